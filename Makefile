@@ -1,0 +1,40 @@
+# Two commands do all set-up on a fresh machine (Python 3.11 only):
+#   make demo   -- build the venv if needed, then run `cassi demo` on the synthetic corpus
+#   make test   -- build the venv if needed, then run the whole test suite
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+
+.PHONY: demo test venv pictures bench experiments lint clean
+
+$(STAMP): pyproject.toml
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m ipykernel install --prefix $(VENV) --name python3 >/dev/null
+	@touch $(STAMP)
+
+venv: $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/cassi demo --out demo_output
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q -p no:cacheprovider
+
+pictures: $(STAMP)
+	$(BIN)/python model/render_pictures.py --out model/pictures
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/bench_jaw.py
+	$(BIN)/python benchmarks/bench_animation.py
+
+experiments: $(STAMP)
+	$(BIN)/python experiments/jaw_comparison.py --out experiments/output
+
+lint: $(STAMP)
+	$(BIN)/ruff check cassi_fit tests experiments benchmarks model
+
+clean:
+	rm -rf $(VENV) demo_output
