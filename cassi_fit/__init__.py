@@ -58,8 +58,9 @@ _PUBLIC = {
     "deform": "deform",
     "build_palate": "palate",
     # pipeline
+    # (the pipeline's `animate` function shares its module's name: use
+    # `from cassi_fit.animate import initialize, animate`)
     "initialize": "animate",
-    "animate": "animate",
     "Renderer": "render",
 }
 
