@@ -1,0 +1,277 @@
+"""Frames to video: MP4 (H.264, yuv420p) with the recording's audio aligned, or GIF.
+
+Timing. XRMB data lines are ``FRAME_STEP_S`` = 6.866 ms apart (about 145.6 Hz). An
+animation that shows every ``stride``-th line plays at ``fps = 1 / (stride * 6.866 ms)``,
+a non-integer rate that MP4 stores exactly as the rational ``1000000 / (6866 stride)``.
+Frame ``k`` of the video shows data line ``first + k * stride``, recording time
+``t_0 + k * stride * 6.866 ms``, and it is on screen from video time ``k / fps``.
+
+Speech synchronization (the report's future work, section 5): the video's time ``tau``
+corresponds to the recording's time ``t_0 + tau``, where ``t_0`` is the time of the first
+rendered frame. Audio time 0 is taken to be pellet time 0 (the first line of the ``.txy``
+file). :func:`slice_wav` cuts the samples ``[t_0, t_0 + m / fps)`` out of the ``.wav``
+(padding with silence where the sound does not reach) so the sound stays aligned for any
+stride; the cut is then muxed as AAC.
+
+GIF stores frame durations in hundredths of a second, so a GIF's timing is rounded
+(and it carries no sound); use MP4 when timing matters.
+
+Every file is written to a temporary name in the destination folder and moved into place
+at the end (``cassi_fit._io``); an input file is never replaced.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import tempfile
+import wave
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+
+from ._io import atomic_output_path, commit_output
+from .errors import CassiError, DataFormatError
+
+FRAME_STEP_US = 6866
+"""XRMB data-line period, microseconds."""
+FRAME_STEP_S = FRAME_STEP_US * 1e-6
+"""XRMB data-line period, seconds."""
+
+VIDEO_SUFFIXES = (".mp4", ".gif")
+
+
+class VideoError(CassiError):
+    """ffmpeg failed to write or read a video."""
+
+
+def frame_rate(stride: int = 1, frame_step_us: int = FRAME_STEP_US) -> Fraction:
+    """Exact frames per second for every ``stride``-th data line: ``10^6 / (step_us * stride)``."""
+    if int(stride) < 1:
+        raise CassiError(f"stride must be a positive integer, got {stride}")
+    return Fraction(1_000_000, int(frame_step_us) * int(stride))
+
+
+def _ffmpeg() -> str:
+    import imageio_ffmpeg
+
+    return imageio_ffmpeg.get_ffmpeg_exe()
+
+
+# --------------------------------------------------------------------------- audio
+
+
+def slice_wav(source, destination, start_s: float, duration_s: float) -> Path:
+    """Write the samples of ``source`` in ``[start_s, start_s + duration_s)`` to ``destination``.
+
+    Times in seconds on the recording's clock (sample 0 = time 0). Where the interval
+    reaches outside the sound it is filled with silence, so the result is always exactly
+    ``round(duration_s * rate)`` samples long and sample 0 of the result is recording time
+    ``start_s`` (to within half a sample). Any PCM sample width and channel count.
+    """
+    source = Path(source)
+    try:
+        with wave.open(str(source), "rb") as src:
+            params = src.getparams()
+            data = src.readframes(params.nframes)
+    except (wave.Error, EOFError) as exc:
+        raise DataFormatError(source, None, f"not a readable PCM .wav file ({exc})") from None
+    frame_bytes = params.sampwidth * params.nchannels
+    n_have = len(data) // frame_bytes
+    first = int(round(start_s * params.framerate))
+    count = max(int(round(duration_s * params.framerate)), 1)
+    silence = b"\x80" if params.sampwidth == 1 else b"\x00"  # 8-bit PCM is unsigned
+    out = bytearray(silence * (count * frame_bytes))
+    lo, hi = max(first, 0), min(first + count, n_have)
+    if hi > lo:
+        at = (lo - first) * frame_bytes
+        out[at : at + (hi - lo) * frame_bytes] = data[lo * frame_bytes : hi * frame_bytes]
+    with wave.open(str(destination), "wb") as dst:
+        dst.setnchannels(params.nchannels)
+        dst.setsampwidth(params.sampwidth)
+        dst.setframerate(params.framerate)
+        dst.writeframes(bytes(out))
+    return Path(destination)
+
+
+# --------------------------------------------------------------------------- writers
+
+
+def _default_permissions(path) -> None:
+    """Give a finished temporary file (created 0600) the usual ``0666 & ~umask`` mode."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, 0o666 & ~umask)
+
+
+class VideoWriter:
+    """Stream RGB frames into an MP4 or GIF; use as a context manager.
+
+    ``path``: ``.mp4`` or ``.gif``. ``fps``: frames per second (a ``Fraction`` keeps the
+    XRMB rate exact; see :func:`frame_rate`). ``audio``: optional ``.wav`` (MP4 only)
+    whose recording time ``audio_start`` seconds is put at video time 0. Frames are
+    ``uint8 (H, W, 3)``, all the same size. Nothing appears at ``path`` until the writer
+    closes without error.
+    """
+
+    def __init__(self, path, fps, *, audio=None, audio_start: float = 0.0, overwrite=False):
+        self.path = Path(path)
+        self.suffix = self.path.suffix.lower()
+        if self.suffix not in VIDEO_SUFFIXES:
+            raise CassiError(f"{self.path}: video must be one of {', '.join(VIDEO_SUFFIXES)}")
+        if audio is not None and self.suffix != ".mp4":
+            raise CassiError(f"{self.path}: audio can only be carried by an .mp4 video")
+        self.fps = Fraction(fps).limit_denominator(10**7)
+        self.audio = None if audio is None else Path(audio)
+        self.audio_start = float(audio_start)
+        self.tmp, self.final = atomic_output_path(self.path, overwrite=overwrite)
+        self.count = 0
+        self.size = None
+        self._proc = None
+        self._gif = None
+
+    # -- frames
+    def append(self, frame) -> None:
+        frame = np.ascontiguousarray(frame, dtype=np.uint8)
+        if frame.ndim != 3 or frame.shape[2] != 3:
+            raise CassiError(f"{self.path}: frames must be (H, W, 3) uint8, got {frame.shape}")
+        if self.size is None:
+            self.size = frame.shape[:2]
+            self._open()
+        elif frame.shape[:2] != self.size:
+            raise CassiError(f"{self.path}: frame {self.count} is {frame.shape[:2]}, not {self.size}")
+        if self._gif is not None:
+            self._gif.append(frame)
+        else:
+            try:
+                self._proc.stdin.write(frame.tobytes())
+            except BrokenPipeError:
+                raise VideoError(f"{self.path}: ffmpeg stopped: {self._stderr()}") from None
+        self.count += 1
+
+    def _open(self) -> None:
+        if self.suffix == ".gif":
+            self._gif = []
+            return
+        h, w = self.size
+        cmd = [_ffmpeg(), "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgb24"]
+        cmd += ["-s", f"{w}x{h}", "-framerate", f"{self.fps.numerator}/{self.fps.denominator}"]
+        cmd += ["-i", "pipe:0"]
+        # yuv420p needs even sides: pad by one black row/column where needed.
+        cmd += ["-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-c:v", "libx264", "-pix_fmt", "yuv420p"]
+        cmd += ["-preset", "veryfast", "-crf", "20", "-an", "-f", "mp4", str(self.tmp)]
+        self._errfile = tempfile.TemporaryFile()
+        self._proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=self._errfile)
+
+    def _stderr(self) -> str:
+        self._errfile.seek(0)
+        text = self._errfile.read().decode(errors="replace").strip()
+        return text.splitlines()[-1] if text else "unknown error"
+
+    # -- finishing
+    def close(self) -> Path:
+        """Finish the file, mux the audio, move it into place; returns the final path."""
+        if self.count == 0:
+            self._discard()
+            raise CassiError(f"{self.path}: no frames to write")
+        if self._gif is not None:
+            self._write_gif()
+        else:
+            self._proc.stdin.close()
+            if self._proc.wait() != 0:
+                message = self._stderr()
+                self._discard()
+                raise VideoError(f"{self.path}: ffmpeg failed: {message}")
+            self._errfile.close()
+            if self.audio is not None:
+                self._mux_audio()
+        _default_permissions(self.tmp)
+        return commit_output(self.tmp, self.final)
+
+    def _write_gif(self) -> None:
+        import imageio.v3 as iio
+
+        # GIF durations are in 1/100 s; Pillow rounds the milliseconds given here.
+        duration_ms = float(1000 / self.fps)
+        iio.imwrite(self.tmp, np.stack(self._gif), extension=".gif", duration=duration_ms, loop=0)
+
+    def _mux_audio(self) -> None:
+        duration = self.count / float(self.fps)
+        with tempfile.TemporaryDirectory() as folder:
+            cut = slice_wav(self.audio, Path(folder) / "audio.wav", self.audio_start, duration)
+            muxed = Path(folder) / "muxed.mp4"
+            cmd = [_ffmpeg(), "-y", "-loglevel", "error", "-i", str(self.tmp), "-i", str(cut)]
+            cmd += ["-map", "0:v:0", "-map", "1:a:0", "-c:v", "copy", "-c:a", "aac"]
+            cmd += ["-b:a", "128k", "-movflags", "+faststart", str(muxed)]
+            done = subprocess.run(cmd, capture_output=True, text=True)
+            if done.returncode != 0:
+                self._discard()
+                last = (done.stderr.strip().splitlines() or ["unknown error"])[-1]
+                raise VideoError(f"{self.path}: could not add audio {self.audio}: {last}")
+            os.replace(muxed, self.tmp)
+
+    def _discard(self) -> None:
+        if self._proc is not None and self._proc.poll() is None:
+            self._proc.stdin.close()
+            self._proc.wait()
+        if self.tmp.exists():
+            self.tmp.unlink()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            self.close()
+        else:
+            self._discard()
+        return False
+
+
+def write_video(path, frames, fps, *, audio=None, audio_start=0.0, overwrite=False) -> Path:
+    """Write an iterable of ``uint8 (H, W, 3)`` frames to ``path`` (.mp4 or .gif); see
+    :class:`VideoWriter`. Returns the path written."""
+    writer = VideoWriter(path, fps, audio=audio, audio_start=audio_start, overwrite=overwrite)
+    with writer:
+        for frame in frames:
+            writer.append(frame)
+    return writer.final
+
+
+# --------------------------------------------------------------------------- reading back
+
+_DURATION = re.compile(r"Duration:\s*(\d+):(\d+):([\d.]+)")
+_FRAME_COUNT = re.compile(r"frame=\s*(\d+)")
+
+
+def media_info(path) -> dict:
+    """What ffmpeg says about a media file: ``{"video": bool, "audio": bool, "duration": s,
+    "streams": [stream lines]}`` (parsed from ``ffmpeg -i``; no ffprobe needed)."""
+    done = subprocess.run([_ffmpeg(), "-hide_banner", "-i", str(path)], capture_output=True, text=True)
+    streams = [ln.strip() for ln in done.stderr.splitlines() if ln.strip().startswith("Stream #")]
+    match = _DURATION.search(done.stderr)
+    duration = None
+    if match:
+        h, m, s = match.groups()
+        duration = int(h) * 3600 + int(m) * 60 + float(s)
+    return {
+        "video": any(": Video:" in s for s in streams),
+        "audio": any(": Audio:" in s for s in streams),
+        "duration": duration,
+        "streams": streams,
+    }
+
+
+def count_frames(path) -> int:
+    """Number of video frames in ``path``, by decoding it (ffmpeg to the null muxer)."""
+    cmd = [_ffmpeg(), "-hide_banner", "-nostats", "-i", str(path), "-map", "0:v:0"]
+    cmd += ["-f", "null", "-progress", "pipe:1", "-"]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise VideoError(f"{path}: ffmpeg could not read it")
+    counts = _FRAME_COUNT.findall(done.stdout)
+    if not counts:
+        raise VideoError(f"{path}: no video frames found")
+    return int(counts[-1])

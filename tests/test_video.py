@@ -1,0 +1,135 @@
+"""Video writing: frame counts, exact XRMB frame rates, audio presence and alignment."""
+
+import subprocess
+import wave
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from cassi_fit import _io
+from cassi_fit.errors import CassiError, DataFormatError, OutputExistsError
+from cassi_fit.video import (
+    FRAME_STEP_S,
+    VideoWriter,
+    _ffmpeg,
+    count_frames,
+    frame_rate,
+    media_info,
+    slice_wav,
+    write_video,
+)
+
+RATE = 8000
+
+
+def _frames(n, size=(61, 81)):
+    """Frames with odd sides (yuv420p needs padding) and distinct content."""
+    return [np.full((*size, 3), (17 * i) % 256, np.uint8) for i in range(n)]
+
+
+def _write_wav(path, samples, rate=RATE):
+    with wave.open(str(path), "wb") as w:
+        w.setnchannels(1)
+        w.setsampwidth(2)
+        w.setframerate(rate)
+        w.writeframes(np.asarray(samples, "<i2").tobytes())
+    return path
+
+
+def _read_wav(path):
+    with wave.open(str(path), "rb") as r:
+        return np.frombuffer(r.readframes(r.getnframes()), "<i2"), r.getframerate()
+
+
+def test_frame_rate_is_exact_rational():
+    assert frame_rate(1) == Fraction(1_000_000, 6866)
+    assert frame_rate(10) == Fraction(1_000_000, 68660)
+    assert float(1 / frame_rate(4)) == pytest.approx(4 * FRAME_STEP_S)
+    with pytest.raises(CassiError):
+        frame_rate(0)
+
+
+def test_slice_wav_is_sample_aligned_and_padded(tmp_path):
+    ramp = np.arange(RATE, dtype=np.int64) % 30000  # sample i has value i (mod 30000)
+    src = _write_wav(tmp_path / "ramp.wav", ramp)
+    out, rate = _read_wav(slice_wav(src, tmp_path / "cut.wav", 0.25, 0.5))
+    assert rate == RATE and out.size == RATE // 2
+    np.testing.assert_array_equal(out, ramp[RATE // 4 : RATE // 4 + RATE // 2])
+    # reaching past the end: the missing part is silence, the length is still exact
+    out, _ = _read_wav(slice_wav(src, tmp_path / "tail.wav", 0.75, 0.5))
+    assert out.size == RATE // 2
+    np.testing.assert_array_equal(out[: RATE // 4], ramp[3 * RATE // 4 :])
+    assert not out[RATE // 4 :].any()
+
+
+def test_slice_wav_rejects_a_non_wav(tmp_path):
+    bad = tmp_path / "bad.wav"
+    bad.write_bytes(b"not a wave file at all")
+    with pytest.raises(DataFormatError, match="bad.wav"):
+        slice_wav(bad, tmp_path / "x.wav", 0.0, 1.0)
+
+
+def test_mp4_has_every_frame_and_the_xrmb_rate(tmp_path):
+    fps = frame_rate(3)
+    path = write_video(tmp_path / "clip.mp4", _frames(23), fps)
+    assert count_frames(path) == 23
+    info = media_info(path)
+    assert info["video"] and not info["audio"]
+    assert info["duration"] == pytest.approx(23 / float(fps), abs=0.02)
+    assert "48.55 fps" in " ".join(info["streams"])  # 1e6 / (3 * 6866) = 48.548...
+
+
+def test_mp4_carries_audio_aligned_to_the_first_frame(tmp_path):
+    """A click at recording time 0.6 s, video starting at t_0 = 0.4 s: heard at 0.2 s."""
+    samples = np.zeros(2 * RATE)
+    click = int(0.6 * RATE)
+    samples[click : click + 80] = 20000
+    wav = _write_wav(tmp_path / "speech.wav", samples)
+    fps = frame_rate(5)
+    path = write_video(tmp_path / "talk.mp4", _frames(30), fps, audio=wav, audio_start=0.4)
+    info = media_info(path)
+    assert info["video"] and info["audio"]
+    assert count_frames(path) == 30
+    decoded = tmp_path / "decoded.wav"
+    subprocess.run(
+        [_ffmpeg(), "-loglevel", "error", "-i", str(path), "-ac", "1", "-ar", str(RATE), str(decoded)],
+        check=True,
+    )
+    heard, _ = _read_wav(decoded)
+    onset = np.argmax(np.abs(heard) > 5000) / RATE
+    assert onset == pytest.approx(0.2, abs=0.01)
+    assert heard.size / RATE == pytest.approx(30 / float(fps), abs=0.05)
+
+
+def test_gif_round_trip(tmp_path):
+    import imageio.v3 as iio
+
+    path = write_video(tmp_path / "clip.gif", _frames(7), frame_rate(2))
+    frames = iio.imread(path)
+    assert frames.shape == (7, 61, 81, 3)
+    with pytest.raises(CassiError, match="audio"):
+        VideoWriter(tmp_path / "x.gif", 10, audio=tmp_path / "a.wav")
+
+
+def test_outputs_are_atomic_and_respect_inputs(tmp_path):
+    path = write_video(tmp_path / "a.mp4", _frames(3), 10)
+    with pytest.raises(OutputExistsError):
+        write_video(path, _frames(3), 10)
+    write_video(path, _frames(4), 10, overwrite=True)
+    assert count_frames(path) == 4
+    _io.register_input(tmp_path / "input.mp4")
+    with pytest.raises(OutputExistsError):
+        write_video(tmp_path / "input.mp4", _frames(2), 10, overwrite=True)
+    # a failure half way leaves nothing behind
+    with pytest.raises(CassiError):
+        write_video(tmp_path / "broken.mp4", [_frames(1)[0], np.zeros((5, 5, 3), np.uint8)], 10)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.mp4"]
+
+
+def test_bad_suffix_and_empty_video(tmp_path):
+    with pytest.raises(CassiError, match=".avi"):
+        VideoWriter(tmp_path / "x.avi", 10)
+    with pytest.raises(CassiError, match="no frames"):
+        write_video(tmp_path / "empty.mp4", [], 10)
+    assert not list(tmp_path.iterdir())
