@@ -1,0 +1,168 @@
+"""``Headmeasures.txt``: ten measurements of each subject's head (the toolkit's own format).
+
+No public description of the original file exists, so the toolkit defines its own (see
+``docs/FORMATS.md``): a header row ``subject`` followed by the ten field names of
+:class:`HeadMeasures` (any order, case-insensitive), then one row per subject; fields
+separated by tabs or any white space; ``#`` starts a comment (whole line or trailing);
+values in mm, decimals allowed. Gonion and gnathion are in the pellet frame (origin at
+the upper incisor tip, +x forward, +y up); the rest are distances.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+from ._io import atomic_write
+from .errors import DataFormatError
+from .txy import read_lines
+
+
+@dataclass(frozen=True)
+class HeadMeasures:
+    """Ten head measurements of one subject, all in mm.
+
+    ``gonion_*`` (the angle of the jaw) and ``gnathion_*`` (the point of the chin) are
+    positions in the pellet frame; CASSI adjusts the jaw and chin from them
+    (initialisation step 5). The others are distances (Farkas-style anthropometry).
+    """
+
+    gonion_x: float
+    gonion_y: float
+    gnathion_x: float
+    gnathion_y: float
+    face_width: float  # bizygomatic breadth
+    jaw_width: float  # bigonial breadth
+    mouth_width: float  # cheilion to cheilion
+    upper_lip_thickness: float  # front to back, at the upper vermilion (UL pellet)
+    lower_lip_thickness: float  # front to back, at the lower vermilion (LL pellet)
+    nose_protrusion: float  # subnasale to pronasale
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+FIELD_NAMES = tuple(f.name for f in fields(HeadMeasures))
+#: Fields that are lengths and must be positive.
+POSITIVE_FIELDS = FIELD_NAMES[4:]
+
+#: Adult averages, used when a dataset has no measures for a subject. Distances after
+#: Farkas-style norms (FACE_MODEL_NOTES.md: bizygomatic 135, bigonial 100, mouth 50,
+#: nose tip 20 from subnasale); lip thickness from the median UL/LL pellets (15, 18) and
+#: (9, -21) to the labial faces of the incisors; gonion about 85 mm behind and 35 mm below
+#: the incisor tip (condyle 90-100 behind and 20-30 above, ramus about 55-60 tall);
+#: gnathion at the chin, about 43 mm below the incisor tip.
+DEFAULT_HEAD_MEASURES = HeadMeasures(
+    gonion_x=-85.0,
+    gonion_y=-35.0,
+    gnathion_x=0.0,
+    gnathion_y=-43.0,
+    face_width=135.0,
+    jaw_width=100.0,
+    mouth_width=50.0,
+    upper_lip_thickness=12.0,
+    lower_lip_thickness=11.0,
+    nose_protrusion=20.0,
+)
+
+_NUMBER = re.compile(r"[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?")
+_SUBJECT = re.compile(r"[A-Za-z0-9_.-]+")
+
+
+def _strip_comment(line: str) -> str:
+    return line.split("#", 1)[0]
+
+
+def _parse_header(path: Path, lineno: int, tokens: list[str]) -> list[str]:
+    names = [t.lower() for t in tokens]
+    if not names or names[0] != "subject":
+        raise DataFormatError(path, lineno, "header must start with the column 'subject'")
+    cols = names[1:]
+    unknown = [c for c in cols if c not in FIELD_NAMES]
+    if unknown:
+        raise DataFormatError(path, lineno, f"unknown column(s) {', '.join(unknown)}")
+    dupes = sorted({c for c in cols if cols.count(c) > 1})
+    if dupes:
+        raise DataFormatError(path, lineno, f"duplicate column(s) {', '.join(dupes)}")
+    missing = [f for f in FIELD_NAMES if f not in cols]
+    if missing:
+        raise DataFormatError(path, lineno, f"missing column(s) {', '.join(missing)}")
+    return cols
+
+
+def _parse_value(path: Path, lineno: int, column: str, token: str) -> float:
+    if not _NUMBER.fullmatch(token):
+        raise DataFormatError(path, lineno, f"{column}: not a number: {token[:40]!r}")
+    value = float(token)
+    if not math.isfinite(value) or abs(value) > 1e4:
+        raise DataFormatError(path, lineno, f"{column}: implausible value {token[:40]} mm")
+    if column in POSITIVE_FIELDS and value <= 0:
+        raise DataFormatError(path, lineno, f"{column}: must be positive, got {token}")
+    return value
+
+
+def read_headmeasures(path: str | os.PathLike) -> dict[str, HeadMeasures]:
+    """Read a ``Headmeasures.txt``: subject name (upper case) -> :class:`HeadMeasures`.
+
+    Raises :class:`DataFormatError` naming file and line for an empty file, a header
+    with unknown, duplicate or missing columns, a row with the wrong number of fields,
+    a value that is not a finite number, a non-positive distance, or a repeated subject.
+    """
+    path, lines = read_lines(path)
+    rows = [(n, _strip_comment(s).split()) for n, s in lines]
+    rows = [(n, toks) for n, toks in rows if toks]
+    if not rows:
+        raise DataFormatError(path, None, "empty file (expected a header row naming the columns)")
+    header_line, header = rows[0]
+    cols = _parse_header(path, header_line, header)
+    result: dict[str, HeadMeasures] = {}
+    for lineno, tokens in rows[1:]:
+        if len(tokens) != len(cols) + 1:
+            raise DataFormatError(
+                path,
+                lineno,
+                f"expected {len(cols) + 1} fields (subject and {len(cols)} values), found {len(tokens)}",
+            )
+        subject = tokens[0].upper()
+        if not _SUBJECT.fullmatch(subject):
+            raise DataFormatError(path, lineno, f"bad subject name {tokens[0][:40]!r}")
+        if subject in result:
+            raise DataFormatError(path, lineno, f"subject {subject} appears twice")
+        values = {
+            c: _parse_value(path, lineno, c, t) for c, t in zip(cols, tokens[1:], strict=True)
+        }
+        result[subject] = HeadMeasures(**values)
+    return result
+
+
+def write_headmeasures(
+    path: str | os.PathLike, measures: Mapping[str, HeadMeasures], *, overwrite: bool = False
+) -> Path:
+    """Write ``Headmeasures.txt``: header, one row per subject (upper case), tabs, CRLF.
+
+    Values are written with 3 decimals (um resolution). Written atomically; never
+    replaces an input file, nor an existing file unless ``overwrite``.
+    """
+    path = Path(path)
+    out = [
+        "# Headmeasures.txt (cassi_fit format): ten measures per subject, mm; "
+        "gonion and gnathion in the pellet frame"
+    ]
+    out.append("\t".join(("subject",) + FIELD_NAMES))
+    written: set[str] = set()
+    for subject, m in measures.items():
+        name = str(subject).upper()
+        if not _SUBJECT.fullmatch(name) or name in written:
+            raise DataFormatError(path, None, f"cannot write: bad or repeated subject {subject!r}")
+        written.add(name)
+        values = [float(getattr(m, f)) for f in FIELD_NAMES]
+        if not all(math.isfinite(v) for v in values) or min(values[4:]) <= 0:
+            raise DataFormatError(
+                path, None, f"cannot write: non-finite or non-positive measure for {name}"
+            )
+        out.append("\t".join([name] + [f"{v:.3f}" for v in values]))
+    return atomic_write(path, "".join(s + "\r\n" for s in out), overwrite=overwrite)
