@@ -50,7 +50,7 @@ def read_outline(path: str | os.PathLike, *, kind: str = "palate") -> np.ndarray
         raise DataFormatError(
             path, None, f"{what} has {len(points)} point(s); at least {min_points} are needed"
         )
-    return np.asarray(points, dtype=np.float64) * 1e-3
+    return np.asarray(points, dtype=np.float64) / 1e3
 
 
 def write_outline(path: str | os.PathLike, points_mm, *, overwrite: bool = False) -> Path:

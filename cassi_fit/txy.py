@@ -220,8 +220,8 @@ def read_txy(path: str | os.PathLike) -> PelletTrack:
     valid = coords != UNTRACKED
     if not valid.any():
         raise MissingDataError(f"{path}: no tracked value at all (every value is {UNTRACKED})")
-    positions = np.where(valid, coords * 1e-3, np.nan)
-    return PelletTrack(times=times_us * 1e-6, positions=positions, valid=valid, path=path)
+    positions = np.where(valid, coords / 1e3, np.nan)
+    return PelletTrack(times=times_us / 1e6, positions=positions, valid=valid, path=path)
 
 
 def _to_int_rows(path: Path, track: PelletTrack) -> np.ndarray:

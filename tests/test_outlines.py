@@ -1,0 +1,60 @@
+"""PAL.DAT / PHA.DAT: fixtures, round trip, bad input with file and line."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cassi_fit.errors import DataFormatError, OutputExistsError
+from cassi_fit.outlines import read_outline, write_outline
+
+FIXTURES = Path(__file__).parent / "fixtures"
+
+
+def test_fixtures():
+    palate = read_outline(FIXTURES / "PAL.DAT")
+    assert palate.shape == (9, 2)
+    np.testing.assert_array_equal(palate[0], [-4.123, 4.012])
+    np.testing.assert_array_equal(palate[-1], [-60.0, 27.01])
+    assert np.all(np.diff(palate[:, 0]) < 0)  # front to back
+    pharynx = read_outline(FIXTURES / "PHA.DAT", kind="pharynx")
+    assert pharynx.shape == (2, 2)
+
+
+def test_round_trip_and_format(tmp_path):
+    pts = np.random.default_rng(1).uniform(-60, 30, size=(20, 2))
+    p = write_outline(tmp_path / "PAL.DAT", pts)
+    raw = p.read_bytes()
+    assert raw.count(b"\r\n") == 20 and all(s.startswith(b" ") for s in raw.split(b"\r\n")[:-1])
+    np.testing.assert_array_equal(read_outline(p), np.round(pts * 1e3) / 1e3)
+    with pytest.raises(OutputExistsError):
+        write_outline(p, pts, overwrite=True)  # it is an input now
+
+
+@pytest.mark.parametrize(
+    "text, line, match",
+    [
+        ("  -4000  4000\r\n  -5000\r\n", 2, "expected 2 fields"),
+        ("  -4000  4000\r\n  -5000  5000  1\r\n", 2, "expected 2 fields"),
+        ("  -4000  4000\r\n\r\n  -5000  abc\r\n", 3, "not an integer"),
+        ("  -4000  4000\r\n  -5.5  5000\r\n", 2, "not an integer"),
+        ("  -4000  4000\r\n  1000000  1000000\r\n", 2, "untracked"),
+        ("  -4000  4000\r\n", None, "at least 2"),
+        ("", None, "empty"),
+    ],
+)
+def test_bad_input(tmp_path, text, line, match):
+    p = tmp_path / "PAL.DAT"
+    p.write_text(text, newline="")
+    with pytest.raises(DataFormatError, match=match) as info:
+        read_outline(p)
+    assert info.value.line == line and info.value.path == str(p)
+
+
+def test_bad_kind_and_bad_points(tmp_path):
+    with pytest.raises(ValueError, match="kind"):
+        read_outline(FIXTURES / "PAL.DAT", kind="tongue")
+    with pytest.raises(DataFormatError, match="non-finite"):
+        write_outline(tmp_path / "a.dat", [[0.0, np.nan], [1.0, 2.0]])
+    with pytest.raises(DataFormatError, match=r"\(n, 2\)"):
+        write_outline(tmp_path / "a.dat", [1.0, 2.0])
