@@ -1,0 +1,165 @@
+"""Jaw rotation from the two jaw pellets, in closed form (paper section 3.1, Eqs 1-7).
+
+One frame: ``reference`` and ``current`` are ``(2, 2)`` arrays in mm, rows ``[MNI, MNM]``
+(index 0 = the incisor pellet, 1 = the molar pellet), columns ``(x, y)`` of the pellet frame.
+The motion found takes the reference jaw to the current jaw: ``p' = R(theta) p + t`` with
+``R`` of Eqs 4-5 (see :mod:`cassi_fit.rigid`); theta > 0 is jaw opening.
+
+Three closed forms live here, all written for one frame (``jax.vmap`` them over frames):
+
+* :func:`closed_form_paper` -- Eqs 1-3 and 6-7 verbatim, kept for reproduction. It divides
+  by ``2 - 2 cos theta`` and ``sin theta`` and takes the arctangent of ratios, so it is NaN
+  or infinite at theta = 0 and quadrant-blind for steep jaw lines.
+* :func:`closed_form` -- the same motion, numerically sound: theta from one ``atan2``,
+  the translation that maps the MNI pellet exactly (the paper's Eqs 6-7 use point 1), the
+  pivot derived by :func:`cassi_fit.rigid.pivot`, a status code instead of a division by zero.
+* :func:`procrustes` -- the least-squares rigid motion of the two points (Kabsch), the
+  exact reference for the per-frame fit in :mod:`cassi_fit.jaw_fit`.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+from jax import Array
+
+from . import rigid
+
+# Status codes of a jaw motion (``JawMotion.status``; also used per frame by ``JawFit``).
+STATUS_OK = 0
+STATUS_PIVOT_UNDEFINED = 1  # theta == 0 exactly: pure translation, the pivot is at infinity
+STATUS_DEGENERATE = 2  # the two jaw pellets coincide in the reference or the current frame
+STATUS_NON_FINITE = 3  # a NaN or infinite coordinate (e.g. an untracked pellet)
+STATUS_INVALID_FRAME = 4  # (fits) a frame excluded by ``valid``: values interpolated
+STATUS_NOT_CONVERGED = 5  # (fits) the solver did not report success for this frame
+STATUS_NAMES = {
+    STATUS_OK: "ok",
+    STATUS_PIVOT_UNDEFINED: "pivot-undefined",
+    STATUS_DEGENERATE: "degenerate",
+    STATUS_NON_FINITE: "non-finite",
+    STATUS_INVALID_FRAME: "invalid-frame",
+    STATUS_NOT_CONVERGED: "not-converged",
+}
+
+
+class JawMotion(NamedTuple):
+    """The jaw's motion in one frame (or, vmapped, in each of ``n`` frames).
+
+    theta: rad, opening positive. translation: (2,) mm, ``p' = R(theta) p + t``, always
+    finite. pivot: (2,) mm, the fixed point (a, b) of Eqs 6-7, (0, 0) where undefined.
+    pivot_defined: bool. status: int, see ``STATUS_NAMES`` (0 ok, 1 pivot undefined,
+    2 degenerate, 3 non-finite input). Where status >= 2 theta, t and pivot are all 0.
+    """
+
+    theta: Array
+    translation: Array
+    pivot: Array
+    pivot_defined: Array
+    status: Array
+
+
+def closed_form_paper(reference, current):
+    """Eqs 1-3 and 6-7 exactly as published. Returns ``(theta, a, b)`` (rad, mm, mm).
+
+    Eq 1: tan alpha = (y1 - y2)/(x1 - x2); Eq 2: the same for beta in the current frame;
+    Eq 3: theta = alpha - beta; Eq 6 gives b and Eq 7 gives a from point 1 (MNI) and its
+    moved position. Undefined (NaN/inf) at theta = 0 and wrong by pi when the jaw line
+    turns past vertical: that is the published method, reproduced, not repaired.
+    """
+    (x1, y1), (x2, y2) = reference[0], reference[1]
+    (x1p, y1p), (x2p, y2p) = current[0], current[1]
+    alpha = jnp.arctan((y1 - y2) / (x1 - x2))  # Eq 1
+    beta = jnp.arctan((y1p - y2p) / (x1p - x2p))  # Eq 2
+    theta = alpha - beta  # Eq 3
+    c, s = jnp.cos(theta), jnp.sin(theta)
+    x, y, xp, yp = x1, y1, x1p, y1p
+    b = ((yp + x * s - y * c) * (1 - c) - (xp - x * c - y * s) * s) / (2 - 2 * c)  # Eq 6
+    a = (yp + x * s - y * c - b * (1 - c)) / s  # Eq 7
+    return theta, a, b
+
+
+def _safe_inputs(reference, current):
+    """Replace a frame with any non-finite coordinate by a harmless one (double-``where``).
+
+    Returns ``(reference, current, finite)``; downstream values are masked by ``finite``,
+    so neither the value nor the gradient of the bad frame can carry a NaN.
+    """
+    finite = jnp.all(jnp.isfinite(reference)) & jnp.all(jnp.isfinite(current))
+    placeholder = jnp.array([[1.0, 0.0], [0.0, 0.0]], dtype=jnp.result_type(reference, current))
+    return (
+        jnp.where(finite, reference, placeholder),
+        jnp.where(finite, current, placeholder),
+        finite,
+    )
+
+
+def _turn_angle(u, v):
+    """The theta with ``R(theta) u`` parallel to ``v`` (Eq 3: alpha - beta), in (-pi, pi].
+
+    ``u, v``: (2,) direction vectors. One ``atan2(cross, dot)`` replaces the two
+    arctangents of ratios, so the quadrant is right and there is no division. Returns
+    ``(theta, ok)``; where a vector has zero length (``ok`` False) theta is 0 with zero
+    gradient: the atan2 arguments are swapped for ``(0, 1)`` before use (double-``where``).
+    """
+    cross = v[0] * u[1] - v[1] * u[0]  # sin(alpha - beta) |u||v|
+    dot = u[0] * v[0] + u[1] * v[1]  # cos(alpha - beta) |u||v|
+    ok = jnp.any(u != 0.0) & jnp.any(v != 0.0)
+    theta = jnp.arctan2(jnp.where(ok, cross, 0.0), jnp.where(ok, dot, 1.0))
+    # atan2(-0.0, negative) is -pi: fold it to +pi so that the range is (-pi, pi].
+    theta = jnp.where(theta == -jnp.pi, jnp.pi, theta)
+    return jnp.where(ok, theta, 0.0), ok
+
+
+def _finish(theta, t, ok, finite):
+    """Assemble a :class:`JawMotion` from ``(theta, t)`` and the validity flags."""
+    good = ok & finite
+    theta = jnp.where(good, theta, 0.0)
+    t = jnp.where(good, t, jnp.zeros_like(t))
+    pivot, defined = rigid.pivot((theta, t))
+    defined = defined & good
+    status = jnp.where(
+        ~finite,
+        STATUS_NON_FINITE,
+        jnp.where(~ok, STATUS_DEGENERATE, jnp.where(defined, STATUS_OK, STATUS_PIVOT_UNDEFINED)),
+    )
+    status = jnp.asarray(status, jnp.int32)
+    return JawMotion(theta, t, jnp.where(defined, pivot, 0.0), defined, status)
+
+
+def closed_form(reference, current) -> JawMotion:
+    """The paper's motion (Eqs 1-3, 6-7), numerically sound. One frame; vmap over frames.
+
+    reference, current: (2, 2) mm, rows [MNI, MNM]. theta = alpha - beta from the jaw line
+    (wrapped to (-pi, pi]); the translation maps the MNI pellet exactly,
+    ``t = p1' - R(theta) p1``, as Eqs 6-7 do; the pivot is the motion's fixed point.
+    At theta = 0 the pivot is undefined (status 1; value (0, 0), zero gradient), the motion
+    stays finite and differentiable. Coincident jaw pellets give status 2, a NaN or
+    infinite coordinate status 3; in both cases theta = 0, t = 0, never NaN.
+    """
+    reference, current = jnp.asarray(reference), jnp.asarray(current)
+    reference, current, finite = _safe_inputs(reference, current)
+    theta, ok = _turn_angle(reference[0] - reference[1], current[0] - current[1])
+    t = current[0] - rigid.apply(theta, jnp.zeros(2, current.dtype), reference[0])
+    return _finish(theta, t, ok, finite)
+
+
+def procrustes(reference, current) -> JawMotion:
+    """The least-squares rigid motion of both jaw points (Kabsch), one frame.
+
+    Minimises ``sum_i |R(theta) p_i + t - p_i'|^2`` over the two pellets: theta turns the
+    centred reference points onto the centred current ones (for two points that is the
+    jaw-line angle of Eq 3) and ``t`` maps the centroid onto the centroid. Same status
+    rules as :func:`closed_form`.
+    """
+    reference, current = jnp.asarray(reference), jnp.asarray(current)
+    reference, current, finite = _safe_inputs(reference, current)
+    c_ref, c_cur = jnp.mean(reference, axis=0), jnp.mean(current, axis=0)
+    theta, ok = _turn_angle(reference[0] - c_ref, current[0] - c_cur)
+    t = c_cur - rigid.apply(theta, jnp.zeros(2, current.dtype), c_ref)
+    return _finish(theta, t, ok, finite)
+
+
+def status_name(code: int) -> str:
+    """The word for a status code (``"ok"``, ``"pivot-undefined"``, ...)."""
+    return STATUS_NAMES.get(int(code), f"status-{int(code)}")
