@@ -1,0 +1,702 @@
+"""Offscreen rendering of the face model in the paper's four evaluation views.
+
+The paper judged every animation from four views (Scheidt & Hamilton 1999, section 4):
+``front`` (the full face), ``side`` (the full face in profile, looking to the right of the
+image), ``inside`` (half the face from the side: the skin, lips, eyes, teeth and palate on
+the camera's side of the midsagittal plane z = 0 are cut away, or the skin drawn
+semi-transparent, so that the tongue, teeth and palate show) and ``top`` (skin hidden:
+palate, teeth and tongue seen from +y, the front of the mouth to the right).
+
+Speed: the whole 2x2 grid is ONE draw of ONE pyrender scene. Every material is split once
+into the triangles on the far side (z <= 0) and the near side (z > 0) of the midsagittal
+plane; each piece is a single pyrender primitive drawn *instanced*, one instance per view
+that shows it, each instance a similarity transform that places that view in its cell of
+the image in front of one orthographic camera. The lights are fixed to the camera, so every
+view is lit alike. Per frame only the vertex buffers are rewritten in place
+(``glBufferSubData``); the framebuffer has no multisampling and only colour is read back.
+
+Geometry is in the model frame (mm): x front, y up, z = 0 midsagittal (docs/ARCHITECTURE.md).
+Cameras are fitted once to the rest mesh with a margin, so a video does not jump.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ._io import atomic_write
+from .errors import CassiError, RenderingUnavailableError
+
+VIEWS = ("front", "side", "inside", "top")
+
+# The face model's material order (cassi_fit.face_model.MATERIALS); repeated here so that
+# rendering does not import JAX.
+_MATERIALS = ("skin", "lips", "eye", "teeth", "tongue", "palate")
+
+# sRGB colours. The paper draws the palate as the darkest object.
+MATERIAL_COLOURS = {
+    "skin": (0.89, 0.72, 0.60),
+    "lips": (0.70, 0.30, 0.30),
+    "eye": (0.96, 0.96, 0.94),
+    "teeth": (0.96, 0.94, 0.86),
+    "tongue": (0.93, 0.52, 0.58),
+    "palate": (0.42, 0.17, 0.20),
+}
+MARKER_COLOURS = {"measured": (0.90, 0.08, 0.08), "model": (0.10, 0.72, 0.22)}
+_EXTRA_MARKER_COLOURS = ((0.15, 0.35, 0.95), (0.98, 0.60, 0.05), (0.60, 0.20, 0.80))
+_IRIS_COLOUR = (0.25, 0.17, 0.10)
+
+# Rows: image right, image up, toward the camera (a right-handed frame), in model axes.
+_VIEW_AXES = {
+    "front": ((0, 0, -1), (0, 1, 0), (1, 0, 0)),
+    "side": ((1, 0, 0), (0, 1, 0), (0, 0, 1)),
+    "inside": ((1, 0, 0), (0, 1, 0), (0, 0, 1)),
+    "top": ((1, 0, 0), (0, 0, -1), (0, 1, 0)),
+}
+_SHOWN = {
+    "front": set(_MATERIALS),
+    "side": set(_MATERIALS),
+    "inside": set(_MATERIALS),
+    "top": {"teeth", "tongue", "palate"},
+}
+_CUT = {"skin", "lips", "eye", "teeth", "palate"}  # near half removed in the inside view
+_GLASS = {"skin", "lips", "eye"}  # near half see-through with skin="transparent"
+_MARKER_VIEWS = ("side", "inside")
+
+# --------------------------------------------------------------------------------------
+# headless OpenGL
+# --------------------------------------------------------------------------------------
+
+_PLATFORM: str | None = None  # the answer of ensure_headless_gl, cached per process
+
+_PROBE = """
+import os, sys
+if sys.argv[1] == "native":
+    os.environ.pop("PYOPENGL_PLATFORM", None)
+else:
+    os.environ["PYOPENGL_PLATFORM"] = sys.argv[1]
+import pyrender
+r = pyrender.OffscreenRenderer(16, 16)
+r.delete()
+"""
+
+
+def _probe_platform(platform: str) -> str | None:
+    """Try an offscreen context with ``platform`` in a fresh interpreter.
+
+    PyOpenGL fixes its platform at first import, so each candidate is tried in its own
+    process. Returns ``None`` if a context was created, else the reason (one line).
+    """
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-c", _PROBE, platform], capture_output=True, text=True, timeout=120
+        )
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return f"{type(exc).__name__}: {exc}"
+    if proc.returncode == 0:
+        return None
+    lines = [ln.strip() for ln in proc.stderr.strip().splitlines() if ln.strip()]
+    return lines[-1] if lines else f"exit code {proc.returncode}"
+
+
+def ensure_headless_gl() -> str:
+    """Choose the OpenGL platform for offscreen rendering; returns its name.
+
+    A ``PYOPENGL_PLATFORM`` set by the user is respected as is. Otherwise the candidates
+    are, in order: the native window system (only if ``DISPLAY``/``WAYLAND_DISPLAY`` is
+    set), ``"egl"`` (Mesa's llvmpipe works without a GPU), ``"osmesa"``. Each is probed in
+    a subprocess; the first that creates a context is put in ``PYOPENGL_PLATFORM`` (before
+    pyrender/OpenGL are imported here) and cached for the process. Raises
+    :class:`RenderingUnavailableError` (one line) if none works.
+    """
+    global _PLATFORM
+    if _PLATFORM is not None:
+        return _PLATFORM
+    chosen = os.environ.get("PYOPENGL_PLATFORM")
+    if chosen:
+        _PLATFORM = chosen
+        return chosen
+    candidates = ["egl", "osmesa"]
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        candidates.insert(0, "native")
+    failures = []
+    for platform in candidates:
+        reason = _probe_platform(platform)
+        if reason is None:
+            if platform != "native":
+                os.environ["PYOPENGL_PLATFORM"] = platform
+            _PLATFORM = platform
+            return platform
+        failures.append(f"{platform} ({reason})")
+    raise RenderingUnavailableError(
+        "no offscreen OpenGL: tried " + "; ".join(failures) + ". Install Mesa EGL "
+        "(apt install libegl1 libgl1-mesa-dri) or OSMesa (libosmesa6), or set "
+        "PYOPENGL_PLATFORM".replace("\n", " ")
+    )
+
+
+# --------------------------------------------------------------------------------------
+# geometry helpers (numpy, one frame)
+# --------------------------------------------------------------------------------------
+
+
+def _linear(srgb) -> tuple[float, ...]:
+    """sRGB in [0, 1] -> linear (pyrender's shader applies gamma 1/2.2 on output)."""
+    return tuple(float(c) ** 2.2 for c in srgb)
+
+
+def _vertex_normals(vertices: np.ndarray, faces: np.ndarray, incidence) -> np.ndarray:
+    """Area-weighted unit vertex normals, (V,3) float32.
+
+    ``incidence`` is the sparse (V,F) vertex-face matrix. A vertex whose summed normal is
+    zero (only zero-area triangles) gets (0, 0, 0): the shader then lights it with ambient
+    light only, instead of dividing by zero.
+    """
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    summed = incidence @ np.cross(b - a, c - a)
+    length = np.linalg.norm(summed, axis=1, keepdims=True)
+    out = np.zeros_like(summed)
+    np.divide(summed, length, out=out, where=length > 0)
+    return out.astype(np.float32)
+
+
+def _as_frame(vertices, n_vertices: int) -> np.ndarray:
+    """One frame of vertices as a finite (V,3) float64 numpy array, or a CassiError."""
+    v = np.asarray(vertices, dtype=np.float64)
+    if v.shape != (n_vertices, 3):
+        raise CassiError(f"render: vertices must have shape ({n_vertices}, 3), got {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise CassiError("render: vertices contain NaN or infinite values")
+    return v
+
+
+def _marker_points(points) -> np.ndarray:
+    """(k,3) or (k,2) marker points (mm) -> finite (k',3); non-finite rows are not drawn."""
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim == 1 and p.size in (2, 3):
+        p = p[None]
+    if p.ndim != 2 or p.shape[1] not in (2, 3):
+        raise CassiError(f"render: marker points must have shape (k, 3) or (k, 2), got {p.shape}")
+    if p.shape[1] == 2:
+        p = np.concatenate([p, np.zeros((len(p), 1))], axis=1)
+    return p[np.all(np.isfinite(p), axis=1)]
+
+
+def _cells(views, size, grid: bool) -> dict[str, tuple[float, float, float, float]]:
+    """Cell of each view: (centre x, centre y, width, height) in pixels, y up.
+
+    Grid: two columns (front, side / inside, top); one view fills the image. Not grid:
+    one row.
+    """
+    width, height = size
+    n = len(views)
+    cols = 1 if n == 1 else (2 if grid else n)
+    rows = -(-n // cols)
+    cw, ch = width / cols, height / rows
+    return {
+        v: ((i % cols + 0.5) * cw, height - (i // cols + 0.5) * ch, cw, ch)
+        for i, v in enumerate(views)
+    }
+
+
+def _iris_factors(vertices: np.ndarray, faces: np.ndarray, face_material, eye: int):
+    """Per-vertex colour factor (V,4) darkening the front of each eyeball into an iris.
+
+    Each eye (one per side of z = 0) is a set of 'eye' vertices; those whose direction from
+    the eye's centre is within 25 degrees of +x (the gaze) are the iris. Returns None if
+    the model has no eye material.
+    """
+    used = np.unique(faces[face_material == eye])
+    if used.size == 0:
+        return None
+    factors = np.ones((len(vertices), 4))
+    ratio = np.array(_linear(_IRIS_COLOUR)) / np.array(_linear(MATERIAL_COLOURS["eye"]))
+    for side in (used[vertices[used, 2] > 0], used[vertices[used, 2] <= 0]):
+        if side.size < 4:
+            continue
+        d = vertices[side] - vertices[side].mean(axis=0)
+        length = np.linalg.norm(d, axis=1)
+        iris = d[:, 0] > np.cos(np.radians(25.0)) * length
+        factors[side[iris], :3] = ratio
+    return factors
+
+
+class _Piece:
+    """The triangles of one material on one side of z = 0: one instanced pyrender primitive.
+
+    ``vertex_index`` (n,) picks the piece's vertices from the whole mesh; ``faces`` (m,3)
+    index into them; ``static`` (n,k) holds extra per-vertex columns (colour) that follow
+    position and normal in the interleaved vertex buffer; ``views`` are the views that draw
+    it.
+    """
+
+    def __init__(self, material, near, glass, vertex_index, faces, static, views):
+        self.material, self.near, self.glass = material, near, glass
+        self.vertex_index, self.faces, self.static, self.views = (
+            vertex_index, faces, static, views
+        )
+        self.buffer = np.zeros((len(vertex_index), 6 + static.shape[1]), np.float32)
+        self.buffer[:, 6:] = static
+        self.primitive = self.mesh = None
+
+
+def _piece_views(material: str, near: bool, glass: bool, views, skin: str) -> tuple:
+    """The views among ``views`` that draw this piece."""
+    out = []
+    for v in views:
+        if material not in _SHOWN[v]:
+            continue
+        cut = v == "inside" and near and material in _CUT
+        if skin == "transparent" and material not in _GLASS:
+            cut = False  # see-through skin: teeth and palate stay whole
+        glass_here = v == "inside" and near and skin == "transparent" and material in _GLASS
+        if (glass and glass_here) or (not glass and not cut and not glass_here):
+            out.append(v)
+    return tuple(out)
+
+
+def _split_pieces(vertices, faces, face_material, materials, views, skin) -> list[_Piece]:
+    """Split the mesh by material and by side of the midsagittal plane (triangle centroid)."""
+    near_side = vertices[faces].mean(axis=1)[:, 2] > 0
+    eye = materials.index("eye") if "eye" in materials else -1
+    iris = _iris_factors(vertices, faces, face_material, eye) if eye >= 0 else None
+    pieces = []
+    for m, name in enumerate(materials):
+        for near in (False, True):
+            for glass in (False, True):
+                mask = (face_material == m) & (near_side == near)
+                shown = _piece_views(name, near, glass, views, skin)
+                if not mask.any() or not shown:
+                    continue
+                index, local = np.unique(faces[mask], return_inverse=True)
+                static = iris[index] if (m == eye and iris is not None) else np.zeros((len(index), 0))
+                pieces.append(_Piece(name, near, glass, index, local.reshape(-1, 3), static, shown))
+    return pieces
+
+
+def _colour_only_renderer_class():
+    """pyrender's Renderer with a plain (or optional multisample) framebuffer, colour read only.
+
+    pyrender always renders into a 4x multisample buffer and reads back colour and depth,
+    converting depth in numpy; with llvmpipe that is about half the time of a frame.
+    """
+    import pyrender
+    from OpenGL import GL as gl
+
+    class _ColourOnlyRenderer(pyrender.Renderer):
+        samples = 0  # multisample anti-aliasing; 0 = none
+
+        def _configure_main_framebuffer(self):
+            dims = (self.viewport_width, self.viewport_height)
+            if self._main_fb is not None and self._main_fb_dims != dims:
+                self._delete_main_framebuffer()
+            if self._main_fb is None:
+                self._main_fb, self._main_cb, self._main_db = _framebuffer(gl, dims, 0)
+                self._main_fb_ms, self._main_cb_ms, self._main_db_ms = (
+                    _framebuffer(gl, dims, self.samples)
+                    if self.samples
+                    else (self._main_fb, self._main_cb, self._main_db)
+                )
+                self._main_fb_dims = dims
+
+        def _delete_main_framebuffer(self):
+            fbs = {self._main_fb, self._main_fb_ms} - {None}
+            rbs = {self._main_cb, self._main_db, self._main_cb_ms, self._main_db_ms} - {None}
+            if fbs:
+                gl.glDeleteFramebuffers(len(fbs), list(fbs))
+            if rbs:
+                gl.glDeleteRenderbuffers(len(rbs), list(rbs))
+            self._main_fb = self._main_cb = self._main_db = None
+            self._main_fb_ms = self._main_cb_ms = self._main_db_ms = None
+            self._main_fb_dims = (None, None)
+
+        def _read_main_framebuffer(self, scene, flags):
+            width, height = self._main_fb_dims
+            if self._main_fb_ms != self._main_fb:
+                gl.glBindFramebuffer(gl.GL_READ_FRAMEBUFFER, self._main_fb_ms)
+                gl.glBindFramebuffer(gl.GL_DRAW_FRAMEBUFFER, self._main_fb)
+                gl.glBlitFramebuffer(
+                    0, 0, width, height, 0, 0, width, height,
+                    gl.GL_COLOR_BUFFER_BIT, gl.GL_LINEAR,
+                )  # fmt: skip
+            gl.glBindFramebuffer(gl.GL_READ_FRAMEBUFFER, self._main_fb)
+            raw = gl.glReadPixels(0, 0, width, height, gl.GL_RGBA, gl.GL_UNSIGNED_BYTE)
+            image = np.frombuffer(raw, np.uint8).reshape(height, width, 4)
+            return np.ascontiguousarray(image[::-1, :, :3]), None
+
+    return _ColourOnlyRenderer
+
+
+def _framebuffer(gl, dims, samples):
+    """A framebuffer with RGBA8 colour and 24-bit depth renderbuffers: (fb, colour, depth)."""
+    colour, depth = gl.glGenRenderbuffers(2)
+    for rb, fmt in ((colour, gl.GL_RGBA8), (depth, gl.GL_DEPTH_COMPONENT24)):
+        gl.glBindRenderbuffer(gl.GL_RENDERBUFFER, rb)
+        if samples:
+            gl.glRenderbufferStorageMultisample(gl.GL_RENDERBUFFER, samples, fmt, *dims)
+        else:
+            gl.glRenderbufferStorage(gl.GL_RENDERBUFFER, fmt, *dims)
+    fb = gl.glGenFramebuffers(1)
+    gl.glBindFramebuffer(gl.GL_DRAW_FRAMEBUFFER, fb)
+    for attachment, rb in ((gl.GL_COLOR_ATTACHMENT0, colour), (gl.GL_DEPTH_ATTACHMENT, depth)):
+        gl.glFramebufferRenderbuffer(gl.GL_DRAW_FRAMEBUFFER, attachment, gl.GL_RENDERBUFFER, rb)
+    return fb, colour, depth
+
+
+def _light_pose(travel) -> np.ndarray:
+    """Pose of a pyrender directional light shining along ``travel`` (it shines along -z)."""
+    z = -np.asarray(travel, float) / np.linalg.norm(travel)
+    x = np.cross((0.0, 1.0, 0.0), z)
+    x = x / np.linalg.norm(x) if np.linalg.norm(x) > 0 else np.array([1.0, 0.0, 0.0])
+    pose = np.eye(4)
+    pose[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
+    return pose
+
+
+def _sphere(radius_subdivisions: int = 2):
+    """Unit icosphere (positions, normals, faces) for the markers."""
+    import trimesh
+
+    s = trimesh.creation.icosphere(subdivisions=radius_subdivisions)
+    return np.asarray(s.vertices), np.asarray(s.vertex_normals), np.asarray(s.faces)
+
+
+class Renderer:
+    """Offscreen renderer of one face model: one OpenGL context, one scene, reused per frame.
+
+    ``size`` is the whole output image (W, H) in pixels; in grid mode the views share it as
+    a 2x2 grid (front, side / inside, top), each view a (W/2, H/2) cell; with ``grid=False``
+    the views stand in one row. ``skin`` is ``"cut"`` (the inside view removes the near
+    half of skin, lips, eyes, teeth and palate) or ``"transparent"`` (the near skin, lips
+    and eyes drawn see-through). ``antialias`` is the number of multisample samples
+    (0 = none, the fast default). ``marker_radius`` is in mm (default: 1.2 % of the
+    head's height). Cameras are fitted to ``model.vertices`` (the rest mesh) plus
+    ``margin`` (a fraction of each cell kept free on every side).
+    """
+
+    def __init__(
+        self,
+        model,
+        *,
+        size=(640, 480),
+        views=VIEWS,
+        grid=True,
+        skin="cut",
+        background=(0.92, 0.92, 0.92),
+        antialias=0,
+        marker_radius=None,
+        margin=0.06,
+    ):
+        self.size, self.views, skin = _check_options(size, views, skin, background)
+        self.grid = bool(grid)
+        rest, faces, face_material, materials = _model_arrays(model)
+        self._n_vertices = len(rest)
+        self._faces = faces
+        self._incidence = _incidence(faces, len(rest))
+        self._pieces = _split_pieces(rest, faces, face_material, materials, self.views, skin)
+        self._fits = {v: self._fit(v, rest) for v in self.views}
+        height = self._fits.get("side", next(iter(self._fits.values())))[3][1]
+        self._marker_radius = float(marker_radius) if marker_radius else 0.012 * height
+        self._margin = float(margin)
+        self.platform = ensure_headless_gl()
+        self._build_scene(background, int(antialias))
+        self._layout_key, self._placements, self._markers = None, {}, {}
+        self.render(rest)  # warm-up: shaders compiled, buffers in the GL context
+
+    # -- set-up ------------------------------------------------------------------------
+
+    def _fit(self, view, rest):
+        """(R (3,3), mid (3,), lo (3,), extent (3,)) of the view's visible rest geometry."""
+        idx = np.unique(np.concatenate(
+            [p.vertex_index for p in self._pieces if view in p.views] or [np.arange(len(rest))]
+        ))  # fmt: skip
+        rotation = np.asarray(_VIEW_AXES[view], float)
+        q = rest[idx] @ rotation.T
+        lo, hi = q.min(axis=0), q.max(axis=0)
+        return rotation, (lo + hi) / 2, lo, np.maximum(hi - lo, 1e-9 * (1 + np.abs(hi)))
+
+    def _build_scene(self, background, samples):
+        import pyrender
+
+        width, height = self.size
+        depth = 4.0 * (width + height)
+        self._scene = pyrender.Scene(bg_color=(*background, 1.0), ambient_light=(0.22,) * 3)
+        camera = pyrender.OrthographicCamera(width / 2, height / 2, znear=1.0, zfar=2 * depth)
+        pose = np.eye(4)
+        pose[:3, 3] = (width / 2, height / 2, depth)
+        self._scene.add(camera, pose=pose)
+        # Lights fixed to the camera: every view is lit alike. Key from the camera, fill
+        # from the upper left, and a back light for surfaces seen from behind (the inside
+        # of the cut skin).
+        for travel, intensity in (((0, 0, -1), 2.6), ((0.5, -0.6, -1), 1.3), ((0, 0.3, 1), 1.4)):
+            light = pyrender.DirectionalLight(color=np.ones(3), intensity=intensity)
+            self._scene.add(light, pose=_light_pose(travel))
+        for piece in self._pieces:
+            self._add_piece(pyrender, piece)
+        self._gl = pyrender.OffscreenRenderer(width, height)
+        cls = _colour_only_renderer_class()
+        self._gl._renderer.__class__ = cls
+        self._gl._renderer.samples = samples
+
+    def _add_piece(self, pyrender, piece):
+        alpha = 0.35 if piece.glass else 1.0
+        material = pyrender.MetallicRoughnessMaterial(
+            baseColorFactor=(*_linear(MATERIAL_COLOURS.get(piece.material, (0.7,) * 3)), alpha),
+            metallicFactor=0.0,
+            roughnessFactor=0.75 if piece.material in ("skin", "palate") else 0.5,
+            doubleSided=True,
+            alphaMode="BLEND" if piece.glass else "OPAQUE",
+        )
+        n = len(piece.vertex_index)
+        piece.primitive = pyrender.Primitive(
+            positions=np.zeros((n, 3), np.float32),
+            normals=np.tile(np.float32([1, 0, 0]), (n, 1)),
+            color_0=piece.static if piece.static.shape[1] else None,
+            indices=piece.faces,
+            material=material,
+            poses=np.tile(np.eye(4), (len(piece.views), 1, 1)),
+        )
+        piece.mesh = pyrender.Mesh([piece.primitive])
+        self._scene.add(piece.mesh)
+
+    # -- per frame ---------------------------------------------------------------------
+
+    def _set_layout(self, key):
+        """Place the views: ``"grid"`` (all views in their cells) or one view filling the image."""
+        if key == self._layout_key:
+            return
+        width, height = self.size
+        cells = (
+            _cells(self.views, self.size, self.grid)
+            if key == "grid"
+            else {key: (width / 2, height / 2, width, height)}
+        )
+        self._placements = {v: self._placement(v, cell) for v, cell in cells.items()}
+        for piece in self._pieces:
+            poses = [self._placements[v] for v in piece.views if v in self._placements]
+            piece.mesh.is_visible = bool(poses)
+            if poses:
+                _set_poses(piece.primitive, np.stack(poses))
+        self._layout_key = key
+
+    def _placement(self, view, cell) -> np.ndarray:
+        """(4,4) similarity taking model mm to image pixels for ``view`` in ``cell``."""
+        rotation, mid, _, extent = self._fits[view]
+        cx, cy, cw, ch = cell
+        scale = min(cw / extent[0], ch / extent[1]) * (1 - 2 * self._margin)
+        pose = np.eye(4)
+        pose[:3, :3] = scale * rotation
+        pose[:3, 3] = np.array([cx, cy, 0.0]) - scale * mid
+        return pose
+
+    def _upload(self, vertices: np.ndarray):
+        """Write one frame's positions and normals into every piece's vertex buffer."""
+        from OpenGL import GL as gl
+
+        normals = _vertex_normals(vertices, self._faces, self._incidence)
+        self._gl._platform.make_current()
+        for piece in self._pieces:
+            piece.buffer[:, :3] = vertices[piece.vertex_index]
+            piece.buffer[:, 3:6] = normals[piece.vertex_index]
+            if piece.primitive._in_context():
+                gl.glBindBuffer(gl.GL_ARRAY_BUFFER, piece.primitive._buffers[0])
+                gl.glBufferSubData(gl.GL_ARRAY_BUFFER, 0, piece.buffer.nbytes, piece.buffer)
+            else:
+                piece.primitive.positions = piece.buffer[:, :3].copy()
+                piece.primitive.normals = piece.buffer[:, 3:6].copy()
+
+    def _set_markers(self, markers):
+        """Instanced spheres for each label's points in the side and inside views.
+
+        The points are moved along the view direction to just in front of the model's rest
+        bounds (this does not move them in the orthographic image), so the face never hides
+        them.
+        """
+        import pyrender
+
+        markers = {} if markers is None else dict(markers)
+        for label in set(self._markers) | set(markers):
+            pts = _marker_points(markers.get(label, np.zeros((0, 3))))
+            poses = self._marker_poses(pts)
+            if label not in self._markers:
+                if not len(poses):
+                    continue
+                self._markers[label] = self._marker_mesh(pyrender, label, poses)
+            mesh = self._markers[label]
+            mesh.is_visible = bool(len(poses))
+            if len(poses):
+                _set_poses(mesh.primitives[0], poses)
+
+    def _marker_poses(self, points) -> np.ndarray:
+        out = []
+        r = self._marker_radius
+        for view in _MARKER_VIEWS:
+            if view not in self._placements or not len(points):
+                continue
+            rotation, _, lo, extent = self._fits[view]
+            pose = self._placements[view]
+            q = points @ rotation.T
+            q[:, 2] = lo[2] + extent[2] + 2 * r  # in front of everything
+            poses = np.tile(np.eye(4), (len(q), 1, 1))
+            poses[:, :3, :3] = pose[:3, :3] @ (r * rotation.T)  # sphere is symmetric
+            poses[:, :3, 3] = q @ (pose[:3, :3] @ rotation.T).T + pose[:3, 3]
+            out.append(poses)
+        return np.concatenate(out) if out else np.zeros((0, 4, 4))
+
+    def _marker_mesh(self, pyrender, label, poses):
+        colours = _EXTRA_MARKER_COLOURS
+        colour = MARKER_COLOURS.get(label, colours[len(self._markers) % len(colours)])
+        material = pyrender.MetallicRoughnessMaterial(
+            baseColorFactor=(*_linear(colour), 1.0),
+            emissiveFactor=tuple(0.5 * c for c in _linear(colour)),
+            metallicFactor=0.0,
+            roughnessFactor=0.4,
+        )
+        positions, normals, faces = _sphere()
+        primitive = pyrender.Primitive(
+            positions=positions, normals=normals, indices=faces, material=material, poses=poses
+        )
+        mesh = pyrender.Mesh([primitive])
+        self._scene.add(mesh)
+        return mesh
+
+    def _draw(self) -> np.ndarray:
+        colour, _ = self._gl.render(self._scene)
+        return colour
+
+    # -- public ------------------------------------------------------------------------
+
+    def render(self, vertices, *, markers=None, caption=None) -> np.ndarray:
+        """One frame as an (H, W, 3) uint8 image: the grid (or the single view).
+
+        ``vertices``: (V,3) mm, model frame, the model's topology (numpy or JAX).
+        ``markers``: optional ``{label: (k,3) or (k,2) points in mm}``, drawn as spheres in
+        the side and inside views ("measured" red, "model" green, others blue, orange, ...;
+        non-finite points are not drawn). ``caption``: text drawn onto the image.
+        """
+        frame = _as_frame(vertices, self._n_vertices)
+        self._upload(frame)
+        self._set_layout("grid")
+        self._set_markers(markers)
+        image = self._draw()
+        return add_caption(image, caption) if caption else image
+
+    def render_views(self, vertices, *, markers=None) -> dict[str, np.ndarray]:
+        """Each view alone, filling the whole image: ``{view: (H, W, 3) uint8}``."""
+        frame = _as_frame(vertices, self._n_vertices)
+        self._upload(frame)
+        out = {}
+        for view in self.views:
+            self._set_layout(view)
+            self._set_markers(markers)
+            out[view] = self._draw()
+        return out
+
+    def close(self):
+        """Release the OpenGL context (idempotent)."""
+        if getattr(self, "_gl", None) is not None:
+            self._gl.delete()
+            self._gl = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+
+def _set_poses(primitive, poses: np.ndarray):
+    """Replace an instanced primitive's (n,4,4) poses, in the GL buffer if it is there."""
+    primitive.poses = poses
+    if primitive._in_context():
+        from OpenGL import GL as gl
+
+        data = np.ascontiguousarray(np.transpose(poses, (0, 2, 1)), dtype=np.float32)
+        gl.glBindBuffer(gl.GL_ARRAY_BUFFER, primitive._buffers[1])
+        gl.glBufferData(gl.GL_ARRAY_BUFFER, data.nbytes, data, gl.GL_DYNAMIC_DRAW)
+
+
+def _incidence(faces: np.ndarray, n_vertices: int):
+    """Sparse (V,F) matrix with a 1 where a vertex belongs to a face."""
+    import scipy.sparse
+
+    rows = faces.ravel()
+    cols = np.repeat(np.arange(len(faces)), 3)
+    return scipy.sparse.csr_matrix(
+        (np.ones(len(rows)), (rows, cols)), shape=(n_vertices, len(faces))
+    )
+
+
+def _model_arrays(model):
+    """(rest (V,3) float64, faces (F,3) int64, face_material (F,), material names)."""
+    try:
+        from .face_model import MATERIALS as materials
+    except ImportError:
+        materials = _MATERIALS
+    rest = np.asarray(model.vertices, dtype=np.float64)
+    faces = np.asarray(model.faces, dtype=np.int64)
+    face_material = np.asarray(model.face_material, dtype=np.int64)
+    if rest.ndim != 2 or rest.shape[1] != 3 or not np.all(np.isfinite(rest)):
+        raise CassiError(f"render: model vertices must be finite (V, 3), got {rest.shape}")
+    if faces.ndim != 2 or faces.shape[1] != 3 or faces.min() < 0 or faces.max() >= len(rest):
+        raise CassiError("render: model faces must be (F, 3) indices into the vertices")
+    if face_material.shape != (len(faces),) or face_material.max() >= len(materials):
+        raise CassiError("render: model face_material must be (F,) indices into MATERIALS")
+    return rest, faces, face_material, tuple(materials)
+
+
+def _check_options(size, views, skin, background):
+    try:
+        width, height = (int(s) for s in size)
+    except (TypeError, ValueError):
+        raise CassiError(f"render: size must be (width, height), got {size!r}") from None
+    if width < 8 or height < 8:
+        raise CassiError(f"render: size must be at least 8x8 pixels, got {width}x{height}")
+    views = (views,) if isinstance(views, str) else tuple(views)
+    unknown = [v for v in views if v not in VIEWS]
+    if not views or unknown or len(set(views)) != len(views):
+        raise CassiError(f"render: views must be distinct names from {VIEWS}, got {views}")
+    if skin not in ("cut", "transparent"):
+        raise CassiError(f"render: skin must be 'cut' or 'transparent', got {skin!r}")
+    if len(background) != 3:
+        raise CassiError(f"render: background must be an RGB triple, got {background!r}")
+    return (width, height), views, skin
+
+
+# --------------------------------------------------------------------------------------
+# captions and files
+# --------------------------------------------------------------------------------------
+
+
+def add_caption(image, text) -> np.ndarray:
+    """A copy of ``image`` ((H,W,3) uint8) with ``text`` on a dark band at the bottom."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    pil = Image.fromarray(np.asarray(image, dtype=np.uint8))
+    height = pil.height
+    font = ImageFont.load_default(size=max(10, height // 32))
+    draw = ImageDraw.Draw(pil, "RGBA")
+    left, top, right, bottom = draw.multiline_textbbox((0, 0), str(text), font=font)
+    pad = max(2, height // 120)
+    band_top = height - (bottom - top) - 2 * pad
+    draw.rectangle((0, band_top, pil.width, height), fill=(20, 20, 20, 170))
+    draw.multiline_text((pad - left, band_top + pad - top), str(text), font=font, fill=(255,) * 4)
+    return np.asarray(pil.convert("RGB"))
+
+
+def save_png(path, image, *, overwrite=True) -> Path:
+    """Write an (H,W,3) or (H,W,4) uint8 image as PNG, atomically; returns the path."""
+    from PIL import Image
+
+    array = np.asarray(image)
+    if array.dtype != np.uint8 or array.ndim != 3 or array.shape[2] not in (3, 4):
+        raise CassiError(f"{path}: an image must be (H, W, 3|4) uint8, got {array.shape} {array.dtype}")
+    buffer = io.BytesIO()
+    Image.fromarray(array).save(buffer, format="PNG")
+    return atomic_write(path, buffer.getvalue(), overwrite=overwrite)
