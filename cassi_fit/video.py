@@ -275,3 +275,64 @@ def count_frames(path) -> int:
     if not counts:
         raise VideoError(f"{path}: no video frames found")
     return int(counts[-1])
+
+
+# --------------------------------------------------------------------------- animations
+
+
+def frame_caption(subject: str, task: str, time_s: float, line: int, status: str = "ok") -> str:
+    """The caption of one frame: subject, task, recording time and (1-based) data line."""
+    text = f"{subject} {task}   t = {time_s:7.3f} s   line {line + 1}"
+    return text if status == "ok" else f"{text}   [{status}]"
+
+
+def animation_frames(animation, renderer, *, subject="", task="", markers=False, progress=True,
+                     indices=None):
+    """Render the frames ``indices`` (default all) of an ``animate.Animation`` with
+    ``renderer`` (a ``render.Renderer``); yields ``uint8 (H, W, 3)`` images. ``markers``: draw the measured
+    pellets and the model's pellet sites (never-tracked pellets left out). The progress
+    bar goes to stderr."""
+    import sys
+
+    from tqdm import tqdm
+
+    from .animate import FRAME_STATUS_NAMES
+
+    vertices = np.asarray(animation.vertices)
+    measured = np.asarray(animation.pellets_measured)
+    model_sites = np.asarray(animation.pellets_model)
+    shown = np.isfinite(measured).all(axis=(0, 2))
+    indices = range(animation.n_frames) if indices is None else indices
+    for k in tqdm(indices, desc="rendering", unit="frame", file=sys.stderr,
+                  disable=not progress, leave=False):
+        kwargs = {}
+        if markers:
+            kwargs["markers"] = {
+                "measured": _in_3d(measured[k][shown]),
+                "model": _in_3d(model_sites[k][shown]),
+            }
+        status = FRAME_STATUS_NAMES[int(animation.frame_status[k])]
+        caption = frame_caption(subject, task, float(animation.times[k]),
+                                int(animation.frame_index[k]), status)
+        yield renderer.render(vertices[k], caption=caption, **kwargs)
+
+
+def _in_3d(points_2d) -> np.ndarray:
+    """Pellet (x, y) in the midsagittal plane as model points (x, y, 0)."""
+    return np.concatenate([points_2d, np.zeros((len(points_2d), 1))], axis=1)
+
+
+def write_animation(path, animation, renderer, *, subject="", task="", audio=None,
+                    markers=False, progress=True, overwrite=False) -> Path:
+    """Render ``animation`` to an MP4/GIF at the recording's pace (``frame_rate(stride)``);
+    an MP4 carries ``audio`` (a ``.wav`` on the recording's clock) aligned so that the
+    first frame sounds at its own recording time. Returns the path written."""
+    times = np.asarray(animation.times, np.float64)
+    step_us = FRAME_STEP_US
+    if len(times) > 1:  # the recording's own line period, should it not be XRMB's
+        step_us = int(round(float(np.median(np.diff(times))) * 1e6 / animation.stride))
+    fps = frame_rate(animation.stride, step_us)
+    start = float(animation.times[0])
+    frames = animation_frames(animation, renderer, subject=subject, task=task,
+                              markers=markers, progress=progress)
+    return write_video(path, frames, fps, audio=audio, audio_start=start, overwrite=overwrite)

@@ -1,0 +1,406 @@
+"""CASSI's pipeline: fit the face to a subject once, then animate it from every data line.
+
+Initialization (paper section 2; :func:`initialize`), once per recording:
+
+1. the first valid line: the first frame in which every pellet the file ever tracks is
+   tracked (a pellet the file never tracks stays at the model's rest site, flagged);
+2. pellets to model: every coordinate scaled by ``p / d``, ``d = |MNI - MNM|`` of the
+   subject in that frame, ``p`` the same distance between the model's jaw pellet sites.
+   Both frames have their origin at the upper incisor tip, so no translation is needed;
+3. the lower teeth and the jaw: the closed form (Eqs 1-3, 6-7, ``jaw.closed_form``) from
+   the model's jaw sites to the scaled first-frame jaw pellets;
+4. the palate from the scaled PAL.DAT (``palate.with_palate``; the model's own if absent);
+5. the jaw's shape from the scaled Headmeasures gonion and gnathion against the model's
+   gonion and gnathion, by the same closed form (rows [gnathion, gonion]);
+6. beyond the paper (its future work): face and mouth width from Headmeasures, lip
+   thickness per speaker (from Headmeasures, or, where the subject has only the default
+   measures, from the first valid line: lip pellet ahead of the incisors), nose tip from
+   the nose protrusion; tongue (#55-#62) and lips (#63-#66) from the first frame.
+
+Animation (:func:`animate`), every ``stride``-th data line from the first valid one:
+tongue ``#55-#62 = scaled T1..T4 - the model's rest sites``, upper lip ``#63/#64`` likewise,
+lower lip ``#65/#66 = scaled LL - where the jaw motion took the model's LL site``; the jaw
+``= compose(motion since the first frame, initial motion)`` with the motion since the first
+frame from ``jaw_fit.fit_jaw`` (reference = the first valid frame's scaled jaw pellets).
+The vertices of all frames come from one jitted, vmapped call of ``deform.deform``.
+
+Gaps. Untracked values (NaN) and mistracked values (``quality.detect_mistracks``) are
+never passed on: per pellet they are replaced by the last good value (``"hold"``) or by
+linear interpolation between good neighbours (``"interpolate"``; the ends are held), and
+flagged in ``Animation.repaired (m, 8)`` and ``Animation.frame_status (m,)``:
+``FRAME_OK`` 0, ``FRAME_HELD`` 1 (an untracked value held), ``FRAME_INTERPOLATED`` 2 (an
+untracked value interpolated), ``FRAME_MISTRACKED`` 3 (a mistracked value replaced; takes
+precedence). A recording whose jaw pellets are never tracked raises ``MissingDataError``.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import rigid
+from .errors import CassiError, DegenerateGeometryError, MissingDataError
+
+PELLETS = ("UL", "LL", "T1", "T2", "T3", "T4", "MNI", "MNM")
+UL, LL, T1, T4, MNI, MNM = 0, 1, 2, 5, 6, 7
+JAW_METHODS = ("closed-form", "frame-fit", "fixed-pivot", "smooth-pivot")
+GAP_POLICIES = ("hold", "interpolate")
+
+FRAME_OK, FRAME_HELD, FRAME_INTERPOLATED, FRAME_MISTRACKED = 0, 1, 2, 3
+FRAME_STATUS_NAMES = {
+    FRAME_OK: "ok",
+    FRAME_HELD: "held",
+    FRAME_INTERPOLATED: "interpolated",
+    FRAME_MISTRACKED: "mistracked",
+}
+# Frames are padded to a multiple of this before the batched geometry call, so that
+# recordings of similar length (and different strides) share one compiled function.
+_FRAME_BUCKET = 64
+
+
+class SubjectState(eqx.Module):
+    """The model fitted to one subject (the result of CASSI's initialization).
+
+    model: the face model with the subject's palate. scale: ``p / d`` (model mm per
+    subject mm). first_frame: index of the first valid data line. reference_jaw ``(2, 2)``
+    mm: the scaled jaw pellets [MNI, MNM] of that line. initial_jaw: ``(theta rad,
+    t (2,) mm)``, the closed-form motion from the model's jaw sites onto them.
+    conformation: ``FaceParams`` of the subject's shape (jaw shape, widths, lip thickness,
+    nose) with no animation; rest_pellets ``(8, 2)`` mm: the model's pellet sites in that
+    shape. initial_params: the parameters of the first valid frame.
+    """
+
+    model: eqx.Module
+    scale: float = eqx.field(static=True)
+    first_frame: int = eqx.field(static=True)
+    reference_jaw: jax.Array
+    initial_jaw: tuple
+    conformation: eqx.Module
+    rest_pellets: jax.Array
+    initial_params: eqx.Module
+    tracked_pellets: tuple = eqx.field(static=True)
+    jaw_weights: str = eqx.field(static=True)
+    tongue_anchor: str = eqx.field(static=True)
+    gap_policy: str = eqx.field(static=True)
+    source: str = eqx.field(static=True)
+
+
+class Animation(eqx.Module):
+    """Per-frame result of :func:`animate`; ``m`` frames, ``V`` vertices.
+
+    times ``(m,)`` s; frame_index ``(m,)`` data-line indices; params: a ``FaceParams``
+    whose leaves carry a leading ``(m,)`` axis; vertices ``(m, V, 3)`` mm;
+    pellets_measured ``(m, 8, 2)`` mm, scaled by ``p / d`` and repaired; pellets_model
+    ``(m, 8, 2)`` mm, where the model puts its pellet sites; repaired ``(m, 8)`` bool;
+    mistracked ``(m, 8)`` bool; frame_status ``(m,)`` int (``FRAME_STATUS_NAMES``);
+    jaw_status ``(m,)`` int (``jaw.STATUS_NAMES``); stride and jaw method, static.
+    """
+
+    times: np.ndarray
+    frame_index: np.ndarray
+    params: eqx.Module
+    vertices: jax.Array
+    pellets_measured: np.ndarray
+    pellets_model: jax.Array
+    repaired: np.ndarray
+    mistracked: np.ndarray
+    frame_status: np.ndarray
+    jaw_status: np.ndarray
+    stride: int = eqx.field(static=True)
+    jaw_method: str = eqx.field(static=True)
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.times.shape[0])
+
+
+def _source(recording) -> str:
+    path = getattr(recording, "path", None) or getattr(recording.track, "path", None)
+    return str(path) if path is not None else f"{recording.subject}/{recording.task}"
+
+
+# --------------------------------------------------------------------------- gaps
+
+
+def _check_choice(name, value, choices):
+    if value not in choices:
+        raise CassiError(f"{name} must be one of {', '.join(choices)}; got {value!r}")
+
+
+def bad_values(track) -> tuple[np.ndarray, np.ndarray]:
+    """``(untracked, mistracked)``, each ``(n, 8)`` bool: a pellet untracked in x or y, and
+    a tracked value that ``quality.detect_mistracks`` flags."""
+    from .quality import detect_mistracks
+
+    untracked = ~np.asarray(track.valid).all(axis=-1)
+    mistracked = np.asarray(detect_mistracks(track), bool) & ~untracked
+    return untracked, mistracked
+
+
+def repair(positions, bad, policy="hold") -> np.ndarray:
+    """Replace the ``bad (n, 8)`` values of ``positions (n, 8, 2)`` mm, pellet by pellet.
+
+    ``"hold"``: the last good value before (the first good one for a leading gap);
+    ``"interpolate"``: linear in the frame index between the good neighbours (held at the
+    ends). A pellet with no good value at all is left NaN (the caller decides).
+    """
+    _check_choice("gap policy", policy, GAP_POLICIES)
+    out = np.array(positions, dtype=np.float64)
+    n = out.shape[0]
+    frames = np.arange(n)
+    for p in range(out.shape[1]):
+        good = ~bad[:, p]
+        if good.all() or not good.any():
+            continue
+        known = np.flatnonzero(good)
+        if policy == "interpolate":
+            for axis in range(2):
+                out[:, p, axis] = np.interp(frames, known, out[known, p, axis])
+        else:
+            last = np.maximum.accumulate(np.where(good, frames, -1))
+            source = np.where(last >= 0, last, known[0])
+            out[:, p] = out[source, p]
+    return out
+
+
+def frame_status(untracked, mistracked, policy) -> np.ndarray:
+    """``(n,)`` codes: FRAME_MISTRACKED if a value was mistracked, else FRAME_HELD or
+    FRAME_INTERPOLATED (by ``policy``) if one was untracked, else FRAME_OK."""
+    gap = FRAME_INTERPOLATED if policy == "interpolate" else FRAME_HELD
+    status = np.where(untracked.any(axis=1), gap, FRAME_OK)
+    return np.where(mistracked.any(axis=1), FRAME_MISTRACKED, status).astype(np.int32)
+
+
+def first_valid_line(track, source: str) -> tuple[int, tuple[str, ...]]:
+    """CASSI's first valid line: the first frame in which every pellet the file ever
+    tracks is tracked. Returns ``(index, tracked pellet names)``; raises
+    ``MissingDataError`` naming ``source`` if a jaw pellet is never tracked."""
+    tracked_xy = np.asarray(track.valid).all(axis=-1)
+    ever = tracked_xy.any(axis=0)
+    missing = [PELLETS[j] for j in (MNI, MNM) if not ever[j]]
+    if missing:
+        raise MissingDataError(f"{source}: jaw pellet(s) {', '.join(missing)} never tracked")
+    complete = tracked_xy[:, ever].all(axis=1)
+    if not complete.any():
+        names = ", ".join(p for p, e in zip(PELLETS, ever, strict=True) if e)
+        raise MissingDataError(f"{source}: no line in which {names} are all tracked")
+    return int(np.argmax(complete)), tuple(p for p, e in zip(PELLETS, ever, strict=True) if e)
+
+
+# --------------------------------------------------------------------------- initialization
+
+
+def _xy(model, vertices, name) -> np.ndarray:
+    return np.asarray(vertices)[model.landmarks[name], :2]
+
+
+def _jaw_shape(model, head, scale):
+    """Paper step 5: the closed form from the model's [gnathion, gonion] to the subject's
+    (scaled Headmeasures), as ``(theta, t)``; neutral if degenerate."""
+    from .jaw import closed_form
+
+    reference = np.stack([_xy(model, model.vertices, "gnathion"), _xy(model, model.vertices, "gonion")])
+    current = scale * np.array([[head.gnathion_x, head.gnathion_y], [head.gonion_x, head.gonion_y]])
+    motion = closed_form(jnp.asarray(reference), jnp.asarray(current))
+    if int(motion.status) >= 2:
+        return 0.0, np.zeros(2)
+    return float(motion.theta), np.asarray(motion.translation)
+
+
+def _lip_thickness(model, sites, first, scale, head, head_is_default):
+    """Millimetres added to the model's own lip thickness ``(upper, lower)``.
+
+    With measured Headmeasures: the scaled measures minus the model's. With the default
+    measures only (the report's future work): from the first valid line, taken as a gently
+    closed mouth, the lip pellet's distance ahead of the incisor (UL from the upper incisor
+    tip at the origin, LL from the MNI pellet) minus the same distance on the model. Kept
+    within [-1/2, +1] of the model's own thickness so that a bad first line cannot turn a
+    lip inside out.
+    """
+    own = np.array([model.measures["upper_lip_thickness"], model.measures["lower_lip_thickness"]])
+    if not head_is_default:
+        wanted = scale * np.array([head.upper_lip_thickness, head.lower_lip_thickness])
+        delta = wanted - own
+    else:
+        subject = scale * np.array([first[UL, 0], first[LL, 0] - first[MNI, 0]])
+        model_ahead = np.array([sites[UL, 0], sites[LL, 0] - sites[MNI, 0]])
+        delta = np.where(np.isfinite(subject), subject - model_ahead, 0.0)
+    return np.clip(delta, -0.5 * own, own)
+
+
+def _conformation(model, recording, sites, first, scale):
+    """FaceParams of the subject's shape (no animation); see the module docstring, step 6."""
+    from .deform import default_params
+
+    head, default = recording.head, bool(recording.head_is_default)
+    params = default_params(model)
+    upper, lower = _lip_thickness(model, sites, first, scale, head, default)
+    changes = {"upper_lip_thickness": upper, "lower_lip_thickness": lower}
+    if not default:
+        theta, t = _jaw_shape(model, head, scale)
+        nose = scale * head.nose_protrusion - model.measures["nose_protrusion"]
+        changes.update(
+            jaw_shape_theta=theta, jaw_shape_translation=t,
+            face_width=scale * head.face_width / model.measures["face_width"],
+            mouth_width=scale * head.mouth_width / model.measures["mouth_width"],
+            nose_tip=np.array([nose, 0.0]),
+        )
+    names = tuple(changes)
+    values = tuple(jnp.asarray(changes[k], jnp.asarray(getattr(params, k)).dtype) for k in names)
+    return eqx.tree_at(lambda p: tuple(getattr(p, k) for k in names), params, values)
+
+
+def initialize(recording, model=None, *, jaw_weights="cassi", tongue_anchor="follow",
+               gap_policy="hold") -> SubjectState:
+    """Fit the face model to the subject of ``recording`` (CASSI's initialization).
+
+    ``recording``: a ``dataset.Recording``. ``model``: a ``FaceModel`` (default
+    ``load_model()``). Returns a :class:`SubjectState`; see the module docstring for the
+    steps. Raises ``MissingDataError`` (jaw pellets never tracked) or
+    ``DegenerateGeometryError`` (coincident jaw pellets on the first valid line).
+    """
+    from .deform import deform, model_pellets
+    from .face_model import load_model
+    from .jaw import closed_form
+    from .palate import with_palate
+
+    _check_choice("jaw weights", jaw_weights, ("cassi", "parke"))
+    _check_choice("tongue anchor", tongue_anchor, ("fixed", "follow", "none"))
+    _check_choice("gap policy", gap_policy, GAP_POLICIES)
+    source = _source(recording)
+    model = load_model() if model is None else model
+    track = recording.track
+    first, tracked = first_valid_line(track, source)
+    pellets = np.asarray(track.positions[first], np.float64)  # (8, 2) mm, subject
+    d = float(np.linalg.norm(pellets[MNI] - pellets[MNM]))
+    sites = np.asarray(model_pellets(model, model.vertices))
+    p = float(np.linalg.norm(sites[MNI] - sites[MNM]))
+    if not d > 0.0:
+        raise DegenerateGeometryError(f"{source}: MNI and MNM coincide on the first valid line ({first + 1})")
+    scale = p / d
+    if recording.palate is not None:
+        model = with_palate(model, scale * np.asarray(recording.palate, np.float64))
+    conformation = _conformation(model, recording, sites, pellets, scale)
+    rest_vertices = deform(model, conformation, jaw_weights=jaw_weights, tongue_anchor=tongue_anchor)
+    rest = jnp.asarray(model_pellets(model, rest_vertices))
+    reference = jnp.asarray(scale * pellets[[MNI, MNM]])
+    initial = closed_form(rest[jnp.array([MNI, MNM])], reference)
+    state = SubjectState(
+        model=model, scale=scale, first_frame=first, reference_jaw=reference,
+        initial_jaw=(initial.theta, initial.translation), conformation=conformation,
+        rest_pellets=rest, initial_params=conformation, tracked_pellets=tracked,
+        jaw_weights=jaw_weights, tongue_anchor=tongue_anchor, gap_policy=gap_policy,
+        source=source,
+    )
+    zero = (jnp.zeros(()), jnp.zeros(2))
+    first_params = _frame_params(state, jnp.asarray(scale * pellets), zero)
+    return eqx.tree_at(lambda s: s.initial_params, state, first_params)
+
+
+# --------------------------------------------------------------------------- animation
+
+
+def _frame_params(state: SubjectState, scaled, motion_since_first):
+    """The FaceParams of one frame. ``scaled (8, 2)`` mm: the pellets times ``p / d``
+    (values of never-tracked pellets are ignored); ``motion_since_first``: ``(theta, t)``
+    of the jaw from the first valid line to this one."""
+    rest = state.rest_pellets
+    tracked = jnp.asarray([name in state.tracked_pellets for name in PELLETS])
+    # never-tracked pellets sit at the model's rest sites: their parameters stay 0
+    scaled = jnp.where(tracked[:, None], jnp.nan_to_num(scaled), rest)
+    motion = rigid.compose(motion_since_first, state.initial_jaw)
+    w_ll = state.model.jaw_weights[state.jaw_weights][state.model.landmarks["LL"]]
+    ll_after_jaw = rigid.apply(*rigid.fractional(motion, w_ll), rest[LL])
+    lower_lip = jnp.where(tracked[LL], scaled[LL] - ll_after_jaw, 0.0)
+    dtype = jnp.asarray(state.conformation.tongue).dtype
+    values = (motion[0], motion[1], scaled[T1 : T4 + 1] - rest[T1 : T4 + 1],
+              scaled[UL] - rest[UL], lower_lip)
+    return eqx.tree_at(
+        lambda p: (p.jaw_theta, p.jaw_translation, p.tongue, p.upper_lip, p.lower_lip),
+        state.conformation, tuple(jnp.asarray(v, dtype) for v in values),
+    )
+
+
+@eqx.filter_jit
+def _batched_params(state, scaled, theta, translation):
+    """FaceParams with a leading frame axis from ``scaled (m, 8, 2)``, ``theta (m,)``,
+    ``translation (m, 2)``."""
+    return jax.vmap(lambda s, a, t: _frame_params(state, s, (a, t)))(scaled, theta, translation)
+
+
+@eqx.filter_jit
+def _geometry(model, params, jaw_weights, tongue_anchor):
+    """All frames at once: vertices ``(m, V, 3)`` and model pellet sites ``(m, 8, 2)``."""
+    from .deform import deform, model_pellets
+
+    def one(p):
+        vertices = deform(model, p, jaw_weights=jaw_weights, tongue_anchor=tongue_anchor)
+        return vertices, model_pellets(model, vertices)
+
+    return jax.vmap(one)(params)
+
+
+def geometry(state: SubjectState, params):
+    """Vertices ``(m, V, 3)`` and model pellet sites ``(m, 8, 2)`` of a batch of params,
+    in one compiled call (frames padded to a multiple of 64 so the compilation is reused)."""
+    m = int(jnp.shape(params.jaw_theta)[0])
+    padded = _FRAME_BUCKET * math.ceil(m / _FRAME_BUCKET)
+    batch = jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], padded - m, 0)]), params)
+    vertices, sites = _geometry(state.model, batch, state.jaw_weights, state.tongue_anchor)
+    return vertices[:m], sites[:m]
+
+
+def _jaw_since_first(state, jaw_pellets, method, solver):
+    """``(theta (m,), t (m, 2), status (m,))``: the jaw from the first valid line to each
+    frame, by ``method``; ``jaw_pellets (m, 2, 2)`` scaled mm, rows [MNI, MNM]."""
+    if method == "closed-form":
+        from .jaw import closed_form
+
+        fit = jax.vmap(closed_form, in_axes=(None, 0))(state.reference_jaw, jnp.asarray(jaw_pellets))
+    else:
+        from .jaw_fit import fit_jaw
+
+        kwargs = {} if solver is None else {"solver": solver}
+        fit = fit_jaw(state.reference_jaw, jnp.asarray(jaw_pellets), method=method, **kwargs)
+    return jnp.asarray(fit.theta), jnp.asarray(fit.translation), np.asarray(fit.status)
+
+
+def animate(state: SubjectState, recording, *, jaw="closed-form", solver=None, stride=1,
+            gap_policy=None) -> Animation:
+    """Animate the face over ``recording`` (every ``stride``-th data line from the first
+    valid one, ``ceil((n - first) / stride)`` frames).
+
+    ``jaw``: one of ``JAW_METHODS`` (the paper's closed form, or a fit from ``jaw_fit``,
+    which gets ``solver`` if given). ``gap_policy``: ``"hold"`` or ``"interpolate"``
+    (default: the state's). Returns an :class:`Animation`.
+    """
+    _check_choice("jaw method", jaw, JAW_METHODS)
+    policy = state.gap_policy if gap_policy is None else gap_policy
+    _check_choice("gap policy", policy, GAP_POLICIES)
+    if int(stride) != stride or stride < 1:
+        raise CassiError(f"stride must be a positive integer, got {stride}")
+    track = recording.track
+    untracked, mistracked = bad_values(track)
+    bad = untracked | mistracked
+    positions = repair(np.asarray(track.positions), bad, policy)
+    rows = np.arange(state.first_frame, track.times.shape[0], int(stride))
+    scaled = state.scale * positions[rows]
+    jaw_ok = ~bad[:, [MNI, MNM]].any(axis=1)
+    if not jaw_ok.any():
+        raise MissingDataError(f"{_source(recording)}: the jaw pellets are never tracked well")
+    theta, translation, jaw_status = _jaw_since_first(state, scaled[:, [MNI, MNM]], jaw, solver)
+    params = _batched_params(state, jnp.asarray(scaled), theta, translation)
+    vertices, sites = geometry(state, params)
+    tracked = np.array([name in state.tracked_pellets for name in PELLETS])
+    return Animation(
+        times=np.asarray(track.times)[rows], frame_index=rows, params=params,
+        vertices=vertices, pellets_measured=np.where(tracked[:, None], scaled, np.nan),
+        pellets_model=sites, repaired=bad[rows] & tracked, mistracked=mistracked[rows],
+        frame_status=frame_status(untracked[rows] & tracked, mistracked[rows], policy),
+        jaw_status=jaw_status, stride=int(stride), jaw_method=jaw,
+    )
