@@ -1,0 +1,173 @@
+"""``cassi info PATH``: subjects, tasks, frames and a validity report of XRMB data."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "info",
+        help="list subjects and tasks of XRMB data, with a validity report per file",
+        description="PATH is a dataset folder (one folder per subject, or flat names such as "
+        "jw11_tp005.txy) or a single pellet file. Prints subjects, tasks, frames, the first "
+        "valid frame, per-pellet valid fractions, unmarked mistracks and the jaw pellet "
+        "distance (MNI-MNM) spread.",
+    )
+    parser.add_argument("path", metavar="PATH", help="dataset folder or pellet (.txy) file")
+    parser.add_argument("--json", action="store_true", help="print one JSON document instead")
+    parser.add_argument(
+        "--list", action="store_true", help="only list subjects and tasks (read no file)"
+    )
+    parser.set_defaults(func=run)
+
+
+def _describe(recording) -> dict:
+    """JSON-ready summary of one loaded recording."""
+    from cassi_fit.quality import quality_report
+
+    return {
+        "path": str(recording.path),
+        "audio": None if recording.audio is None else str(recording.audio),
+        "palate_points": None if recording.palate is None else len(recording.palate),
+        "pharynx_points": None if recording.pharynx is None else len(recording.pharynx),
+        "head_is_default": recording.head_is_default,
+        "quality": quality_report(recording.track).to_dict(),
+    }
+
+
+def _quietly(load, *args):
+    """``load(*args)`` without the default-head-measures warning (the report shows it)."""
+    import warnings
+
+    from cassi_fit.dataset import DefaultHeadMeasuresWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DefaultHeadMeasuresWarning)
+        return load(*args)
+
+
+def _load(load, *args) -> dict:
+    """Describe a recording, or report its error (one bad file does not stop the listing)."""
+    from cassi_fit.errors import CassiError
+
+    try:
+        return _describe(_quietly(load, *args))
+    except CassiError as exc:
+        return {"error": str(exc)}
+
+
+def collect(path: Path, list_only: bool = False) -> dict:
+    """The whole report as a JSON-ready dict (a folder or a single pellet file)."""
+    from cassi_fit.dataset import Dataset, load_recording
+    from cassi_fit.errors import MissingDataError
+
+    if path.is_file():
+        rec = _quietly(load_recording, path)
+        info = _describe(rec)
+        return {"path": str(path), "kind": "file", "subject": rec.subject, "task": rec.task, **info}
+    if not path.is_dir():
+        raise MissingDataError(f"{path}: no such file or folder")
+    ds = Dataset(path)
+    if not ds.subjects():
+        raise MissingDataError(f"{path}: no pellet files (.txy) found")
+    subjects = {}
+    for subject in ds.subjects():
+        tasks = {}
+        for task in ds.tasks(subject):
+            if list_only:
+                tasks[task] = {"path": str(ds.pellet_path(subject, task))}
+            else:
+                tasks[task] = _load(ds.load, subject, task)
+        subjects[subject] = tasks
+    return {"path": str(path), "kind": "dataset", "n_subjects": len(subjects),
+            "n_recordings": len(ds), "subjects": subjects}  # fmt: skip
+
+
+def _pct(x) -> str:
+    return "-" if x is None else f"{100 * x:.1f}"
+
+
+def _mm(x, digits=2) -> str:
+    return "-" if x is None else f"{x:.{digits}f}"
+
+
+def _print_file(report: dict, out) -> None:
+    q = report["quality"]
+    first = q["first_valid_frame"]
+    print(f"{report['subject']} {report['task']}  {report['path']}", file=out)
+    print(f"  frames {q['n_frames']}  duration {q['duration_s']:.3f} s  first valid frame "
+          f"{'-' if first is None else first}  first jaw frame "
+          f"{'-' if q['first_jaw_frame'] is None else q['first_jaw_frame']}", file=out)  # fmt: skip
+    print(f"  palate {report['palate_points'] or '-'} points  pharynx "
+          f"{report['pharynx_points'] or '-'} points  head measures "
+          f"{'DEFAULTS' if report['head_is_default'] else 'from file'}  audio "
+          f"{report['audio'] or '-'}", file=out)  # fmt: skip
+    print("  pellet  valid%  mistracked", file=out)
+    for name, frac in q["valid_fraction"].items():
+        print(f"  {name:<6}  {_pct(frac):>6}  {q['n_mistracked'][name]:>10}", file=out)
+    print(f"  all     {_pct(q['all_valid_fraction']):>6}", file=out)
+    print(f"  jaw distance MNI-MNM: median {_mm(q['jaw_distance_median_mm'])} mm, "
+          f"SD {_mm(q['jaw_distance_sd_mm'], 3)} mm", file=out)  # fmt: skip
+
+
+_COLUMNS = ("subject", "task", "frames", "dur_s", "first", "all%", "jaw_mm", "jaw_sd", "mistr")
+
+
+def _row(subject: str, task: str, entry: dict) -> list[str]:
+    if "error" in entry:
+        return [subject, task, f"error: {entry['error']}"]
+    if "quality" not in entry:
+        return [subject, task, entry["path"]]
+    q = entry["quality"]
+    first = q["first_valid_frame"]
+    return [subject, task, str(q["n_frames"]), f"{q['duration_s']:.2f}",
+            "-" if first is None else str(first), _pct(q["all_valid_fraction"]),
+            _mm(q["jaw_distance_median_mm"]), _mm(q["jaw_distance_sd_mm"], 3),
+            str(sum(q["n_mistracked"].values()))]  # fmt: skip
+
+
+def _print_dataset(report: dict, out) -> None:
+    print(f"{report['path']}: {report['n_subjects']} subject(s), "
+          f"{report['n_recordings']} recording(s)", file=out)  # fmt: skip
+    for subject, tasks in report["subjects"].items():
+        loaded = [e for e in tasks.values() if "quality" in e]
+        extra = ""
+        if loaded:
+            e = loaded[0]
+            extra = (f"; palate {e['palate_points'] or '-'} points, pharynx "
+                     f"{e['pharynx_points'] or '-'}, head measures "
+                     f"{'DEFAULTS' if e['head_is_default'] else 'from file'}")  # fmt: skip
+        print(f"  {subject}: {len(tasks)} task(s){extra}", file=out)
+    rows = [_row(s, t, e) for s, tasks in report["subjects"].items() for t, e in tasks.items()]
+    header = (
+        list(_COLUMNS)
+        if any(len(r) == len(_COLUMNS) for r in rows)
+        else ["subject", "task", "path"]
+    )
+    table = [header] + [r for r in rows if len(r) == len(header)]
+    widths = [max(len(r[i]) for r in table) for i in range(len(header))]
+    for r in [header] + rows:
+        if len(r) == len(_COLUMNS):
+            r = [c.ljust(w) for c, w in zip(r, widths, strict=True)]
+        else:  # --list (path) or an error: the rest of the line
+            r = [r[0].ljust(widths[0]), r[1].ljust(widths[1]), r[2]]
+        print("  " + "  ".join(r).rstrip(), file=out)
+
+
+def run(args) -> int:
+    report = collect(Path(args.path), list_only=args.list)
+    out = sys.stdout
+    if args.json:
+        json.dump(report, out, indent=2)
+        print(file=out)
+    elif report["kind"] == "file":
+        _print_file(report, out)
+    else:
+        _print_dataset(report, out)
+    failed = report["kind"] == "dataset" and any(
+        "error" in e for ts in report["subjects"].values() for e in ts.values()
+    )
+    return 2 if failed else 0
