@@ -1,0 +1,145 @@
+"""The toolkit's Parke-style face model (with the inside of the mouth) and its loader.
+
+The data live in the repository's ``model/`` folder (format: ``model/README.md``):
+``vertices.csv`` (positions, jaw weights, deformation fields), ``faces.csv``
+(triangles with a material), ``model.json`` (regions, landmarks, measures) and
+``parameters.csv`` (the parameter table). Any mesh written in that format loads here.
+
+Model frame (mm): origin at the upper incisor tip, +x to the front, +y up, +z to the
+subject's left; z = 0 is the midsagittal plane, which is the XRMB pellet plane.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from ._io import register_input
+from .errors import DataFormatError, MissingDataError
+
+MATERIALS = ("skin", "lips", "eye", "teeth", "tongue", "palate")
+REGIONS = ("skin", "upper_lip", "lower_lip", "jaw", "under_chin", "neck", "cheek", "nose",
+           "eyes", "upper_teeth", "lower_teeth", "tongue", "palate")
+LANDMARKS = ("upper_incisor_tip", "lower_incisor_tip", "MNI", "MNM", "UL", "LL", "T1", "T2",
+             "T3", "T4", "gonion", "gnathion", "nose_tip", "subnasale", "mouth_corner_left",
+             "mouth_corner_right")
+MEASURES = ("face_width", "jaw_width", "mouth_width", "upper_lip_thickness",
+            "lower_lip_thickness", "nose_protrusion")
+# Per-vertex deformation fields stored beside the positions (see model/README.md).
+FIELDS = ("upper_lip", "lower_lip", "upper_vermilion", "lower_vermilion", "mouth", "nose",
+          "nose_rise", "jaw_shape", "tongue_s")
+VERTEX_COLUMNS = ("x", "y", "z", "w_cassi", "w_parke") + FIELDS
+
+
+class FaceModel(eqx.Module):
+    """The rest mesh and everything needed to deform it.
+
+    ``vertices`` (V, 3) mm; ``faces`` (F, 3) int and ``face_material`` (F,) (indices into
+    ``MATERIALS``) static; ``regions`` name -> vertex indices; ``jaw_weights`` "cassi" and
+    "parke" -> (V,) fraction of the jaw rotation; ``landmarks`` name -> vertex index;
+    ``measures`` name -> mm (plus ``jaw_pivot_x/y``, ``tongue_anchor_s``);
+    ``fields`` name -> (V,) deformation weights (``FIELDS``).
+    """
+
+    vertices: Array
+    faces: np.ndarray = eqx.field(static=True)
+    face_material: np.ndarray = eqx.field(static=True)
+    regions: dict = eqx.field(static=True)
+    jaw_weights: dict
+    landmarks: dict = eqx.field(static=True)
+    measures: dict = eqx.field(static=True)
+    fields: dict = eqx.field(default_factory=dict)
+
+
+def default_model_dir() -> Path:
+    import cassi_fit
+
+    return Path(cassi_fit.__file__).resolve().parents[1] / "model"
+
+
+def _read_table(path: Path, columns) -> np.ndarray:
+    """A CSV with a header naming at least ``columns``; returns float rows (n, len(columns))."""
+    if not path.exists():
+        raise MissingDataError(f"{path}: model file not found")
+    register_input(path)
+    with open(path, newline="", encoding="utf-8") as fh:
+        reader = csv.reader(fh)
+        header = [h.strip() for h in next(reader, [])]
+        missing = [c for c in columns if c not in header]
+        if missing:
+            raise DataFormatError(path, 1, f"header lacks column(s) {', '.join(missing)}")
+        pick = [header.index(c) for c in columns]
+        rows = []
+        for line, row in enumerate(reader, start=2):
+            if not row or all(not c.strip() for c in row):
+                continue
+            try:
+                values = [float(row[k]) for k in pick]
+            except (ValueError, IndexError):
+                raise DataFormatError(path, line, f"expected {len(header)} numbers, got {row!r}")
+            if not np.all(np.isfinite(values)):
+                raise DataFormatError(path, line, "non-finite value")
+            rows.append(values)
+    if not rows:
+        raise DataFormatError(path, None, "no data rows")
+    return np.array(rows)
+
+
+def _check_index(path, what, index, n):
+    index = np.asarray(index, dtype=np.int64)
+    if index.size and (index.min() < 0 or index.max() >= n):
+        raise DataFormatError(path, None, f"{what} refers to vertex {index.max()} of {n}")
+    return index
+
+
+def load_model(path=None) -> FaceModel:
+    """Load a model folder (default: the repository's ``model/``) as a :class:`FaceModel`."""
+    folder = Path(path) if path is not None else default_model_dir()
+    vpath, fpath, mpath = folder / "vertices.csv", folder / "faces.csv", folder / "model.json"
+    required = ("x", "y", "z", "w_cassi", "w_parke")
+    table = _read_table(vpath, required)
+    with open(vpath, encoding="utf-8") as fh:
+        header = [h.strip() for h in fh.readline().split(",")]
+    extra = [f for f in FIELDS if f in header]
+    fields_table = _read_table(vpath, extra) if extra else np.zeros((len(table), 0))
+    n = len(table)
+    ftable = _read_table(fpath, ("a", "b", "c", "material"))
+    faces = _check_index(fpath, "a face", ftable[:, :3].astype(np.int64), n)
+    material = ftable[:, 3].astype(np.int64)
+    if material.min() < 0 or material.max() >= len(MATERIALS):
+        raise DataFormatError(fpath, None, f"material index outside 0..{len(MATERIALS) - 1}")
+    if not mpath.exists():
+        raise MissingDataError(f"{mpath}: model file not found")
+    register_input(mpath)
+    try:
+        meta = json.loads(mpath.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise DataFormatError(mpath, exc.lineno, f"invalid JSON: {exc.msg}") from None
+    for key in ("regions", "landmarks", "measures"):
+        if key not in meta:
+            raise DataFormatError(mpath, None, f"missing the {key!r} entry")
+    regions = {k: _check_index(mpath, f"region {k}", v, n) for k, v in meta["regions"].items()}
+    for name in REGIONS:
+        regions.setdefault(name, np.zeros(0, dtype=np.int64))
+    landmarks = {k: int(v) for k, v in meta["landmarks"].items()}
+    for k, v in landmarks.items():
+        _check_index(mpath, f"landmark {k}", [v], n)
+    fields = {f: jnp.asarray(fields_table[:, k]) for k, f in enumerate(extra)}
+    for f in FIELDS:
+        fields.setdefault(f, jnp.zeros(n))
+    return FaceModel(
+        vertices=jnp.asarray(table[:, :3]),
+        faces=faces,
+        face_material=material,
+        regions=regions,
+        jaw_weights={"cassi": jnp.asarray(table[:, 3]), "parke": jnp.asarray(table[:, 4])},
+        landmarks=landmarks,
+        measures={k: float(v) for k, v in meta["measures"].items()},
+        fields=fields,
+    )

@@ -1,0 +1,582 @@
+"""Build the toolkit's own Parke-style face model and write it to ``model/``.
+
+This is NOT Parke's data (which is not available to us): it is a new mesh built in the
+manner Parke described (a half face, mirrored across the midsagittal plane, whose vertex
+groups move by rotation, translation and scaling), plus the inside of the mouth that
+CASSI added (teeth, tongue, palate). Run ``python model/build_model.py`` to rebuild.
+
+Construction (all mm, model frame: origin = upper incisor tip, +x front, +y up,
++z the subject's left):
+* skin: a lofted half head on a structured grid. Rows are horizontal (or, in the lower
+  face, tilted to follow the jaw line) cross-sections, columns run from the front
+  midline around to the back midline. Nose, eye sockets, cheekbones, lips and chin are
+  smooth bumps on top of the loft. The two lips are their own rows, with a real opening.
+* eyes: spheres in the sockets; teeth: two arches of individual crowns; tongue: a closed
+  tube shaped through the four tongue pellet sites; palate: ``cassi_fit.palate``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from cassi_fit._io import atomic_write  # noqa: E402
+from cassi_fit.face_model import MATERIALS  # noqa: E402
+
+MAT = {name: i for i, name in enumerate(MATERIALS)}
+
+# Pellet sites of the model (x, y) mm, placed where real pellets sit (one speaker's medians).
+SITES = {"UL": (14.9, 17.8), "LL": (9.4, -21.4), "MNI": (-1.0, -8.0), "MNM": (-44.0, -3.0),
+         "T1": (-17.0, 1.0), "T2": (-29.0, 7.0), "T3": (-41.0, 12.5), "T4": (-53.0, 17.0)}
+MOUTH_HALF_WIDTH = 24.5
+JAW_PIVOT = (-95.0, 22.0)  # condyle, mm
+PARKE = {"jaw": 1.00, "lower_teeth": 0.90, "under_chin": 0.75, "neck": 0.50, "cheek": 0.35}
+CASSI_FACTOR = 1.0 / 0.9   # CASSI's 1.11111: the lower teeth move 100 %
+
+# ---------------------------------------------------------------------------- skin rows
+# name, y0 (midline height), xf (front midline x, before nose/lip bumps), cx (section
+# centre), w (half width), xb (back midline x), e (front superellipse exponent),
+# lift (mm the row rises toward the back, following the jaw line), group (upper/lower).
+ROWS = [
+    ("vertex", 176, -75, -80, 0.0, -85, 2.0, 0, "u"),
+    ("crown1", 173, -40, -80, 32, -125, 2.0, 0, "u"),
+    ("crown2", 164, -12, -80, 54, -155, 2.2, 0, "u"),
+    ("crown3", 148, 2, -80, 66, -170, 2.4, 0, "u"),
+    ("forehead1", 130, 10, -80, 72, -177, 2.6, 0, "u"),
+    ("forehead2", 112, 14, -80, 74, -178, 2.8, 0, "u"),
+    ("brow", 94, 15, -80, 73, -176, 3.0, 0, "u"),
+    ("glabella", 82, 14, -80, 71, -172, 3.2, 0, "u"),
+    ("nasion", 73, 9, -80, 69, -168, 3.4, 0, "u"),
+    ("eyes", 65, 9, -78, 68, -164, 3.4, 0, "u"),
+    ("eyes_low", 57, 10, -76, 68, -158, 3.2, 0, "u"),
+    ("cheekbone", 49, 11, -74, 68, -152, 3.0, 0, "u"),
+    ("nose_tip_high", 43, 12, -72, 66, -146, 2.9, 0, "u"),
+    ("nose_tip", 38, 12, -71, 65, -142, 2.8, 0, "u"),
+    ("nostril", 33, 12, -70, 63, -138, 2.7, 0, "u"),
+    ("subnasale", 29.5, 12, -70, 62, -136, 2.6, 0, "u"),
+    ("philtrum", 24, 11.5, -70, 61, -134, 2.5, 0, "u"),
+    ("UL", 17.8, 6.0, -70, 60, -132, 2.4, 0, "u"),
+    ("ul_red", 9.5, 5.5, -70, 60, -131, 2.4, 0, "u"),
+    ("ul_low", 3.5, 5.0, -70, 59, -130, 2.4, 0, "u"),
+    ("A", 0.6, 5.0, -70, 59, -130, 2.4, 0, "u"),
+    ("A_in", 0.6, 5.0, -70, 59, -130, 2.4, 0, "u"),
+    ("B_in", -0.6, 5.0, -70, 59, -130, 2.4, 0, "l"),
+    ("B", -0.6, 5.0, -70, 59, -130, 2.4, 0, "l"),
+    ("ll_high", -4, 5.0, -70, 58, -130, 2.4, 0, "l"),
+    ("ll_red", -11, 5.0, -70, 57, -130, 2.4, 0, "l"),
+    ("LL", -21.4, 4.0, -71, 56, -129, 2.4, 0.5, "l"),
+    ("fold", -29, 3.0, -72, 55, -128, 2.4, 2, "l"),
+    ("chin", -40, 8.0, -73, 53, -127, 2.3, 5, "l"),
+    ("chin_low", -49, 6.0, -74, 51, -126, 2.2, 9, "l"),
+    ("menton", -56, -4.0, -76, 50, -125, 2.1, 13, "l"),
+    ("under_chin", -61, -22.0, -78, 48, -124, 2.0, 14, "l"),
+    ("throat", -67, -40.0, -78, 46, -123, 2.0, 12, "l"),
+    ("neck1", -82, -43.0, -80, 46, -122, 2.0, 6, "l"),
+    ("neck2", -105, -41.0, -80, 48, -121, 2.0, 2, "l"),
+    ("neck_base", -125, -38.0, -80, 52, -122, 2.0, 0, "l"),
+]
+ROW_INDEX = {r[0]: i for i, r in enumerate(ROWS)}
+# Lip protrusion (mm, at the midline) on top of xf; falls to 0 at the mouth corners.
+LIP_BUMP = {"UL": 8.9, "ul_red": 10.5, "ul_low": 8.0, "A": 5.0, "A_in": -2.0,
+            "B_in": -2.0, "B": 5.0, "ll_high": 8.5, "ll_red": 9.0, "LL": 5.4, "fold": 0.0}
+# Nose: protrusion (mm at the midline) and half width per row.
+NOSE = {"glabella": (0.5, 9), "nasion": (1.0, 8), "eyes": (5.0, 8), "eyes_low": (10.0, 9),
+        "cheekbone": (15.0, 10), "nose_tip_high": (19.5, 13), "nose_tip": (21.5, 17),
+        "nostril": (14.0, 17), "subnasale": (1.5, 12)}
+# Front z targets (on the mouth row) of the columns; the mouth corner is one of them.
+FRONT_Z = [0, 4, 8, 12, 16, 20, MOUTH_HALF_WIDTH, 29, 34, 39, 44, 49, 53.5]
+
+
+def bell(u):
+    """Raised cosine: 1 at u = 0, 0 for |u| >= 1, smooth in between."""
+    u = np.clip(np.abs(u), 0.0, 1.0)
+    return 0.5 + 0.5 * np.cos(np.pi * u)
+
+
+def ramp(u, lo, hi):
+    """Raised-cosine step: 0 below lo, 1 above hi."""
+    t = np.clip((u - lo) / (hi - lo), 0.0, 1.0)
+    return 0.5 - 0.5 * np.cos(np.pi * t)
+
+
+def column_angles():
+    """Angles phi (0 = front midline, pi = back midline) of the half-head columns."""
+    name, y0, xf, cx, w, xb, e, lift, g = ROWS[ROW_INDEX["A"]]
+    front = [np.arcsin(min((z / w), 1.0) ** (e / 2.0)) for z in FRONT_Z]
+    n_side = 4
+    side = list(np.linspace(front[-1], np.pi / 2, n_side + 2)[1:])
+    back = list(np.linspace(np.pi / 2, np.pi, 7)[1:])
+    return np.array(front + side + back)
+
+
+def section_point(row, phi):
+    """(x, y, z) of the loft (no bumps) at angle phi on a row."""
+    name, y0, xf, cx, w, xb, e, lift, g = row
+    c, s = np.cos(phi), np.sin(phi)
+    if phi <= np.pi / 2:
+        x = cx + (xf - cx) * abs(c) ** (2.0 / e)
+        z = w * abs(s) ** (2.0 / e)
+    else:
+        x = cx - (cx - xb) * abs(c)
+        z = w * s
+    depth = np.clip(xf - x, 0.0, 80.0) / 80.0  # 0 at the front, 1 at the gonion and behind
+    return np.array([x, y0 + lift * np.sin(np.pi / 2 * depth), z])
+
+
+def bumps(name, p):
+    """Add nose, lips, eye sockets, cheekbones, chin, jaw angle and ears to a loft point."""
+    x, y, z = p
+    az = abs(z)
+    if name in LIP_BUMP:
+        x += LIP_BUMP[name] * bell(az / (MOUTH_HALF_WIDTH + 3.0))
+        if name in ("A_in", "B_in"):  # the inner lip rows curl in toward the teeth
+            inside = bell(az / MOUTH_HALF_WIDTH)
+            y += (1.5 if name == "A_in" else -1.5) * inside
+    if name in NOSE:
+        h, hw = NOSE[name]
+        x += h * bell(az / hw) ** 1.3
+        if name == "nostril":  # alar wings and the two nostril dents
+            x += 4.0 * bell((az - 14.0) / 5.0)
+            x -= 7.0 * bell((az - 6.0) / 3.5)
+        if name == "nose_tip":
+            x += 2.5 * bell((az - 14.0) / 5.0)
+    # eye sockets, brow ridge, cheekbones
+    x -= 6.0 * bell(np.hypot(y - 65.0, az - 32.0) / 19.0)
+    x += 3.0 * bell(np.hypot((y - 86.0) / 6.0, (az - 30.0) / 22.0))
+    x += 5.0 * bell(np.hypot((y - 45.0) / 14.0, (az - 50.0) / 16.0))
+    # chin prominence (mentalis) and the lateral flare of the jaw angle
+    if name in ("chin", "chin_low", "fold"):
+        x += 2.0 * bell(az / 18.0)
+    if ROWS[ROW_INDEX[name]][8] == "l" and y < 10:
+        gon = bell(np.hypot((x + 82.0) / 16.0, (y + 40.0) / 22.0))
+        z = np.sign(z) * (az + 5.0 * gon)
+    # ears: a flat bump on the side of the head
+    ear = bell(np.hypot((x + 95.0) / 10.0, (y - 48.0) / 18.0))
+    z = np.sign(z) * (abs(z) + 10.0 * ear) if az > 30 else z
+    return np.array([x, y, z])
+
+
+def build_skin():
+    """Half-head grid -> full mirrored skin: vertices, faces, row/col ids, mouth mask."""
+    phis = column_angles()
+    n_r, n_c = len(ROWS), len(phis)
+    grid = np.zeros((n_r, n_c, 3))
+    for i, row in enumerate(ROWS):
+        for j, phi in enumerate(phis):
+            grid[i, j] = bumps(row[0], section_point(row, phi))
+    grid[:, 0, 2] = 0.0
+    grid[:, -1, 2] = 0.0
+    corner = FRONT_Z.index(MOUTH_HALF_WIDTH)
+    # collapse the lip rows outside the mouth onto one line (the lips meet at the corners)
+    a, a_in, b_in, b = (ROW_INDEX[k] for k in ("A", "A_in", "B_in", "B"))
+    for j in range(corner, n_c):
+        mid = 0.5 * (grid[a, j] + grid[b, j])
+        grid[a, j] = grid[a_in, j] = grid[b_in, j] = grid[b, j] = mid
+    # upper lip pellet site exactly at the midline vertex of row UL (x, y)
+    return grid, corner
+
+
+def mirror_grid(grid):
+    """Full skin from the half grid: vertex array, faces, (row, col, side) per vertex."""
+    n_r, n_c, _ = grid.shape
+    verts, ids, index = [], [], {}
+    for i in range(n_r):
+        for j in range(n_c):
+            for side in (1, -1):
+                if side == -1 and j in (0, n_c - 1):
+                    index[(i, j, -1)] = index[(i, j, 1)]
+                    continue
+                index[(i, j, side)] = len(verts)
+                p = grid[i, j].copy()
+                p[2] *= side
+                verts.append(p)
+                ids.append((i, j, side))
+    return np.array(verts), np.array(ids), index
+
+
+def skin_faces(n_r, n_c, index, corner):
+    """Quads between consecutive rows (not across the mouth opening), split in two."""
+    a_in, b_in = ROW_INDEX["A_in"], ROW_INDEX["B_in"]
+    faces = []
+    for i in range(n_r - 1):
+        for j in range(n_c - 1):
+            if i == a_in and j < corner:
+                continue  # the mouth opening
+            for side in (1, -1):
+                q = [index[(i, j, side)], index[(i, j + 1, side)],
+                     index[(i + 1, j + 1, side)], index[(i + 1, j, side)]]
+                tris = [(q[0], q[3], q[1]), (q[1], q[3], q[2])]
+                for t in tris:
+                    if len(set(t)) < 3:
+                        continue
+                    faces.append(t if side == 1 else (t[0], t[2], t[1]))
+    return faces
+
+
+def skin_weights(verts, ids, corner_z):
+    """Per-vertex fraction of the jaw rotation (Parke's values) and the region cores."""
+    x, y, z = verts[:, 0], verts[:, 1], np.abs(verts[:, 2])
+    lower = np.array([ROWS[i][8] == "l" for i in ids[:, 0]])
+    # jaw line: menton (-4, -56) to gonion (-84, -40); dy > 0 below it
+    y_line = np.interp(x, [-84.0, -4.0], [-40.0, -56.0])
+    dy = y_line - y
+    p = PARKE
+    below = (p["jaw"] + (p["under_chin"] - p["jaw"]) * ramp(dy, 0, 5)
+             + (p["neck"] - p["under_chin"]) * ramp(dy, 11, 18)
+             - p["neck"] * ramp(dy, 40, 60))
+    back = 1.0 - ramp(-x, 86.0, 104.0)
+    w_jaw = below * back
+    # beside the mouth the lower face grades into the cheek, so the corners stretch
+    side = p["cheek"] + (p["jaw"] - p["cheek"]) * ramp(-y, 3.0, 22.0)
+    lat = ramp(z, corner_z, corner_z + 12.0)
+    w_lower = (1 - lat) * w_jaw + lat * np.minimum(side, w_jaw) * 1.0
+    w_lower = np.where(dy > 0, w_jaw, w_lower)
+    cheek = p["cheek"] * (1.0 - ramp(y, 8.0, 24.0)) * ramp(z, corner_z, corner_z + 12.0)
+    cheek = cheek * back
+    w = np.where(lower, w_lower, cheek)
+    return w, lower
+
+
+def tooth(point, tangent, width, thick_cerv, thick_occ, height, up):
+    """One crown: a six-sided frustum from the occlusal ring to the cervical ring.
+
+    ``point`` is where the labial/buccal face meets the occlusal level on the arch;
+    ``tangent`` the arch direction (x, z) away from the midline. Left side only.
+    """
+    t = np.array([tangent[0], 0.0, tangent[1]])
+    n = np.array([tangent[1], 0.0, -tangent[0]])  # outward (labial/buccal) in the x-z plane
+    v = np.array([0.0, 1.0, 0.0]) * (1 if up else -1)
+    ring = []
+    for level, thick, shrink in ((0.0, thick_occ, 0.92), (height, thick_cerv, 0.80)):
+        centre = point - n * thick / 2 + v * level
+        for a in np.linspace(0, 2 * np.pi, 7)[:-1]:
+            ring.append(centre + t * np.cos(a) * width / 2 * shrink + n * np.sin(a) * thick / 2)
+    ring.append(point - n * thick_occ / 2 - v * 0.4)         # occlusal cap
+    ring.append(point - n * thick_cerv / 2 + v * (height + 0.5))  # cervical cap
+    faces = []
+    for k in range(6):
+        a0, a1, b0, b1 = k, (k + 1) % 6, 6 + k, 6 + (k + 1) % 6
+        faces += [(a0, b0, a1), (a1, b0, b1), (12, a1, a0), (13, b0, b1)]
+    if not up:
+        faces = [(a, c, b) for a, b, c in faces]
+    return np.array(ring), faces
+
+
+ARCH = np.array([(0.0, 0.0), (-2.5, 6.0), (-6.5, 12.0), (-11.5, 16.5), (-18.5, 20.5),
+                 (-26.0, 23.5), (-34.0, 25.5), (-43.0, 27.0), (-52.0, 28.0), (-60.0, 28.5)])
+UPPER_TEETH = [  # width, cervical thickness, occlusal thickness, crown height
+    (8.5, 7.0, 1.5, 10.5), (6.5, 6.0, 1.5, 9.0), (7.5, 8.0, 2.5, 10.0), (7.0, 9.0, 7.0, 8.0),
+    (6.5, 9.0, 7.0, 7.5), (10.0, 11.0, 9.5, 7.0), (9.0, 10.5, 9.0, 6.5)]
+LOWER_TEETH = [
+    (5.5, 6.0, 1.5, 9.0), (6.0, 6.0, 1.5, 9.5), (7.0, 7.5, 2.5, 10.0), (7.0, 8.0, 6.5, 8.0),
+    (7.0, 8.5, 7.0, 7.5), (11.0, 10.5, 9.5, 7.5), (10.5, 10.0, 9.0, 7.0)]
+
+
+def build_arch(arch, teeth, y0, up, snaps=()):
+    """Teeth along an arch (x, z) curve, left side then mirrored.
+
+    ``snaps``: (tooth k, ring vertex r, (x, y)) moving one vertex onto a pellet site.
+    Returns vertices, faces and ``{(side, k, r): vertex index}`` for the left side.
+    """
+    seg = np.linalg.norm(np.diff(arch, axis=0), axis=1)
+    s = np.concatenate([[0], np.cumsum(seg)])
+    at = lambda q: np.array([np.interp(q, s, arch[:, 0]), np.interp(q, s, arch[:, 1])])
+    left_v, left_f, pos = [], [], 0.0
+    for k, (wd, tc, to, h) in enumerate(teeth):
+        mid = pos + wd / 2
+        pos += wd
+        d = at(mid + 0.5) - at(mid - 0.5)
+        d /= np.linalg.norm(d)
+        p = np.array([at(mid)[0], y0, at(mid)[1]])
+        ring, fs = tooth(p, d, wd, tc, to, h, up)
+        for kk, r, xy in snaps:
+            if kk == k:
+                ring[r, :2] = xy
+                if r in (3,) and xy == (0.0, 0.0):
+                    ring[r, 2] = 0.0
+        base = len(left_v)
+        left_v.extend(ring)
+        left_f.extend([(a + base, b + base, c + base) for a, b, c in fs])
+    left_v = np.array(left_v)
+    n = len(left_v)
+    right_v = left_v * np.array([1.0, 1.0, -1.0])
+    verts = np.concatenate([left_v, right_v])
+    faces = np.array(left_f + [(a + n, c + n, b + n) for a, b, c in left_f])
+    return verts, faces
+
+
+# ---------------------------------------------------------------------------- tongue
+# Upper-surface midline (x, y) from the tip to the root, through T1..T4 exactly; thickness
+# (mm, along the inward normal) and half width at each control point.
+TONGUE = [  # x, y, thickness, half width
+    (-9.0, -4.5, 5.0, 7.0), (-12.5, -1.0, 9.0, 12.0), (*SITES["T1"], 13.0, 16.0),
+    (-23.0, 4.5, 16.0, 19.0), (*SITES["T2"], 18.0, 21.0), (-35.0, 10.0, 19.0, 21.5),
+    (*SITES["T3"], 19.0, 21.5), (-47.0, 15.0, 18.0, 21.0), (*SITES["T4"], 17.0, 20.5),
+    (-61.0, 17.0, 15.0, 19.5), (-68.0, 13.5, 13.0, 18.5), (-73.0, 6.0, 12.0, 17.0),
+    (-75.5, -4.0, 11.0, 16.0), (-76.0, -14.0, 10.0, 15.0)]
+TONGUE_RING = 12
+TONGUE_ANCHOR = 10  # control point index from which CASSI's fixed anchors hold the back
+
+
+def catmull_rom(points, per_segment=2):
+    """Points on a Catmull-Rom spline through ``points`` (k, d), the points included."""
+    p = np.concatenate([points[:1] * 2 - points[1:2], points, points[-1:] * 2 - points[-2:-1]])
+    out = []
+    for i in range(1, len(p) - 2):
+        for t in np.arange(per_segment) / per_segment:
+            a, b, c, d = p[i - 1], p[i], p[i + 1], p[i + 2]
+            out.append(0.5 * (2 * b + (c - a) * t + (2 * a - 5 * b + 4 * c - d) * t**2
+                              + (3 * b - a - 3 * c + d) * t**3))
+    out.append(points[-1])
+    return np.array(out)
+
+
+def build_tongue():
+    """Closed tongue tube: vertices, faces, arc length per vertex, control station ids."""
+    ctrl = np.array(TONGUE)
+    st = catmull_rom(ctrl, 2)                # stations; control point k is station 2k
+    xy, thick, hw = st[:, :2], st[:, 2], st[:, 3]
+    s = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
+    tang = np.gradient(xy, axis=0)
+    tang /= np.linalg.norm(tang, axis=1, keepdims=True)
+    n_in = np.stack([-tang[:, 1], tang[:, 0]], 1)      # points into the tongue body
+    psi = 2 * np.pi * np.arange(TONGUE_RING) / TONGUE_RING
+    verts, svals = [], []
+    for i in range(len(st)):
+        for a in psi:
+            off = thick[i] / 2 * (1 - np.cos(a)) * n_in[i]
+            z = hw[i] * np.sign(np.sin(a)) * abs(np.sin(a)) ** 0.6
+            verts.append([xy[i, 0] + off[0], xy[i, 1] + off[1], z])
+            svals.append(s[i])
+    n_st = len(st)
+    tip = xy[0] + thick[0] / 2 * n_in[0] - 3.0 * tang[0]
+    root = xy[-1] + thick[-1] / 2 * n_in[-1] + 2.0 * tang[-1]
+    verts += [[tip[0], tip[1], 0.0], [root[0], root[1], 0.0]]
+    svals += [s[0], s[-1]]
+    faces, R = [], TONGUE_RING
+    for i in range(n_st - 1):
+        for k in range(R):
+            a, b = i * R + k, i * R + (k + 1) % R
+            c, d = (i + 1) * R + (k + 1) % R, (i + 1) * R + k
+            faces += [(a, b, c), (a, c, d)]
+    t0, t1 = n_st * R, n_st * R + 1
+    for k in range(R):
+        faces.append((t0, (k + 1) % R, k))
+        faces.append((t1, (n_st - 1) * R + k, (n_st - 1) * R + (k + 1) % R))
+    sites = {name: 2 * k * R for name, k in (("T1", 2), ("T2", 4), ("T3", 6), ("T4", 8))}
+    return np.array(verts), np.array(faces), np.array(svals), sites, s[2 * TONGUE_ANCHOR]
+
+
+def build_eye(centre, radius=12.0, n_lat=8, n_lon=12):
+    """A UV sphere (the eyeball)."""
+    verts = [centre + [0, radius, 0]]
+    for i in range(1, n_lat):
+        th = np.pi * i / n_lat
+        for j in range(n_lon):
+            ph = 2 * np.pi * j / n_lon
+            verts.append(centre + radius * np.array([np.sin(th) * np.cos(ph), np.cos(th),
+                                                     np.sin(th) * np.sin(ph)]))
+    verts.append(centre - [0, radius, 0])
+    faces, last = [], len(verts) - 1
+    ring = lambda i, j: 1 + (i - 1) * n_lon + j % n_lon
+    for j in range(n_lon):
+        faces.append((0, ring(1, j + 1), ring(1, j)))
+        faces.append((last, ring(n_lat - 1, j), ring(n_lat - 1, j + 1)))
+        for i in range(1, n_lat - 1):
+            a, b, c, d = ring(i, j), ring(i, j + 1), ring(i + 1, j + 1), ring(i + 1, j)
+            faces += [(a, b, c), (a, c, d)]
+    return np.array(verts), np.array(faces)
+
+
+# ---------------------------------------------------------------------------- assembly
+def skin_fields(verts, ids, lower, corner_z, nose_tip):
+    """Deformation fields of the skin vertices (see model/README.md)."""
+    x, y, z = verts[:, 0], verts[:, 1], np.abs(verts[:, 2])
+    names = [ROWS[i][0] for i in ids[:, 0]]
+    lat = 1.0 - ramp(z, 6.0, corner_z + 8.0)
+    up_v = {"philtrum": 0.55, "UL": 1, "ul_red": 1, "ul_low": 1, "A": 1, "A_in": 1}
+    lo_v = {"B_in": 1, "B": 1, "ll_high": 1, "ll_red": 1, "LL": 1, "fold": 0.5}
+    ured = {"philtrum": 0.3, "UL": 1, "ul_red": 1, "ul_low": 0.8, "A": 0.5}
+    lred = {"B": 0.5, "ll_high": 0.8, "ll_red": 1, "LL": 1, "fold": 0.3}
+    f = {}
+    f["upper_lip"] = np.array([up_v.get(n, 0.0) for n in names]) * lat
+    f["lower_lip"] = np.array([lo_v.get(n, 0.0) for n in names]) * lat
+    red_lat = bell(z / (corner_z + 2.0))
+    f["upper_vermilion"] = np.array([ured.get(n, 0.0) for n in names]) * red_lat
+    f["lower_vermilion"] = np.array([lred.get(n, 0.0) for n in names]) * red_lat
+    f["mouth"] = (1.0 - ramp(z, corner_z + 2.0, corner_z + 22.0)) * (
+        1.0 - ramp(np.abs(y + 3.0), 26.0, 40.0))
+    f["nose"] = bell(np.linalg.norm(verts - nose_tip, axis=1) / 24.0)
+    rise_v = np.where(y >= 29.0, 1.0 - ramp(y, 45.0, 66.0), 0.0)
+    rise_v = np.where([n == "philtrum" for n in names], 1.0 - 0.55, rise_v)
+    f["nose_rise"] = rise_v * (1.0 - ramp(z, 20.0, 34.0))
+    return f
+
+
+def build():
+    """All parts -> (vertices, faces, material, regions, landmarks, measures, fields)."""
+    grid, corner = build_skin()
+    sv, ids, index = mirror_grid(grid)
+    sf = skin_faces(grid.shape[0], grid.shape[1], index, corner)
+    corner_z = grid[ROW_INDEX["A"], corner, 2]
+    w_parke, lower = skin_weights(sv, ids, corner_z)
+    nose_tip_i = index[(ROW_INDEX["nose_tip"], 0, 1)]
+    fields = skin_fields(sv, ids, lower, corner_z, sv[nose_tip_i])
+    names = [ROWS[i][0] for i in ids[:, 0]]
+    lip_row = np.isin(names, ["UL", "ul_red", "ul_low", "A", "A_in", "B_in", "B", "ll_high",
+                              "ll_red", "LL"])
+    in_mouth = np.abs(sv[:, 2]) < corner_z + 1e-9
+    lip_vertex = lip_row & in_mouth
+    skin_mat = np.where(lip_vertex[np.array(sf)].all(axis=1), MAT["lips"], MAT["skin"])
+    parts = [("skin", sv, np.array(sf), skin_mat)]
+    ev, ef = [], []
+    for side in (1, -1):
+        v, f_ = build_eye(np.array([-6.0, 65.0, 32.0 * side]))
+        ef.append(f_ + sum(len(a) for a in ev))
+        ev.append(v)
+    parts.append(("eyes", np.concatenate(ev), np.concatenate(ef), MAT["eye"]))
+    uv, uf = build_arch(ARCH, UPPER_TEETH, 0.0, True, snaps=[(0, 3, (0.0, 0.0))])
+    lower_arch = ARCH * np.array([1.0, 0.93]) + np.array([-2.5, 0.0])
+    lv, lf = build_arch(lower_arch, LOWER_TEETH, -0.5, False,
+                        snaps=[(0, 8, SITES["MNI"]), (6, 1, SITES["MNM"])])
+    parts.append(("upper_teeth", uv, uf, MAT["teeth"]))
+    parts.append(("lower_teeth", lv, lf, MAT["teeth"]))
+    tv, tf, ts, tsites, anchor_s = build_tongue()
+    parts.append(("tongue", tv, tf, MAT["tongue"]))
+    from cassi_fit.palate import DEFAULT_OUTLINE, build_palate
+    pv, pf = build_palate(DEFAULT_OUTLINE)
+    parts.append(("palate", np.asarray(pv), np.asarray(pf), MAT["palate"]))
+
+    verts, faces, mats, regions, offsets = [], [], [], {}, {}
+    for name, v, f_, m in parts:
+        base = sum(len(a) for a in verts)
+        offsets[name] = base
+        regions[name] = np.arange(base, base + len(v))
+        verts.append(v)
+        faces.append(f_ + base)
+        mats.append(np.broadcast_to(m, (len(f_),)))
+    V = np.concatenate(verts)
+    n = len(V)
+    wp = np.zeros(n)
+    wp[: len(sv)] = w_parke
+    wp[regions["lower_teeth"]] = PARKE["lower_teeth"]
+    full = {k: np.zeros(n) for k in ("upper_lip", "lower_lip", "upper_vermilion",
+                                     "lower_vermilion", "mouth", "nose", "nose_rise",
+                                     "jaw_shape", "tongue_s")}
+    for k, v in fields.items():
+        full[k][: len(sv)] = v
+    full["jaw_shape"][: len(sv)] = w_parke
+    full["tongue_s"][regions["tongue"]] = ts
+    skin = regions["skin"]
+    row_of = {k: ids[:, 0] == ROW_INDEX[k] for k in ROW_INDEX}
+    up_rows = np.isin(names, ["UL", "ul_red", "ul_low", "A", "A_in"])
+    lo_rows = np.isin(names, ["B_in", "B", "ll_high", "ll_red", "LL"])
+    close = lambda value: np.isclose(w_parke, value, atol=1e-12)
+    regions.update({
+        "upper_lip": skin[up_rows & in_mouth],
+        "lower_lip": skin[lo_rows & in_mouth],
+        "jaw": skin[close(PARKE["jaw"])],
+        "under_chin": skin[close(PARKE["under_chin"])],
+        "neck": skin[close(PARKE["neck"])],
+        "cheek": skin[close(PARKE["cheek"]) & ~lower],
+        "nose": skin[fields["nose"] > 0.3],
+    })
+    T = lambda k: offsets["tongue"] + tsites[k]
+    ui = offsets["upper_teeth"] + 3
+    li = offsets["lower_teeth"] + 3
+    gonion = int(np.argmin(np.linalg.norm(sv - [-84.0, -40.0, 52.0], axis=1)))
+    landmarks = {
+        "upper_incisor_tip": ui, "lower_incisor_tip": li,
+        "MNI": offsets["lower_teeth"] + 8, "MNM": offsets["lower_teeth"] + 6 * 14 + 1,
+        "UL": index[(ROW_INDEX["UL"], 0, 1)], "LL": index[(ROW_INDEX["LL"], 0, 1)],
+        "T1": T("T1"), "T2": T("T2"), "T3": T("T3"), "T4": T("T4"),
+        "gonion": gonion, "gnathion": index[(ROW_INDEX["menton"], 0, 1)],
+        "nose_tip": nose_tip_i, "subnasale": index[(ROW_INDEX["subnasale"], 0, 1)],
+        "mouth_corner_left": index[(ROW_INDEX["A"], corner, 1)],
+        "mouth_corner_right": index[(ROW_INDEX["A"], corner, -1)],
+    }
+    landmarks = {k: int(v) for k, v in landmarks.items()}
+    P = lambda k: V[landmarks[k]]
+    cheek_row = sv[row_of["cheekbone"]]
+    measures = {
+        "face_width": float(2 * np.abs(cheek_row[:, 2]).max()),
+        "jaw_width": float(2 * abs(P("gonion")[2])),
+        "mouth_width": float(P("mouth_corner_left")[2] - P("mouth_corner_right")[2]),
+        "upper_lip_thickness": float(P("UL")[0] - P("upper_incisor_tip")[0]),
+        "lower_lip_thickness": float(P("LL")[0] - P("lower_incisor_tip")[0]),
+        "nose_protrusion": float(P("nose_tip")[0] - P("subnasale")[0]),
+        "jaw_pivot_x": JAW_PIVOT[0], "jaw_pivot_y": JAW_PIVOT[1],
+        "tongue_anchor_s": float(anchor_s),
+    }
+    w_cassi = wp * CASSI_FACTOR
+    return (V, np.concatenate(faces), np.concatenate(mats), regions, landmarks, measures,
+            w_cassi, wp, full)
+
+
+PARAMETERS = [  # number, name, unit, min, max, default, description
+    ("J1", "jaw_theta", "rad", -0.1, 0.5, 0.0, "jaw rotation (Parke's jaw rotation; + opens)"),
+    ("J2", "jaw_translation_x", "mm", -15, 15, 0.0, "jaw translation x (rigid motion p' = R p + t)"),
+    ("J3", "jaw_translation_y", "mm", -15, 15, 0.0, "jaw translation y"),
+    ("C1", "mouth_width", "scale", 0.7, 1.3, 1.0, "mouth width scale (z of lips and corners)"),
+    ("C2", "upper_lip_thickness", "mm", -5, 10, 0.0, "added to the upper vermilion, outward"),
+    ("C3", "lower_lip_thickness", "mm", -5, 10, 0.0, "added to the lower vermilion, outward"),
+    ("C4", "face_width", "scale", 0.8, 1.2, 1.0, "face width scale (z of skin and eyes)"),
+    ("C5", "nose_tip_x", "mm", -10, 10, 0.0, "nose tip offset x (falloff 24 mm)"),
+    ("C6", "nose_tip_y", "mm", -10, 10, 0.0, "nose tip offset y"),
+    ("C7", "jaw_shape_theta", "rad", -0.3, 0.3, 0.0, "jaw/chin conformation rotation"),
+    ("C8", "jaw_shape_translation_x", "mm", -15, 15, 0.0, "jaw/chin conformation translation x"),
+    ("C9", "jaw_shape_translation_y", "mm", -15, 15, 0.0, "jaw/chin conformation translation y"),
+    ("55", "T1_X", "mm", -30, 30, 0.0, "tongue T1 site, x displacement"),
+    ("56", "T1_Z", "mm", -30, 30, 0.0, "tongue T1 site, vertical (y) displacement"),
+    ("57", "T2_X", "mm", -30, 30, 0.0, "tongue T2 site, x displacement"),
+    ("58", "T2_Z", "mm", -30, 30, 0.0, "tongue T2 site, vertical displacement"),
+    ("59", "T3_X", "mm", -30, 30, 0.0, "tongue T3 site, x displacement"),
+    ("60", "T3_Z", "mm", -30, 30, 0.0, "tongue T3 site, vertical displacement"),
+    ("61", "T4_X", "mm", -30, 30, 0.0, "tongue T4 site, x displacement"),
+    ("62", "T4_Z", "mm", -30, 30, 0.0, "tongue T4 site, vertical displacement"),
+    ("63", "upper_lip_X", "mm", -20, 20, 0.0, "upper lip (UL site) x displacement"),
+    ("64", "upper_lip_Z", "mm", -20, 20, 0.0, "upper lip vertical displacement"),
+    ("65", "lower_lip_X", "mm", -20, 20, 0.0, "lower lip x displacement, after the jaw"),
+    ("66", "lower_lip_Z", "mm", -20, 20, 0.0, "lower lip vertical displacement, after the jaw"),
+]
+
+
+def _csv(rows, header):
+    return ",".join(header) + "\n" + "".join(",".join(map(str, r)) + "\n" for r in rows)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=str(Path(__file__).resolve().parent))
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    V, F, M, regions, landmarks, measures, wc, wp, fields = build()
+    names = ["x", "y", "z", "w_cassi", "w_parke"] + list(fields)
+    cols = np.column_stack([V, wc, wp] + [fields[k] for k in fields])
+    fmt = lambda r: [f"{v:.4f}" for v in r[:3]] + [repr(float(v)) for v in r[3:5]] + [
+        f"{v:.6f}" for v in r[5:]]
+    atomic_write(out / "vertices.csv", _csv([fmt(r) for r in cols], names), overwrite=True)
+    atomic_write(out / "faces.csv", _csv([(*f, m) for f, m in zip(F, M)],
+                                         ["a", "b", "c", "material"]), overwrite=True)
+    meta = {"format": "cassi_fit face model 1",
+            "frame": "mm; origin upper incisor tip; +x front, +y up, +z subject's left",
+            "materials": list(MATERIALS),
+            "measures": measures, "landmarks": landmarks,
+            "regions": {k: [int(i) for i in v] for k, v in regions.items()}}
+    atomic_write(out / "model.json", json.dumps(meta, indent=1) + "\n", overwrite=True)
+    atomic_write(out / "parameters.csv",
+                 _csv(PARAMETERS, ["number", "name", "unit", "min", "max", "default",
+                                   "description"]), overwrite=True)
+    print(f"{len(V)} vertices, {len(F)} triangles -> {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
