@@ -86,8 +86,10 @@ class SubjectAnatomy:
 
     Attributes beyond the obvious ones: ``pellets_rest`` ``(8, 2)`` all pellets at rest
     (jaw closed, tongue and lips neutral; rows 6-7 equal ``mni_rest``/``mnm_rest``);
-    ``condyle_slide_mm_per_deg`` how far the condyle slides per degree of opening, along
-    ``eminence_angle_deg`` below the forward horizontal; ``f0_hz`` the synthetic voice pitch.
+    the condyle slides ``s = k1 deg + k2 deg^2`` mm (``condyle_slide_mm_per_deg`` = k1,
+    ``condyle_slide_mm_per_deg2`` = k2; little in speech, 10-20 mm at wide opening) along
+    ``eminence_angle_deg`` below the forward horizontal, so the rotation centre of the
+    motion from rest moves back and down as the jaw opens; ``f0_hz`` the synthetic voice pitch.
     """
 
     name: str
@@ -104,6 +106,7 @@ class SubjectAnatomy:
     face_width: float
     pellets_rest: np.ndarray  # (8, 2)
     condyle_slide_mm_per_deg: float
+    condyle_slide_mm_per_deg2: float
     eminence_angle_deg: float
     f0_hz: float
 
@@ -176,7 +179,8 @@ def make_subject(name: str, rng: np.random.Generator) -> SubjectAnatomy:
         lower_lip_thickness=float(ll_thick),
         face_width=float(face_width),
         pellets_rest=pellets,
-        condyle_slide_mm_per_deg=float(r(0.35, 0.55)),
+        condyle_slide_mm_per_deg=float(r(0.12, 0.28)),
+        condyle_slide_mm_per_deg2=float(r(0.010, 0.018)),
         eminence_angle_deg=float(r(25.0, 40.0)),
         f0_hz=float(r(100.0, 220.0)),
     )
@@ -253,7 +257,8 @@ def _jaw_motion(anatomy: SubjectAnatomy, theta: np.ndarray, points: np.ndarray):
     n_pad = -(-n // 1024) * 1024
     theta_pad = np.zeros(n_pad)
     theta_pad[:n] = theta
-    slide = np.rad2deg(theta_pad) * anatomy.condyle_slide_mm_per_deg
+    deg = np.rad2deg(theta_pad)
+    slide = deg * anatomy.condyle_slide_mm_per_deg + deg**2 * anatomy.condyle_slide_mm_per_deg2
     angle = np.deg2rad(anatomy.eminence_angle_deg)
     eminence = np.array([np.cos(angle), -np.sin(angle)])
     with jax.enable_x64(True):
@@ -425,3 +430,398 @@ def _simulate(anatomy, task, seed, noise_mm, duration_s, dropouts, mistracks):
 def _replace(truth: JawTruth, **changes) -> JawTruth:
     values = {f.name: getattr(truth, f.name) for f in fields(JawTruth)}
     return JawTruth(**{**values, **changes})
+
+
+# ------------------------------------------------------------------------------ audio
+def synth_audio(
+    controls: np.ndarray, times: np.ndarray, f0_hz: float, rng: np.random.Generator
+) -> np.ndarray:
+    """A voiced buzz that follows the articulators: ``(n_samples,)`` int16 at 16 kHz.
+
+    ``controls`` ``(n, len(CONTROLS))`` on the frame times ``times`` (s). Sample ``k`` is at
+    ``k / 16000`` s, so the audio starts with the recording (time 0) and lasts as long
+    (``n * 6866`` us). Loudness follows voicing and the mouth opening (silent in a lip
+    or tongue-tip closure); the first two formants follow jaw opening and tongue body
+    position. It is a harmonic sum, not speech, but its envelope is aligned to the
+    movements, which is what a speech-sync demo needs.
+    """
+    c = {name: controls[:, i] for i, name in enumerate(CONTROLS)}
+    n_samples = int(round(times.shape[0] * FRAME_STEP_S * AUDIO_RATE_HZ))
+    t = np.arange(n_samples) / AUDIO_RATE_HZ
+    # Linear interpolation from frames to samples, shared by every curve below.
+    pos = np.clip((t - times[0]) / FRAME_STEP_S, 0.0, times.shape[0] - 1.0)
+    i0 = np.minimum(pos.astype(np.int64), times.shape[0] - 2)
+    w = pos - i0
+
+    def at_samples(curve):
+        return curve[i0] * (1.0 - w) + curve[i0 + 1] * w
+
+    closure = np.clip(np.maximum(c["lip_close"], c["tip_up"] - 0.2), 0.0, 1.0)
+    opening = (1.0 - closure) * (0.35 + 0.65 * np.clip(c["jaw_deg"] / 8.0, 0.0, 1.0))
+    loud = at_samples(np.clip(c["voicing"], 0.0, 1.0) * opening)
+    f1 = 300.0 + 55.0 * c["jaw_deg"] - 8.0 * c["body_up"]  # per frame, Hz
+    f2 = 1450.0 + 70.0 * c["body_fwd"] + 25.0 * c["body_up"] - 250.0 * c["lip_round"]
+    f0 = f0_hz * (1.05 - 0.1 * t / max(t[-1], 1e-9)) * (1.0 + 0.02 * np.sin(2 * np.pi * 4.0 * t))
+    base = np.exp(1j * (2 * np.pi * np.cumsum(f0) / AUDIO_RATE_HZ))
+    harmonic = base.copy()  # exp(i k phase), by repeated multiplication (cheaper than sin)
+    signal = np.zeros(n_samples)
+    # Harmonic gains change at the articulators' pace: computed per frame, interpolated.
+    for k in range(1, int(3800.0 // f0_hz) + 1):
+        fk = k * f0_hz
+        gain = (
+            np.exp(-0.5 * ((fk - f1) / 120.0) ** 2)
+            + 0.6 * np.exp(-0.5 * ((fk - f2) / 180.0) ** 2)
+            + 0.25 * np.exp(-0.5 * ((fk - 2700.0) / 250.0) ** 2)
+            + 0.3 / k
+        )
+        signal += at_samples(gain) * harmonic.imag
+        harmonic *= base
+    hiss = np.diff(rng.normal(size=n_samples + 1)) * at_samples(c["frication"]) * 0.15
+    signal = signal * loud + hiss
+    peak = np.max(np.abs(signal))
+    scale = 0.6 * 32767 / peak if peak > 0 else 0.0
+    return np.round(signal * scale).astype(np.int16)
+
+
+def _write_wav(path: Path, samples: np.ndarray, *, overwrite: bool) -> Path:
+    """16 kHz mono int16 ``.wav`` (stdlib ``wave``), written atomically."""
+    import wave
+
+    from ._io import atomic_write
+
+    def write(fh):
+        with wave.open(fh, "wb") as w:
+            w.setnchannels(1)
+            w.setsampwidth(2)
+            w.setframerate(AUDIO_RATE_HZ)
+            w.writeframes(samples.astype("<i2").tobytes())
+
+    return atomic_write(path, write, overwrite=overwrite, binary=True)
+
+
+# ----------------------------------------------------------------------- truth files
+def _truth_columns() -> list[str]:
+    cols = ["time_s", "theta_deg", "tx_mm", "ty_mm", "pivot_x_mm", "pivot_y_mm"]
+    cols += ["condyle_x_mm", "condyle_y_mm"]
+    cols += [f"{p}_{a}_mm" for p in PELLETS for a in "xy"]
+    cols += [f"dropped_{p}_{a}" for p in PELLETS for a in "xy"]
+    return cols + [f"mistracked_{p}" for p in PELLETS]
+
+
+TRUTH_COLUMNS = tuple(_truth_columns())
+_N_FLOAT_COLUMNS = 8 + 16
+
+
+def _truth_text(truth: JawTruth, comment: str) -> str:
+    """The sidecar CSV: a ``#`` comment line, a header, one row per frame."""
+    n = truth.n_frames
+    values = np.concatenate(
+        [
+            truth.times[:, None],
+            np.rad2deg(truth.theta)[:, None],
+            truth.translation,
+            truth.pivot,
+            truth.condyle,
+            truth.pellets_true.reshape(n, 16),
+        ],
+        axis=1,
+    )
+    flags = np.concatenate([truth.dropped.reshape(n, 16), truth.mistracked], axis=1)
+    fmt = ",".join(["%.6f", "%.10f"] + ["%.6f"] * (_N_FLOAT_COLUMNS - 2)) + ","
+    fmt_flags = ",".join(["%d"] * 24)
+    lines = [f"# {comment}", ",".join(TRUTH_COLUMNS)]
+    for row, flag_row, defined in zip(values.tolist(), flags.astype(int).tolist(), truth.pivot_defined):
+        text = fmt % tuple(row)
+        if not defined:  # the pivot columns are left empty where the pivot does not exist
+            parts = text.split(",")
+            parts[4] = parts[5] = ""
+            text = ",".join(parts)
+        lines.append(text + fmt_flags % tuple(flag_row))
+    return "\n".join(lines) + "\n"
+
+
+def _parse_truth(path: Path, text: str) -> JawTruth:
+    rows, header_seen = [], False
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        if not line.strip() or line.startswith("#"):
+            continue
+        fields_ = line.strip().split(",")
+        if not header_seen:
+            if tuple(fields_) != TRUTH_COLUMNS:
+                raise DataFormatError(path, lineno, "not a synthetic ground-truth header")
+            header_seen = True
+            continue
+        if len(fields_) != len(TRUTH_COLUMNS):
+            raise DataFormatError(
+                path, lineno, f"expected {len(TRUTH_COLUMNS)} fields, found {len(fields_)}"
+            )
+        try:
+            rows.append([float(f) if f else np.nan for f in fields_])
+        except ValueError:
+            raise DataFormatError(path, lineno, "a field is not a number") from None
+    if not rows:
+        raise DataFormatError(path, None, "no ground-truth rows")
+    a = np.array(rows)
+    n = a.shape[0]
+    defined = np.isfinite(a[:, 4]) & np.isfinite(a[:, 5])
+    return JawTruth(
+        times=a[:, 0],
+        theta=np.deg2rad(a[:, 1]),
+        translation=a[:, 2:4],
+        pivot=np.where(defined[:, None], a[:, 4:6], 0.0),
+        pivot_defined=defined,
+        condyle=a[:, 6:8],
+        pellets_true=a[:, 8:24].reshape(n, 8, 2),
+        dropped=a[:, 24:40].reshape(n, 8, 2) != 0,
+        mistracked=a[:, 40:48] != 0,
+    )
+
+
+def _find_ci(folder: Path, name: str) -> Path | None:
+    """The entry of ``folder`` called ``name`` ignoring case, or None."""
+    if not folder.is_dir():
+        return None
+    exact = folder / name
+    if exact.exists():
+        return exact
+    matches = sorted(p for p in folder.iterdir() if p.name.lower() == name.lower())
+    return matches[0] if matches else None
+
+
+def load_truth(root, subject: str, task: str) -> JawTruth:
+    """Read the ground truth of ``subject``'s ``task`` from a corpus folder ``root``.
+
+    Reads ``root/<subject>/<task>.truth.csv`` (names case-insensitive). Raises
+    MissingDataError when absent, DataFormatError when malformed.
+    """
+    from ._io import register_input
+
+    folder = _find_ci(Path(root), str(subject))
+    path = _find_ci(folder, f"{task}.truth.csv") if folder is not None else None
+    if path is None:
+        raise MissingDataError(f"{Path(root) / str(subject)}: no ground truth for task {task!r}")
+    register_input(path)
+    return _parse_truth(path, path.read_text(encoding="utf-8"))
+
+
+# --------------------------------------------------------------------- anatomy files
+def _anatomy_json(anatomy: SubjectAnatomy) -> str:
+    out = {}
+    for f in fields(SubjectAnatomy):
+        value = getattr(anatomy, f.name)
+        if f.name == "head":
+            value = asdict(value)
+        elif isinstance(value, np.ndarray):
+            value = value.tolist()
+        out[f.name] = value
+    return json.dumps(out, indent=1) + "\n"
+
+
+def load_anatomy(root, subject: str) -> SubjectAnatomy:
+    """Read ``root/<subject>/anatomy.json`` written by :func:`generate_corpus`."""
+    from ._io import register_input
+    from .headmeasures import HeadMeasures
+
+    folder = _find_ci(Path(root), str(subject))
+    path = _find_ci(folder, "anatomy.json") if folder is not None else None
+    if path is None:
+        raise MissingDataError(f"{Path(root) / str(subject)}: no anatomy.json")
+    register_input(path)
+    try:
+        raw = json.loads(path.read_text(encoding="utf-8"))
+        values = {}
+        for f in fields(SubjectAnatomy):
+            value = raw[f.name]
+            if f.name == "head":
+                value = HeadMeasures(**value)
+            elif isinstance(value, list):
+                value = np.asarray(value, dtype=np.float64)
+            values[f.name] = value
+        return SubjectAnatomy(**values)
+    except (ValueError, KeyError, TypeError) as exc:
+        raise DataFormatError(path, None, f"not a synthetic anatomy file ({exc})") from None
+
+
+# ---------------------------------------------------------------------------- corpus
+def subject_names(n_subjects: int) -> list[str]:
+    """``S01``, ``S02``, ... (never the real database's JW names)."""
+    return [f"S{i + 1:02d}" for i in range(n_subjects)]
+
+
+def _file_names(index: int) -> dict[str, str]:
+    """Upper-case file names for odd-numbered subjects (S01, S03, ...), lower for even:
+    the real distribution mixes both, and readers must not care."""
+    upper = index % 2 == 0
+    case = str.upper if upper else str.lower
+    return {"pal": case("PAL.DAT"), "pha": case("PHA.DAT"), "txy": case(".txy"), "wav": case(".wav")}
+
+
+def _recording_seed(seed: int, index: int, task: str) -> list[int]:
+    return [int(seed), 2, index, zlib.crc32(task.encode())]
+
+
+def _corpus_plan(out_dir: Path, names, tasks, audio):
+    """``[(subject index, name, task or None, {kind: path})]`` of every file to write."""
+    plan = []
+    for i, name in enumerate(names):
+        fn, folder = _file_names(i), out_dir / name
+        plan.append((i, name, None, {"pal": folder / fn["pal"], "pha": folder / fn["pha"],
+                                     "anatomy": folder / "anatomy.json"}))  # fmt: skip
+        for task in tasks:
+            stem = task.upper() if fn["txy"] == ".TXY" else task
+            files = {"txy": folder / f"{stem}{fn['txy']}", "truth": folder / f"{task}.truth.csv"}
+            if audio and TASKS[task].audio:
+                files["wav"] = folder / f"{stem}{fn['wav']}"
+            plan.append((i, name, task, files))
+    return plan
+
+
+def _readme(n_subjects, seed, tasks, noise_scale, audio) -> str:
+    lines = [
+        "cassi_fit synthetic XRMB corpus (NOT real data)",
+        "",
+        "Made by cassi_fit.synth.generate_corpus / `cassi synth`; see docs/SYNTHETIC.md.",
+        f"generator_version: {GENERATOR_VERSION}",
+        f"seed: {seed}",
+        f"subjects: {n_subjects} ({', '.join(subject_names(n_subjects))})",
+        f"tasks: {', '.join(tasks)}",
+        f"noise_scale: {noise_scale}",
+        f"audio: {'yes' if audio else 'no'}",
+        "",
+        "Per subject folder: pellet files (.txy, real format), PAL.DAT, PHA.DAT, audio (.wav,",
+        "16 kHz, speech tasks), <task>.truth.csv (per frame: true jaw angle, translation,",
+        "pivot, condyle, noise-free pellets, dropout and mistrack flags) and anatomy.json.",
+        "Headmeasures.txt holds every subject's head measures.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def generate_corpus(
+    out_dir,
+    *,
+    n_subjects: int = 15,
+    seed: int = 0,
+    tasks=None,
+    noise_scale: float = 1.0,
+    audio: bool = True,
+    overwrite: bool = False,
+) -> Path:
+    """Write a synthetic corpus to ``out_dir`` and return its path.
+
+    ``tasks``: task names (default ``DEFAULT_TASKS``); ``noise_scale`` multiplies the
+    default measurement noise (0 = noise-free, dropouts and mistracks stay); ``audio``
+    writes a ``.wav`` for speech tasks. Refuses (OutputExistsError, before writing
+    anything) if a file it would write exists, unless ``overwrite``. Deterministic: the
+    same arguments give byte-identical files, and each recording depends only on
+    (seed, subject, task).
+    """
+    from ._io import atomic_write
+    from .headmeasures import write_headmeasures
+    from .outlines import write_outline
+    from .txy import write_txy
+
+    out_dir = Path(out_dir)
+    tasks = _check_arguments(n_subjects, tasks, noise_scale)
+    names = subject_names(n_subjects)
+    plan = _corpus_plan(out_dir, names, tasks, audio)
+    top = {"readme": out_dir / "README.txt", "head": out_dir / "Headmeasures.txt"}
+    if not overwrite:
+        for path in [*top.values(), *(p for *_, files in plan for p in files.values())]:
+            if path.exists():
+                raise OutputExistsError(f"{path}: file exists (pass overwrite=True / --force)")
+    anatomies = {}
+    for i, name, task, files in plan:
+        if task is None:
+            anatomy = make_subject(name, np.random.default_rng([int(seed), 1, i]))
+            anatomies[name] = anatomy
+            write_outline(files["pal"], anatomy.palate, overwrite=overwrite)
+            write_outline(files["pha"], anatomy.pharynx, overwrite=overwrite)
+            atomic_write(files["anatomy"], _anatomy_json(anatomy), overwrite=overwrite)
+            continue
+        anatomy = anatomies[name]
+        rec_seed = _recording_seed(seed, i, task)
+        track, truth, controls = _simulate(
+            anatomy, task, rec_seed, noise_scale * DEFAULT_NOISE_MM, None, True, True
+        )
+        write_txy(files["txy"], track, overwrite=overwrite)
+        comment = f"cassi_fit synthetic ground truth; subject {name}; task {task}; seed {seed}"
+        atomic_write(files["truth"], _truth_text(truth, comment), overwrite=overwrite)
+        if "wav" in files:
+            rng = np.random.default_rng([*rec_seed, 3])
+            samples = synth_audio(controls, truth.times, anatomy.f0_hz, rng)
+            _write_wav(files["wav"], samples, overwrite=overwrite)
+    heads = {name: a.head for name, a in anatomies.items()}
+    write_headmeasures(top["head"], heads, overwrite=overwrite)
+    atomic_write(top["readme"], _readme(n_subjects, seed, tasks, noise_scale, audio), overwrite=overwrite)
+    return out_dir
+
+
+def _check_arguments(n_subjects, tasks, noise_scale) -> tuple[str, ...]:
+    """Validate :func:`generate_corpus`'s arguments; returns the task names (lower case)."""
+    if not isinstance(n_subjects, (int, np.integer)) or not 1 <= n_subjects <= 99:
+        raise CassiError(f"n_subjects must be an integer from 1 to 99, got {n_subjects!r}")
+    if not (np.isfinite(noise_scale) and noise_scale >= 0):
+        raise CassiError(f"noise_scale must be a finite number >= 0, got {noise_scale!r}")
+    if tasks is None:
+        return DEFAULT_TASKS
+    if isinstance(tasks, str):
+        tasks = [t for t in tasks.split(",") if t.strip()]
+    names = tuple(dict.fromkeys(get_task(t).name for t in tasks))
+    if not names:
+        raise CassiError("no tasks given")
+    return names
+
+
+# ---------------------------------------------------------------- the default corpus
+DEFAULT_CORPUS_SEED = 0
+
+
+def default_corpus_dir() -> Path:
+    """Where the default corpus lives: ``$CASSI_SYNTH_DIR`` if set, else
+    ``$XDG_CACHE_HOME/cassi_fit/synthetic-v<version>`` (``~/.cache`` by default)."""
+    override = os.environ.get("CASSI_SYNTH_DIR")
+    if override:
+        return Path(override).expanduser()
+    cache = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(cache).expanduser() / "cassi_fit" / f"synthetic-v{GENERATOR_VERSION}"
+
+
+def _is_complete(folder: Path) -> bool:
+    readme = folder / "README.txt"
+    return readme.is_file() and f"generator_version: {GENERATOR_VERSION}" in readme.read_text(
+        encoding="utf-8", errors="replace"
+    )
+
+
+def ensure_default_corpus() -> Path:
+    """The default corpus (15 subjects, default tasks, seed 0), generated if absent.
+
+    Generated into a temporary sibling folder and renamed into place, so a crash or a
+    second process never leaves a half-written corpus behind. The README written last
+    marks a complete corpus.
+    """
+    import shutil
+    import tempfile
+
+    target = default_corpus_dir()
+    if _is_complete(target):
+        return target
+    if target.exists() and any(target.iterdir()):
+        raise OutputExistsError(
+            f"{target}: exists but is not a complete synthetic corpus of this version; "
+            "remove it or point CASSI_SYNTH_DIR elsewhere"
+        )
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    try:
+        generate_corpus(tmp, seed=DEFAULT_CORPUS_SEED, overwrite=True)
+        if target.exists():
+            target.rmdir()  # empty (checked above); fails if another process filled it
+        os.replace(tmp, target)
+    except OSError:
+        if not _is_complete(target):
+            raise
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    return target
