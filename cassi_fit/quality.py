@@ -21,7 +21,6 @@ cannot be true movement. The three tests and their thresholds (mm, s):
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -62,13 +61,20 @@ def _distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _running_median(values: np.ndarray) -> np.ndarray:
-    """NaN-aware median over ``MEDIAN_WINDOW`` frames centred on each frame (axis 0)."""
+    """NaN-aware median over ``MEDIAN_WINDOW`` frames centred on each frame (axis 0).
+
+    NaN where a window holds no value. Sorting puts NaN last, so the median of the
+    ``count`` values is the mean of the sorted entries ``(count - 1) // 2`` and
+    ``count // 2`` (several times faster than ``np.nanmedian``).
+    """
     half = MEDIAN_WINDOW // 2
     pad = np.full((half,) + values.shape[1:], np.nan)
     windows = sliding_window_view(np.concatenate([pad, values, pad]), MEDIAN_WINDOW, axis=0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN windows give NaN: no flag
-        return np.nanmedian(windows, axis=-1)
+    ordered = np.sort(windows, axis=-1)
+    count = np.sum(~np.isnan(windows), axis=-1, keepdims=True)
+    lo = np.take_along_axis(ordered, np.maximum(count - 1, 0) // 2, axis=-1)
+    hi = np.take_along_axis(ordered, count // 2, axis=-1)
+    return np.where(count > 0, 0.5 * (lo + hi), np.nan)[..., 0]
 
 
 def _jumps(track: PelletTrack, speed: float, step_s: float) -> np.ndarray:

@@ -1,6 +1,7 @@
 """Unmarked mistrack detection (each test must flag planted errors and nothing else) and reports."""
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -111,3 +112,20 @@ def test_single_frame():
     t, pos = _speech_like(n=1)
     assert not detect_mistracks(_track(t, pos)).any()
     assert quality_report(_track(t, pos)).duration_s == 0.0
+
+
+def test_running_median_matches_nanmedian():
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    from cassi_fit.quality import MEDIAN_WINDOW, _running_median
+
+    rng = np.random.default_rng(4)
+    x = rng.normal(size=(60, 8, 2))
+    x[rng.random(x.shape) < 0.5] = np.nan
+    x[:7] = np.nan
+    pad = np.full((MEDIAN_WINDOW // 2, 8, 2), np.nan)
+    windows = sliding_window_view(np.concatenate([pad, x, pad]), MEDIAN_WINDOW, axis=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN windows
+        expected = np.nanmedian(windows, axis=-1)
+    np.testing.assert_array_equal(_running_median(x), expected)
