@@ -126,23 +126,24 @@ def _palate_outline(rng: np.random.Generator) -> np.ndarray:
     u = (x - x_front) / (x_back - x_front)
     y = y_front + (height - y_front) * (1 - np.exp(-u / rise)) / (1 - np.exp(-1 / rise))
     y -= rng.uniform(0.0, 2.0) * np.clip((u - 0.8) / 0.2, 0.0, 1.0) ** 2  # velum droop
-    return np.stack([x, y], axis=1)
+    return np.round(np.stack([x, y], axis=1), 3)  # um, as PAL.DAT holds it
 
 
 def _head_measures(rng, gonion, gnathion, ul_thick, ll_thick, face_width):
     from .headmeasures import HeadMeasures
 
+    um = functools.partial(round, ndigits=3)  # as Headmeasures.txt holds them
     return HeadMeasures(
-        gonion_x=float(gonion[0]),
-        gonion_y=float(gonion[1]),
-        gnathion_x=float(gnathion[0]),
-        gnathion_y=float(gnathion[1]),
-        face_width=float(face_width),
-        jaw_width=float(rng.uniform(90.0, 110.0)),
-        mouth_width=float(rng.uniform(45.0, 56.0)),
-        upper_lip_thickness=float(ul_thick),
-        lower_lip_thickness=float(ll_thick),
-        nose_protrusion=float(rng.uniform(17.0, 24.0)),
+        gonion_x=um(float(gonion[0])),
+        gonion_y=um(float(gonion[1])),
+        gnathion_x=um(float(gnathion[0])),
+        gnathion_y=um(float(gnathion[1])),
+        face_width=um(float(face_width)),
+        jaw_width=um(float(rng.uniform(90.0, 110.0))),
+        mouth_width=um(float(rng.uniform(45.0, 56.0))),
+        upper_lip_thickness=um(float(ul_thick)),
+        lower_lip_thickness=um(float(ll_thick)),
+        nose_protrusion=um(float(rng.uniform(17.0, 24.0))),
     )
 
 
@@ -165,19 +166,20 @@ def make_subject(name: str, rng: np.random.Generator) -> SubjectAnatomy:
     ul = np.array([ul_thick + r(0.5, 2.0), r(16.5, 19.5)])
     ll = np.array([ll_thick - r(2.0, 4.0), r(-18.0, -15.5)])
     pellets = np.concatenate([ul[None], ll[None], tongue, mni[None], mnm[None]])
+    head = _head_measures(rng, gonion, gnathion, ul_thick, ll_thick, face_width)
     return SubjectAnatomy(
         name=str(name),
         palate=palate,
-        pharynx=np.array([[-r(70.0, 78.0), r(15.0, 22.0)], [-r(66.0, 74.0), -r(25.0, 35.0)]]),
-        head=_head_measures(rng, gonion, gnathion, ul_thick, ll_thick, face_width),
+        pharynx=np.round([[-r(70.0, 78.0), r(15.0, 22.0)], [-r(66.0, 74.0), -r(25.0, 35.0)]], 3),
+        head=head,
         mni_rest=mni,
         mnm_rest=mnm,
         lower_incisor_tip_rest=tip,
-        chin_rest=gnathion,
+        chin_rest=np.array([head.gnathion_x, head.gnathion_y]),
         condyle_rest=condyle,
-        upper_lip_thickness=float(ul_thick),
-        lower_lip_thickness=float(ll_thick),
-        face_width=float(face_width),
+        upper_lip_thickness=head.upper_lip_thickness,
+        lower_lip_thickness=head.lower_lip_thickness,
+        face_width=head.face_width,
         pellets_rest=pellets,
         condyle_slide_mm_per_deg=float(r(0.12, 0.28)),
         condyle_slide_mm_per_deg2=float(r(0.010, 0.018)),
