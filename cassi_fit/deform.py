@@ -1,0 +1,160 @@
+"""Parameters -> vertices: the one pure function that animates the face model.
+
+``deform`` runs four plain stages on the rest mesh, each a small function:
+
+1. conformation (Parke's shape parameters: mouth width, lip thickness, face width, nose
+   tip, jaw/chin shape) -- the subject's face, before any animation;
+2. jaw: Parke's jaw rotation, each vertex moved by the fraction ``w_i`` of the jaw motion
+   about the same pivot (``rigid.fractional``, paper Eqs 4-5 with the region weights);
+3. lips: CASSI's #63/#64 (upper lip) and #65/#66 (lower lip, on top of where the jaw took
+   it), with two couplings: lip rounding (the corners move toward each other when the lips
+   come forward, CASSI's future work) and the nose tip rising with the upper lip so that a
+   gap always remains between them (CASSI section 2, step 3);
+4. tongue: CASSI's #55-#62 (``cassi_fit.tongue``).
+
+Everything is written for one frame; ``jax.vmap`` over frames. With default parameters
+every stage is the identity to the last bit, so ``deform`` returns the stored rest mesh.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from . import rigid
+from .tongue import tongue_displacement
+
+PELLET_SITES = ("UL", "LL", "T1", "T2", "T3", "T4", "MNI", "MNM")
+# Lip rounding: relative narrowing of the mouth per mm of mean forward lip displacement.
+LIP_ROUNDING_PER_MM = 0.015
+# Smooth positive part used for the nose coupling: quadratic over the first 2 mm.
+_NOSE_KNEE_MM = 2.0
+
+
+class FaceParams(eqx.Module):
+    """One frame of face parameters (mm, rad, scales); every leaf a float array."""
+
+    jaw_theta: Array
+    jaw_translation: Array
+    tongue: Array
+    upper_lip: Array
+    lower_lip: Array
+    mouth_width: Array
+    upper_lip_thickness: Array
+    lower_lip_thickness: Array
+    face_width: Array
+    nose_tip: Array
+    jaw_shape_theta: Array
+    jaw_shape_translation: Array
+
+
+def default_params(model=None, dtype=float) -> FaceParams:
+    """Neutral parameters: ``deform(model, default_params())`` is the rest mesh exactly."""
+    z = lambda *shape: jnp.zeros(shape, dtype)
+    one = jnp.ones((), dtype)
+    return FaceParams(z(), z(2), z(4, 2), z(2), z(2), one, z(), z(), one, z(2), z(), z(2))
+
+
+def _move_by_fraction(motion, weights, xy):
+    """Each point ``xy[i]`` (n, 2) moved by ``rigid.fractional(motion, weights[i])``."""
+    def one(w, p):
+        theta, t = rigid.fractional(motion, w)
+        return rigid.apply(theta, t, p)
+
+    return jax.vmap(one)(weights, xy)
+
+
+def _smooth_positive(u):
+    """0 for u <= 0, u^2/(2k) up to k, u - k/2 beyond: C1, exact 0 (and slope 0) at 0."""
+    k = _NOSE_KNEE_MM
+    return jnp.where(u <= 0.0, 0.0, jnp.where(u < k, u * u / (2 * k), u - k / 2))
+
+
+def _mask(model, names) -> np.ndarray:
+    m = np.zeros(model.vertices.shape[0], bool)
+    for n in names:
+        m[model.regions[n]] = True
+    return m
+
+
+def conformation(model, v, p):
+    """Stage 1: the subject's face shape (all identities at the neutral values)."""
+    f = model.fields
+    z = v[:, 2] * (1.0 + (p.mouth_width - 1.0) * f["mouth"])
+    z = z * jnp.where(_mask(model, ("skin", "eyes")), p.face_width, 1.0)
+    x = v[:, 0] + p.upper_lip_thickness * f["upper_vermilion"] \
+        + p.lower_lip_thickness * f["lower_vermilion"]
+    xy = jnp.stack([x, v[:, 1]], -1) + p.nose_tip * f["nose"][:, None]
+    xy = _move_by_fraction((p.jaw_shape_theta, p.jaw_shape_translation), f["jaw_shape"], xy)
+    return jnp.concatenate([xy, z[:, None]], -1)
+
+
+def jaw(model, v, p, weights="cassi"):
+    """Stage 2: jaw rotation with per-vertex fractions (``"cassi"`` or ``"parke"`` set)."""
+    if weights not in ("cassi", "parke"):
+        raise ValueError(f"jaw_weights must be 'cassi' or 'parke', got {weights!r}")
+    xy = _move_by_fraction((p.jaw_theta, p.jaw_translation), model.jaw_weights[weights], v[:, :2])
+    return v.at[:, :2].set(xy)
+
+
+def lips(model, v, p):
+    """Stage 3: lip displacements, lip rounding and the nose tip coupling."""
+    f = model.fields
+    xy = v[:, :2] + p.upper_lip * f["upper_lip"][:, None] + p.lower_lip * f["lower_lip"][:, None]
+    xy = xy.at[:, 1].add(_smooth_positive(p.upper_lip[1]) * f["nose_rise"])
+    forward = 0.5 * (p.upper_lip[0] + p.lower_lip[0])
+    z = v[:, 2] * (1.0 - LIP_ROUNDING_PER_MM * forward * f["mouth"])
+    return jnp.concatenate([xy, z[:, None]], -1)
+
+
+def tongue(model, v, p, anchor="follow"):
+    """Stage 4: tongue params #55-#62 spread along the tongue (``cassi_fit.tongue``)."""
+    idx = model.regions["tongue"]
+    s = model.fields["tongue_s"]
+    site_s = jnp.stack([s[model.landmarks[k]] for k in ("T1", "T2", "T3", "T4")])
+    if anchor == "none" or anchor == "follow" or anchor == "fixed":
+        d = tongue_displacement(s[idx], site_s, p.tongue, model.measures["tongue_anchor_s"], anchor)
+    else:
+        raise ValueError(f"tongue_anchor must be 'fixed', 'follow' or 'none', got {anchor!r}")
+    return v.at[idx, :2].add(d)
+
+
+def deform(model, params, *, jaw_weights="cassi", tongue_anchor="follow") -> Array:
+    """Vertices (V, 3) mm of ``model`` posed by ``params`` (one frame; vmap for many).
+
+    ``jaw_weights``: ``"cassi"`` (Parke's fractions x 1.11111, lower teeth 100 %) or
+    ``"parke"``; ``tongue_anchor``: ``"fixed"`` | ``"follow"`` | ``"none"``. Both static.
+    """
+    v = jnp.asarray(model.vertices)
+    v = conformation(model, v, params)
+    v = jaw(model, v, params, jaw_weights)
+    v = lips(model, v, params)
+    return tongue(model, v, params, tongue_anchor)
+
+
+def vertex_normals(vertices, faces) -> Array:
+    """Unit vertex normals (V, 3): area-weighted sums of the incident face normals.
+
+    Zero-area triangles contribute nothing. A vertex whose sum is zero (only degenerate
+    triangles) gets the zero vector, with zero gradient: the norm is taken through a double
+    ``where`` so that neither branch divides by zero.
+    """
+    faces = np.asarray(faces)
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    face_n = jnp.cross(b - a, c - a)  # length = 2 x area
+    summed = jnp.zeros_like(vertices)
+    for k in range(3):
+        summed = summed.at[faces[:, k]].add(face_n)
+    sq = jnp.sum(summed * summed, axis=-1, keepdims=True)
+    ok = sq > 0.0
+    norm = jnp.sqrt(jnp.where(ok, sq, 1.0))
+    return jnp.where(ok, summed / norm, 0.0)
+
+
+def model_pellets(model, vertices) -> Array:
+    """(8, 2) x, y of the model's pellet sites, order UL, LL, T1, T2, T3, T4, MNI, MNM."""
+    idx = np.array([model.landmarks[k] for k in PELLET_SITES])
+    return vertices[idx, :2]
