@@ -8,15 +8,17 @@ cannot be true movement. The three tests and their thresholds (mm, s):
    (the pellet frame; real pellets span about x -65..25, y -35..30).
 2. Jumps: a pellet cannot move faster than ``MAX_SPEED_MM_S`` = 500 mm/s (twice the
    fastest real pellet speeds, about 250 mm/s). A value further than one frame's worth of
-   that speed (3.4 mm at 145.6 Hz) from the running median of the ``MEDIAN_WINDOW`` = 9
+   that speed (3.4 mm at 145.6 Hz) from the running median of the ``MEDIAN_WINDOW`` = 11
    frames around it is flagged, as is a spike whose jumps in and out both exceed it.
    The median follows smooth motion (it is exact for constant velocity), so only
-   isolated excursions of up to about four frames stand out. Beside gaps and at the
+   isolated excursions of up to five frames stand out. Beside gaps and at the
    file ends, where the window is one-sided, the allowance grows by the speed limit
    times the lag of the window's median time.
 3. Jaw: MNI and MNM sit on one rigid bone, so their distance is constant up to noise
    (about 0.3 mm SD). A frame whose distance is further than ``max(5 robust SD, 2 mm)``
-   from the median (robust SD = 1.4826 x median absolute deviation) flags both pellets.
+   from the median (robust SD = 1.4826 x median absolute deviation) flags both pellets,
+   unless tests 1-2 already flag exactly one of them in that frame: then only that one
+   (the distance cannot tell which pellet moved; the jump tests can).
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ from .txy import JAW_PELLETS, PELLET_NAMES, PelletTrack, first_valid_frame, pell
 PLAUSIBLE_X_MM = (-120.0, 60.0)
 PLAUSIBLE_Y_MM = (-90.0, 60.0)
 MAX_SPEED_MM_S = 500.0
-MEDIAN_WINDOW = 9
+MEDIAN_WINDOW = 11
 JAW_ROBUST_SDS = 5.0
 JAW_MIN_DEVIATION_MM = 2.0
 _MAD_TO_SD = 1.4826
@@ -125,8 +127,9 @@ def detect_mistracks(track: PelletTrack) -> np.ndarray:
     """
     flags = _out_of_range(track) | _jumps(track, MAX_SPEED_MM_S, _frame_step(track))
     jaw = _jaw_outliers(_jaw_distance(track))
-    for name in JAW_PELLETS:
-        flags[:, pellet_index(name)] |= jaw
+    cols = [pellet_index(name) for name in JAW_PELLETS]
+    one_known = flags[:, cols].sum(axis=-1) == 1  # the jump tests already found the culprit
+    flags[:, cols] |= (jaw & ~one_known)[:, None]
     return flags & track.valid.any(axis=-1)
 
 

@@ -129,3 +129,11 @@ def test_running_median_matches_nanmedian():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN windows
         expected = np.nanmedian(windows, axis=-1)
     np.testing.assert_array_equal(_running_median(x), expected)
+
+
+def test_jaw_outlier_blamed_on_the_pellet_that_jumped():
+    t, pos = _speech_like(seed=5)
+    pos[600, 7] += [0.0, 8.0]  # MNM jumps: the jump test names it, so MNI stays clean
+    flags = detect_mistracks(_track(t, pos))
+    assert flags[600, 7] and not flags[600, 6]
+    assert flags.sum() == 1
