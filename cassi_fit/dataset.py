@@ -225,7 +225,9 @@ class Dataset:
         path = self.pellet_path(subject, task)
         subject, task = self._subject(subject), str(task).lower()
         own = self._index[(subject, task)][1]
-        return _assemble(path, subject, task, own=own, shared=[self.root])
+        # a root that is itself a subject folder: look one folder up, as load_recording does
+        shared = [self.root, self.root.parent] if own == self.root else [self.root]
+        return _assemble(path, subject, task, own=own, shared=shared)
 
     def __len__(self) -> int:
         return len(self._index)

@@ -62,7 +62,8 @@ def test_flat_layout(flat_layout):
     ds = Dataset(flat_layout)
     assert ds.subjects() == ["JW11", "S02"]
     assert ds.tasks("jw11") == ["tp005", "tp020_2"]
-    rec = ds.load("JW11", "tp005")
+    with pytest.warns(DefaultHeadMeasuresWarning, match="JW11"):  # not in Headmeasures.txt
+        rec = ds.load("JW11", "tp005")
     assert rec.palate.shape == (9, 2) and rec.pharynx.shape == (2, 2)
     assert rec.audio.name == "jw11_tp005.wav"
     s02 = ds.load("S02", "tp001")  # in Headmeasures.txt, but no palate of its own
@@ -85,14 +86,16 @@ def test_load_recording_both_layouts(folder_layout, flat_layout):
     assert rec.palate is not None and rec.audio is not None and not rec.head_is_default
     rec = load_recording(folder_layout / "S01" / "tp020_2.txy")
     assert rec.task == "tp020_2"
-    rec = load_recording(flat_layout / "JW11_TP020_2.TXY")
+    with pytest.warns(DefaultHeadMeasuresWarning):
+        rec = load_recording(flat_layout / "JW11_TP020_2.TXY")
     assert (rec.subject, rec.task) == ("JW11", "tp020_2") and rec.pharynx is not None
 
 
 def test_subject_folder_as_root(folder_layout):
     ds = Dataset(folder_layout / "S01")
     assert ds.subjects() == ["S01"] and len(ds) == 3
-    assert ds.load("S01", "tp005").palate is not None
+    rec = ds.load("S01", "tp005")  # Headmeasures.txt one folder up
+    assert rec.palate is not None and not rec.head_is_default
 
 
 def test_errors(folder_layout, tmp_path):
