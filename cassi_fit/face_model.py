@@ -12,6 +12,7 @@ subject's left; z = 0 is the midsagittal plane, which is the XRMB pellet plane.
 from __future__ import annotations
 
 import csv
+import warnings
 import json
 from pathlib import Path
 
@@ -130,11 +131,18 @@ def load_model(path=None) -> FaceModel:
     landmarks = {k: int(v) for k, v in meta["landmarks"].items()}
     for k, v in landmarks.items():
         _check_index(mpath, f"landmark {k}", [v], n)
+    vertices = jnp.asarray(table[:, :3])
     fields = {f: jnp.asarray(fields_table[:, k]) for k, f in enumerate(extra)}
     for f in FIELDS:
         fields.setdefault(f, jnp.zeros(n))
+    with warnings.catch_warnings():  # static index arrays are intended (hashed by identity)
+        warnings.simplefilter("ignore", UserWarning)
+        return _make_model(vertices, faces, material, regions, table, landmarks, meta, fields)
+
+
+def _make_model(vertices, faces, material, regions, table, landmarks, meta, fields):
     return FaceModel(
-        vertices=jnp.asarray(table[:, :3]),
+        vertices=vertices,
         faces=faces,
         face_material=material,
         regions=regions,

@@ -1,0 +1,68 @@
+"""The model files and the rest mesh: loadable, symmetric, finite, the documented weights."""
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from cassi_fit.errors import DataFormatError, MissingDataError
+from cassi_fit.face_model import LANDMARKS, MATERIALS, MEASURES, REGIONS, load_model
+
+MODEL = load_model()
+V = np.asarray(MODEL.vertices)
+
+CASSI = {"jaw": 1.11, "lower_teeth": 1.00, "under_chin": 0.83, "neck": 0.56, "cheek": 0.39}
+PARKE = {"jaw": 1.00, "lower_teeth": 0.90, "under_chin": 0.75, "neck": 0.50, "cheek": 0.35}
+
+
+def test_files_load_with_a_few_thousand_triangles():
+    assert 1000 <= len(MODEL.faces) <= 6000
+    assert MODEL.faces.max() < len(V) and MODEL.face_material.max() < len(MATERIALS)
+    assert set(REGIONS) <= set(MODEL.regions) and set(LANDMARKS) <= set(MODEL.landmarks)
+    assert set(MEASURES) <= set(MODEL.measures)
+    for name in REGIONS:
+        assert len(MODEL.regions[name]) > 0, name
+
+
+def test_no_nans_and_origin_at_upper_incisor_tip():
+    assert np.all(np.isfinite(V))
+    np.testing.assert_allclose(V[MODEL.landmarks["upper_incisor_tip"]], 0.0, atol=1e-9)
+
+
+def test_neutral_face_is_mirror_symmetric():
+    mirrored = V * np.array([1.0, 1.0, -1.0])
+    dist, _ = cKDTree(V).query(mirrored)
+    assert dist.max() < 1e-6
+
+
+@pytest.mark.parametrize("region", sorted(CASSI))
+def test_jaw_weights_match_the_table(region):
+    idx = MODEL.regions[region]
+    np.testing.assert_allclose(np.asarray(MODEL.jaw_weights["cassi"])[idx], CASSI[region], atol=0.006)
+    np.testing.assert_allclose(np.asarray(MODEL.jaw_weights["parke"])[idx], PARKE[region], atol=1e-9)
+
+
+def test_upper_face_does_not_move_with_the_jaw():
+    w = np.asarray(MODEL.jaw_weights["cassi"])
+    for name in ("upper_teeth", "palate", "eyes", "nose", "upper_lip", "tongue"):
+        assert np.all(w[MODEL.regions[name]] == 0.0), name
+
+
+def test_pellet_sites_sit_where_real_pellets_sit():
+    expected = {"UL": (14.9, 17.8), "LL": (9.4, -21.4), "MNI": (-1, -8), "MNM": (-44, -3),
+                "T1": (-17, 1), "T4": (-53, 17)}
+    for name, xy in expected.items():
+        np.testing.assert_allclose(V[MODEL.landmarks[name], :2], xy, atol=1e-3)
+
+
+def test_measures_are_plausible_adult_values():
+    m = MODEL.measures
+    assert 120 < m["face_width"] < 160 and 80 < m["jaw_width"] < 125
+    assert 40 < m["mouth_width"] < 60 and 10 < m["nose_protrusion"] < 30
+
+
+def test_missing_and_malformed_files_raise_toolkit_errors(tmp_path):
+    with pytest.raises(MissingDataError):
+        load_model(tmp_path)
+    (tmp_path / "vertices.csv").write_text("x,y,z,w_cassi,w_parke\n1,2,oops,0,0\n")
+    with pytest.raises(DataFormatError, match="vertices.csv:2"):
+        load_model(tmp_path)
