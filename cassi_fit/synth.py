@@ -344,14 +344,14 @@ def _noise(rng: np.random.Generator, n: int, noise_mm: float) -> np.ndarray:
 
 
 def _dropouts(rng: np.random.Generator, n: int, n_lead: int) -> np.ndarray:
-    """``(n, 8, 2)`` bool: all-untracked leading rows plus occasional runs of dropouts.
+    """``(n, 8, 2)`` bool: all-untracked leading rows plus at least one run of dropouts.
 
     The back tongue pellets drop out most often; x and y go together nine times in ten.
     """
     dropped = np.zeros((n, 8, 2), bool)
     dropped[:n_lead] = True
     weights = np.array([1.0, 1.0, 1.0, 1.0, 2.0, 3.0, 0.7, 1.5])
-    for _ in range(rng.poisson(1.5 * n * FRAME_STEP_S / 4.0)):
+    for _ in range(1 + rng.poisson(1.5 * n * FRAME_STEP_S / 4.0)):
         pellet = rng.choice(8, p=weights / weights.sum())
         start = int(rng.integers(n_lead + 1, n))
         length = int(min(1 + rng.geometric(0.15), 30))
@@ -416,7 +416,7 @@ def _simulate(anatomy, task, seed, noise_mm, duration_s, dropouts, mistracks):
         raise CassiError(f"duration_s={duration_s!r} is too short for a recording")
     controls = control_trajectories(spec, keyframes, n - n_lead, FRAME_STEP_S, task_rng)
     controls = np.concatenate([np.repeat(controls[:1], n_lead, axis=0), controls])
-    times = np.arange(n) * FRAME_STEP_S
+    times = np.arange(n) * 6866 / 1e6  # as read_txy gives them (us / 1e6)
     truth = _kinematics(anatomy, controls, times)
     measured = truth.pellets_true + _noise(noise_rng, n, noise_mm)
     dropped = _dropouts(drop_rng, n, n_lead) if dropouts else np.zeros((n, 8, 2), bool)
@@ -425,7 +425,7 @@ def _simulate(anatomy, task, seed, noise_mm, duration_s, dropouts, mistracks):
     measured = np.round((measured + jumps) * 1e3) / 1e3
     flags &= ~dropped.all(axis=2)
     truth = _replace(truth, dropped=dropped, mistracked=flags)
-    track = PelletTrack(times=np.round(times * 1e6) / 1e6, positions=measured, valid=~dropped)
+    track = PelletTrack(times=times, positions=measured, valid=~dropped)
     return track, truth, controls
 
 
@@ -776,6 +776,7 @@ def _check_arguments(n_subjects, tasks, noise_scale) -> tuple[str, ...]:
 
 # ---------------------------------------------------------------- the default corpus
 DEFAULT_CORPUS_SEED = 0
+_DEFAULT_CORPUS_ARGS = {"n_subjects": 15, "seed": DEFAULT_CORPUS_SEED}
 
 
 def default_corpus_dir() -> Path:
@@ -816,7 +817,7 @@ def ensure_default_corpus() -> Path:
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
     try:
-        generate_corpus(tmp, seed=DEFAULT_CORPUS_SEED, overwrite=True)
+        generate_corpus(tmp, **_DEFAULT_CORPUS_ARGS, overwrite=True)
         if target.exists():
             target.rmdir()  # empty (checked above); fails if another process filled it
         os.replace(tmp, target)
