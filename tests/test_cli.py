@@ -1,0 +1,56 @@
+"""The `cassi` dispatcher: help, one-line errors, tracebacks only under --debug."""
+
+import sys
+import types
+
+import pytest
+
+from cassi_fit import cli
+from cassi_fit.errors import DataFormatError
+
+
+@pytest.fixture
+def failing_command(monkeypatch):
+    """A throwaway subcommand `boom` whose run raises what the test asks for."""
+    module = types.ModuleType("cassi_fit._cli.boom")
+    state = {}
+
+    def register(subparsers):
+        p = subparsers.add_parser("boom", help="fails on purpose")
+        p.set_defaults(func=lambda args: (_ for _ in ()).throw(state["exc"]))
+
+    module.register = register
+    monkeypatch.setitem(sys.modules, "cassi_fit._cli.boom", module)
+    monkeypatch.setattr(cli, "SUBCOMMANDS", cli.SUBCOMMANDS + ("boom",))
+    return state
+
+
+def test_no_command_prints_help(capsys):
+    assert cli.main([]) == 2
+    assert "usage: cassi" in capsys.readouterr().out
+
+
+def test_every_subcommand_has_help(capsys):
+    parser = cli.build_parser()
+    names = parser._subparsers._group_actions[0].choices  # noqa: SLF001 - argparse has no public accessor
+    assert {"info", "synth", "jaw", "animate", "demo"} <= set(names)
+    for name in names:
+        with pytest.raises(SystemExit) as exit_info:
+            cli.main([name, "--help"])
+        assert exit_info.value.code == 0
+        assert "usage: cassi" in capsys.readouterr().out
+
+
+def test_toolkit_error_is_one_line(failing_command, capsys):
+    failing_command["exc"] = DataFormatError("S01/TP005.TXY", 12, "expected 17 fields, found 16")
+    assert cli.main(["boom"]) == 2
+    err = capsys.readouterr().err
+    assert err == "cassi: error: S01/TP005.TXY:12: expected 17 fields, found 16\n"
+
+
+def test_unexpected_error_is_one_line_and_debug_shows_traceback(failing_command, capsys):
+    failing_command["exc"] = RuntimeError("first line\nsecond line")
+    assert cli.main(["boom"]) == 1
+    assert capsys.readouterr().err == "cassi: error: RuntimeError: first line\n"
+    with pytest.raises(RuntimeError):
+        cli.main(["--debug", "boom"])
