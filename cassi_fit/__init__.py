@@ -55,11 +55,10 @@ _PUBLIC = {
     "load_model": "face_model",
     "FaceParams": "deform",
     "default_params": "deform",
-    "deform": "deform",
     "build_palate": "palate",
     # pipeline
-    # (the pipeline's `animate` function shares its module's name: use
-    # `from cassi_fit.animate import initialize, animate`)
+    # `deform` and `animate` are module names too; their functions are imported from
+    # the modules (`from cassi_fit.deform import deform`) so that a name means one thing.
     "initialize": "animate",
     "Renderer": "render",
 }
