@@ -532,7 +532,9 @@ def _truth_text(truth: JawTruth, comment: str) -> str:
     fmt = ",".join(["%.6f", "%.10f"] + ["%.6f"] * (_N_FLOAT_COLUMNS - 2)) + ","
     fmt_flags = ",".join(["%d"] * 24)
     lines = [f"# {comment}", ",".join(TRUTH_COLUMNS)]
-    for row, flag_row, defined in zip(values.tolist(), flags.astype(int).tolist(), truth.pivot_defined):
+    for row, flag_row, defined in zip(
+        values.tolist(), flags.astype(int).tolist(), truth.pivot_defined, strict=True
+    ):
         text = fmt % tuple(row)
         if not defined:  # the pivot columns are left empty where the pivot does not exist
             parts = text.split(",")
@@ -655,7 +657,12 @@ def _file_names(index: int) -> dict[str, str]:
     the real distribution mixes both, and readers must not care."""
     upper = index % 2 == 0
     case = str.upper if upper else str.lower
-    return {"pal": case("PAL.DAT"), "pha": case("PHA.DAT"), "txy": case(".txy"), "wav": case(".wav")}
+    return {
+        "pal": case("PAL.DAT"),
+        "pha": case("PHA.DAT"),
+        "txy": case(".txy"),
+        "wav": case(".wav"),
+    }
 
 
 def _recording_seed(seed: int, index: int, task: str) -> list[int]:
@@ -754,7 +761,9 @@ def generate_corpus(
             _write_wav(files["wav"], samples, overwrite=overwrite)
     heads = {name: a.head for name, a in anatomies.items()}
     write_headmeasures(top["head"], heads, overwrite=overwrite)
-    atomic_write(top["readme"], _readme(n_subjects, seed, tasks, noise_scale, audio), overwrite=overwrite)
+    atomic_write(
+        top["readme"], _readme(n_subjects, seed, tasks, noise_scale, audio), overwrite=overwrite
+    )
     return out_dir
 
 

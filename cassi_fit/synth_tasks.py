@@ -108,7 +108,9 @@ def _phone_targets(phone: str) -> tuple[dict, str]:
         return dict(_PAUSE), "pause"
     if phone in _V:
         jaw, up, fwd, rnd, tip = _V[phone]
-        return dict(_VOWEL, jaw_deg=jaw, body_up=up, body_fwd=fwd, lip_round=rnd, tip_up=tip), "vowel"
+        return dict(
+            _VOWEL, jaw_deg=jaw, body_up=up, body_fwd=fwd, lip_round=rnd, tip_up=tip
+        ), "vowel"
     if phone in _K:
         base = dict(lip_close=0.0, labiodental=0.0, tip_up=0.0, frication=0.0)
         return {**base, **_K[phone]}, _KIND.get(phone, "sonorant")
@@ -201,7 +203,9 @@ def _smooth(controls: np.ndarray, dt: float, slowness: float = 1.0) -> np.ndarra
 
     out = np.empty_like(controls)
     for name, i in _C.items():
-        out[:, i] = gaussian_filter1d(controls[:, i], slowness * _SMOOTHING_S[name] / dt, mode="nearest")
+        out[:, i] = gaussian_filter1d(
+            controls[:, i], slowness * _SMOOTHING_S[name] / dt, mode="nearest"
+        )
     return out
 
 
