@@ -58,8 +58,8 @@ FRAME_STATUS_NAMES = {
     FRAME_INTERPOLATED: "interpolated",
     FRAME_MISTRACKED: "mistracked",
 }
-# Frames are padded to a multiple of this before the batched geometry call, so that
-# recordings of similar length (and different strides) share one compiled function.
+# Frames are padded (64, 128, 256, 512, then multiples of 256) before the batched calls,
+# so that recordings of similar length (and different strides) share compiled functions.
 _FRAME_BUCKET = 64
 
 
@@ -345,29 +345,50 @@ def _geometry(model, params, jaw_weights, tongue_anchor):
     return jax.vmap(one)(params)
 
 
+def _bucket(m: int) -> int:
+    """Padded batch size: 64, 128, 256, 512, then multiples of 256."""
+    if m > 8 * _FRAME_BUCKET:
+        return 4 * _FRAME_BUCKET * math.ceil(m / (4 * _FRAME_BUCKET))
+    return _FRAME_BUCKET * 2 ** max(math.ceil(math.log2(max(m, 1) / _FRAME_BUCKET)), 0)
+
+
+def _pad(x, size: int):
+    """``x`` with its last row repeated along axis 0 up to ``size`` rows."""
+    x = jnp.asarray(x)
+    return jnp.concatenate([x, jnp.repeat(x[-1:], size - x.shape[0], axis=0)])
+
+
 def geometry(state: SubjectState, params):
     """Vertices ``(m, V, 3)`` and model pellet sites ``(m, 8, 2)`` of a batch of params,
-    in one compiled call (frames padded to a multiple of 64 so the compilation is reused)."""
+    in one compiled call (frames padded to a size bucket so the compilation is reused)."""
     m = int(jnp.shape(params.jaw_theta)[0])
-    padded = _FRAME_BUCKET * math.ceil(m / _FRAME_BUCKET)
-    batch = jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], padded - m, 0)]), params)
+    batch = jax.tree.map(lambda x: _pad(x, _bucket(m)), params)
     vertices, sites = _geometry(state.model, batch, state.jaw_weights, state.tongue_anchor)
     return vertices[:m], sites[:m]
 
 
-def _jaw_since_first(state, jaw_pellets, method, solver):
-    """``(theta (m,), t (m, 2), status (m,))``: the jaw from the first valid line to each
-    frame, by ``method``; ``jaw_pellets (m, 2, 2)`` scaled mm, rows [MNI, MNM]."""
+@jax.jit
+def _closed_form_batch(reference, current):
+    from .jaw import closed_form
+
+    fit = jax.vmap(closed_form, in_axes=(None, 0))(reference, current)
+    return fit.theta, fit.translation, fit.status
+
+
+def _jaw_since_first(state, jaw_pellets, method, solver, size):
+    """``(theta (size,), t (size, 2), status (m,))``: the jaw from the first valid line to
+    each frame, by ``method``, padded to ``size`` frames; ``jaw_pellets (m, 2, 2)`` scaled
+    mm, rows [MNI, MNM]. The closed form is per frame, so it runs on the padded frames
+    (one compilation per size bucket); a fit sees only the real frames."""
+    m = jaw_pellets.shape[0]
     if method == "closed-form":
-        from .jaw import closed_form
+        theta, t, status = _closed_form_batch(state.reference_jaw, _pad(jaw_pellets, size))
+        return theta, t, np.asarray(status)[:m]
+    from .jaw_fit import fit_jaw
 
-        fit = jax.vmap(closed_form, in_axes=(None, 0))(state.reference_jaw, jnp.asarray(jaw_pellets))
-    else:
-        from .jaw_fit import fit_jaw
-
-        kwargs = {} if solver is None else {"solver": solver}
-        fit = fit_jaw(state.reference_jaw, jnp.asarray(jaw_pellets), method=method, **kwargs)
-    return jnp.asarray(fit.theta), jnp.asarray(fit.translation), np.asarray(fit.status)
+    kwargs = {} if solver is None else {"solver": solver}
+    fit = fit_jaw(state.reference_jaw, jnp.asarray(jaw_pellets), method=method, **kwargs)
+    return _pad(fit.theta, size), _pad(fit.translation, size), np.asarray(fit.status)
 
 
 def animate(state: SubjectState, recording, *, jaw="closed-form", solver=None, stride=1,
@@ -393,9 +414,12 @@ def animate(state: SubjectState, recording, *, jaw="closed-form", solver=None, s
     jaw_ok = ~bad[:, [MNI, MNM]].any(axis=1)
     if not jaw_ok.any():
         raise MissingDataError(f"{_source(recording)}: the jaw pellets are never tracked well")
-    theta, translation, jaw_status = _jaw_since_first(state, scaled[:, [MNI, MNM]], jaw, solver)
-    params = _batched_params(state, jnp.asarray(scaled), theta, translation)
-    vertices, sites = geometry(state, params)
+    m, size = len(rows), _bucket(len(rows))
+    theta, translation, jaw_status = _jaw_since_first(state, scaled[:, [MNI, MNM]], jaw, solver, size)
+    params = _batched_params(state, _pad(scaled, size), theta, translation)
+    vertices, sites = _geometry(state.model, params, state.jaw_weights, state.tongue_anchor)
+    params = jax.tree.map(lambda x: x[:m], params)
+    vertices, sites = vertices[:m], sites[:m]
     tracked = np.array([name in state.tracked_pellets for name in PELLETS])
     return Animation(
         times=np.asarray(track.times)[rows], frame_index=rows, params=params,

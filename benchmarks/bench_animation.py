@@ -1,0 +1,92 @@
+"""Benchmark: every data line of a 5-second recording rendered to MP4 (issue 5, section 5).
+
+Targets on 2 CPU cores: the geometry of all ~730 frames in one jitted call in under 0.2 s
+after compilation; the whole job (initialize, animate, render the 640x480 2x2 grid of every
+frame, encode the MP4) in under 20 s. Prints the numbers; run with
+
+    .venv/bin/python benchmarks/bench_animation.py [--size 640x480] [--seconds 5] [--out FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("JAX_PLATFORMS", "cpu")
+
+
+def synthetic_recording(seconds: float, seed: int = 7):
+    """A ``Recording`` held in memory: one synthetic subject saying a sentence."""
+    import numpy as np
+
+    from cassi_fit import synth
+    from cassi_fit.dataset import Recording
+
+    anatomy = synth.make_subject("BENCH", np.random.default_rng(seed))
+    track, _ = synth.synth_recording(anatomy, synth.SENTENCE_TASK, seed=seed, duration_s=seconds)
+    return Recording(subject="BENCH", task=synth.SENTENCE_TASK, track=track,
+                     palate=anatomy.palate, pharynx=anatomy.pharynx, head=anatomy.head,
+                     head_is_default=False, audio=None, path=Path("bench.txy"))
+
+
+def _timed(label, fn, results):
+    start = time.perf_counter()
+    value = fn()
+    results[label] = time.perf_counter() - start
+    print(f"{label:<34s} {results[label]:8.3f} s", flush=True)
+    return value
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--size", default="640x480")
+    parser.add_argument("--seconds", type=float, default=5.0)
+    parser.add_argument("--out", help="keep the MP4 here (default: a temporary folder)")
+    args = parser.parse_args(argv)
+    width, height = (int(v) for v in args.size.split("x"))
+
+    import jax
+
+    from cassi_fit import video
+    from cassi_fit.animate import animate, geometry, initialize
+    from cassi_fit.face_model import load_model
+    from cassi_fit.render import Renderer
+
+    results = {}
+    recording = synthetic_recording(args.seconds)
+    model = load_model()
+    wall = time.perf_counter()
+    state = _timed("initialize", lambda: initialize(recording, model), results)
+    animation = _timed("animate (incl. compilation)", lambda: animate(state, recording), results)
+    m = animation.n_frames
+    for _ in range(2):  # geometry alone, compiled: best of three
+        jax.block_until_ready(geometry(state, animation.params))
+    runs = []
+    for _ in range(3):
+        start = time.perf_counter()
+        jax.block_until_ready(geometry(state, animation.params))
+        runs.append(time.perf_counter() - start)
+    results["geometry, all frames, compiled"] = min(runs)
+    print(f"{'geometry, all frames, compiled':<34s} {min(runs):8.3f} s  ({m} frames)")
+    renderer = _timed("renderer set-up", lambda: Renderer(state.model, size=(width, height)), results)
+    with tempfile.TemporaryDirectory() as folder:
+        out = Path(args.out) if args.out else Path(folder) / "bench.mp4"
+        _timed("render + encode MP4", lambda: video.write_animation(
+            out, animation, renderer, subject="BENCH", task="sentence", progress=False,
+            overwrite=True), results)
+        frames = video.count_frames(out)
+    total = time.perf_counter() - wall
+    print(f"{'total wall time':<34s} {total:8.3f} s  ({m} frames, {frames} in the MP4, "
+          f"{width}x{height} 2x2 grid, {m / results['render + encode MP4']:.0f} frames/s, "
+          f"{os.cpu_count()} CPUs)")
+    ok = total < 20.0 and results["geometry, all frames, compiled"] < 0.2 and frames == m
+    print("targets (total < 20 s, geometry < 0.2 s):", "met" if ok else "NOT met")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

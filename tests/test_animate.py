@@ -1,0 +1,223 @@
+"""The pipeline: initialization on the first valid line, p/d scaling, the jaw following the
+MNI pellet, stride, gap repair and its flags."""
+
+import dataclasses
+import math
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+from cassi_fit import synth
+from cassi_fit.animate import (
+    FRAME_HELD,
+    FRAME_INTERPOLATED,
+    FRAME_MISTRACKED,
+    FRAME_OK,
+    LL,
+    MNI,
+    MNM,
+    UL,
+    animate,
+    first_valid_line,
+    frame_status,
+    geometry,
+    initialize,
+    repair,
+)
+from cassi_fit.dataset import Recording
+from cassi_fit.errors import CassiError, MissingDataError
+from cassi_fit.txy import PelletTrack
+
+
+def make_recording(seconds=1.0, seed=3, *, head_is_default=False, **synth_options):
+    anatomy = synth.make_subject("JWT", np.random.default_rng(seed))
+    track, truth = synth.synth_recording(
+        anatomy, synth.SENTENCE_TASK, seed=seed, duration_s=seconds, **synth_options
+    )
+    return Recording(subject="JWT", task=synth.SENTENCE_TASK, track=track, palate=anatomy.palate,
+                     pharynx=anatomy.pharynx, head=anatomy.head, head_is_default=head_is_default,
+                     audio=None, path=Path("/data/JWT/tp040.txy")), truth
+
+
+def with_track(recording, positions, valid=None):
+    valid = np.isfinite(positions) if valid is None else valid
+    track = PelletTrack(recording.track.times, positions, valid, recording.track.path)
+    return dataclasses.replace(recording, track=track)
+
+
+@pytest.fixture(scope="module")
+def model():
+    from cassi_fit.face_model import load_model
+
+    return load_model()
+
+
+@pytest.fixture(scope="module")
+def recording():
+    return make_recording()[0]
+
+
+@pytest.fixture(scope="module")
+def state(recording, model):
+    return initialize(recording, model)
+
+
+@pytest.fixture(scope="module")
+def animation(state, recording):
+    return animate(state, recording)
+
+
+# ------------------------------------------------------------------ pure numpy parts
+
+
+def test_repair_hold_and_interpolate():
+    x = np.arange(6.0)[:, None, None] * np.ones((6, 8, 2))
+    bad = np.zeros((6, 8), bool)
+    bad[2:4, 1] = True  # a gap in LL
+    bad[0, 3] = True  # a leading gap in T2
+    held = repair(np.where(bad[..., None], np.nan, x), bad, "hold")
+    np.testing.assert_array_equal(held[:, 1, 0], [0, 1, 1, 1, 4, 5])
+    np.testing.assert_array_equal(held[:, 3, 0], [1, 1, 2, 3, 4, 5])
+    interp = repair(np.where(bad[..., None], np.nan, x), bad, "interpolate")
+    np.testing.assert_allclose(interp[:, 1, 0], np.arange(6.0))
+    np.testing.assert_array_equal(interp[:, 0], x[:, 0])  # untouched pellets unchanged
+    with pytest.raises(CassiError, match="gap policy"):
+        repair(x, bad, "zero")
+
+
+def test_frame_status_codes():
+    untracked = np.zeros((4, 8), bool)
+    mistracked = np.zeros((4, 8), bool)
+    untracked[1, 2] = True
+    mistracked[2, 0] = True
+    untracked[3, 0] = mistracked[3, 1] = True
+    np.testing.assert_array_equal(frame_status(untracked, mistracked, "hold"),
+                                  [FRAME_OK, FRAME_HELD, FRAME_MISTRACKED, FRAME_MISTRACKED])
+    assert frame_status(untracked, mistracked, "interpolate")[1] == FRAME_INTERPOLATED
+
+
+def test_first_valid_line_ignores_pellets_never_tracked(recording):
+    positions = recording.track.positions.copy()
+    positions[:, 5] = np.nan  # T4 never tracked, as in many real files
+    first, tracked = first_valid_line(with_track(recording, positions).track, "x.txy")
+    assert "T4" not in tracked and len(tracked) == 7
+    positions[:, MNM] = np.nan
+    with pytest.raises(MissingDataError, match="x.txy.*MNM"):
+        first_valid_line(with_track(recording, positions).track, "x.txy")
+
+
+# ------------------------------------------------------------------ initialization
+
+
+def test_initialization_uses_the_first_valid_line(recording, model):
+    positions = recording.track.positions.copy()
+    n_lead = int(np.argmax(np.isfinite(positions).all(axis=(1, 2))))
+    positions[n_lead : n_lead + 3, 2, 0] = np.nan  # T1 x untracked on the next three lines
+    rec = with_track(recording, positions)
+    state = initialize(rec, model)
+    assert state.first_frame == n_lead + 3
+    from cassi_fit.deform import model_pellets
+
+    sites = np.asarray(model_pellets(model, model.vertices))
+    p = np.linalg.norm(sites[MNI] - sites[MNM])
+    d = np.linalg.norm(positions[n_lead + 3, MNI] - positions[n_lead + 3, MNM])
+    assert state.scale == pytest.approx(p / d, rel=1e-12)
+    np.testing.assert_allclose(state.reference_jaw, state.scale * positions[n_lead + 3, [MNI, MNM]])
+
+
+def test_initial_pose_puts_the_model_on_the_first_frame(state, recording):
+    verts, sites = geometry(state, jax.tree.map(lambda x: x[None], state.initial_params))
+    scaled = state.scale * recording.track.positions[state.first_frame]
+    assert np.all(np.isfinite(np.asarray(verts)))
+    np.testing.assert_allclose(sites[0, MNI], scaled[MNI], atol=0.1)
+    # jaw line direction matches (closed form, Eqs 1-3)
+    model_line = np.asarray(sites[0, MNI] - sites[0, MNM])
+    data_line = scaled[MNI] - scaled[MNM]
+    cos = model_line @ data_line / np.linalg.norm(model_line) / np.linalg.norm(data_line)
+    assert cos == pytest.approx(1.0, abs=1e-6)
+
+
+def test_jaw_pellets_never_tracked_name_the_file(recording, model):
+    positions = recording.track.positions.copy()
+    positions[:, MNI] = np.nan
+    with pytest.raises(MissingDataError, match="tp040.txy"):
+        initialize(with_track(recording, positions), model)
+
+
+# ------------------------------------------------------------------ animation
+
+
+def test_model_mni_follows_the_scaled_pellet_in_every_frame(animation, recording, state):
+    """Acceptance: closed-form jaw, CASSI weights -> the MNI site within 0.1 mm."""
+    measured = np.asarray(animation.pellets_measured)
+    model_sites = np.asarray(animation.pellets_model)
+    assert animation.n_frames == len(recording.track.times) - state.first_frame
+    good = ~animation.repaired[:, MNI]
+    assert good.mean() > 0.8
+    error = np.linalg.norm(model_sites[:, MNI] - measured[:, MNI], axis=1)
+    assert error.max() < 0.1, error.max()
+    # against the raw file too, not only the repaired copy
+    raw = state.scale * recording.track.positions[animation.frame_index]
+    assert np.nanmax(np.linalg.norm(model_sites[good, MNI] - raw[good, MNI], axis=1)) < 0.1
+
+
+def test_lips_and_tongue_follow_their_pellets(animation):
+    measured = np.asarray(animation.pellets_measured)
+    model_sites = np.asarray(animation.pellets_model)
+    error = np.linalg.norm(model_sites - measured, axis=2)  # (m, 8)
+    for pellet in (UL, LL, 2, 3, 4, 5):
+        assert np.median(error[:, pellet]) < 0.5, (pellet, np.median(error[:, pellet]))
+
+
+def test_animation_is_finite_and_repairs_are_flagged(recording, model):
+    rec, truth = make_recording(seconds=1.0, seed=11)
+    positions = rec.track.positions.copy()
+    state = initialize(rec, model)
+    hole = slice(state.first_frame + 20, state.first_frame + 30)
+    positions[hole, LL] = np.nan
+    rec = with_track(rec, positions)
+    held = animate(state, rec, gap_policy="hold")
+    interp = animate(state, rec, gap_policy="interpolate")
+    for anim in (held, interp):
+        assert np.all(np.isfinite(np.asarray(anim.vertices)))
+        assert np.all(np.isfinite(anim.pellets_measured))
+        assert anim.repaired[20:30, LL].all()
+        assert set(np.unique(anim.frame_status[20:30])) <= {FRAME_HELD, FRAME_INTERPOLATED, FRAME_MISTRACKED}
+    np.testing.assert_array_equal(held.pellets_measured[20:30, LL], held.pellets_measured[[19] * 10, LL])
+    assert np.all(interp.frame_status[20:30][interp.frame_status[20:30] != FRAME_MISTRACKED] == FRAME_INTERPOLATED)
+    # the synthetic mistracks are caught and flagged, not animated
+    flagged = truth.mistracked[held.frame_index]
+    if flagged.any():
+        assert held.repaired[flagged].mean() > 0.5
+
+
+@pytest.mark.parametrize("stride", [3, 10])
+def test_stride(state, recording, stride, animation):
+    anim = animate(state, recording, stride=stride)
+    n = len(recording.track.times)
+    assert anim.n_frames == math.ceil((n - state.first_frame) / stride)
+    np.testing.assert_array_equal(anim.frame_index, np.arange(state.first_frame, n, stride))
+    np.testing.assert_allclose(anim.times, recording.track.times[anim.frame_index])
+    np.testing.assert_allclose(anim.vertices, animation.vertices[::stride], atol=1e-9)
+    assert anim.stride == stride
+
+
+@pytest.mark.slow
+def test_jaw_fits_and_options(state, recording, model):
+    fit = animate(state, recording, jaw="fixed-pivot", stride=5)
+    assert fit.jaw_method == "fixed-pivot" and np.all(np.isfinite(np.asarray(fit.vertices)))
+    with pytest.raises(CassiError, match="jaw method"):
+        animate(state, recording, jaw="magic")
+    with pytest.raises(CassiError, match="stride"):
+        animate(state, recording, stride=0)
+    parke = initialize(recording, model, jaw_weights="parke", tongue_anchor="fixed")
+    anim = animate(parke, recording, stride=5)
+    assert np.all(np.isfinite(np.asarray(anim.vertices)))
+
+
+def test_default_head_measures_still_initialize(model):
+    rec, _ = make_recording(seconds=0.6, seed=5, head_is_default=True)
+    state = initialize(rec, model)
+    assert np.all(np.isfinite(np.asarray(state.rest_pellets)))
