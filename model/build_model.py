@@ -139,6 +139,11 @@ def bumps(name, p):
         if name in ("A_in", "B_in"):  # the inner lip rows curl in toward the teeth
             inside = bell(az / MOUTH_HALF_WIDTH)
             y += (1.5 if name == "A_in" else -1.5) * inside
+    if name in ("UL", "ul_red", "ul_low", "ll_high", "ll_red", "LL"):
+        # the vermilion is a lens: its height shrinks toward the mouth corners
+        u = az / MOUTH_HALF_WIDTH
+        squeeze = np.where(u <= 1.0, 1.0 - 0.7 * u**2, 0.3 + 0.7 * ramp(u, 1.0, 1.8))
+        y = y * squeeze
     if name in NOSE:
         h, hw = NOSE[name]
         x += h * bell(az / hw) ** 1.3
