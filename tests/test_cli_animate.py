@@ -1,0 +1,158 @@
+"""`cassi animate`, `cassi export`, `cassi demo` end to end on a small synthetic corpus:
+videos with the right frame count and sound, non-blank views, one-line errors."""
+
+import math
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+from cassi_fit import cli, synth
+from cassi_fit.dataset import Dataset
+from cassi_fit.export import read_glb
+from cassi_fit.video import count_frames, media_info
+
+SIZE = "160x120"
+STRIDE = 12
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory):
+    root = tmp_path_factory.mktemp("corpus")
+    return synth.generate_corpus(
+        root, n_subjects=1, tasks=[synth.JAW_WAGGING_TASK, synth.SENTENCE_TASK], audio=True
+    )
+
+
+@pytest.fixture(scope="module")
+def sentence(corpus):
+    dataset = Dataset(corpus)
+    subject = dataset.subjects()[0]
+    return subject, dataset.load(subject, synth.SENTENCE_TASK)
+
+
+def _expected_frames(recording, stride):
+    from cassi_fit.animate import first_valid_line
+
+    first, _ = first_valid_line(recording.track, "x")
+    return math.ceil((len(recording.track.times) - first) / stride)
+
+
+def _run(capsys, *argv):
+    code = cli.main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_animate_dataset_subject_task_to_mp4_with_sound(corpus, sentence, tmp_path, capsys):
+    subject, recording = sentence
+    assert recording.audio is not None
+    out = tmp_path / "talk.mp4"
+    code, stdout, _ = _run(capsys, "animate", corpus, subject, synth.SENTENCE_TASK,
+                           "--stride", STRIDE, "--size", SIZE, "--out", out, "--markers", "--quiet")
+    assert code == 0 and str(out) in stdout
+    assert count_frames(out) == _expected_frames(recording, STRIDE)
+    info = media_info(out)
+    assert info["video"] and info["audio"]
+    frames = _expected_frames(recording, STRIDE)
+    assert info["duration"] == pytest.approx(frames * STRIDE * 0.006866, abs=0.05)
+    # no sound when asked, and --force to replace
+    code, _, _ = _run(capsys, "animate", recording.path, "--stride", STRIDE, "--size", SIZE,
+                      "--out", out, "--no-audio", "--force", "--quiet")
+    assert code == 0 and not media_info(out)["audio"]
+
+
+def test_animate_pellet_file_to_gif_and_png(sentence, tmp_path, capsys):
+    _, recording = sentence
+    gif = tmp_path / "front.gif"
+    code, _, _ = _run(capsys, "animate", recording.path, "--views", "front,top",
+                      "--stride", 40, "--size", SIZE, "--out", gif, "--quiet")
+    assert code == 0
+    frames = iio.imread(gif)
+    assert frames.shape[0] == _expected_frames(recording, 40)
+    png = tmp_path / "still.png"
+    code, _, _ = _run(capsys, "animate", recording.path, "--stride", 40, "--size", SIZE,
+                      "--out", png, "--frame", 2)
+    image = iio.imread(png)
+    assert code == 0 and image.shape[:2] == (120, 160)
+    assert image.std() > 10  # not a blank image
+
+
+def test_every_view_is_non_blank(sentence):
+    from cassi_fit.animate import animate, initialize
+    from cassi_fit.render import Renderer
+
+    _, recording = sentence
+    state = initialize(recording)
+    animation = animate(state, recording, stride=40)
+    views = Renderer(state.model, size=(160, 120)).render_views(animation.vertices[1])
+    assert set(views) == {"front", "side", "inside", "top"}
+    for name, image in views.items():
+        background = np.median(image.reshape(-1, 3), axis=0)
+        drawn = np.abs(image.astype(int) - background).sum(axis=2) > 30
+        assert drawn.mean() > 0.05, name
+
+
+def test_export_glb_and_obj(corpus, sentence, tmp_path, capsys):
+    subject, recording = sentence
+    glb = tmp_path / "talk.glb"
+    code, _, _ = _run(capsys, "export", corpus, subject, synth.SENTENCE_TASK, "--out", glb,
+                      "--stride", STRIDE, "--max-keyframes", 20)
+    assert code == 0
+    doc, _ = read_glb(glb)
+    assert len(doc["meshes"][0]["primitives"][0]["targets"]) == 19
+    obj = tmp_path / "frame.obj"
+    code, _, _ = _run(capsys, "export", recording.path, "--out", obj, "--frame", 3, "--stride", STRIDE)
+    assert code == 0 and obj.stat().st_size > 1000
+
+
+def test_demo_writes_everything_and_reruns(corpus, tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("CASSI_SYNTH_DIR", str(corpus))  # the small corpus stands in
+    out = tmp_path / "demo"
+    for _ in range(2):  # re-running replaces its own outputs
+        code, stdout, _ = _run(capsys, "demo", "--out", out, "--size", SIZE, "--stride", 20, "--quiet")
+        assert code == 0 and str(out.resolve()) in stdout
+    names = {p.name for p in out.iterdir()}
+    subject = Dataset(corpus).subjects()[0]
+    for task in (synth.JAW_WAGGING_TASK, synth.SENTENCE_TASK):
+        assert f"{subject}_{task}.mp4" in names
+        for view in ("front", "side", "inside", "top"):
+            assert f"{subject}_{task}_{view}.png" in names
+    assert f"{subject}_{synth.SENTENCE_TASK}.glb" in names
+    assert f"{subject}_{synth.JAW_WAGGING_TASK}_jaw.png" in names
+    assert media_info(out / f"{subject}_{synth.SENTENCE_TASK}.mp4")["audio"]
+    assert not any(n.startswith(".") for n in names)  # no temporary files left
+
+
+@pytest.mark.parametrize(
+    "argv, fragment",
+    [
+        (["animate", "/no/such/file.txy"], "no such pellet file"),
+        (["animate", "{txy}", "--size", "big"], "--size"),
+        (["animate", "{txy}", "--views", "front,back"], "back"),
+        (["animate", "{txy}", "--out", "x.avi"], ".avi"),
+        (["animate", "{txy}", "--stride", "0"], "stride"),
+        (["animate", "a", "b"], "DATASET SUBJECT TASK"),
+        (["animate", "{root}", "NOBODY", "tp040"], "NOBODY"),
+        (["export", "{txy}", "--out", "x.stl"], ".stl"),
+        (["animate", "{txy}", "--out", "{existing}"], "exists"),
+    ],
+)
+def test_errors_are_one_line(argv, fragment, corpus, sentence, tmp_path, capsys):
+    existing = tmp_path / "old.mp4"
+    existing.write_bytes(b"")
+    words = [a.format(txy=sentence[1].path, root=corpus, existing=existing) for a in argv]
+    code, _, err = _run(capsys, *words)
+    assert code == 2
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("cassi: error:") and fragment in lines[0], err
+
+
+def test_damaged_pellet_file_is_one_line(tmp_path, capsys):
+    bad = tmp_path / "bad.txy"
+    bad.write_text("0\t1\t2\n")
+    code, _, err = _run(capsys, "animate", bad, "--out", tmp_path / "x.mp4")
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert code == 2 and len(lines) == 1 and "bad.txy" in lines[0]
