@@ -61,7 +61,7 @@ _VIEW_AXES = {
 _SHOWN = {
     "front": set(_MATERIALS),
     "side": set(_MATERIALS),
-    "inside": set(_MATERIALS),
+    "inside": set(_MATERIALS) - {"eye"},  # an eyeball floating in the cut head distracts
     "top": {"teeth", "tongue", "palate"},
 }
 _CUT = {"skin", "lips", "eye", "teeth", "palate"}  # near half removed in the inside view
@@ -207,9 +207,10 @@ def _cells(views, size, grid: bool) -> dict[str, tuple[float, float, float, floa
 def _iris_factors(vertices: np.ndarray, faces: np.ndarray, face_material, eye: int):
     """Per-vertex colour factor (V,4) darkening the front of each eyeball into an iris.
 
-    Each eye (one per side of z = 0) is a set of 'eye' vertices; those whose direction from
-    the eye's centre is within 25 degrees of +x (the gaze) are the iris. Returns None if
-    the model has no eye material.
+    Each eye is the set of 'eye' vertices on one side of z = 0; its iris is the front half
+    (x above the eye's centre) within 45 % of the eye's half-height of the gaze axis (the
+    +x line through the centre), whatever the eyeball's shape or tessellation. Returns
+    None if the model has no eye material.
     """
     used = np.unique(faces[face_material == eye])
     if used.size == 0:
@@ -219,9 +220,11 @@ def _iris_factors(vertices: np.ndarray, faces: np.ndarray, face_material, eye: i
     for side in (used[vertices[used, 2] > 0], used[vertices[used, 2] <= 0]):
         if side.size < 4:
             continue
-        d = vertices[side] - vertices[side].mean(axis=0)
-        length = np.linalg.norm(d, axis=1)
-        iris = d[:, 0] > np.cos(np.radians(25.0)) * length
+        p = vertices[side]
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        centre, half = (lo + hi) / 2, (hi[1] - lo[1]) / 2
+        off_axis = np.hypot(p[:, 1] - centre[1], p[:, 2] - centre[2])
+        iris = (p[:, 0] > centre[0]) & (off_axis < 0.45 * half)
         factors[side[iris], :3] = ratio
     return factors
 
@@ -279,17 +282,99 @@ def _split_pieces(vertices, faces, face_material, materials, views, skin) -> lis
     return pieces
 
 
-def _colour_only_renderer_class():
-    """pyrender's Renderer with a plain (or optional multisample) framebuffer, colour read only.
+# Shading, in the camera's frame (orthographic, looking along -z; the lights are fixed to
+# the camera): ambient + a key light from the camera + a fill light from the upper left +
+# a weak highlight, on linear colours, then gamma 1/2.2. Lighting is two-sided by view
+# direction: a surface seen from behind (the inside of the cut skin) is lit as if it faced
+# the camera, whatever the triangle winding. The instance matrices are similarities, so
+# mat3(M * inst_m) transforms normals up to a scale that normalisation removes.
+_VERTEX_SHADER = """#version 330 core
+layout(location = 0) in vec3 position;
+layout(location = 1) in vec3 normal;
+#if HAS_COLOUR
+layout(location = 2) in vec4 color_0;
+#endif
+layout(location = INST_M_LOC) in mat4 inst_m;
+uniform mat4 M;
+uniform mat4 V;
+uniform mat4 P;
+out vec3 frag_normal;
+out vec4 frag_colour;
+void main() {
+    mat4 model = M * inst_m;
+    gl_Position = P * V * model * vec4(position, 1.0);
+    frag_normal = mat3(model) * normal;
+#if HAS_COLOUR
+    frag_colour = color_0;
+#else
+    frag_colour = vec4(1.0);
+#endif
+}
+"""
+_FRAGMENT_SHADER = """#version 330 core
+struct Material {
+    vec4 base_color_factor;
+    vec3 emissive_factor;
+    float roughness_factor;
+};
+uniform Material material;
+in vec3 frag_normal;
+in vec4 frag_colour;
+out vec4 frag_color;
+const vec3 FILL = vec3(-0.397, 0.476, 0.794);  // unit, from the upper left and front
+void main() {
+    // A zero normal (a vertex of zero-area triangles only) is taken as facing the camera:
+    // the ternary selects before dividing, so no NaN is formed.
+    float len = length(frag_normal);
+    vec3 n = len > 0.0 ? frag_normal / len : vec3(0.0, 0.0, 1.0);
+    // Seen from behind (the inside of the cut skin): lit as facing, a little darker.
+    float shade = n.z < 0.0 ? 0.8 : 1.0;
+    n = n.z < 0.0 ? -n : n;
+    vec3 base = shade * material.base_color_factor.rgb * frag_colour.rgb;
+    float light = 0.20 + 0.66 * n.z + 0.30 * max(dot(n, FILL), 0.0);
+    float highlight = 0.25 * (1.0 - material.roughness_factor) * pow(n.z, 24.0);
+    vec3 c = base * light + vec3(highlight) + material.emissive_factor;
+    frag_color = vec4(pow(clamp(c, 0.0, 1.0), vec3(1.0 / 2.2)), material.base_color_factor.a);
+}
+"""
 
-    pyrender always renders into a 4x multisample buffer and reads back colour and depth,
-    converting depth in numpy; with llvmpipe that is about half the time of a frame.
+
+def _colour_only_renderer_class():
+    """pyrender's Renderer with the toolkit's light shader and a plain framebuffer.
+
+    pyrender renders into a 4x multisample buffer, reads back colour and depth (converting
+    depth in numpy) and shades with a full PBR shader whose lights are re-bound in Python
+    for every draw; with llvmpipe that is most of a frame. This keeps pyrender's scene,
+    buffers and draw loop, and replaces those three parts.
     """
     import pyrender
     from OpenGL import GL as gl
+    from pyrender.shader_program import ShaderProgram
+
+    class _Program(ShaderProgram):
+        def __init__(self, has_colour: bool, inst_m_loc: int):
+            super().__init__("cassi.vert", "cassi.frag")
+            self._defines = {"HAS_COLOUR": int(has_colour), "INST_M_LOC": inst_m_loc}
+
+        def _load(self, name):
+            text = _VERTEX_SHADER if name.endswith(".vert") else _FRAGMENT_SHADER
+            for key, value in self._defines.items():
+                text = text.replace(key, str(value))
+            return text
 
     class _ColourOnlyRenderer(pyrender.Renderer):
         samples = 0  # multisample anti-aliasing; 0 = none
+
+        def _get_primitive_program(self, primitive, flags, program_flags):
+            has_colour = primitive.color_0 is not None
+            programs = self.__dict__.setdefault("_cassi_programs", {})
+            if has_colour not in programs:
+                programs[has_colour] = _Program(has_colour, 3 if has_colour else 2)
+                programs[has_colour]._add_to_context()
+            return programs[has_colour]
+
+        def _bind_lighting(self, scene, program, node, flags):
+            pass  # the lights live in the shader
 
         def _configure_main_framebuffer(self):
             dims = (self.viewport_width, self.viewport_height)
@@ -348,16 +433,6 @@ def _framebuffer(gl, dims, samples):
     return fb, colour, depth
 
 
-def _light_pose(travel) -> np.ndarray:
-    """Pose of a pyrender directional light shining along ``travel`` (it shines along -z)."""
-    z = -np.asarray(travel, float) / np.linalg.norm(travel)
-    x = np.cross((0.0, 1.0, 0.0), z)
-    x = x / np.linalg.norm(x) if np.linalg.norm(x) > 0 else np.array([1.0, 0.0, 0.0])
-    pose = np.eye(4)
-    pose[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
-    return pose
-
-
 def _sphere(radius_subdivisions: int = 2):
     """Unit icosphere (positions, normals, faces) for the markers."""
     import trimesh
@@ -376,7 +451,8 @@ class Renderer:
     and eyes drawn see-through). ``antialias`` is the number of multisample samples
     (0 = none, the fast default). ``marker_radius`` is in mm (default: 1.2 % of the
     head's height). Cameras are fitted to ``model.vertices`` (the rest mesh) plus
-    ``margin`` (a fraction of each cell kept free on every side).
+    ``margin`` (a fraction of each cell kept free on every side). ``colours`` overrides
+    :data:`MATERIAL_COLOURS` (``{material: sRGB triple in [0, 1]}``).
     """
 
     def __init__(
@@ -391,6 +467,7 @@ class Renderer:
         antialias=0,
         marker_radius=None,
         margin=0.06,
+        colours=None,
     ):
         self.size, self.views, skin = _check_options(size, views, skin, background)
         self.grid = bool(grid)
@@ -403,6 +480,7 @@ class Renderer:
         height = self._fits.get("side", next(iter(self._fits.values())))[3][1]
         self._marker_radius = float(marker_radius) if marker_radius else 0.012 * height
         self._margin = float(margin)
+        self._colours = {**MATERIAL_COLOURS, **(colours or {})}
         self.platform = ensure_headless_gl()
         self._build_scene(background, int(antialias))
         self._layout_key, self._placements, self._markers = None, {}, {}
@@ -425,17 +503,11 @@ class Renderer:
 
         width, height = self.size
         depth = 4.0 * (width + height)
-        self._scene = pyrender.Scene(bg_color=(*background, 1.0), ambient_light=(0.22,) * 3)
+        self._scene = pyrender.Scene(bg_color=(*background, 1.0))
         camera = pyrender.OrthographicCamera(width / 2, height / 2, znear=1.0, zfar=2 * depth)
         pose = np.eye(4)
         pose[:3, 3] = (width / 2, height / 2, depth)
         self._scene.add(camera, pose=pose)
-        # Lights fixed to the camera: every view is lit alike. Key from the camera, fill
-        # from the upper left, and a back light for surfaces seen from behind (the inside
-        # of the cut skin).
-        for travel, intensity in (((0, 0, -1), 2.6), ((0.5, -0.6, -1), 1.3), ((0, 0.3, 1), 1.4)):
-            light = pyrender.DirectionalLight(color=np.ones(3), intensity=intensity)
-            self._scene.add(light, pose=_light_pose(travel))
         for piece in self._pieces:
             self._add_piece(pyrender, piece)
         self._gl = pyrender.OffscreenRenderer(width, height)
@@ -446,7 +518,7 @@ class Renderer:
     def _add_piece(self, pyrender, piece):
         alpha = 0.35 if piece.glass else 1.0
         material = pyrender.MetallicRoughnessMaterial(
-            baseColorFactor=(*_linear(MATERIAL_COLOURS.get(piece.material, (0.7,) * 3)), alpha),
+            baseColorFactor=(*_linear(self._colours.get(piece.material, (0.7,) * 3)), alpha),
             metallicFactor=0.0,
             roughnessFactor=0.75 if piece.material in ("skin", "palate") else 0.5,
             doubleSided=True,
@@ -533,18 +605,22 @@ class Renderer:
                 _set_poses(mesh.primitives[0], poses)
 
     def _marker_poses(self, points) -> np.ndarray:
+        """(n,4,4) sphere poses for ``points`` (k,3) mm in the marker views laid out now.
+
+        Radius: ``marker_radius`` mm, but at least 3 pixels so that small images show them.
+        """
         out = []
-        r = self._marker_radius
         for view in _MARKER_VIEWS:
             if view not in self._placements or not len(points):
                 continue
             rotation, _, lo, extent = self._fits[view]
             pose = self._placements[view]
-            q = points @ rotation.T
-            q[:, 2] = lo[2] + extent[2] + 2 * r  # in front of everything
-            poses = np.tile(np.eye(4), (len(q), 1, 1))
-            poses[:, :3, :3] = pose[:3, :3] @ (r * rotation.T)  # sphere is symmetric
-            poses[:, :3, 3] = q @ (pose[:3, :3] @ rotation.T).T + pose[:3, 3]
+            scale = np.linalg.norm(pose[:3, 0])
+            radius = max(self._marker_radius * scale, 3.0)
+            poses = np.tile(np.eye(4), (len(points), 1, 1))
+            poses[:, :3, :3] *= radius
+            poses[:, :3, 3] = points @ pose[:3, :3].T + pose[:3, 3]
+            poses[:, 2, 3] = scale * (lo[2] + extent[2]) + pose[2, 3] + 2 * radius
             out.append(poses)
         return np.concatenate(out) if out else np.zeros((0, 4, 4))
 
@@ -599,9 +675,24 @@ class Renderer:
 
     def close(self):
         """Release the OpenGL context (idempotent)."""
-        if getattr(self, "_gl", None) is not None:
-            self._gl.delete()
-            self._gl = None
+        offscreen, self._gl = getattr(self, "_gl", None), None
+        if offscreen is None:
+            return
+        platform = offscreen._platform
+        if type(platform).__name__ != "EGLPlatform":
+            offscreen.delete()
+            return
+        # pyrender's delete() would eglTerminate the EGL display, which every renderer of
+        # the process shares: destroy only this context.
+        from OpenGL import EGL
+
+        platform.make_current()
+        offscreen._renderer.delete()
+        display = platform._egl_display
+        EGL.eglMakeCurrent(display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, EGL.EGL_NO_CONTEXT)
+        EGL.eglDestroyContext(display, platform._egl_context)
+        platform._egl_context = platform._egl_display = None
+        offscreen._renderer = offscreen._platform = None
 
     def __enter__(self):
         return self

@@ -1,0 +1,334 @@
+"""Tests of cassi_fit.render: headless GL selection, the four views, grid, markers, caption.
+
+Most tests use a stand-in head built from ellipsoids (known geometry, independent of the
+face model's evolution) drawn with saturated test colours, so that each material can be
+told apart by its dominant colour channels. One test renders the repository's face model.
+"""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import trimesh
+
+from cassi_fit import render
+from cassi_fit._io import register_input
+from cassi_fit.errors import CassiError, OutputExistsError, RenderingUnavailableError
+
+pytestmark = pytest.mark.render
+
+# material index (MATERIALS order: skin, lips, eye, teeth, tongue, palate), centre, radii (mm)
+_PARTS = (
+    (0, (-45, 20, 0), (75, 110, 70)),
+    (1, (27, -8, 0), (8, 10, 22)),
+    (2, (12, 50, 30), (12, 12, 12)),
+    (2, (12, 50, -30), (12, 12, 12)),
+    (3, (-3, -8, 0), (6, 10, 22)),
+    (4, (-35, -15, 0), (30, 12, 20)),
+    (5, (-30, 6, 0), (30, 4, 22)),
+)
+TEST_COLOURS = {
+    "skin": (0.25, 0.25, 0.95),  # blue
+    "lips": (0.95, 0.95, 0.15),  # yellow
+    "eye": (0.95, 0.95, 0.95),
+    "teeth": (0.95, 0.95, 0.95),
+    "tongue": (0.15, 0.95, 0.15),  # green
+    "palate": (0.95, 0.15, 0.95),  # magenta
+}
+SIZE = (320, 240)
+
+
+def standin_model():
+    """A head-like stand-in with the FaceModel attributes the renderer reads."""
+    vertices, faces, material, n = [], [], [], 0
+    for m, centre, radii in _PARTS:
+        sphere = trimesh.creation.icosphere(subdivisions=2)
+        vertices.append(np.asarray(sphere.vertices) * radii + centre)
+        faces.append(np.asarray(sphere.faces) + n)
+        material.append(np.full(len(sphere.faces), m))
+        n += len(sphere.vertices)
+    return SimpleNamespace(
+        vertices=np.concatenate(vertices),
+        faces=np.concatenate(faces),
+        face_material=np.concatenate(material),
+    )
+
+
+def blue(img):  # skin
+    r, g, b = (img[..., k].astype(int) for k in range(3))
+    return (b > r + 40) & (b > g + 40)
+
+
+def green(img):  # tongue
+    r, g, b = (img[..., k].astype(int) for k in range(3))
+    return (g > r + 40) & (g > b + 40)
+
+
+def magenta(img):  # palate
+    r, g, b = (img[..., k].astype(int) for k in range(3))
+    return (r > g + 40) & (b > g + 40)
+
+
+def red(img):  # "measured" markers
+    r, g, b = (img[..., k].astype(int) for k in range(3))
+    return (r > g + 60) & (r > b + 60)
+
+
+def quadrants(img):
+    h, w = img.shape[0] // 2, img.shape[1] // 2
+    return {
+        "front": img[:h, :w],
+        "side": img[:h, w:],
+        "inside": img[h:, :w],
+        "top": img[h:, w:],
+    }
+
+
+@pytest.fixture(scope="module")
+def model():
+    return standin_model()
+
+
+@pytest.fixture(scope="module")
+def renderer(model):
+    with render.Renderer(model, size=SIZE, colours=TEST_COLOURS) as r:
+        yield r
+
+
+@pytest.fixture(scope="module")
+def views(renderer, model):
+    return renderer.render_views(model.vertices)
+
+
+# -- headless GL selection ----------------------------------------------------------------
+
+
+@pytest.fixture
+def fresh_gl(monkeypatch):
+    """No platform chosen yet, no display; the probe records its calls."""
+    monkeypatch.setattr(render, "_PLATFORM", None)
+    for name in ("DISPLAY", "WAYLAND_DISPLAY", "PYOPENGL_PLATFORM"):
+        monkeypatch.delenv(name, raising=False)
+    calls = []
+
+    def use(working):
+        def probe(platform):
+            calls.append(platform)
+            return None if platform in working else f"{platform} does not work here"
+
+        monkeypatch.setattr(render, "_probe_platform", probe)
+
+    return SimpleNamespace(use=use, calls=calls)
+
+
+def test_headless_picks_egl_without_display(fresh_gl):
+    import os
+
+    fresh_gl.use({"egl", "osmesa", "native"})
+    assert render.ensure_headless_gl() == "egl"
+    assert os.environ["PYOPENGL_PLATFORM"] == "egl"
+    assert fresh_gl.calls == ["egl"]
+    assert render.ensure_headless_gl() == "egl" and fresh_gl.calls == ["egl"]  # cached
+
+
+def test_headless_falls_back_to_osmesa(fresh_gl):
+    fresh_gl.use({"osmesa"})
+    assert render.ensure_headless_gl() == "osmesa"
+    assert fresh_gl.calls == ["egl", "osmesa"]
+
+
+def test_headless_tries_native_first_with_a_display(fresh_gl, monkeypatch):
+    monkeypatch.setenv("DISPLAY", ":0")
+    fresh_gl.use({"egl"})
+    assert render.ensure_headless_gl() == "egl"
+    assert fresh_gl.calls == ["native", "egl"]
+
+
+def test_headless_respects_the_users_platform(fresh_gl, monkeypatch):
+    monkeypatch.setenv("PYOPENGL_PLATFORM", "osmesa")
+    fresh_gl.use(set())
+    assert render.ensure_headless_gl() == "osmesa"
+    assert fresh_gl.calls == []
+
+
+def test_no_gl_is_one_clear_line(fresh_gl):
+    fresh_gl.use(set())
+    with pytest.raises(RenderingUnavailableError) as info:
+        render.ensure_headless_gl()
+    message = str(info.value)
+    assert "\n" not in message
+    assert "egl" in message and "osmesa" in message and "libegl1" in message
+
+
+def test_egl_really_works_here():
+    assert render._probe_platform("egl") is None
+
+
+# -- the views ------------------------------------------------------------------------------
+
+
+def test_each_view_is_non_blank_and_sized(views):
+    assert set(views) == set(render.VIEWS)
+    for name, img in views.items():
+        assert img.shape == (SIZE[1], SIZE[0], 3) and img.dtype == np.uint8, name
+        background = np.all(img == img[0, 0], axis=-1)
+        assert background.mean() < 0.9, f"{name} is (nearly) blank"
+
+
+def test_front_and_side_show_skin_not_tongue(views):
+    for name in ("front", "side"):
+        assert blue(views[name]).mean() > 0.2, name
+        assert green(views[name]).sum() == 0, name
+
+
+def test_inside_view_shows_the_tongue_and_palate(views):
+    assert green(views["inside"]).sum() > 200
+    assert magenta(views["inside"]).sum() > 50
+    assert blue(views["inside"]).sum() > 200  # the far half of the skin
+
+
+def test_top_view_shows_palate_from_above_without_skin(views):
+    assert magenta(views["top"]).mean() > 0.2
+    assert blue(views["top"]).sum() == 0
+
+
+def test_grid_holds_the_four_views(renderer, model, views):
+    grid = renderer.render(model.vertices)
+    assert grid.shape == (SIZE[1], SIZE[0], 3) and grid.dtype == np.uint8
+    cells = quadrants(grid)
+    assert blue(cells["front"]).mean() > 0.2 and green(cells["front"]).sum() == 0
+    assert green(cells["inside"]).sum() > 50
+    assert magenta(cells["top"]).mean() > 0.2 and blue(cells["top"]).sum() == 0
+    # a cell is its view at half the size
+    half = views["side"][::2, ::2]
+    assert abs(blue(cells["side"]).mean() - blue(half).mean()) < 0.05
+
+
+def test_render_is_deterministic(renderer, model):
+    a = renderer.render(model.vertices)
+    renderer.render(model.vertices * 1.01)
+    b = renderer.render(model.vertices)
+    np.testing.assert_array_equal(a, b)
+
+
+def test_vertices_are_updated_per_frame(renderer, model):
+    """Moving the tongue up 8 mm changes the inside view (vertex buffers updated in place)."""
+    moved = model.vertices.copy()
+    tongue = np.unique(model.faces[model.face_material == 4])
+    moved[tongue, 1] += 8.0
+    a = quadrants(renderer.render(model.vertices))["inside"]
+    b = quadrants(renderer.render(moved))["inside"]
+    rows_a = np.nonzero(green(a).any(axis=1))[0]
+    rows_b = np.nonzero(green(b).any(axis=1))[0]
+    assert rows_b.min() < rows_a.min()  # higher in the image
+
+
+def test_single_view_renderer_matches_render_views(model, views):
+    with render.Renderer(model, size=SIZE, views=("side",), colours=TEST_COLOURS) as r:
+        np.testing.assert_array_equal(r.render(model.vertices), views["side"])
+
+
+def test_size_option_and_row_layout(model):
+    with render.Renderer(
+        model, size=(200, 80), views=("front", "top"), grid=False, colours=TEST_COLOURS
+    ) as r:
+        img = r.render(model.vertices)
+        assert img.shape == (80, 200, 3)
+        assert blue(img[:, :100]).sum() > 100 and blue(img[:, 100:]).sum() == 0
+        assert magenta(img[:, 100:]).sum() > 100
+
+
+def test_transparent_skin_shows_the_tongue(model):
+    with render.Renderer(
+        model, size=SIZE, views=("inside",), skin="transparent", colours=TEST_COLOURS
+    ) as r:
+        img = r.render(model.vertices)
+    tongue = green(img) | ((img[..., 1].astype(int) > img[..., 0] + 25))
+    assert tongue.sum() > 100
+    assert blue(img).sum() > 200
+
+
+def test_markers_are_drawn_in_the_side_and_inside_views(renderer, model):
+    pellets = np.array([[-20.0, -5.0, 0.0], [-40.0, -8.0, 0.0]])  # inside the head
+    plain = quadrants(renderer.render(model.vertices))
+    marked = quadrants(renderer.render(model.vertices, markers={"measured": pellets}))
+    for name in ("side", "inside"):
+        assert red(plain[name]).sum() == 0
+        assert red(marked[name]).sum() > 4, name
+    for name in ("front", "top"):
+        assert red(marked[name]).sum() == 0, name
+    # at the projected position: the side cell shows the model's x-y plane
+    again = quadrants(renderer.render(model.vertices, markers={"measured": pellets[:1]}))
+    assert 0 < red(again["side"]).sum() < red(marked["side"]).sum()
+    # and gone again when not given
+    assert red(quadrants(renderer.render(model.vertices))["side"]).sum() == 0
+
+
+def test_markers_accept_2d_points_and_skip_missing_ones(renderer, model):
+    pts = np.array([[-20.0, -5.0], [np.nan, np.nan]])
+    img = renderer.render(model.vertices, markers={"measured": pts})
+    assert red(quadrants(img)["side"]).sum() > 4
+    with pytest.raises(CassiError):
+        renderer.render(model.vertices, markers={"measured": np.zeros((2, 4))})
+
+
+def test_caption_changes_pixels_in_a_band_at_the_bottom(renderer, model):
+    plain = renderer.render(model.vertices)
+    captioned = renderer.render(model.vertices, caption="JW11 task 18  t = 1.250 s  frame 10")
+    changed = np.any(plain != captioned, axis=-1)
+    assert changed.sum() > 500
+    assert not changed[: SIZE[1] // 2].any()
+    direct = render.add_caption(plain, "JW11 task 18  t = 1.250 s  frame 10")
+    np.testing.assert_array_equal(direct, captioned)
+
+
+def test_bad_vertices_raise_clear_errors(renderer, model):
+    with pytest.raises(CassiError, match="shape"):
+        renderer.render(model.vertices[:-1])
+    bad = model.vertices.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(CassiError, match="NaN"):
+        renderer.render(bad)
+
+
+def test_bad_options_raise_clear_errors(model):
+    with pytest.raises(CassiError, match="views"):
+        render.Renderer(model, views=("back",))
+    with pytest.raises(CassiError, match="skin"):
+        render.Renderer(model, skin="glass")
+    with pytest.raises(CassiError, match="size"):
+        render.Renderer(model, size=(4, 4))
+
+
+def test_save_png_round_trip_and_refusals(tmp_path, renderer, model):
+    from PIL import Image
+
+    img = renderer.render(model.vertices)
+    path = render.save_png(tmp_path / "out" / "grid.png", img)
+    np.testing.assert_array_equal(np.asarray(Image.open(path)), img)
+    with pytest.raises(OutputExistsError):
+        render.save_png(path, img, overwrite=False)
+    register_input(path)
+    with pytest.raises(OutputExistsError):
+        render.save_png(path, img)
+
+
+def test_jax_vertices_are_accepted(renderer, model):
+    import jax.numpy as jnp
+
+    a = renderer.render(jnp.asarray(model.vertices))
+    np.testing.assert_array_equal(a, renderer.render(model.vertices))
+
+
+@pytest.mark.slow
+def test_the_face_model_renders_in_all_views():
+    from cassi_fit.face_model import load_model
+
+    face = load_model()
+    with render.Renderer(face, size=SIZE) as r:
+        views = r.render_views(np.asarray(face.vertices))
+    skin = np.array(render.MATERIAL_COLOURS["skin"]) * 255
+    for name, img in views.items():
+        assert (np.all(img == img[0, 0], axis=-1)).mean() < 0.9, name
+    near_skin = np.linalg.norm(views["front"].astype(float) - skin, axis=-1) < 40
+    assert near_skin.mean() > 0.1
