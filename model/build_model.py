@@ -465,6 +465,8 @@ def build():
         offsets[name] = base
         regions[name] = np.arange(base, base + len(v))
         verts.append(v)
+        if name in ("skin", "upper_teeth", "lower_teeth", "tongue"):
+            f_ = f_[:, ::-1]  # these parts are built clockwise: make every part face outward
         faces.append(f_ + base)
         mats.append(np.broadcast_to(m, (len(f_),)))
     V = np.concatenate(verts)
