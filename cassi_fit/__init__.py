@@ -40,12 +40,21 @@ _PUBLIC = {
     "Dataset": "dataset",
     "Recording": "dataset",
     "load_recording": "dataset",
+    "require_tracked": "txy",
+    "DefaultHeadMeasuresWarning": "dataset",
+    "QualityReport": "quality",
     "quality_report": "quality",
     "detect_mistracks": "quality",
     # synthetic corpus
     "generate_corpus": "synth",
     "load_truth": "synth",
     "load_anatomy": "synth",
+    "SubjectAnatomy": "synth",
+    "JawTruth": "synth",
+    "make_subject": "synth",
+    "synth_recording": "synth",
+    "ensure_default_corpus": "synth",
+    "TASKS": "synth",
     # jaw
     "closed_form": "jaw",
     "closed_form_paper": "jaw",
@@ -55,7 +64,11 @@ _PUBLIC = {
     "load_model": "face_model",
     "FaceParams": "deform",
     "default_params": "deform",
+    "MATERIALS": "face_model",
+    "vertex_normals": "deform",
+    "model_pellets": "deform",
     "build_palate": "palate",
+    "with_palate": "palate",
     # pipeline
     # `deform` and `animate` are module names too; their functions are imported from
     # the modules (`from cassi_fit.deform import deform`) so that a name means one thing.
