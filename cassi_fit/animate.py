@@ -305,44 +305,111 @@ def initialize(recording, model=None, *, jaw_weights="cassi", tongue_anchor="fol
 # --------------------------------------------------------------------------- animation
 
 
-def _frame_params(state: SubjectState, scaled, motion_since_first):
+def _frame_inputs(state: SubjectState) -> dict:
+    """The arrays one frame's parameters depend on (all arrays: safe to pass to jit)."""
+    tracked = np.array([name in state.tracked_pellets for name in PELLETS])
+    weights = state.model.jaw_weights[state.jaw_weights]
+    return {
+        "rest": state.rest_pellets, "tracked": jnp.asarray(tracked),
+        "initial_jaw": state.initial_jaw, "conformation": state.conformation,
+        "w_ll": jnp.asarray(weights)[state.model.landmarks["LL"]],
+    }
+
+
+def _frame_params_of(inputs: dict, scaled, motion_since_first):
     """The FaceParams of one frame. ``scaled (8, 2)`` mm: the pellets times ``p / d``
     (values of never-tracked pellets are ignored); ``motion_since_first``: ``(theta, t)``
     of the jaw from the first valid line to this one."""
-    rest = state.rest_pellets
-    tracked = jnp.asarray([name in state.tracked_pellets for name in PELLETS])
+    rest, tracked = inputs["rest"], inputs["tracked"]
     # never-tracked pellets sit at the model's rest sites: their parameters stay 0
     scaled = jnp.where(tracked[:, None], jnp.nan_to_num(scaled), rest)
-    motion = rigid.compose(motion_since_first, state.initial_jaw)
-    w_ll = state.model.jaw_weights[state.jaw_weights][state.model.landmarks["LL"]]
-    ll_after_jaw = rigid.apply(*rigid.fractional(motion, w_ll), rest[LL])
+    motion = rigid.compose(motion_since_first, inputs["initial_jaw"])
+    ll_after_jaw = rigid.apply(*rigid.fractional(motion, inputs["w_ll"]), rest[LL])
     lower_lip = jnp.where(tracked[LL], scaled[LL] - ll_after_jaw, 0.0)
-    dtype = jnp.asarray(state.conformation.tongue).dtype
+    conformation = inputs["conformation"]
+    dtype = jnp.asarray(conformation.tongue).dtype
     values = (motion[0], motion[1], scaled[T1 : T4 + 1] - rest[T1 : T4 + 1],
               scaled[UL] - rest[UL], lower_lip)
     return eqx.tree_at(
         lambda p: (p.jaw_theta, p.jaw_translation, p.tongue, p.upper_lip, p.lower_lip),
-        state.conformation, tuple(jnp.asarray(v, dtype) for v in values),
+        conformation, tuple(jnp.asarray(v, dtype) for v in values),
     )
 
 
-@eqx.filter_jit
-def _batched_params(state, scaled, theta, translation):
+def _frame_params(state: SubjectState, scaled, motion_since_first):
+    """:func:`_frame_params_of` for ``state``."""
+    return _frame_params_of(_frame_inputs(state), scaled, motion_since_first)
+
+
+@jax.jit
+def _batched_params(inputs, scaled, theta, translation):
     """FaceParams with a leading frame axis from ``scaled (m, 8, 2)``, ``theta (m,)``,
     ``translation (m, 2)``."""
-    return jax.vmap(lambda s, a, t: _frame_params(state, s, (a, t)))(scaled, theta, translation)
+    return jax.vmap(lambda s, a, t: _frame_params_of(inputs, s, (a, t)))(scaled, theta, translation)
 
 
-@eqx.filter_jit
+# The face model keeps numpy arrays in static fields, which jit cannot hash or compare, so
+# the geometry function is compiled per model *content* (a digest of its static parts)
+# and receives only the model's array leaves; its tree structure is closed over.
+_GEOMETRY_CACHE: dict = {}
+
+
+def _digest(value, h) -> None:
+    if isinstance(value, np.ndarray):
+        h.update(f"{value.dtype}{value.shape}".encode())
+        h.update(np.ascontiguousarray(value).tobytes())
+    elif isinstance(value, dict):
+        for key in sorted(value, key=str):
+            h.update(repr(key).encode())
+            _digest(value[key], h)
+    elif isinstance(value, (list, tuple)):
+        for item in value:
+            _digest(item, h)
+    else:
+        h.update(repr(value).encode())
+
+
+def _model_key(model, leaves) -> str:
+    import dataclasses
+    import hashlib
+
+    h = hashlib.sha1()
+    for f in dataclasses.fields(model):
+        if f.metadata.get("static", False):
+            h.update(f.name.encode())
+            _digest(getattr(model, f.name), h)
+    for leaf in leaves:  # non-array leaves are constants of the compiled function
+        _digest((np.shape(leaf), str(getattr(leaf, "dtype", type(leaf).__name__)))
+                if _is_array(leaf) else leaf, h)
+    return h.hexdigest()
+
+
+def _is_array(x) -> bool:
+    return isinstance(x, (jax.Array, np.ndarray, np.generic, float, int))
+
+
 def _geometry(model, params, jaw_weights, tongue_anchor):
     """All frames at once: vertices ``(m, V, 3)`` and model pellet sites ``(m, 8, 2)``."""
-    from .deform import deform, model_pellets
+    leaves, treedef = jax.tree.flatten(model)
+    key = (_model_key(model, leaves), jaw_weights, tongue_anchor)
+    compiled = _GEOMETRY_CACHE.get(key)
+    if compiled is None:
+        constant = [None if _is_array(x) else x for x in leaves]
 
-    def one(p):
-        vertices = deform(model, p, jaw_weights=jaw_weights, tongue_anchor=tongue_anchor)
-        return vertices, model_pellets(model, vertices)
+        def run(arrays, batch):
+            from .deform import deform, model_pellets
 
-    return jax.vmap(one)(params)
+            it = iter(arrays)
+            rebuilt = jax.tree.unflatten(treedef, [next(it) if c is None else c for c in constant])
+
+            def one(p):
+                vertices = deform(rebuilt, p, jaw_weights=jaw_weights, tongue_anchor=tongue_anchor)
+                return vertices, model_pellets(rebuilt, vertices)
+
+            return jax.vmap(one)(batch)
+
+        compiled = _GEOMETRY_CACHE[key] = jax.jit(run)
+    return compiled([x for x in leaves if _is_array(x)], params)
 
 
 def _bucket(m: int) -> int:
@@ -416,7 +483,7 @@ def animate(state: SubjectState, recording, *, jaw="closed-form", solver=None, s
         raise MissingDataError(f"{_source(recording)}: the jaw pellets are never tracked well")
     m, size = len(rows), _bucket(len(rows))
     theta, translation, jaw_status = _jaw_since_first(state, scaled[:, [MNI, MNM]], jaw, solver, size)
-    params = _batched_params(state, _pad(scaled, size), theta, translation)
+    params = _batched_params(_frame_inputs(state), _pad(scaled, size), theta, translation)
     vertices, sites = _geometry(state.model, params, state.jaw_weights, state.tongue_anchor)
     params = jax.tree.map(lambda x: x[:m], params)
     vertices, sites = vertices[:m], sites[:m]
