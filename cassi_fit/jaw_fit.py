@@ -1,0 +1,467 @@
+"""Least-squares jaw rotation: alternatives to, and a check on, the paper's closed form.
+
+Data: the reference jaw ``(2, 2)`` mm (rows [MNI, MNM]) and the current jaw in ``n`` frames
+``(n, 2, 2)``. Every method returns, per frame, the motion ``p' = R(theta) p + t`` taking the
+reference to the frame (Eqs 4-5; :mod:`cassi_fit.rigid`), its pivot, residuals, status and
+uncertainty, as a :class:`JawFit`. Methods:
+
+* ``"closed-form"`` -- the paper's Eqs 1-3, 6-7 in the sound form (:func:`jaw.closed_form`).
+* ``"frame-fit"`` -- per frame, rotation + translation fitted to both pellets (3 parameters,
+  4 residuals). Parameterised by ``(theta, t)``, never by the pivot, which is ill-conditioned
+  at small theta; the pivot is derived. Its exact reference is :func:`jaw.procrustes`.
+* ``"fixed-pivot"`` -- Parke's model: one pivot ``q`` for the recording, an angle per frame,
+  ``p' = R(theta_k)(p - q) + q``. The angles are eliminated in closed form (variable
+  projection: for a given ``q`` the best ``theta_k`` is one ``atan2``), so the solver sees
+  2 parameters and ``4 n`` residuals; the pivot covariance is then the exact marginal.
+* ``"smooth-pivot"`` -- a moving pivot ``q_k`` (linear spline with a knot every
+  ``knot_spacing`` frames) with a smoothness prior ``smoothness * sum |q_{k+1} - q_k|^2``
+  (mm^2 per frame step, against squared pellet residuals in mm^2), angles eliminated as
+  above. ``smoothness -> inf`` gives the fixed pivot; small values let the pivot follow the
+  condyle's translation, the model the jaw literature supports.
+
+Solvers (``solver=``): ``"optimistix-lm"`` (default), ``"optimistix-gn"``,
+``"optimistix-dogleg"``, ``"jaxopt-lm"``, ``"jaxopt-gn"`` (the last two through
+:mod:`cassi_fit._jaxopt_adapter`). Initial guesses come from the closed form / Procrustes.
+Uncertainty: ``s^2 (J^T J)^-1`` with ``s^2`` pooled over the recording's usable frames.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from . import jaw, rigid
+from .errors import DegenerateGeometryError, MissingDataError
+
+METHODS = ("closed-form", "frame-fit", "fixed-pivot", "smooth-pivot")
+SOLVERS = ("optimistix-lm", "optimistix-gn", "optimistix-dogleg", "jaxopt-lm", "jaxopt-gn")
+DEFAULT_KNOT_SPACING = 16  # frames (about 0.11 s at 145.6 Hz) between pivot-path knots
+_MAX_STEPS = 100
+
+
+@dataclass(frozen=True)
+class JawFit:
+    """One recording's jaw motion, per frame (``n`` frames); numpy arrays.
+
+    theta (n,) rad, opening positive; translation (n, 2) mm, ``p' = R(theta) p + t``
+    from the reference jaw; pivot (n, 2) mm: the fixed point of the frame's motion (for
+    "fixed-pivot" the recording's pivot, for "smooth-pivot" the pivot path), (0, 0) where
+    undefined; pivot_defined (n,) bool; residual (n,) mm, rms pellet misfit of the frame;
+    status (n,) int, see :data:`cassi_fit.jaw.STATUS_NAMES` (0 ok, 1 pivot undefined,
+    2 degenerate, 3 non-finite, 4 invalid frame (values interpolated), 5 not converged);
+    converged: the solver reported success (all frames for "frame-fit");
+    covariance (n, 3, 3) of ``(theta, tx, ty)`` (rad, mm) given the frame's data;
+    pivot_covariance (n, 2, 2) mm^2 for the uncertainty ellipse (inf where undefined);
+    noise_mm: the pooled pellet-noise estimate ``s``.
+    """
+
+    theta: np.ndarray
+    translation: np.ndarray
+    pivot: np.ndarray
+    pivot_defined: np.ndarray
+    residual: np.ndarray
+    status: np.ndarray
+    converged: bool
+    covariance: np.ndarray
+    pivot_covariance: np.ndarray
+    noise_mm: float
+    method: str
+    solver: str
+
+    @property
+    def status_names(self) -> list[str]:
+        return [jaw.status_name(c) for c in self.status]
+
+
+# ------------------------------------------------------------------ solvers, by name
+def _tolerance(dtype):
+    return 1e-8 if jnp.dtype(dtype) == jnp.float64 else 1e-4
+
+
+def solve(residuals, params0, args, solver="optimistix-lm"):
+    """Minimise ``|residuals(params, args)|^2`` from ``params0`` with the named solver.
+
+    Traceable (jit/vmap). Returns ``(params, converged)``. Failure comes back as a value
+    (optimistix ``throw=False``), never as an exception from traced code. ``converged`` is
+    the solver's own verdict, or first-order optimality at the answer
+    (``|J^T r|_inf <= 100 tol (1 + |r|^2)``): a trust-region solver sitting exactly on the
+    minimum may stop by shrinking its region without declaring success.
+    """
+    params, converged = _solve_raw(residuals, params0, args, solver)
+    cost, grad = jax.value_and_grad(lambda p: 0.5 * jnp.sum(residuals(p, args) ** 2))(params)
+    stationary = jnp.max(jnp.abs(grad)) <= 100 * _tolerance(params0.dtype) * (1.0 + 2.0 * cost)
+    return params, converged | stationary
+
+
+def _solve_raw(residuals, params0, args, solver):
+    tol = _tolerance(params0.dtype)
+    if solver.startswith("jaxopt-"):
+        from . import _jaxopt_adapter
+
+        return _jaxopt_adapter.least_squares(
+            residuals, params0, args, method=solver.removeprefix("jaxopt-"), tol=tol,
+            max_steps=_MAX_STEPS,
+        )
+    kinds = {
+        "optimistix-lm": optx.LevenbergMarquardt,
+        "optimistix-gn": optx.GaussNewton,
+        "optimistix-dogleg": optx.Dogleg,
+    }
+    sol = optx.least_squares(
+        residuals, kinds[solver](rtol=tol, atol=tol), params0, args,
+        max_steps=_MAX_STEPS, throw=False,
+    )
+    return sol.value, sol.result == optx.RESULTS.successful
+
+
+def _check_solver(solver):
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+
+
+# ------------------------------------------------------------- residual functions
+def rigid_residuals(params, args):
+    """One frame, ``params = (theta, tx, ty)``: ``R p_i + t - p_i'`` for both pellets, (4,) mm."""
+    reference, current = args
+    return (rigid.apply(params[0], params[1:], reference) - current).ravel()
+
+
+def best_angle_about(pivot, reference, current):
+    """The theta minimising ``sum_i |R(theta)(p_i - q) + q - p_i'|^2``, one frame, rad.
+
+    ``argmax_theta sum_i v_i . R u_i`` with ``u = p - q``, ``v = p' - q``: one atan2.
+    Where both sums vanish (pellets on the pivot) theta is 0, gradient 0 (double-where).
+    """
+    u, v = reference - pivot, current - pivot
+    cross = jnp.sum(v[:, 0] * u[:, 1] - v[:, 1] * u[:, 0])
+    dot = jnp.sum(u * v)
+    ok = (cross != 0.0) | (dot != 0.0)
+    return jnp.where(ok, jnp.arctan2(jnp.where(ok, cross, 0.0), jnp.where(ok, dot, 1.0)), 0.0)
+
+
+def _about_pivot(pivot, reference, current, weight):
+    """Weighted residuals (4,) of one frame turned about ``pivot`` by its best angle."""
+    theta = best_angle_about(pivot, reference, current)
+    moved = rigid.apply(*rigid.from_pivot(theta, pivot), reference)
+    return weight * (moved - current).ravel()
+
+
+_about_pivot_frames = jax.vmap(_about_pivot, in_axes=(None, None, 0, 0))
+_about_pivots_frames = jax.vmap(_about_pivot, in_axes=(0, None, 0, 0))
+
+
+def fixed_pivot_residuals(pivot, args):
+    """Parke's fixed pivot, angles projected out: ``pivot`` (2,) mm -> residuals (4 n,) mm."""
+    reference, current, weight = args
+    return _about_pivot_frames(pivot, reference, current, weight).ravel()
+
+
+def _spline(knots, n, spacing):
+    """Piecewise-linear path (n, 2) through ``knots`` (m, 2) placed every ``spacing`` frames."""
+    k = jnp.arange(n)
+    j = k // spacing
+    f = (k % spacing / spacing)[:, None]
+    return (1.0 - f) * knots[j] + f * knots[jnp.minimum(j + 1, knots.shape[0] - 1)]
+
+
+def smooth_pivot_residuals(knots, args):
+    """Moving pivot: knots (2 m,) mm, flattened (m, 2) -> data residuals (4 n,) and prior residuals (2 (m-1),).
+
+    The prior is ``sqrt(smoothness) * (q_{k+1} - q_k)`` summed exactly over the frames of
+    each knot interval: ``|dQ|^2 / spacing`` per interval.
+    """
+    reference, current, weight, smoothness, spacing = args
+    knots = knots.reshape(-1, 2)
+    path = _spline(knots, current.shape[0], spacing)
+    data = _about_pivots_frames(path, reference, current, weight).ravel()
+    prior = jnp.sqrt(smoothness / spacing) * (knots[1:] - knots[:-1]).ravel()
+    return jnp.concatenate([data, prior])
+
+
+# ---------------------------------------------------------------- compiled kernels
+def _motion_params(motion):
+    return jnp.concatenate([motion.theta[None], motion.translation])
+
+
+def _unit_covariance(params, reference, current):
+    """``(J^T J)^-1`` (3, 3) of the frame's rigid residuals at ``params``."""
+    jac = jax.jacfwd(rigid_residuals)(params, (reference, current))
+    return jnp.linalg.inv(jac.T @ jac)
+
+
+@functools.cache
+def _frame_kernel(method, solver):
+    """Compiled, vmapped per-frame estimate: closed form or per-frame least squares."""
+
+    def one(reference, current):
+        y0 = _motion_params(jaw.closed_form(reference, current))
+        if method == "closed-form":
+            # noise propagated through the closed form itself: G G^T, G = d(theta, t)/d(current)
+            g = jax.jacfwd(lambda c: _motion_params(jaw.closed_form(reference, c)))(current)
+            g = g.reshape(3, 4)
+            y, converged, unit_cov = y0, jnp.array(True), g @ g.T
+        else:
+            y, converged = solve(rigid_residuals, y0, (reference, current), solver)
+            unit_cov = _unit_covariance(y, reference, current)
+        return y, rigid_residuals(y, (reference, current)), converged, unit_cov
+
+    return jax.jit(jax.vmap(one, in_axes=(None, 0)))
+
+
+@functools.cache
+def _fixed_pivot_kernel(solver):
+    """Compiled fixed-pivot fit: ``(reference, current, weight, q0) -> (q, converged, J)``."""
+
+    def run(reference, current, weight, pivot0):
+        args = (reference, current, weight)
+        pivot, converged = solve(fixed_pivot_residuals, pivot0, args, solver)
+        return pivot, converged, jax.jacfwd(fixed_pivot_residuals)(pivot, args)
+
+    return jax.jit(run)
+
+
+@functools.cache
+def _smooth_pivot_kernel(solver, spacing):
+    """Compiled smooth-pivot fit: ``(..., knots0) -> (knots, converged, J)``."""
+
+    def run(reference, current, weight, smoothness, knots0):
+        args = (reference, current, weight, smoothness, spacing)
+        knots, converged = solve(smooth_pivot_residuals, knots0, args, solver)
+        return knots, converged, jax.jacfwd(smooth_pivot_residuals)(knots, args)
+
+    return jax.jit(run)
+
+
+@jax.jit
+@functools.partial(jax.vmap, in_axes=(None, 0, 0))
+def _about_pivot_params(reference, current, pivot):
+    """Per frame: best angle about ``pivot`` -> params (theta, tx, ty), unit covariance."""
+    theta, t = rigid.from_pivot(best_angle_about(pivot, reference, current), pivot)
+    y = jnp.concatenate([theta[None], t])
+    return y, _unit_covariance(y, reference, current)
+
+
+@jax.jit
+@jax.vmap
+def _pivot_with_covariance(params, covariance):
+    """The fixed point of ``params = (theta, tx, ty)`` and its (2, 2) covariance."""
+
+    def fixed_point(y):
+        return rigid.pivot((y[0], y[1:]))[0]
+
+    point, defined = rigid.pivot((params[0], params[1:]))
+    jac = jax.jacfwd(fixed_point)(params)
+    cov = jnp.where(defined, jac @ covariance @ jac.T, jnp.diag(jnp.full(2, jnp.inf)))
+    return point, defined, cov
+
+
+_closed_form_frames = jax.jit(jax.vmap(jaw.closed_form, in_axes=(None, 0)))
+_procrustes_frames = jax.jit(jax.vmap(jaw.procrustes, in_axes=(None, 0)))
+_frame_residuals = jax.jit(jax.vmap(rigid_residuals, in_axes=(0, (None, 0))))
+_translation_about = jax.jit(jax.vmap(lambda theta, q: rigid.from_pivot(theta, q)[1]))
+
+
+def _spline_weights(n, spacing, n_knots):
+    """(n, m) weights of the linear spline :func:`_spline`: ``path = weights @ knots``."""
+    k = np.arange(n)
+    j, f = k // spacing, (k % spacing) / spacing
+    weights = np.zeros((n, n_knots))
+    weights[k, j] += 1.0 - f
+    weights[k, np.minimum(j + 1, n_knots - 1)] += f
+    return weights
+
+
+# --------------------------------------------------------------------- helpers
+def _interpolate(values, usable):
+    """Fill unusable frames of ``values`` (n, ...) by linear interpolation over frame index
+    (held constant beyond the ends)."""
+    frames = np.arange(values.shape[0])
+    flat = values.reshape(values.shape[0], -1).copy()
+    for col in range(flat.shape[1]):
+        flat[:, col] = np.interp(frames, frames[usable], flat[usable, col])
+    return flat.reshape(values.shape)
+
+
+def _check_reference(reference):
+    if not np.all(np.isfinite(reference)):
+        raise MissingDataError("jaw reference: MNI or MNM untracked (non-finite) in the reference")
+    if np.all(reference[0] == reference[1]):
+        raise DegenerateGeometryError(
+            f"jaw reference: MNI and MNM coincide at {reference[0].tolist()} mm"
+        )
+
+
+def _prepare(reference, current, valid):
+    """Validate; returns (reference, safe current, usable mask, base status)."""
+    reference = np.asarray(reference, dtype=float)
+    current = np.asarray(current, dtype=float)
+    if reference.shape != (2, 2) or current.ndim != 3 or current.shape[1:] != (2, 2):
+        raise ValueError(
+            f"jaw data: expected reference (2, 2) and current (n, 2, 2), got "
+            f"{reference.shape} and {current.shape}"
+        )
+    _check_reference(reference)
+    n = current.shape[0]
+    valid = np.ones(n, bool) if valid is None else np.asarray(valid, bool)
+    status = np.asarray(_closed_form_frames(reference, current).status).astype(np.int32)
+    status = np.where(valid, status, jaw.STATUS_INVALID_FRAME)
+    usable = status <= jaw.STATUS_PIVOT_UNDEFINED
+    if not usable.any():
+        raise MissingDataError("jaw data: no frame where both jaw pellets are tracked")
+    safe = np.where(usable[:, None, None], current, reference[None])
+    return reference, safe, usable, np.where(usable, 0, status).astype(np.int32)
+
+
+def _noise_variance(residuals, usable, n_params):
+    dof = 4 * int(usable.sum()) - n_params
+    return float(np.sum(residuals[usable] ** 2) / dof) if dof > 0 else 0.0
+
+
+# ---------------------------------------------------------------------- methods
+def _per_frame(reference, current, usable, method, solver):
+    params, res, converged, unit_cov = (
+        np.asarray(a) for a in _frame_kernel(method, solver)(reference, current)
+    )
+    converged = converged | ~usable
+    return params, res, unit_cov, None, converged, 3 * int(usable.sum())
+
+
+def _initial_pivot(reference, current, usable):
+    """Linear least squares for ``q`` in ``t_k = (I - R_k) q`` from Procrustes motions.
+
+    ``(I - R)^T (I - R) = (2 - 2 cos theta) I``, so frames weigh in by their rotation.
+    """
+    m = _procrustes_frames(reference, current)
+    theta, t = np.asarray(m.theta)[usable], np.asarray(m.translation)[usable]
+    gain = np.sum(2.0 - 2.0 * np.cos(theta))
+    if gain == 0.0:
+        raise DegenerateGeometryError("jaw data: the jaw never rotates, so no pivot exists")
+    c, s = np.cos(theta), np.sin(theta)
+    # (I - R)^T t with R = [[c, s], [-s, c]]
+    rhs = np.stack([(1 - c) * t[:, 0] + s * t[:, 1], -s * t[:, 0] + (1 - c) * t[:, 1]], -1)
+    return rhs.sum(axis=0) / gain
+
+
+def _fixed_pivot(reference, current, usable, solver):
+    pivot0 = _initial_pivot(reference, current, usable)
+    pivot, converged, jac = _fixed_pivot_kernel(solver)(
+        reference, current, usable.astype(float), pivot0
+    )
+    path = np.broadcast_to(np.asarray(pivot), current.shape[:1] + (2,))
+    jac = np.asarray(jac)
+    return path, lambda s2: np.broadcast_to(s2 * np.linalg.pinv(jac.T @ jac), (len(path), 2, 2)), bool(converged), 2
+
+
+def _smooth_pivot(reference, current, usable, solver, smoothness, spacing):
+    n = current.shape[0]
+    n_knots = (n - 1) // spacing + 2
+    pivot0 = _initial_pivot(reference, current, usable)
+    knots0 = np.tile(pivot0, n_knots)  # flat (2 m,): jaxopt wants a vector
+    knots, converged, jac = _smooth_pivot_kernel(solver, spacing)(
+        reference, current, usable.astype(float), float(smoothness), knots0
+    )
+    jac = np.asarray(jac).reshape(-1, 2 * n_knots)
+    interp = _spline_weights(n, spacing, n_knots)
+
+    def pivot_cov(s2):
+        knot_cov = (s2 * np.linalg.pinv(jac.T @ jac)).reshape(n_knots, 2, n_knots, 2)
+        return np.einsum("kj,kl,jalb->kab", interp, interp, knot_cov)
+
+    path = interp @ np.asarray(knots).reshape(n_knots, 2)
+    return path, pivot_cov, bool(converged), 2 * n_knots
+
+
+def fit_jaw(
+    reference,
+    current,
+    *,
+    method="closed-form",
+    solver="optimistix-lm",
+    valid=None,
+    smoothness=1.0,
+    knot_spacing=DEFAULT_KNOT_SPACING,
+) -> JawFit:
+    """Jaw motion from ``reference`` (2, 2) mm [MNI, MNM] to each frame of ``current``
+    (n, 2, 2) mm. ``valid`` (n,) bool marks frames to use; the others, and frames with an
+    untracked or coincident jaw pellet, get a status code and interpolated values.
+    ``method`` in :data:`METHODS`, ``solver`` in :data:`SOLVERS` (unused by
+    "closed-form"), ``smoothness`` and ``knot_spacing`` (frames) for "smooth-pivot".
+    Raises :class:`MissingDataError` / :class:`DegenerateGeometryError` when no motion
+    can be computed at all (untracked or coincident reference, no usable frame, no rotation
+    for a pivot model).
+    """
+    if method not in METHODS:
+        raise ValueError(f"unknown jaw method {method!r}; choose one of {', '.join(METHODS)}")
+    _check_solver(solver)
+    reference, current, usable, base_status = _prepare(reference, current, valid)
+    if method in ("closed-form", "frame-fit"):
+        params, res, unit_cov, _, frame_ok, n_params = _per_frame(
+            reference, current, usable, method, solver
+        )
+        converged = bool(frame_ok.all())
+        pivot_cov_of = None
+    else:
+        if method == "fixed-pivot":
+            path, pivot_cov_of, converged, n_extra = _fixed_pivot(
+                reference, current, usable, solver
+            )
+        else:
+            path, pivot_cov_of, converged, n_extra = _smooth_pivot(
+                reference, current, usable, solver, smoothness, int(knot_spacing)
+            )
+        params, unit_cov = (np.asarray(a) for a in _about_pivot_params(reference, current, path))
+        frame_ok = np.full(len(usable), converged)
+        res = np.asarray(_frame_residuals(params, (reference, current)))
+        n_params = int(usable.sum()) + n_extra
+    s2 = _noise_variance(res, usable, n_params)
+    covariance = np.where(usable[:, None, None], s2 * unit_cov, 0.0)
+    params = _interpolate(params, usable)
+    if pivot_cov_of is None:
+        pivot, defined, pivot_cov = (
+            np.asarray(a) for a in _pivot_with_covariance(params, covariance)
+        )
+        pivot = np.where(defined[:, None], pivot, 0.0)
+    else:
+        pivot, defined = np.asarray(path, float), np.ones(len(usable), bool)
+        pivot_cov = np.asarray(pivot_cov_of(s2))
+        params[:, 1:] = np.asarray(_translation_about(params[:, 0], pivot))
+    status = np.where(defined, jaw.STATUS_OK, jaw.STATUS_PIVOT_UNDEFINED)
+    status = np.where(frame_ok, status, jaw.STATUS_NOT_CONVERGED)
+    status = np.where(usable, status, base_status).astype(np.int32)
+    residual = np.sqrt(np.sum(res**2, axis=1) / 2.0)  # rms over the two pellets, mm
+    return JawFit(
+        theta=params[:, 0], translation=params[:, 1:], pivot=pivot,
+        pivot_defined=defined & usable, residual=np.where(usable, residual, 0.0),
+        status=status, converged=converged, covariance=covariance,
+        pivot_covariance=pivot_cov, noise_mm=float(np.sqrt(s2)), method=method,
+        solver="closed-form" if method == "closed-form" else solver,
+    )
+
+
+def jaw_from_track(track, *, method="closed-form", solver="optimistix-lm", reference_frame=None,
+                   **options) -> JawFit:
+    """:func:`fit_jaw` on a :class:`cassi_fit.txy.PelletTrack`'s MNI and MNM pellets.
+
+    The reference is ``reference_frame`` or the first frame in which both jaw pellets are
+    tracked (CASSI's first valid line for the jaw); frames with an untracked jaw pellet
+    get status "invalid-frame". Errors name the file.
+    """
+    from .txy import JAW_PELLETS, first_valid_frame, pellet_index
+
+    if reference_frame is None:
+        reference_frame = first_valid_frame(track, JAW_PELLETS)
+    jaw_points = track.positions[:, [pellet_index("MNI"), pellet_index("MNM")], :]
+    valid = track.frame_valid(JAW_PELLETS)
+    where = str(track.path) if track.path is not None else "<pellet track>"
+    if not valid[reference_frame]:
+        raise MissingDataError(f"{where}: jaw pellets untracked in reference frame {reference_frame}")
+    try:
+        return fit_jaw(jaw_points[reference_frame], jaw_points, method=method, solver=solver,
+                       valid=valid, **options)
+    except (MissingDataError, DegenerateGeometryError) as exc:
+        raise type(exc)(f"{where}: {exc}") from None
