@@ -226,26 +226,36 @@ def skin_faces(n_r, n_c, index, corner):
 
 
 def skin_weights(verts, ids, corner_z):
-    """Per-vertex fraction of the jaw rotation (Parke's values) and the region cores."""
+    """Per-vertex fraction of the jaw rotation (Parke's values) and the region cores.
+
+    One smooth field of position (raised-cosine ramps between plateaus), the same for
+    the upper and lower rows except across the mouth opening, so the skin stretches
+    instead of tearing: chin and lower lip 1.00, beside the mouth the cheeks 0.35 (fading
+    to 0 toward the cheekbones and the ears), under the chin 0.75, upper neck 0.50, 0 on
+    the lower neck, the ears and the back of the head. Inside the mouth both lips blend
+    to the corner value (0.35) over the outer third of the mouth.
+    """
     x, y, z = verts[:, 0], verts[:, 1], np.abs(verts[:, 2])
     lower = np.array([ROWS[i][8] == "l" for i in ids[:, 0]])
-    # jaw line: menton (-4, -56) to gonion (-84, -40); dy > 0 below it
+    phis = column_angles()
+    phi = phis[ids[:, 1]]
+    phi_c = phis[FRONT_Z.index(MOUTH_HALF_WIDTH)]
+    phi_in = phis[FRONT_Z.index(16)]
+    p = PARKE
+    # jaw line from menton to gonion; dy > 0 below it
     y_line = np.interp(x, [-84.0, -4.0], [-40.0, -56.0])
     dy = y_line - y
-    p = PARKE
-    below = (p["jaw"] + (p["under_chin"] - p["jaw"]) * ramp(dy, 0, 5)
-             + (p["neck"] - p["under_chin"]) * ramp(dy, 11, 18)
-             - p["neck"] * ramp(dy, 40, 60))
-    back = 1.0 - ramp(-x, 86.0, 104.0)
-    w_jaw = below * back
-    # beside the mouth the lower face grades into the cheek, so the corners stretch
-    side = p["cheek"] + (p["jaw"] - p["cheek"]) * ramp(-y, 3.0, 22.0)
-    lat = ramp(z, corner_z, corner_z + 12.0)
-    w_lower = (1 - lat) * w_jaw + lat * np.minimum(side, w_jaw) * 1.0
-    w_lower = np.where(dy > 0, w_jaw, w_lower)
-    cheek = p["cheek"] * (1.0 - ramp(y, 8.0, 24.0)) * ramp(z, corner_z, corner_z + 12.0)
-    cheek = cheek * back
-    w = np.where(lower, w_lower, cheek)
+    vert = (p["jaw"] + (p["under_chin"] - p["jaw"]) * ramp(dy, 0.0, 6.0)
+            + (p["neck"] - p["under_chin"]) * ramp(dy, 12.0, 20.0)
+            - p["neck"] * ramp(dy, 40.0, 70.0))
+    back = 1.0 - ramp(-x, 80.0, 102.0)
+    lat = ramp(phi, phi_in, phi_c)            # 0 in the middle of the mouth, 1 at the corners
+    lat = np.where(phi > np.pi / 2, 1.0, lat)
+    below = ramp(-y, 4.0, 30.0)               # mouth level -> mandible
+    side_low = p["cheek"] * (1.0 - below) + vert * below
+    w_lower = back * ((1.0 - lat) * vert + lat * side_low)
+    w_upper = back * lat * p["cheek"] * (1.0 - ramp(y, 6.0, 30.0))
+    w = np.where(lower, w_lower, w_upper)
     return w, lower
 
 
@@ -437,7 +447,8 @@ def build():
     names = [ROWS[i][0] for i in ids[:, 0]]
     lip_row = np.isin(names, ["UL", "ul_red", "ul_low", "A", "A_in", "B_in", "B", "ll_high",
                               "ll_red", "LL"])
-    in_mouth = np.abs(sv[:, 2]) < corner_z + 1e-9
+    in_mouth = (np.abs(sv[:, 2]) < corner_z + 1e-9) & (sv[:, 0] > -30.0)
+    mouth_core = (np.abs(sv[:, 2]) < 16.0 + 1e-6) & (sv[:, 0] > -30.0)  # lips' jaw weight flat
     lip_vertex = lip_row & in_mouth
     skin_mat = np.where(lip_vertex[np.array(sf)].all(axis=1), MAT["lips"], MAT["skin"])
     parts = [("skin", sv, np.array(sf), skin_mat)]
@@ -487,8 +498,8 @@ def build():
     lo_rows = np.isin(names, ["B_in", "B", "ll_high", "ll_red", "LL"])
     close = lambda value: np.isclose(w_parke, value, atol=1e-12)
     regions.update({
-        "upper_lip": skin[up_rows & in_mouth],
-        "lower_lip": skin[lo_rows & in_mouth],
+        "upper_lip": skin[up_rows & mouth_core],
+        "lower_lip": skin[lo_rows & mouth_core],
         "jaw": skin[close(PARKE["jaw"])],
         "under_chin": skin[close(PARKE["under_chin"])],
         "neck": skin[close(PARKE["neck"])],
