@@ -3,13 +3,12 @@
 The paper judged every animation from four views (Scheidt & Hamilton 1999, section 4):
 ``front`` (the full face), ``side`` (the full face in profile, looking to the right of the
 image), ``inside`` (half the face from the side: the skin, lips, eyes, teeth and palate on
-the camera's side of the midsagittal plane z = 0 are cut away, or the skin drawn
+the camera's side of the midsagittal plane z = 0 (the subject's right half) are cut away, or the skin drawn
 semi-transparent, so that the tongue, teeth and palate show) and ``top`` (skin hidden:
 palate, teeth and tongue seen from +y, the front of the mouth to the right).
 
 Speed: the whole 2x2 grid is ONE draw of ONE pyrender scene. Every material is split once
-into the triangles on the far side (z <= 0) and the near side (z > 0) of the midsagittal
-plane; each piece is a single pyrender primitive drawn *instanced*, one instance per view
+into the triangles on either side of the midsagittal plane; each piece is a single pyrender primitive drawn *instanced*, one instance per view
 that shows it, each instance a similarity transform that places that view in its cell of
 the image in front of one orthographic camera. The lights are fixed to the camera, so every
 view is lit alike. Per frame only the vertex buffers are rewritten in place
@@ -21,6 +20,7 @@ Cameras are fitted once to the rest mesh with a margin, so a video does not jump
 
 from __future__ import annotations
 
+import functools
 import io
 import os
 import subprocess
@@ -51,12 +51,18 @@ MARKER_COLOURS = {"measured": (0.90, 0.08, 0.08), "model": (0.10, 0.72, 0.22)}
 _EXTRA_MARKER_COLOURS = ((0.15, 0.35, 0.95), (0.98, 0.60, 0.05), (0.60, 0.20, 0.80))
 _IRIS_COLOUR = (0.25, 0.17, 0.10)
 
-# Rows: image right, image up, toward the camera (a right-handed frame), in model axes.
+# Rows: image right, image up, toward the camera, in model axes. The model frame (x front,
+# y up, z to the subject's LEFT) is left-handed, so a view that shows the subject as a
+# camera would (not mirrored) is a reflection in OpenGL's right-handed terms (det = -1):
+# front: the subject's left on the image's right; side and inside: the subject's right
+# side, the face looking to the right of the image; top: from above, the front of the
+# mouth to the right and the subject's left up. (Triangle winding flips with it, which
+# does not matter: everything is drawn double-sided and lit by the view direction.)
 _VIEW_AXES = {
-    "front": ((0, 0, -1), (0, 1, 0), (1, 0, 0)),
-    "side": ((1, 0, 0), (0, 1, 0), (0, 0, 1)),
-    "inside": ((1, 0, 0), (0, 1, 0), (0, 0, 1)),
-    "top": ((1, 0, 0), (0, 0, -1), (0, 1, 0)),
+    "front": ((0, 0, 1), (0, 1, 0), (1, 0, 0)),
+    "side": ((1, 0, 0), (0, 1, 0), (0, 0, -1)),
+    "inside": ((1, 0, 0), (0, 1, 0), (0, 0, -1)),
+    "top": ((1, 0, 0), (0, 0, 1), (0, 1, 0)),
 }
 _SHOWN = {
     "front": set(_MATERIALS),
@@ -304,8 +310,10 @@ def _piece_views(material: str, near: bool, glass: bool, views, skin: str) -> tu
 
 
 def _split_pieces(vertices, faces, face_material, materials, views, skin) -> list[_Piece]:
-    """Split the mesh by material and by side of the midsagittal plane (triangle centroid)."""
-    near_side = vertices[faces].mean(axis=1)[:, 2] > 0
+    """Split the mesh by material and by side of the midsagittal plane (triangle centroid);
+    "near" is the inside view's camera side."""
+    toward_camera = np.asarray(_VIEW_AXES["inside"][2], float)
+    near_side = vertices[faces].mean(axis=1) @ toward_camera > 0
     eye = materials.index("eye") if "eye" in materials else -1
     iris = _iris_factors(vertices, faces, face_material, eye) if eye >= 0 else None
     pieces = []
@@ -811,6 +819,12 @@ class Renderer:
         platform._egl_context = platform._egl_display = None
         offscreen._renderer = offscreen._platform = None
 
+    def __del__(self):  # an unclosed renderer must not eglTerminate the shared display
+        try:
+            self.close()
+        except Exception:
+            pass
+
     def __enter__(self):
         return self
 
@@ -882,20 +896,36 @@ def _check_options(size, views, skin, background):
 # --------------------------------------------------------------------------------------
 
 
-def add_caption(image, text) -> np.ndarray:
-    """A copy of ``image`` ((H,W,3) uint8) with ``text`` on a dark band at the bottom."""
-    from PIL import Image, ImageDraw, ImageFont
+@functools.lru_cache(maxsize=8)
+def _font(size: int):
+    from PIL import ImageFont
 
-    pil = Image.fromarray(np.asarray(image, dtype=np.uint8))
-    height = pil.height
-    font = ImageFont.load_default(size=max(10, height // 32))
-    draw = ImageDraw.Draw(pil, "RGBA")
-    left, top, right, bottom = draw.multiline_textbbox((0, 0), str(text), font=font)
+    return ImageFont.load_default(size=size)
+
+
+def add_caption(image, text) -> np.ndarray:
+    """A copy of ``image`` ((H,W,3) uint8) with ``text`` in white on a dark band at the bottom.
+
+    Only the band is touched (about 1 ms at 640x480, so a caption on every frame is cheap).
+    """
+    from PIL import Image, ImageDraw
+
+    out = np.array(image, dtype=np.uint8, copy=True)
+    if out.ndim != 3 or out.shape[2] != 3:
+        raise CassiError(f"add_caption: an image must be (H, W, 3) uint8, got {out.shape}")
+    height = out.shape[0]
+    text = str(text)
+    font = _font(max(10, height // 32))
+    left, top, right, bottom = ImageDraw.Draw(Image.new("L", (1, 1))).multiline_textbbox(
+        (0, 0), text, font=font
+    )
     pad = max(2, height // 120)
-    band_top = height - (bottom - top) - 2 * pad
-    draw.rectangle((0, band_top, pil.width, height), fill=(20, 20, 20, 170))
-    draw.multiline_text((pad - left, band_top + pad - top), str(text), font=font, fill=(255,) * 4)
-    return np.asarray(pil.convert("RGB"))
+    band_top = max(0, height - (bottom - top) - 2 * pad)
+    band = out[band_top:].astype(np.uint16) * 85 // 255 + 13  # 2/3 toward dark grey
+    pil = Image.fromarray(band.astype(np.uint8))
+    ImageDraw.Draw(pil).multiline_text((pad - left, pad - top), text, font=font, fill=(255,) * 3)
+    out[band_top:] = np.asarray(pil)
+    return out
 
 
 def save_png(path, image, *, overwrite=True) -> Path:

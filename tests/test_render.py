@@ -332,3 +332,28 @@ def test_the_face_model_renders_in_all_views():
         assert (np.all(img == img[0, 0], axis=-1)).mean() < 0.9, name
     near_skin = np.linalg.norm(views["front"].astype(float) - skin, axis=-1) < 40
     assert near_skin.mean() > 0.1
+
+
+def test_front_view_is_not_mirrored(model):
+    """The model's +z is the subject's left: in the front view it is on the image's right."""
+    one_eye = SimpleNamespace(**vars(model))
+    eye_faces = model.face_material == 2
+    left_eye = model.vertices[model.faces].mean(axis=1)[:, 2] > 0
+    keep = ~eye_faces | left_eye
+    one_eye.faces, one_eye.face_material = model.faces[keep], model.face_material[keep]
+    with render.Renderer(one_eye, size=SIZE, views=("front",), colours=TEST_COLOURS) as r:
+        img = r.render(model.vertices)
+    white = np.all(img > 200, axis=-1) & ~np.all(img == img[0, 0], axis=-1)
+    cols = np.nonzero(white.any(axis=0))[0]
+    assert cols.size and cols.min() > SIZE[0] // 2
+
+
+def test_an_unclosed_renderer_does_not_break_the_others(renderer, model):
+    import gc
+
+    before = renderer.render(model.vertices)
+    other = render.Renderer(model, size=(64, 48), views=("top",))
+    other.render(model.vertices)
+    del other
+    gc.collect()
+    np.testing.assert_array_equal(renderer.render(model.vertices), before)
