@@ -195,6 +195,14 @@ def first_valid_line(track, source: str) -> tuple[int, tuple[str, ...]]:
 # --------------------------------------------------------------------------- initialization
 
 
+@jax.jit
+def _closed_form_one(reference, current):
+    """``jaw.closed_form`` compiled (one frame; eager dispatch of its many small ops is slow)."""
+    from .jaw import closed_form
+
+    return closed_form(reference, current)
+
+
 def _xy(model, vertices, name) -> np.ndarray:
     return np.asarray(vertices)[model.landmarks[name], :2]
 
@@ -202,11 +210,9 @@ def _xy(model, vertices, name) -> np.ndarray:
 def _jaw_shape(model, head, scale):
     """Paper step 5: the closed form from the model's [gnathion, gonion] to the subject's
     (scaled Headmeasures), as ``(theta, t)``; neutral if degenerate."""
-    from .jaw import closed_form
-
     reference = np.stack([_xy(model, model.vertices, "gnathion"), _xy(model, model.vertices, "gonion")])
     current = scale * np.array([[head.gnathion_x, head.gnathion_y], [head.gonion_x, head.gonion_y]])
-    motion = closed_form(jnp.asarray(reference), jnp.asarray(current))
+    motion = _closed_form_one(jnp.asarray(reference), jnp.asarray(current))
     if int(motion.status) >= 2:
         return 0.0, np.zeros(2)
     return float(motion.theta), np.asarray(motion.translation)
@@ -264,9 +270,8 @@ def initialize(recording, model=None, *, jaw_weights="cassi", tongue_anchor="fol
     steps. Raises ``MissingDataError`` (jaw pellets never tracked) or
     ``DegenerateGeometryError`` (coincident jaw pellets on the first valid line).
     """
-    from .deform import deform, model_pellets
+    from .deform import model_pellets
     from .face_model import load_model
-    from .jaw import closed_form
     from .palate import with_palate
 
     _check_choice("jaw weights", jaw_weights, ("cassi", "parke"))
@@ -286,10 +291,10 @@ def initialize(recording, model=None, *, jaw_weights="cassi", tongue_anchor="fol
     if recording.palate is not None:
         model = with_palate(model, scale * np.asarray(recording.palate, np.float64))
     conformation = _conformation(model, recording, sites, pellets, scale)
-    rest_vertices = deform(model, conformation, jaw_weights=jaw_weights, tongue_anchor=tongue_anchor)
-    rest = jnp.asarray(model_pellets(model, rest_vertices))
+    one = jax.tree.map(lambda x: jnp.asarray(x)[None], conformation)
+    rest = _geometry(model, one, jaw_weights, tongue_anchor)[1][0]  # compiled, not eager
     reference = jnp.asarray(scale * pellets[[MNI, MNM]])
-    initial = closed_form(rest[jnp.array([MNI, MNM])], reference)
+    initial = _closed_form_one(rest[jnp.array([MNI, MNM])], reference)
     state = SubjectState(
         model=model, scale=scale, first_frame=first, reference_jaw=reference,
         initial_jaw=(initial.theta, initial.translation), conformation=conformation,
@@ -297,8 +302,9 @@ def initialize(recording, model=None, *, jaw_weights="cassi", tongue_anchor="fol
         jaw_weights=jaw_weights, tongue_anchor=tongue_anchor, gap_policy=gap_policy,
         source=source,
     )
-    zero = (jnp.zeros(()), jnp.zeros(2))
-    first_params = _frame_params(state, jnp.asarray(scale * pellets), zero)
+    first_params = _batched_params(_frame_inputs(state), jnp.asarray(scale * pellets)[None],
+                                   jnp.zeros(1), jnp.zeros((1, 2)))
+    first_params = jax.tree.map(lambda x: x[0], first_params)
     return eqx.tree_at(lambda s: s.initial_params, state, first_params)
 
 
