@@ -342,11 +342,6 @@ def _frame_params_of(inputs: dict, scaled, motion_since_first):
     )
 
 
-def _frame_params(state: SubjectState, scaled, motion_since_first):
-    """:func:`_frame_params_of` for ``state``."""
-    return _frame_params_of(_frame_inputs(state), scaled, motion_since_first)
-
-
 @jax.jit
 def _batched_params(inputs, scaled, theta, translation):
     """FaceParams with a leading frame axis from ``scaled (m, 8, 2)``, ``theta (m,)``,
