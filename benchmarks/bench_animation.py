@@ -28,9 +28,17 @@ def synthetic_recording(seconds: float, seed: int = 7):
 
     anatomy = synth.make_subject("BENCH", np.random.default_rng(seed))
     track, _ = synth.synth_recording(anatomy, synth.SENTENCE_TASK, seed=seed, duration_s=seconds)
-    return Recording(subject="BENCH", task=synth.SENTENCE_TASK, track=track,
-                     palate=anatomy.palate, pharynx=anatomy.pharynx, head=anatomy.head,
-                     head_is_default=False, audio=None, path=Path("bench.txy"))
+    return Recording(
+        subject="BENCH",
+        task=synth.SENTENCE_TASK,
+        track=track,
+        palate=anatomy.palate,
+        pharynx=anatomy.pharynx,
+        head=anatomy.head,
+        head_is_default=False,
+        audio=None,
+        path=Path("bench.txy"),
+    )
 
 
 def _timed(label, fn, results):
@@ -72,17 +80,31 @@ def main(argv=None) -> int:
         runs.append(time.perf_counter() - start)
     results["geometry, all frames, compiled"] = min(runs)
     print(f"{'geometry, all frames, compiled':<34s} {min(runs):8.3f} s  ({m} frames)")
-    renderer = _timed("renderer set-up", lambda: Renderer(state.model, size=(width, height)), results)
+    renderer = _timed(
+        "renderer set-up", lambda: Renderer(state.model, size=(width, height)), results
+    )
     with tempfile.TemporaryDirectory() as folder:
         out = Path(args.out) if args.out else Path(folder) / "bench.mp4"
-        _timed("render + encode MP4", lambda: video.write_animation(
-            out, animation, renderer, subject="BENCH", task="sentence", progress=False,
-            overwrite=True), results)
+        _timed(
+            "render + encode MP4",
+            lambda: video.write_animation(
+                out,
+                animation,
+                renderer,
+                subject="BENCH",
+                task="sentence",
+                progress=False,
+                overwrite=True,
+            ),
+            results,
+        )
         frames = video.count_frames(out)
     total = time.perf_counter() - wall
-    print(f"{'total wall time':<34s} {total:8.3f} s  ({m} frames, {frames} in the MP4, "
-          f"{width}x{height} 2x2 grid, {m / results['render + encode MP4']:.0f} frames/s, "
-          f"{os.cpu_count()} CPUs)")
+    print(
+        f"{'total wall time':<34s} {total:8.3f} s  ({m} frames, {frames} in the MP4, "
+        f"{width}x{height} 2x2 grid, {m / results['render + encode MP4']:.0f} frames/s, "
+        f"{os.cpu_count()} CPUs)"
+    )
     ok = total < 20.0 and results["geometry, all frames, compiled"] < 0.2 and frames == m
     print("targets (total < 20 s, geometry < 0.2 s):", "met" if ok else "NOT met")
     return 0

@@ -36,7 +36,6 @@ precedence). A recording whose jaw pellets are never tracked raises ``MissingDat
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import equinox as eqx
 import jax
@@ -210,7 +209,9 @@ def _xy(model, vertices, name) -> np.ndarray:
 def _jaw_shape(model, head, scale):
     """Paper step 5: the closed form from the model's [gnathion, gonion] to the subject's
     (scaled Headmeasures), as ``(theta, t)``; neutral if degenerate."""
-    reference = np.stack([_xy(model, model.vertices, "gnathion"), _xy(model, model.vertices, "gonion")])
+    reference = np.stack(
+        [_xy(model, model.vertices, "gnathion"), _xy(model, model.vertices, "gonion")]
+    )
     current = scale * np.array([[head.gnathion_x, head.gnathion_y], [head.gonion_x, head.gonion_y]])
     motion = _closed_form_one(jnp.asarray(reference), jnp.asarray(current))
     if int(motion.status) >= 2:
@@ -251,7 +252,8 @@ def _conformation(model, recording, sites, first, scale):
         theta, t = _jaw_shape(model, head, scale)
         nose = scale * head.nose_protrusion - model.measures["nose_protrusion"]
         changes.update(
-            jaw_shape_theta=theta, jaw_shape_translation=t,
+            jaw_shape_theta=theta,
+            jaw_shape_translation=t,
             face_width=scale * head.face_width / model.measures["face_width"],
             mouth_width=scale * head.mouth_width / model.measures["mouth_width"],
             nose_tip=np.array([nose, 0.0]),
@@ -261,8 +263,9 @@ def _conformation(model, recording, sites, first, scale):
     return eqx.tree_at(lambda p: tuple(getattr(p, k) for k in names), params, values)
 
 
-def initialize(recording, model=None, *, jaw_weights="cassi", tongue_anchor="follow",
-               gap_policy="hold") -> SubjectState:
+def initialize(
+    recording, model=None, *, jaw_weights="cassi", tongue_anchor="follow", gap_policy="hold"
+) -> SubjectState:
     """Fit the face model to the subject of ``recording`` (CASSI's initialization).
 
     ``recording``: a ``dataset.Recording``. ``model``: a ``FaceModel`` (default
@@ -286,7 +289,9 @@ def initialize(recording, model=None, *, jaw_weights="cassi", tongue_anchor="fol
     sites = np.asarray(model_pellets(model, model.vertices))
     p = float(np.linalg.norm(sites[MNI] - sites[MNM]))
     if not d > 0.0:
-        raise DegenerateGeometryError(f"{source}: MNI and MNM coincide on the first valid line ({first + 1})")
+        raise DegenerateGeometryError(
+            f"{source}: MNI and MNM coincide on the first valid line ({first + 1})"
+        )
     scale = p / d
     if recording.palate is not None:
         model = with_palate(model, scale * np.asarray(recording.palate, np.float64))
@@ -296,14 +301,23 @@ def initialize(recording, model=None, *, jaw_weights="cassi", tongue_anchor="fol
     reference = jnp.asarray(scale * pellets[[MNI, MNM]])
     initial = _closed_form_one(rest[jnp.array([MNI, MNM])], reference)
     state = SubjectState(
-        model=model, scale=scale, first_frame=first, reference_jaw=reference,
-        initial_jaw=(initial.theta, initial.translation), conformation=conformation,
-        rest_pellets=rest, initial_params=conformation, tracked_pellets=tracked,
-        jaw_weights=jaw_weights, tongue_anchor=tongue_anchor, gap_policy=gap_policy,
+        model=model,
+        scale=scale,
+        first_frame=first,
+        reference_jaw=reference,
+        initial_jaw=(initial.theta, initial.translation),
+        conformation=conformation,
+        rest_pellets=rest,
+        initial_params=conformation,
+        tracked_pellets=tracked,
+        jaw_weights=jaw_weights,
+        tongue_anchor=tongue_anchor,
+        gap_policy=gap_policy,
         source=source,
     )
-    first_params = _batched_params(_frame_inputs(state), jnp.asarray(scale * pellets)[None],
-                                   jnp.zeros(1), jnp.zeros((1, 2)))
+    first_params = _batched_params(
+        _frame_inputs(state), jnp.asarray(scale * pellets)[None], jnp.zeros(1), jnp.zeros((1, 2))
+    )
     first_params = jax.tree.map(lambda x: x[0], first_params)
     return eqx.tree_at(lambda s: s.initial_params, state, first_params)
 
@@ -316,8 +330,10 @@ def _frame_inputs(state: SubjectState) -> dict:
     tracked = np.array([name in state.tracked_pellets for name in PELLETS])
     weights = state.model.jaw_weights[state.jaw_weights]
     return {
-        "rest": state.rest_pellets, "tracked": jnp.asarray(tracked),
-        "initial_jaw": state.initial_jaw, "conformation": state.conformation,
+        "rest": state.rest_pellets,
+        "tracked": jnp.asarray(tracked),
+        "initial_jaw": state.initial_jaw,
+        "conformation": state.conformation,
         "w_ll": jnp.asarray(weights)[state.model.landmarks["LL"]],
     }
 
@@ -334,11 +350,17 @@ def _frame_params_of(inputs: dict, scaled, motion_since_first):
     lower_lip = jnp.where(tracked[LL], scaled[LL] - ll_after_jaw, 0.0)
     conformation = inputs["conformation"]
     dtype = jnp.asarray(conformation.tongue).dtype
-    values = (motion[0], motion[1], scaled[T1 : T4 + 1] - rest[T1 : T4 + 1],
-              scaled[UL] - rest[UL], lower_lip)
+    values = (
+        motion[0],
+        motion[1],
+        scaled[T1 : T4 + 1] - rest[T1 : T4 + 1],
+        scaled[UL] - rest[UL],
+        lower_lip,
+    )
     return eqx.tree_at(
         lambda p: (p.jaw_theta, p.jaw_translation, p.tongue, p.upper_lip, p.lower_lip),
-        conformation, tuple(jnp.asarray(v, dtype) for v in values),
+        conformation,
+        tuple(jnp.asarray(v, dtype) for v in values),
     )
 
 
@@ -380,8 +402,12 @@ def _model_key(model, leaves) -> str:
             h.update(f.name.encode())
             _digest(getattr(model, f.name), h)
     for leaf in leaves:  # non-array leaves are constants of the compiled function
-        _digest((np.shape(leaf), str(getattr(leaf, "dtype", type(leaf).__name__)))
-                if _is_array(leaf) else leaf, h)
+        _digest(
+            (np.shape(leaf), str(getattr(leaf, "dtype", type(leaf).__name__)))
+            if _is_array(leaf)
+            else leaf,
+            h,
+        )
     return h.hexdigest()
 
 
@@ -459,8 +485,9 @@ def _jaw_since_first(state, jaw_pellets, method, solver, size):
     return _pad(fit.theta, size), _pad(fit.translation, size), np.asarray(fit.status)
 
 
-def animate(state: SubjectState, recording, *, jaw="closed-form", solver=None, stride=1,
-            gap_policy=None) -> Animation:
+def animate(
+    state: SubjectState, recording, *, jaw="closed-form", solver=None, stride=1, gap_policy=None
+) -> Animation:
     """Animate the face over ``recording`` (every ``stride``-th data line from the first
     valid one, ``ceil((n - first) / stride)`` frames).
 
@@ -483,16 +510,25 @@ def animate(state: SubjectState, recording, *, jaw="closed-form", solver=None, s
     if not jaw_ok.any():
         raise MissingDataError(f"{_source(recording)}: the jaw pellets are never tracked well")
     m, size = len(rows), _bucket(len(rows))
-    theta, translation, jaw_status = _jaw_since_first(state, scaled[:, [MNI, MNM]], jaw, solver, size)
+    theta, translation, jaw_status = _jaw_since_first(
+        state, scaled[:, [MNI, MNM]], jaw, solver, size
+    )
     params = _batched_params(_frame_inputs(state), _pad(scaled, size), theta, translation)
     vertices, sites = _geometry(state.model, params, state.jaw_weights, state.tongue_anchor)
     params = jax.tree.map(lambda x: x[:m], params)
     vertices, sites = vertices[:m], sites[:m]
     tracked = np.array([name in state.tracked_pellets for name in PELLETS])
     return Animation(
-        times=np.asarray(track.times)[rows], frame_index=rows, params=params,
-        vertices=vertices, pellets_measured=np.where(tracked[:, None], scaled, np.nan),
-        pellets_model=sites, repaired=bad[rows] & tracked, mistracked=mistracked[rows],
+        times=np.asarray(track.times)[rows],
+        frame_index=rows,
+        params=params,
+        vertices=vertices,
+        pellets_measured=np.where(tracked[:, None], scaled, np.nan),
+        pellets_model=sites,
+        repaired=bad[rows] & tracked,
+        mistracked=mistracked[rows],
         frame_status=frame_status(untracked[rows] & tracked, mistracked[rows], policy),
-        jaw_status=jaw_status, stride=int(stride), jaw_method=jaw,
+        jaw_status=jaw_status,
+        stride=int(stride),
+        jaw_method=jaw,
     )

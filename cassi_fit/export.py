@@ -61,7 +61,9 @@ def vertex_colors(n_vertices: int, faces, face_material=None, materials=MATERIAL
     colors = np.tile(np.asarray(MATERIAL_COLORS["skin"], np.float32), (n_vertices, 1))
     if face_material is None:
         return colors
-    table = np.asarray([MATERIAL_COLORS.get(m, MATERIAL_COLORS["skin"]) for m in materials], np.float32)
+    table = np.asarray(
+        [MATERIAL_COLORS.get(m, MATERIAL_COLORS["skin"]) for m in materials], np.float32
+    )
     faces = np.asarray(faces)
     per_face = table[np.asarray(face_material)]
     for corner in range(3):
@@ -81,7 +83,9 @@ def export_frame(path, vertices, faces, *, face_material=None, overwrite=False) 
     vertices = np.asarray(vertices, np.float64)
     colors = vertex_colors(len(vertices), faces, face_material)
     mesh = trimesh.Trimesh(
-        vertices, np.asarray(faces), vertex_colors=(colors * 255).round().astype(np.uint8),
+        vertices,
+        np.asarray(faces),
+        vertex_colors=(colors * 255).round().astype(np.uint8),
         process=False,
     )
     tmp, final = atomic_output_path(path, overwrite=overwrite)
@@ -128,8 +132,12 @@ class _Buffer:
     def dense(self, array, kind, target=None, bounds=False) -> int:
         array = np.asarray(array)
         ctype = _UINT if array.dtype.kind == "u" else _FLOAT
-        entry = {"bufferView": self.view(array, target), "componentType": ctype,
-                 "count": int(array.shape[0]), "type": kind}
+        entry = {
+            "bufferView": self.view(array, target),
+            "componentType": ctype,
+            "count": int(array.shape[0]),
+            "type": kind,
+        }
         if bounds:
             flat = array.reshape(array.shape[0], -1)
             entry["min"] = flat.min(axis=0).tolist()
@@ -145,12 +153,20 @@ class _Buffer:
         moving = np.flatnonzero(np.abs(displacement).max(axis=1) > tolerance)
         kept = np.zeros_like(displacement)
         kept[moving] = displacement[moving]
-        entry = {"componentType": _FLOAT, "count": int(len(displacement)), "type": "VEC3",
-                 "min": kept.min(axis=0).tolist(), "max": kept.max(axis=0).tolist()}
+        entry = {
+            "componentType": _FLOAT,
+            "count": int(len(displacement)),
+            "type": "VEC3",
+            "min": kept.min(axis=0).tolist(),
+            "max": kept.max(axis=0).tolist(),
+        }
         if moving.size:
             entry["sparse"] = {
                 "count": int(moving.size),
-                "indices": {"bufferView": self.view(moving.astype(np.uint32)), "componentType": _UINT},
+                "indices": {
+                    "bufferView": self.view(moving.astype(np.uint32)),
+                    "componentType": _UINT,
+                },
                 "values": {"bufferView": self.view(displacement[moving])},
             }
         return self.accessor(entry)
@@ -162,16 +178,30 @@ def _glb_bytes(document: dict, binary: bytes) -> bytes:
     text += b" " * (-len(text) % 4)
     binary = bytes(binary) + b"\x00" * (-len(binary) % 4)
     total = 12 + 8 + len(text) + 8 + len(binary)
-    return b"".join([
-        struct.pack("<4sII", _GLB_MAGIC, _GLB_VERSION, total),
-        struct.pack("<II", len(text), _CHUNK_JSON), text,
-        struct.pack("<II", len(binary), _CHUNK_BIN), binary,
-    ])
+    return b"".join(
+        [
+            struct.pack("<4sII", _GLB_MAGIC, _GLB_VERSION, total),
+            struct.pack("<II", len(text), _CHUNK_JSON),
+            text,
+            struct.pack("<II", len(binary), _CHUNK_BIN),
+            binary,
+        ]
+    )
 
 
-def glb_document(frames, faces, times, *, face_material=None, materials=MATERIALS,
-                 max_keyframes=240, interpolation="LINEAR", tolerance_mm=1e-3,
-                 name="cassi_face", extras=None) -> tuple[dict, bytes]:
+def glb_document(
+    frames,
+    faces,
+    times,
+    *,
+    face_material=None,
+    materials=MATERIALS,
+    max_keyframes=240,
+    interpolation="LINEAR",
+    tolerance_mm=1e-3,
+    name="cassi_face",
+    extras=None,
+) -> tuple[dict, bytes]:
     """The glTF JSON and binary buffer of an animation; see the module docstring.
 
     ``frames (m, V, 3)`` mm, ``faces (F, 3)``, ``times (m,)`` s, strictly increasing.
@@ -180,7 +210,9 @@ def glb_document(frames, faces, times, *, face_material=None, materials=MATERIAL
     frames = np.asarray(frames, np.float32)
     times = np.asarray(times, np.float64)
     if frames.ndim != 3 or frames.shape[2] != 3 or len(times) != len(frames) or len(frames) == 0:
-        raise CassiError(f"glTF export needs frames (m, V, 3) and times (m,), got {frames.shape}, {times.shape}")
+        raise CassiError(
+            f"glTF export needs frames (m, V, 3) and times (m,), got {frames.shape}, {times.shape}"
+        )
     if not np.all(np.isfinite(frames)):
         raise CassiError("glTF export: the vertices are not all finite")
     if np.any(np.diff(times) <= 0):
@@ -191,23 +223,44 @@ def glb_document(frames, faces, times, *, face_material=None, materials=MATERIAL
     base = frames[keys[0]]
     buf = _Buffer()
     position = buf.dense(base, "VEC3", _ARRAY_BUFFER, bounds=True)
-    colors = buf.dense(vertex_colors(len(base), faces, face_material, materials), "VEC3", _ARRAY_BUFFER)
+    colors = buf.dense(
+        vertex_colors(len(base), faces, face_material, materials), "VEC3", _ARRAY_BUFFER
+    )
     indices = buf.dense(np.asarray(faces, np.uint32).reshape(-1), "SCALAR", _ELEMENT_ARRAY_BUFFER)
     targets = [{"POSITION": buf.sparse_vec3(frames[k] - base, tolerance_mm)} for k in keys[1:]]
-    primitive = {"attributes": {"POSITION": position, "COLOR_0": colors}, "indices": indices,
-                 "material": 0, "mode": 4}
+    primitive = {
+        "attributes": {"POSITION": position, "COLOR_0": colors},
+        "indices": indices,
+        "material": 0,
+        "mode": 4,
+    }
     mesh = {"name": name, "primitives": [primitive]}
     document = {
         "asset": {"version": "2.0", "generator": "cassi_fit.export"},
         "scene": 0,
         "scenes": [{"nodes": [0]}],
-        "nodes": [{"name": "model_frame_mm", "matrix": _MODEL_TO_GLTF, "children": [1]},
-                  {"name": name, "mesh": 0}],
-        "materials": [{"name": "cassi", "doubleSided": True, "pbrMetallicRoughness": {
-            "baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0.0, "roughnessFactor": 0.8}}],
+        "nodes": [
+            {"name": "model_frame_mm", "matrix": _MODEL_TO_GLTF, "children": [1]},
+            {"name": name, "mesh": 0},
+        ],
+        "materials": [
+            {
+                "name": "cassi",
+                "doubleSided": True,
+                "pbrMetallicRoughness": {
+                    "baseColorFactor": [1, 1, 1, 1],
+                    "metallicFactor": 0.0,
+                    "roughnessFactor": 0.8,
+                },
+            }
+        ],
         "meshes": [mesh],
-        "extras": {"recording_start_s": float(times[0]), "units": "mm (node scale 0.001 m)",
-                   "keyframes": [int(k) for k in keys], **(extras or {})},
+        "extras": {
+            "recording_start_s": float(times[0]),
+            "units": "mm (node scale 0.001 m)",
+            "keyframes": [int(k) for k in keys],
+            **(extras or {}),
+        },
     }
     if targets:
         primitive["targets"] = targets
@@ -216,11 +269,18 @@ def glb_document(frames, faces, times, *, face_material=None, materials=MATERIAL
         key_times = (times[keys] - times[keys[0]]).astype(np.float32)
         weights = np.zeros((len(keys), len(targets)), np.float32)
         weights[np.arange(1, len(keys)), np.arange(len(targets))] = 1.0
-        sampler = {"input": buf.dense(key_times, "SCALAR", bounds=True),
-                   "output": buf.dense(weights.reshape(-1), "SCALAR"),
-                   "interpolation": interpolation}
-        document["animations"] = [{"name": "speech", "samplers": [sampler],
-                                   "channels": [{"sampler": 0, "target": {"node": 1, "path": "weights"}}]}]
+        sampler = {
+            "input": buf.dense(key_times, "SCALAR", bounds=True),
+            "output": buf.dense(weights.reshape(-1), "SCALAR"),
+            "interpolation": interpolation,
+        }
+        document["animations"] = [
+            {
+                "name": "speech",
+                "samplers": [sampler],
+                "channels": [{"sampler": 0, "target": {"node": 1, "path": "weights"}}],
+            }
+        ]
     document["accessors"] = buf.accessors
     document["bufferViews"] = buf.views
     document["buffers"] = [{"byteLength": len(buf.data)}]

@@ -141,7 +141,9 @@ class VideoWriter:
             self.size = frame.shape[:2]
             self._open()
         elif frame.shape[:2] != self.size:
-            raise CassiError(f"{self.path}: frame {self.count} is {frame.shape[:2]}, not {self.size}")
+            raise CassiError(
+                f"{self.path}: frame {self.count} is {frame.shape[:2]}, not {self.size}"
+            )
         if self._gif is not None:
             self._gif.append(frame)
         else:
@@ -249,7 +251,9 @@ _FRAME_COUNT = re.compile(r"frame=\s*(\d+)")
 def media_info(path) -> dict:
     """What ffmpeg says about a media file: ``{"video": bool, "audio": bool, "duration": s,
     "streams": [stream lines]}`` (parsed from ``ffmpeg -i``; no ffprobe needed)."""
-    done = subprocess.run([_ffmpeg(), "-hide_banner", "-i", str(path)], capture_output=True, text=True)
+    done = subprocess.run(
+        [_ffmpeg(), "-hide_banner", "-i", str(path)], capture_output=True, text=True
+    )
     streams = [ln.strip() for ln in done.stderr.splitlines() if ln.strip().startswith("Stream #")]
     match = _DURATION.search(done.stderr)
     duration = None
@@ -286,8 +290,9 @@ def frame_caption(subject: str, task: str, time_s: float, line: int, status: str
     return text if status == "ok" else f"{text}   [{status}]"
 
 
-def animation_frames(animation, renderer, *, subject="", task="", markers=False, progress=True,
-                     indices=None):
+def animation_frames(
+    animation, renderer, *, subject="", task="", markers=False, progress=True, indices=None
+):
     """Render the frames ``indices`` (default all) of an ``animate.Animation`` with
     ``renderer`` (a ``render.Renderer``); yields ``uint8 (H, W, 3)`` images. ``markers``: draw the measured
     pellets and the model's pellet sites (never-tracked pellets left out). The progress
@@ -303,8 +308,9 @@ def animation_frames(animation, renderer, *, subject="", task="", markers=False,
     model_sites = np.asarray(animation.pellets_model)
     shown = np.isfinite(measured).all(axis=(0, 2))
     indices = range(animation.n_frames) if indices is None else indices
-    for k in tqdm(indices, desc="rendering", unit="frame", file=sys.stderr,
-                  disable=not progress, leave=False):
+    for k in tqdm(
+        indices, desc="rendering", unit="frame", file=sys.stderr, disable=not progress, leave=False
+    ):
         kwargs = {}
         if markers:
             kwargs["markers"] = {
@@ -312,8 +318,9 @@ def animation_frames(animation, renderer, *, subject="", task="", markers=False,
                 "model": _in_3d(model_sites[k][shown]),
             }
         status = FRAME_STATUS_NAMES[int(animation.frame_status[k])]
-        caption = frame_caption(subject, task, float(animation.times[k]),
-                                int(animation.frame_index[k]), status)
+        caption = frame_caption(
+            subject, task, float(animation.times[k]), int(animation.frame_index[k]), status
+        )
         yield renderer.render(vertices[k], caption=caption, **kwargs)
 
 
@@ -322,8 +329,18 @@ def _in_3d(points_2d) -> np.ndarray:
     return np.concatenate([points_2d, np.zeros((len(points_2d), 1))], axis=1)
 
 
-def write_animation(path, animation, renderer, *, subject="", task="", audio=None,
-                    markers=False, progress=True, overwrite=False) -> Path:
+def write_animation(
+    path,
+    animation,
+    renderer,
+    *,
+    subject="",
+    task="",
+    audio=None,
+    markers=False,
+    progress=True,
+    overwrite=False,
+) -> Path:
     """Render ``animation`` to an MP4/GIF at the recording's pace (``frame_rate(stride)``);
     an MP4 carries ``audio`` (a ``.wav`` on the recording's clock) aligned so that the
     first frame sounds at its own recording time. Returns the path written."""
@@ -333,6 +350,7 @@ def write_animation(path, animation, renderer, *, subject="", task="", audio=Non
         step_us = int(round(float(np.median(np.diff(times))) * 1e6 / animation.stride))
     fps = frame_rate(animation.stride, step_us)
     start = float(animation.times[0])
-    frames = animation_frames(animation, renderer, subject=subject, task=task,
-                              markers=markers, progress=progress)
+    frames = animation_frames(
+        animation, renderer, subject=subject, task=task, markers=markers, progress=progress
+    )
     return write_video(path, frames, fps, audio=audio, audio_start=start, overwrite=overwrite)

@@ -36,9 +36,17 @@ def make_recording(seconds=1.0, seed=3, *, head_is_default=False, **synth_option
     track, truth = synth.synth_recording(
         anatomy, synth.SENTENCE_TASK, seed=seed, duration_s=seconds, **synth_options
     )
-    return Recording(subject="JWT", task=synth.SENTENCE_TASK, track=track, palate=anatomy.palate,
-                     pharynx=anatomy.pharynx, head=anatomy.head, head_is_default=head_is_default,
-                     audio=None, path=Path("/data/JWT/tp040.txy")), truth
+    return Recording(
+        subject="JWT",
+        task=synth.SENTENCE_TASK,
+        track=track,
+        palate=anatomy.palate,
+        pharynx=anatomy.pharynx,
+        head=anatomy.head,
+        head_is_default=head_is_default,
+        audio=None,
+        path=Path("/data/JWT/tp040.txy"),
+    ), truth
 
 
 def with_track(recording, positions, valid=None):
@@ -93,8 +101,10 @@ def test_frame_status_codes():
     untracked[1, 2] = True
     mistracked[2, 0] = True
     untracked[3, 0] = mistracked[3, 1] = True
-    np.testing.assert_array_equal(frame_status(untracked, mistracked, "hold"),
-                                  [FRAME_OK, FRAME_HELD, FRAME_MISTRACKED, FRAME_MISTRACKED])
+    np.testing.assert_array_equal(
+        frame_status(untracked, mistracked, "hold"),
+        [FRAME_OK, FRAME_HELD, FRAME_MISTRACKED, FRAME_MISTRACKED],
+    )
     assert frame_status(untracked, mistracked, "interpolate")[1] == FRAME_INTERPOLATED
 
 
@@ -184,9 +194,18 @@ def test_animation_is_finite_and_repairs_are_flagged(recording, model):
         assert np.all(np.isfinite(np.asarray(anim.vertices)))
         assert np.all(np.isfinite(anim.pellets_measured))
         assert anim.repaired[20:30, LL].all()
-        assert set(np.unique(anim.frame_status[20:30])) <= {FRAME_HELD, FRAME_INTERPOLATED, FRAME_MISTRACKED}
-    np.testing.assert_array_equal(held.pellets_measured[20:30, LL], held.pellets_measured[[19] * 10, LL])
-    assert np.all(interp.frame_status[20:30][interp.frame_status[20:30] != FRAME_MISTRACKED] == FRAME_INTERPOLATED)
+        assert set(np.unique(anim.frame_status[20:30])) <= {
+            FRAME_HELD,
+            FRAME_INTERPOLATED,
+            FRAME_MISTRACKED,
+        }
+    np.testing.assert_array_equal(
+        held.pellets_measured[20:30, LL], held.pellets_measured[[19] * 10, LL]
+    )
+    assert np.all(
+        interp.frame_status[20:30][interp.frame_status[20:30] != FRAME_MISTRACKED]
+        == FRAME_INTERPOLATED
+    )
     # the synthetic mistracks are caught and flagged, not animated
     flagged = truth.mistracked[held.frame_index]
     if flagged.any():

@@ -50,8 +50,21 @@ def test_animate_dataset_subject_task_to_mp4_with_sound(corpus, sentence, tmp_pa
     subject, recording = sentence
     assert recording.audio is not None
     out = tmp_path / "talk.mp4"
-    code, stdout, _ = _run(capsys, "animate", corpus, subject, synth.SENTENCE_TASK,
-                           "--stride", STRIDE, "--size", SIZE, "--out", out, "--markers", "--quiet")
+    code, stdout, _ = _run(
+        capsys,
+        "animate",
+        corpus,
+        subject,
+        synth.SENTENCE_TASK,
+        "--stride",
+        STRIDE,
+        "--size",
+        SIZE,
+        "--out",
+        out,
+        "--markers",
+        "--quiet",
+    )
     assert code == 0 and str(out) in stdout
     assert count_frames(out) == _expected_frames(recording, STRIDE)
     info = media_info(out)
@@ -59,22 +72,57 @@ def test_animate_dataset_subject_task_to_mp4_with_sound(corpus, sentence, tmp_pa
     frames = _expected_frames(recording, STRIDE)
     assert info["duration"] == pytest.approx(frames * STRIDE * 0.006866, abs=0.05)
     # no sound when asked, and --force to replace
-    code, _, _ = _run(capsys, "animate", recording.path, "--stride", STRIDE, "--size", SIZE,
-                      "--out", out, "--no-audio", "--force", "--quiet")
+    code, _, _ = _run(
+        capsys,
+        "animate",
+        recording.path,
+        "--stride",
+        STRIDE,
+        "--size",
+        SIZE,
+        "--out",
+        out,
+        "--no-audio",
+        "--force",
+        "--quiet",
+    )
     assert code == 0 and not media_info(out)["audio"]
 
 
 def test_animate_pellet_file_to_gif_and_png(sentence, tmp_path, capsys):
     _, recording = sentence
     gif = tmp_path / "front.gif"
-    code, _, _ = _run(capsys, "animate", recording.path, "--views", "front,top",
-                      "--stride", 40, "--size", SIZE, "--out", gif, "--quiet")
+    code, _, _ = _run(
+        capsys,
+        "animate",
+        recording.path,
+        "--views",
+        "front,top",
+        "--stride",
+        40,
+        "--size",
+        SIZE,
+        "--out",
+        gif,
+        "--quiet",
+    )
     assert code == 0
     frames = iio.imread(gif)
     assert frames.shape[0] == _expected_frames(recording, 40)
     png = tmp_path / "still.png"
-    code, _, _ = _run(capsys, "animate", recording.path, "--stride", 40, "--size", SIZE,
-                      "--out", png, "--frame", 2)
+    code, _, _ = _run(
+        capsys,
+        "animate",
+        recording.path,
+        "--stride",
+        40,
+        "--size",
+        SIZE,
+        "--out",
+        png,
+        "--frame",
+        2,
+    )
     image = iio.imread(png)
     assert code == 0 and image.shape[:2] == (120, 160)
     assert image.std() > 10  # not a blank image
@@ -98,13 +146,26 @@ def test_every_view_is_non_blank(sentence):
 def test_export_glb_and_obj(corpus, sentence, tmp_path, capsys):
     subject, recording = sentence
     glb = tmp_path / "talk.glb"
-    code, _, _ = _run(capsys, "export", corpus, subject, synth.SENTENCE_TASK, "--out", glb,
-                      "--stride", STRIDE, "--max-keyframes", 20)
+    code, _, _ = _run(
+        capsys,
+        "export",
+        corpus,
+        subject,
+        synth.SENTENCE_TASK,
+        "--out",
+        glb,
+        "--stride",
+        STRIDE,
+        "--max-keyframes",
+        20,
+    )
     assert code == 0
     doc, _ = read_glb(glb)
     assert len(doc["meshes"][0]["primitives"][0]["targets"]) == 19
     obj = tmp_path / "frame.obj"
-    code, _, _ = _run(capsys, "export", recording.path, "--out", obj, "--frame", 3, "--stride", STRIDE)
+    code, _, _ = _run(
+        capsys, "export", recording.path, "--out", obj, "--frame", 3, "--stride", STRIDE
+    )
     assert code == 0 and obj.stat().st_size > 1000
 
 
@@ -112,7 +173,9 @@ def test_demo_writes_everything_and_reruns(corpus, tmp_path, capsys, monkeypatch
     monkeypatch.setenv("CASSI_SYNTH_DIR", str(corpus))  # the small corpus stands in
     out = tmp_path / "demo"
     for _ in range(2):  # re-running replaces its own outputs
-        code, stdout, _ = _run(capsys, "demo", "--out", out, "--size", SIZE, "--stride", 20, "--quiet")
+        code, stdout, _ = _run(
+            capsys, "demo", "--out", out, "--size", SIZE, "--stride", 20, "--quiet"
+        )
         assert code == 0 and str(out.resolve()) in stdout
     names = {p.name for p in out.iterdir()}
     subject = Dataset(corpus).subjects()[0]

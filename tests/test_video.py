@@ -93,7 +93,18 @@ def test_mp4_carries_audio_aligned_to_the_first_frame(tmp_path):
     assert count_frames(path) == 30
     decoded = tmp_path / "decoded.wav"
     subprocess.run(
-        [_ffmpeg(), "-loglevel", "error", "-i", str(path), "-ac", "1", "-ar", str(RATE), str(decoded)],
+        [
+            _ffmpeg(),
+            "-loglevel",
+            "error",
+            "-i",
+            str(path),
+            "-ac",
+            "1",
+            "-ar",
+            str(RATE),
+            str(decoded),
+        ],
         check=True,
     )
     heard, _ = _read_wav(decoded)

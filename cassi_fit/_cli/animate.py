@@ -13,7 +13,9 @@ OUT_SUFFIXES = (".mp4", ".gif", ".png")
 
 def add_recording_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "recording", nargs="+", metavar="RECORDING",
+        "recording",
+        nargs="+",
+        metavar="RECORDING",
         help="a pellet file (.txy), or three words DATASET SUBJECT TASK: a dataset folder "
         "(per-subject folders or flat files) and the subject and task in it",
     )
@@ -21,28 +23,39 @@ def add_recording_argument(parser: argparse.ArgumentParser) -> None:
 
 def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--jaw", choices=JAW_METHODS, default="closed-form",
+        "--jaw",
+        choices=JAW_METHODS,
+        default="closed-form",
         help="how the jaw moves: the paper's closed form from the two jaw pellets (default), "
         "or a least-squares fit: per frame (frame-fit), about one pivot for the whole "
         "recording (fixed-pivot), or about a pivot that moves smoothly (smooth-pivot)",
     )
     parser.add_argument(
-        "--stride", type=int, default=1, metavar="N",
+        "--stride",
+        type=int,
+        default=1,
+        metavar="N",
         help="use every Nth data line from the first valid one (default 1: every line; "
         "CASSI showed every 10th); video time stays real time",
     )
     parser.add_argument(
-        "--tongue-anchor", choices=("fixed", "follow", "none"), default="follow",
+        "--tongue-anchor",
+        choices=("fixed", "follow", "none"),
+        default="follow",
         help="the tongue's back anchor points: fixed (CASSI: they never move, hence its V "
         "shape), follow (they move with T4; default) or none",
     )
     parser.add_argument(
-        "--gap", choices=("hold", "interpolate"), default="hold",
+        "--gap",
+        choices=("hold", "interpolate"),
+        default="hold",
         help="untracked or mistracked pellet values: hold the last good value (default) or "
         "interpolate between good ones; repaired frames are flagged in the caption",
     )
     parser.add_argument(
-        "--jaw-weights", choices=("cassi", "parke"), default="cassi",
+        "--jaw-weights",
+        choices=("cassi", "parke"),
+        default="cassi",
         help="region weights of the jaw rotation: CASSI's (teeth 100%%; default) or Parke's "
         "(teeth 90%%)",
     )
@@ -50,7 +63,8 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
-        "animate", help="animate the face from a pellet recording (video or still)",
+        "animate",
+        help="animate the face from a pellet recording (video or still)",
         description="Fit the face to the recording's subject (CASSI's initialization), move it "
         "with every data line and render it (front, side, inside and top views) to a video "
         "or a still. An .mp4 carries the recording's sound (a .wav with the pellet file's "
@@ -59,25 +73,36 @@ def register(subparsers) -> None:
     add_recording_argument(parser)
     add_model_arguments(parser)
     parser.add_argument(
-        "--views", default=",".join(VIEWS), metavar="LIST",
+        "--views",
+        default=",".join(VIEWS),
+        metavar="LIST",
         help="comma-separated views among front, side, inside, top (default: all four)",
     )
     parser.add_argument(
-        "--size", default="640x480", metavar="WxH",
+        "--size",
+        default="640x480",
+        metavar="WxH",
         help="size of the whole image in pixels (default 640x480); four views share it as a "
         "2x2 grid",
     )
     parser.add_argument(
-        "--out", metavar="FILE",
+        "--out",
+        metavar="FILE",
         help="output .mp4 (with sound when there is any), .gif or .png (one still, see "
         "--frame); default SUBJECT_TASK.mp4 in the current folder",
     )
     parser.add_argument(
-        "--frame", type=int, default=0, metavar="K",
+        "--frame",
+        type=int,
+        default=0,
+        metavar="K",
         help="for a .png: which animation frame to draw (0 = the first valid line)",
     )
-    parser.add_argument("--markers", action="store_true",
-                        help="draw the measured pellets (red) and the model's pellet sites (green)")
+    parser.add_argument(
+        "--markers",
+        action="store_true",
+        help="draw the measured pellets (red) and the model's pellet sites (green)",
+    )
     parser.add_argument("--no-audio", action="store_true", help="leave the sound out of an .mp4")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -102,7 +127,9 @@ def parse_views(text: str) -> tuple[str, ...]:
     views = tuple(v.strip() for v in text.split(",") if v.strip())
     unknown = [v for v in views if v not in VIEWS]
     if unknown or not views:
-        raise CassiError(f"--views: unknown view(s) {', '.join(unknown) or '(none)'}; use {','.join(VIEWS)}")
+        raise CassiError(
+            f"--views: unknown view(s) {', '.join(unknown) or '(none)'}; use {','.join(VIEWS)}"
+        )
     return views
 
 
@@ -134,8 +161,12 @@ def animate_recording(recording, args):
 
     if args.stride < 1:
         raise CassiError(f"--stride must be at least 1, got {args.stride}")
-    state = initialize(recording, jaw_weights=args.jaw_weights,
-                       tongue_anchor=args.tongue_anchor, gap_policy=args.gap)
+    state = initialize(
+        recording,
+        jaw_weights=args.jaw_weights,
+        tongue_anchor=args.tongue_anchor,
+        gap_policy=args.gap,
+    )
     return state, animate(state, recording, jaw=args.jaw, stride=args.stride)
 
 
@@ -169,14 +200,26 @@ def write_output(out: Path, animation, renderer, recording, args) -> Path:
         if not 0 <= args.frame < animation.n_frames:
             raise CassiError(f"--frame {args.frame}: the animation has {animation.n_frames} frames")
         (image,) = video.animation_frames(
-            animation, renderer, subject=recording.subject, task=recording.task,
-            markers=args.markers, progress=False, indices=[args.frame],
+            animation,
+            renderer,
+            subject=recording.subject,
+            task=recording.task,
+            markers=args.markers,
+            progress=False,
+            indices=[args.frame],
         )
         return save_png(out, image, overwrite=args.force)
     audio = None if args.no_audio or out.suffix.lower() != ".mp4" else recording.audio
     if audio is not None:
         print(f"sound: {audio}", file=sys.stderr)
     return video.write_animation(
-        out, animation, renderer, subject=recording.subject, task=recording.task,
-        audio=audio, markers=args.markers, progress=not args.quiet, overwrite=args.force,
+        out,
+        animation,
+        renderer,
+        subject=recording.subject,
+        task=recording.task,
+        audio=audio,
+        markers=args.markers,
+        progress=not args.quiet,
+        overwrite=args.force,
     )

@@ -8,21 +8,33 @@ from pathlib import Path
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
-        "demo", help="animate a jaw-wagging task and a sentence of the synthetic corpus",
+        "demo",
+        help="animate a jaw-wagging task and a sentence of the synthetic corpus",
         description="Create the synthetic corpus if it is absent, animate one subject's "
         "jaw-wagging task and a spoken sentence, and write to --out: the two videos (the "
         "sentence with its sound), the four views as stills, the sentence as a .glb, and a "
         "plot of the paper's closed-form jaw rotation against a least-squares fit about one "
         "pivot. Re-running replaces the demo's own files in --out.",
     )
-    parser.add_argument("--out", default="demo_output", metavar="DIR",
-                        help="output folder (default demo_output)")
-    parser.add_argument("--size", default="640x480", metavar="WxH",
-                        help="video size in pixels, the four views as a 2x2 grid (default 640x480)")
-    parser.add_argument("--stride", type=int, default=1, metavar="N",
-                        help="use every Nth data line (default 1: every line)")
-    parser.add_argument("--subject", metavar="NAME",
-                        help="which synthetic subject (default: the first)")
+    parser.add_argument(
+        "--out", default="demo_output", metavar="DIR", help="output folder (default demo_output)"
+    )
+    parser.add_argument(
+        "--size",
+        default="640x480",
+        metavar="WxH",
+        help="video size in pixels, the four views as a 2x2 grid (default 640x480)",
+    )
+    parser.add_argument(
+        "--stride",
+        type=int,
+        default=1,
+        metavar="N",
+        help="use every Nth data line (default 1: every line)",
+    )
+    parser.add_argument(
+        "--subject", metavar="NAME", help="which synthetic subject (default: the first)"
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run)
 
@@ -41,8 +53,10 @@ def _corpus_recordings(subject):
     wanted = (synth.JAW_WAGGING_TASK, synth.SENTENCE_TASK)
     missing = [t for t in wanted if t.lower() not in tasks]
     if missing:
-        raise CassiError(f"{dataset.root if hasattr(dataset, 'root') else 'corpus'}: subject "
-                         f"{subject} has no task {', '.join(missing)}")
+        raise CassiError(
+            f"{dataset.root if hasattr(dataset, 'root') else 'corpus'}: subject "
+            f"{subject} has no task {', '.join(missing)}"
+        )
     return [dataset.load(subject, task) for task in wanted]
 
 
@@ -60,9 +74,11 @@ def jaw_plot(path, state, animation, *, title=""):
     current = np.asarray(animation.pellets_measured)[:, 6:8]
     t = np.asarray(animation.times)
     fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
-    for method, style in (("closed-form", dict(lw=0.8, color="0.45")),
-                          ("fixed-pivot", dict(lw=1.6, color="tab:blue")),
-                          ("smooth-pivot", dict(lw=1.6, color="tab:orange", ls="--"))):
+    for method, style in (
+        ("closed-form", dict(lw=0.8, color="0.45")),
+        ("fixed-pivot", dict(lw=1.6, color="tab:blue")),
+        ("smooth-pivot", dict(lw=1.6, color="tab:orange", ls="--")),
+    ):
         fit = fit_jaw(np.asarray(state.reference_jaw), current, method=method)
         pivot = np.where(fit.pivot_defined[:, None], fit.pivot, np.nan)
         axes[0].plot(t, np.degrees(fit.theta), label=method, **style)
@@ -95,12 +111,21 @@ def _stills(out: Path, renderer, recording, animation):
     k = int(np.argmax(np.asarray(animation.params.jaw_theta)))
     stem = f"{recording.subject}_{recording.task}"
     written = []
-    markers = {"measured": np.asarray(animation.pellets_measured[k]),
-               "model": np.asarray(animation.pellets_model[k])}
+    markers = {
+        "measured": np.asarray(animation.pellets_measured[k]),
+        "model": np.asarray(animation.pellets_model[k]),
+    }
     for view, image in renderer.render_views(animation.vertices[k], markers=markers).items():
         written.append(save_png(out / f"{stem}_{view}.png", image, overwrite=True))
-    (grid,) = video.animation_frames(animation, renderer, subject=recording.subject,
-                                     task=recording.task, markers=True, progress=False, indices=[k])
+    (grid,) = video.animation_frames(
+        animation,
+        renderer,
+        subject=recording.subject,
+        task=recording.task,
+        markers=True,
+        progress=False,
+        indices=[k],
+    )
     written.append(save_png(out / f"{stem}_grid.png", grid, overwrite=True))
     return written
 
@@ -128,20 +153,40 @@ def run(args) -> int:
         animation = animate(state, recording, stride=args.stride)
         renderer = renderer or Renderer(state.model, size=size)
         stem = f"{recording.subject}_{recording.task}"
-        written.append(video.write_animation(
-            out / f"{stem}.mp4", animation, renderer, subject=recording.subject,
-            task=recording.task, audio=recording.audio, progress=not args.quiet, overwrite=True,
-        ))
+        written.append(
+            video.write_animation(
+                out / f"{stem}.mp4",
+                animation,
+                renderer,
+                subject=recording.subject,
+                task=recording.task,
+                audio=recording.audio,
+                progress=not args.quiet,
+                overwrite=True,
+            )
+        )
         written += _stills(out, renderer, recording, animation)
         if recording is recordings[-1]:  # the sentence: its animation as glTF
-            written.append(export_glb(
-                out / f"{stem}.glb", animation.vertices, state.model.faces, animation.times,
-                face_material=state.model.face_material, overwrite=True,
-                extras={"subject": recording.subject, "task": recording.task},
-            ))
+            written.append(
+                export_glb(
+                    out / f"{stem}.glb",
+                    animation.vertices,
+                    state.model.faces,
+                    animation.times,
+                    face_material=state.model.face_material,
+                    overwrite=True,
+                    extras={"subject": recording.subject, "task": recording.task},
+                )
+            )
         else:  # jaw wagging: the closed form against the fits
-            written.append(jaw_plot(out / f"{stem}_jaw.png", state, animation,
-                                    title=f"{stem}: closed form vs pivot fits"))
+            written.append(
+                jaw_plot(
+                    out / f"{stem}_jaw.png",
+                    state,
+                    animation,
+                    title=f"{stem}: closed form vs pivot fits",
+                )
+            )
     print(f"demo written to {out.resolve()}:")
     for path in written:
         print(f"  {path}")
