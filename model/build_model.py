@@ -36,6 +36,8 @@ MAT = {name: i for i, name in enumerate(MATERIALS)}
 SITES = {"UL": (14.9, 17.8), "LL": (9.4, -21.4), "MNI": (-1.0, -8.0), "MNM": (-44.0, -3.0),
          "T1": (-17.0, 1.0), "T2": (-29.0, 7.0), "T3": (-41.0, 12.5), "T4": (-53.0, 17.0)}
 MOUTH_HALF_WIDTH = 24.5
+EYE_CENTRE = (-9.0, 64.0, 32.0)  # left eyeball centre, mm
+EYE_RADIUS = 12.0
 JAW_PIVOT = (-95.0, 22.0)  # condyle, mm
 PARKE = {"jaw": 1.00, "lower_teeth": 0.90, "under_chin": 0.75, "neck": 0.50, "cheek": 0.35}
 CASSI_FACTOR = 1.0 / 0.9   # CASSI's 1.11111: the lower teeth move 100 %
@@ -45,50 +47,55 @@ CASSI_FACTOR = 1.0 / 0.9   # CASSI's 1.11111: the lower teeth move 100 %
 # centre), w (half width), xb (back midline x), e (front superellipse exponent),
 # lift (mm the row rises toward the back, following the jaw line), group (upper/lower).
 ROWS = [
-    ("vertex", 176, -75, -80, 0.0, -85, 2.0, 0, "u"),
-    ("crown1", 173, -40, -80, 32, -125, 2.0, 0, "u"),
-    ("crown2", 164, -12, -80, 54, -155, 2.2, 0, "u"),
-    ("crown3", 148, 2, -80, 66, -170, 2.4, 0, "u"),
-    ("forehead1", 130, 10, -80, 72, -177, 2.6, 0, "u"),
-    ("forehead2", 112, 14, -80, 74, -178, 2.8, 0, "u"),
-    ("brow", 94, 15, -80, 73, -176, 3.0, 0, "u"),
-    ("glabella", 82, 14, -80, 71, -172, 3.2, 0, "u"),
-    ("nasion", 73, 9, -80, 69, -168, 3.4, 0, "u"),
-    ("eyes", 65, 9, -78, 68, -164, 3.4, 0, "u"),
-    ("eyes_low", 57, 10, -76, 68, -158, 3.2, 0, "u"),
-    ("cheekbone", 49, 11, -74, 68, -152, 3.0, 0, "u"),
-    ("nose_tip_high", 43, 12, -72, 66, -146, 2.9, 0, "u"),
-    ("nose_tip", 38, 12, -71, 65, -142, 2.8, 0, "u"),
-    ("nostril", 33, 12, -70, 63, -138, 2.7, 0, "u"),
-    ("subnasale", 29.5, 12, -70, 62, -136, 2.6, 0, "u"),
-    ("philtrum", 24, 11.5, -70, 61, -134, 2.5, 0, "u"),
-    ("UL", 17.8, 6.0, -70, 60, -132, 2.4, 0, "u"),
-    ("ul_red", 9.5, 5.5, -70, 60, -131, 2.4, 0, "u"),
-    ("ul_low", 3.5, 5.0, -70, 59, -130, 2.4, 0, "u"),
-    ("A", 0.6, 5.0, -70, 59, -130, 2.4, 0, "u"),
-    ("A_in", 0.6, 5.0, -70, 59, -130, 2.4, 0, "u"),
-    ("B_in", -0.6, 5.0, -70, 59, -130, 2.4, 0, "l"),
-    ("B", -0.6, 5.0, -70, 59, -130, 2.4, 0, "l"),
-    ("ll_high", -4, 5.0, -70, 58, -130, 2.4, 0, "l"),
-    ("ll_red", -11, 5.0, -70, 57, -130, 2.4, 0, "l"),
-    ("LL", -21.4, 4.0, -71, 56, -129, 2.4, 0.5, "l"),
-    ("fold", -29, 3.0, -72, 55, -128, 2.4, 2, "l"),
-    ("chin", -40, 8.0, -73, 53, -127, 2.3, 5, "l"),
-    ("chin_low", -49, 6.0, -74, 51, -126, 2.2, 9, "l"),
-    ("menton", -56, -4.0, -76, 50, -125, 2.1, 13, "l"),
-    ("under_chin", -61, -22.0, -78, 48, -124, 2.0, 14, "l"),
-    ("throat", -67, -40.0, -78, 46, -123, 2.0, 12, "l"),
-    ("neck1", -82, -43.0, -80, 46, -122, 2.0, 6, "l"),
-    ("neck2", -105, -41.0, -80, 48, -121, 2.0, 2, "l"),
-    ("neck_base", -125, -38.0, -80, 52, -122, 2.0, 0, "l"),
+    ("vertex", 177, -88, -88, 0.0, -88, 2.0, 0, "u"),
+    ("crown1", 172, -48, -90, 30, -132, 2.0, 0, "u"),
+    ("crown2", 162, -18, -92, 52, -160, 2.0, 0, "u"),
+    ("crown3", 147, 1, -92, 66, -173, 2.1, 0, "u"),
+    ("forehead1", 129, 9, -92, 73, -179, 2.2, 0, "u"),
+    ("forehead2", 110, 13, -92, 75, -181, 2.3, 0, "u"),
+    ("brow", 94, 15, -90, 73, -180, 2.5, 0, "u"),
+    ("glabella", 84, 15, -88, 70, -177, 2.7, 0, "u"),
+    ("nasion", 76, 11, -85, 67, -174, 3.0, 0, "u"),
+    ("lid_up", 70, 10, -82, 66, -171, 3.0, 0, "u"),
+    ("eye_hi", 67, 10, -81, 66, -170, 3.0, 0, "u"),
+    ("eyes", 64, 10, -80, 66, -168, 3.0, 0, "u"),
+    ("eye_lo", 61, 10, -79, 66, -166, 3.0, 0, "u"),
+    ("lid_low", 58, 10, -78, 66, -164, 3.0, 0, "u"),
+    ("eyes_low", 54, 10.5, -76, 66, -162, 3.0, 0, "u"),
+    ("cheekbone", 47, 11, -74, 65, -158, 3.0, 0, "u"),
+    ("nose_tip_high", 42.5, 12, -73, 64, -155, 2.9, 0, "u"),
+    ("nose_tip", 38, 12, -72, 63, -153, 2.8, 0, "u"),
+    ("nostril", 33, 12, -72, 62, -151, 2.7, 0, "u"),
+    ("subnasale", 29.5, 12, -72, 61, -150, 2.6, 0, "u"),
+    ("philtrum", 24, 11.5, -72, 60, -149, 2.5, 0, "u"),
+    ("UL", 17.8, 6.0, -72, 59, -148, 2.4, 0, "u"),
+    ("ul_red", 9.5, 5.5, -73, 57.5, -147, 2.4, 0, "u"),
+    ("ul_low", 3.5, 5.0, -73, 57, -147, 2.4, 0, "u"),
+    ("A", 0.2, 5.0, -74, 56.5, -147, 2.4, 0, "u"),
+    ("A_in", 0.2, 5.0, -74, 56.5, -147, 2.4, 0, "u"),
+    ("B_in", -0.2, 5.0, -74, 56.5, -147, 2.4, 0, "l"),
+    ("B", -0.2, 5.0, -74, 56.5, -147, 2.4, 0, "l"),
+    ("ll_high", -4, 5.0, -74, 56, -147, 2.4, 0, "l"),
+    ("ll_red", -11, 5.0, -75, 55, -147, 2.3, 0, "l"),
+    ("LL", -21.4, 4.0, -76, 54, -147, 2.2, 0.5, "l"),
+    ("fold", -29, 3.0, -78, 52.5, -147, 2.1, 2, "l"),
+    ("chin", -40, 8.0, -80, 50.5, -147, 1.9, 5, "l"),
+    ("chin_low", -49, 6.0, -82, 48.5, -147, 1.8, 9, "l"),
+    ("menton", -56, -4.0, -84, 46, -147, 1.6, 13, "l"),
+    ("under_chin", -61, -24.0, -95, 52, -147, 1.5, 14, "l"),
+    ("throat", -68, -38.0, -95, 53, -148, 1.6, 12, "l"),
+    ("neck1", -85, -40.0, -95, 53, -150, 1.8, 6, "l"),
+    ("neck2", -105, -39.0, -95, 54, -152, 2.0, 2, "l"),
+    ("neck_base", -125, -36.0, -95, 57, -154, 2.0, 0, "l"),
 ]
 ROW_INDEX = {r[0]: i for i, r in enumerate(ROWS)}
 # Lip protrusion (mm, at the midline) on top of xf; falls to 0 at the mouth corners.
-LIP_BUMP = {"UL": 8.9, "ul_red": 10.5, "ul_low": 8.0, "A": 5.0, "A_in": -2.0,
-            "B_in": -2.0, "B": 5.0, "ll_high": 8.5, "ll_red": 9.0, "LL": 5.4, "fold": 0.0}
+LIP_BUMP = {"UL": 8.9, "ul_red": 9.6, "ul_low": 8.6, "A": 6.5, "A_in": 1.0,
+            "B_in": 1.0, "B": 6.5, "ll_high": 8.8, "ll_red": 9.6, "LL": 5.4, "fold": 0.0}
 # Nose: protrusion (mm at the midline) and half width per row.
-NOSE = {"glabella": (0.5, 9), "nasion": (1.0, 8), "eyes": (5.0, 8), "eyes_low": (10.0, 9),
-        "cheekbone": (15.0, 10), "nose_tip_high": (19.5, 13), "nose_tip": (21.5, 17),
+NOSE = {"glabella": (0.5, 9), "nasion": (1.0, 8), "lid_up": (2.5, 8), "eye_hi": (4.0, 8),
+        "eyes": (5.5, 8.5), "eye_lo": (7.0, 8.5), "lid_low": (8.5, 9), "eyes_low": (11.0, 9.5),
+        "cheekbone": (15.5, 10.5), "nose_tip_high": (19.5, 13), "nose_tip": (21.5, 17),
         "nostril": (14.0, 17), "subnasale": (1.5, 12)}
 # Front z targets (on the mouth row) of the columns; the mouth corner is one of them.
 FRONT_Z = [0, 4, 8, 12, 16, 20, MOUTH_HALF_WIDTH, 29, 34, 39, 44, 49, 53.5]
@@ -127,13 +134,16 @@ def section_point(row, phi):
         x = cx - (cx - xb) * abs(c)
         z = w * s
     depth = np.clip(xf - x, 0.0, 80.0) / 80.0  # 0 at the front, 1 at the gonion and behind
-    return np.array([x, y0 + lift * np.sin(np.pi / 2 * depth), z])
+    fade = 1.0 - ramp(-x, 100.0, 135.0)  # behind the jaw angle the rows level out again
+    return np.array([x, y0 + lift * np.sin(np.pi / 2 * depth) * fade, z])
 
 
 def bumps(name, p):
     """Add nose, lips, eye sockets, cheekbones, chin, jaw angle and ears to a loft point."""
     x, y, z = p
     az = abs(z)
+    fr = ramp(x, -55.0, -30.0)  # face features only on the front of the head
+    x0, y0 = x, y
     if name in LIP_BUMP:
         x += LIP_BUMP[name] * bell(az / (MOUTH_HALF_WIDTH + 3.0))
         if name in ("A_in", "B_in"):  # the inner lip rows curl in toward the teeth
@@ -152,18 +162,29 @@ def bumps(name, p):
             x -= 7.0 * bell((az - 6.0) / 3.5)
         if name == "nose_tip":
             x += 2.5 * bell((az - 14.0) / 5.0)
-    # eye sockets, brow ridge, cheekbones
-    x -= 6.0 * bell(np.hypot(y - 65.0, az - 32.0) / 19.0)
-    x += 3.0 * bell(np.hypot((y - 86.0) / 6.0, (az - 30.0) / 22.0))
-    x += 5.0 * bell(np.hypot((y - 45.0) / 14.0, (az - 50.0) / 16.0))
-    # chin prominence (mentalis) and the lateral flare of the jaw angle
+    # orbit, brow ridge, the eye opening (skin pulled back behind the eyeball's front in
+    # an almond, with a slight lid margin around it), cheekbones
+    ex, ey, ez = EYE_CENTRE
+    x -= 3.0 * bell(np.hypot((y - ey) / 16.0, (az - ez) / 22.0))
+    x += 3.5 * bell(np.hypot((y - 84.0) / 7.0, (az - 30.0) / 24.0))
+    r_eye = np.hypot((y - ey) / 8.0, (az - ez) / 21.0)
+    x += 1.2 * bell((r_eye - 0.8) / 0.3)
+    b = 1.0 - ramp(r_eye, 0.6, 1.0)
+    x = x * (1.0 - b) + (ex + EYE_RADIUS - 7.0) * b
+    x += 4.0 * bell(np.hypot((y - 47.0) / 13.0, (az - 52.0) / 16.0))
+    if az > 30:
+        z = np.sign(z) * (az + 3.0 * bell(np.hypot((y - 47.0) / 12.0, (x + 50.0) / 22.0)))
+        az = abs(z)
+    # chin prominence (mentalis)
     if name in ("chin", "chin_low", "fold"):
         x += 2.0 * bell(az / 18.0)
+    x, y = x0 + fr * (x - x0), y0 + fr * (y - y0)
+    # the lateral flare of the jaw angle
     if ROWS[ROW_INDEX[name]][8] == "l" and y < 10:
         gon = bell(np.hypot((x + 82.0) / 16.0, (y + 40.0) / 22.0))
         z = np.sign(z) * (az + 5.0 * gon)
     # ears: a flat bump on the side of the head
-    ear = bell(np.hypot((x + 95.0) / 10.0, (y - 48.0) / 18.0))
+    ear = bell(np.hypot((x + 106.0) / 12.0, (y - 38.0) / 28.0))
     z = np.sign(z) * (abs(z) + 10.0 * ear) if az > 30 else z
     return np.array([x, y, z])
 
@@ -188,15 +209,19 @@ def build_skin():
     return grid, corner
 
 
-def mirror_grid(grid):
+def mirror_grid(grid, corner):
     """Full skin from the half grid: vertex array, faces, (row, col, side) per vertex."""
     n_r, n_c, _ = grid.shape
     verts, ids, index = [], [], {}
+    merged = {ROW_INDEX[k] for k in ("A_in", "B_in", "B")}
     for i in range(n_r):
         for j in range(n_c):
             for side in (1, -1):
                 if side == -1 and j in (0, n_c - 1):
                     index[(i, j, -1)] = index[(i, j, 1)]
+                    continue
+                if j >= corner and i in merged:  # the lips meet: one vertex for 4 rows
+                    index[(i, j, side)] = index[(ROW_INDEX["A"], j, side)]
                     continue
                 index[(i, j, side)] = len(verts)
                 p = grid[i, j].copy()
@@ -331,11 +356,11 @@ def build_arch(arch, teeth, y0, up, snaps=()):
 # Upper-surface midline (x, y) from the tip to the root, through T1..T4 exactly; thickness
 # (mm, along the inward normal) and half width at each control point.
 TONGUE = [  # x, y, thickness, half width
-    (-9.0, -4.5, 5.0, 7.0), (-12.5, -1.0, 9.0, 12.0), (*SITES["T1"], 13.0, 16.0),
-    (-23.0, 4.5, 16.0, 19.0), (*SITES["T2"], 18.0, 21.0), (-35.0, 10.0, 19.0, 21.5),
-    (*SITES["T3"], 19.0, 21.5), (-47.0, 15.0, 18.0, 21.0), (*SITES["T4"], 17.0, 20.5),
-    (-61.0, 17.0, 15.0, 19.5), (-68.0, 13.5, 13.0, 18.5), (-73.0, 6.0, 12.0, 17.0),
-    (-75.5, -4.0, 11.0, 16.0), (-76.0, -14.0, 10.0, 15.0)]
+    (-9.0, -4.5, 6.0, 9.0), (-12.5, -1.0, 11.0, 14.0), (*SITES["T1"], 16.0, 18.0),
+    (-23.0, 4.5, 20.0, 20.5), (*SITES["T2"], 23.0, 22.0), (-35.0, 10.0, 25.0, 22.5),
+    (*SITES["T3"], 26.0, 22.5), (-47.0, 15.0, 26.0, 22.5), (*SITES["T4"], 25.0, 22.0),
+    (-61.0, 17.0, 23.0, 21.0), (-68.0, 13.5, 20.0, 19.5), (-73.0, 6.0, 17.0, 18.0),
+    (-75.5, -4.0, 14.0, 16.0), (-76.0, -14.0, 12.0, 15.0)]
 TONGUE_RING = 12
 TONGUE_ANCHOR = 10  # control point index from which CASSI's fixed anchors hold the back
 
@@ -366,7 +391,7 @@ def build_tongue():
     verts, svals = [], []
     for i in range(len(st)):
         for a in psi:
-            off = thick[i] / 2 * (1 - np.cos(a)) * n_in[i]
+            off = thick[i] / 2 * (1 - np.cos(min(a, 2 * np.pi - a))) * n_in[i]  # mirror-exact
             z = hw[i] * np.sign(np.sin(a)) * abs(np.sin(a)) ** 0.6
             verts.append([xy[i, 0] + off[0], xy[i, 1] + off[1], z])
             svals.append(s[i])
@@ -438,7 +463,7 @@ def skin_fields(verts, ids, lower, corner_z, nose_tip):
 def build():
     """All parts -> (vertices, faces, material, regions, landmarks, measures, fields)."""
     grid, corner = build_skin()
-    sv, ids, index = mirror_grid(grid)
+    sv, ids, index = mirror_grid(grid, corner)
     sf = skin_faces(grid.shape[0], grid.shape[1], index, corner)
     corner_z = grid[ROW_INDEX["A"], corner, 2]
     w_parke, lower = skin_weights(sv, ids, corner_z)
@@ -454,7 +479,7 @@ def build():
     parts = [("skin", sv, np.array(sf), skin_mat)]
     ev, ef = [], []
     for side in (1, -1):
-        v, f_ = build_eye(np.array([-6.0, 65.0, 32.0 * side]))
+        v, f_ = build_eye(np.array([EYE_CENTRE[0], EYE_CENTRE[1], EYE_CENTRE[2] * side]), EYE_RADIUS)
         ef.append(f_ + sum(len(a) for a in ev))
         ev.append(v)
     parts.append(("eyes", np.concatenate(ev), np.concatenate(ef), MAT["eye"]))
@@ -522,7 +547,7 @@ def build():
     }
     landmarks = {k: int(v) for k, v in landmarks.items()}
     P = lambda k: V[landmarks[k]]
-    cheek_row = sv[row_of["cheekbone"]]
+    cheek_row = sv[row_of["cheekbone"] & (sv[:, 0] > -75.0)]
     measures = {
         "face_width": float(2 * np.abs(cheek_row[:, 2]).max()),
         "jaw_width": float(2 * abs(P("gonion")[2])),
