@@ -73,6 +73,7 @@ _SHOWN = {
 _CUT = {"skin", "lips", "eye", "teeth", "palate"}  # near half removed in the inside view
 _GLASS = {"skin", "lips", "eye"}  # near half see-through with skin="transparent"
 _MARKER_VIEWS = ("side", "inside")
+_MARGIN_MM = 10.0  # free space around each view's rest bounds, for the motion
 
 # --------------------------------------------------------------------------------------
 # headless OpenGL
@@ -349,8 +350,18 @@ uniform mat4 P;
 out vec3 frag_normal;
 out vec4 frag_colour;
 void main() {
-    mat4 model = M * inst_m;
-    gl_Position = P * V * model * vec4(position, 1.0);
+    // inst_m: an affine map whose bottom row carries the view's cell (x0, y0, x1, y1) in
+    // image pixels (= world x, y); clip to it.
+    vec4 cell = vec4(inst_m[0][3], inst_m[1][3], inst_m[2][3], inst_m[3][3]);
+    mat4 affine = inst_m;
+    affine[0][3] = 0.0; affine[1][3] = 0.0; affine[2][3] = 0.0; affine[3][3] = 1.0;
+    mat4 model = M * affine;
+    vec4 world = model * vec4(position, 1.0);
+    gl_ClipDistance[0] = world.x - cell.x;
+    gl_ClipDistance[1] = world.y - cell.y;
+    gl_ClipDistance[2] = cell.z - world.x;
+    gl_ClipDistance[3] = cell.w - world.y;
+    gl_Position = P * V * world;
     frag_normal = mat3(model) * normal;
 #if HAS_COLOUR
     frag_colour = color_0;
@@ -433,6 +444,8 @@ def _colour_only_renderer_class():
             self._configure_forward_pass_viewport(flags)
             gl.glClearColor(*scene.bg_color)
             gl.glClear(gl.GL_COLOR_BUFFER_BIT | gl.GL_DEPTH_BUFFER_BIT)
+            for k in range(4):
+                gl.glEnable(gl.GL_CLIP_DISTANCE0 + k)
             view, projection = self._get_camera_matrices(scene)
             nodes = [n for n in scene.mesh_nodes if n.mesh.is_visible]
             nodes.sort(key=lambda n: n.mesh.is_transparent)
@@ -682,13 +695,21 @@ class Renderer:
         self._layout_key = key
 
     def _placement(self, view, cell) -> np.ndarray:
-        """(4,4) similarity taking model mm to image pixels for ``view`` in ``cell``."""
+        """(4,4) instance matrix of ``view`` in ``cell``: a similarity taking model mm to
+        image pixels, with the cell's rectangle (x0, y0, x1, y1) in its bottom row.
+
+        The shader rebuilds the affine matrix and clips every instance to its own cell, so
+        a tongue or jaw moving past the rest-mesh bounds never spills into a neighbour.
+        The fit keeps ``margin`` of the cell and at least _MARGIN_MM around the bounds.
+        """
         rotation, mid, _, extent = self._fits[view]
         cx, cy, cw, ch = cell
-        scale = min(cw / extent[0], ch / extent[1]) * (1 - 2 * self._margin)
+        padded = extent[:2] + 2 * _MARGIN_MM
+        scale = min(cw / padded[0], ch / padded[1]) * (1 - 2 * self._margin)
         pose = np.eye(4)
         pose[:3, :3] = scale * rotation
         pose[:3, 3] = np.array([cx, cy, 0.0]) - scale * mid
+        pose[3] = (cx - cw / 2, cy - ch / 2, cx + cw / 2, cy + ch / 2)
         return pose
 
     def _upload(self, vertices: np.ndarray):
@@ -744,6 +765,7 @@ class Renderer:
             radius = max(self._marker_radius * scale, 3.0)
             poses = np.tile(np.eye(4), (len(points), 1, 1))
             poses[:, :3, :3] *= radius
+            poses[:, 3] = pose[3]  # the view's cell, for clipping
             poses[:, :3, 3] = points @ pose[:3, :3].T + pose[:3, 3]
             poses[:, 2, 3] = scale * (lo[2] + extent[2]) + pose[2, 3] + 2 * radius
             out.append(poses)

@@ -357,3 +357,17 @@ def test_an_unclosed_renderer_does_not_break_the_others(renderer, model):
     del other
     gc.collect()
     np.testing.assert_array_equal(renderer.render(model.vertices), before)
+
+
+def test_views_are_clipped_to_their_cells(renderer, model):
+    """A tongue moved far out of the inside view's cell never shows in the top view's cell.
+
+    Moved 220 mm forward and 149 mm up, the inside view would draw it on the background
+    near the top cell's upper-left corner; the top view itself puts it off the image.
+    """
+    moved = model.vertices.copy()
+    tongue = np.unique(model.faces[model.face_material == 4])
+    moved[tongue, :2] += (220.0, 149.0)
+    cells = quadrants(renderer.render(moved))
+    assert green(cells["top"]).sum() == 0
+    assert green(cells["inside"]).sum() == 0
