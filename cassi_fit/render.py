@@ -151,6 +151,22 @@ def _probe_platform(platform: str) -> str | None:
     return lines[-1] if lines else f"exit code {proc.returncode}"
 
 
+def _imported_platform() -> str:
+    """The platform of an already imported PyOpenGL, if pyrender can use it."""
+    import OpenGL.platform
+
+    name = type(OpenGL.platform.PLATFORM).__name__.lower()
+    for platform in ("egl", "osmesa"):
+        if name.startswith(platform):
+            return platform
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        return "native"
+    raise RenderingUnavailableError(
+        f"OpenGL was imported (platform {name}) before cassi_fit.render could choose a "
+        "headless one: import cassi_fit.render first, or set PYOPENGL_PLATFORM=egl"
+    )
+
+
 def ensure_headless_gl() -> str:
     """Choose the OpenGL platform for offscreen rendering; returns its name.
 
@@ -168,6 +184,9 @@ def ensure_headless_gl() -> str:
     if chosen:
         _PLATFORM = chosen
         return chosen
+    if "OpenGL.platform" in sys.modules:  # too late to choose: PyOpenGL has its platform
+        _PLATFORM = _imported_platform()
+        return _PLATFORM
     candidates = ["egl", "osmesa"]
     if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
         candidates.insert(0, "native")

@@ -105,8 +105,12 @@ def views(renderer, model):
 
 @pytest.fixture
 def fresh_gl(monkeypatch):
-    """No platform chosen yet, no display; the probe records its calls."""
+    """No platform chosen yet, no display, PyOpenGL not imported; the probe records calls."""
+    import sys
+
     monkeypatch.setattr(render, "_PLATFORM", None)
+    imported = sys.modules.get("OpenGL.platform")
+    monkeypatch.delitem(sys.modules, "OpenGL.platform", raising=False)
     for name in ("DISPLAY", "WAYLAND_DISPLAY", "PYOPENGL_PLATFORM"):
         monkeypatch.delenv(name, raising=False)
     calls = []
@@ -118,7 +122,7 @@ def fresh_gl(monkeypatch):
 
         monkeypatch.setattr(render, "_probe_platform", probe)
 
-    return SimpleNamespace(use=use, calls=calls)
+    return SimpleNamespace(use=use, calls=calls, imported=imported)
 
 
 def test_headless_picks_egl_without_display(fresh_gl):
@@ -371,3 +375,27 @@ def test_views_are_clipped_to_their_cells(renderer, model):
     cells = quadrants(renderer.render(moved))
     assert green(cells["top"]).sum() == 0
     assert green(cells["inside"]).sum() == 0
+
+
+def test_an_already_imported_opengl_is_reported_not_guessed(renderer, fresh_gl, monkeypatch):
+    """Once PyOpenGL is imported its platform is fixed; ensure_headless_gl says which.
+
+    (The ``renderer`` fixture makes sure this process imported PyOpenGL with EGL; the
+    module is never re-imported here, which would replace the process's GL platform.)
+    """
+    import sys
+
+    opengl_platform = fresh_gl.imported
+    assert opengl_platform is not None
+    fresh_gl.use({"egl"})
+    monkeypatch.setitem(sys.modules, "OpenGL.platform", opengl_platform)
+    assert render.ensure_headless_gl() == "egl"  # this process runs EGL
+    assert fresh_gl.calls == []
+
+    class GLXPlatform:
+        pass
+
+    monkeypatch.setattr(render, "_PLATFORM", None)
+    monkeypatch.setattr(opengl_platform, "PLATFORM", GLXPlatform())
+    with pytest.raises(RenderingUnavailableError, match="import cassi_fit.render first"):
+        render.ensure_headless_gl()
