@@ -53,14 +53,14 @@ ROWS = [
     ("crown3", 147, 1, -92, 66, -173, 2.1, 0, "u"),
     ("forehead1", 129, 9, -92, 73, -179, 2.2, 0, "u"),
     ("forehead2", 110, 13, -92, 75, -181, 2.3, 0, "u"),
-    ("brow", 94, 15, -90, 73, -180, 2.5, 0, "u"),
-    ("glabella", 84, 15, -88, 70, -177, 2.7, 0, "u"),
-    ("nasion", 76, 11, -85, 67, -174, 3.0, 0, "u"),
-    ("lid_up", 70, 10, -82, 66, -171, 3.0, 0, "u"),
-    ("eye_hi", 67, 10, -81, 66, -170, 3.0, 0, "u"),
-    ("eyes", 64, 10, -80, 66, -168, 3.0, 0, "u"),
-    ("eye_lo", 61, 10, -79, 66, -166, 3.0, 0, "u"),
-    ("lid_low", 58, 10, -78, 66, -164, 3.0, 0, "u"),
+    ("brow", 94, 15, -90, 74, -180, 2.5, 0, "u"),
+    ("glabella", 84, 15, -88, 72.5, -177, 2.65, 0, "u"),
+    ("nasion", 76, 11, -86, 70.5, -174, 2.8, 0, "u"),
+    ("lid_up", 70, 10, -84, 69, -171, 2.9, 0, "u"),
+    ("eye_hi", 67, 10, -83, 68, -170, 2.95, 0, "u"),
+    ("eyes", 64, 10, -81.5, 67.5, -168, 3.0, 0, "u"),
+    ("eye_lo", 61, 10, -80, 67, -166, 3.0, 0, "u"),
+    ("lid_low", 58, 10, -78.5, 66.5, -164, 3.0, 0, "u"),
     ("eyes_low", 54, 10.5, -76, 66, -162, 3.0, 0, "u"),
     ("cheekbone", 47, 11, -74, 65, -158, 3.0, 0, "u"),
     ("nose_tip_high", 42.5, 12, -73, 64, -155, 2.9, 0, "u"),
@@ -82,11 +82,11 @@ ROWS = [
     ("chin", -40, 8.0, -80, 50.5, -147, 1.9, 5, "l"),
     ("chin_low", -49, 6.0, -82, 48.5, -147, 1.8, 9, "l"),
     ("menton", -56, -4.0, -84, 46, -147, 1.6, 13, "l"),
-    ("under_chin", -61, -24.0, -95, 52, -147, 1.5, 14, "l"),
-    ("throat", -68, -38.0, -95, 53, -148, 1.6, 12, "l"),
-    ("neck1", -85, -40.0, -95, 53, -150, 1.8, 6, "l"),
-    ("neck2", -105, -39.0, -95, 54, -152, 2.0, 2, "l"),
-    ("neck_base", -125, -36.0, -95, 57, -154, 2.0, 0, "l"),
+    ("under_chin", -61, -24.0, -95, 48, -147, 1.5, 14, "l"),
+    ("throat", -68, -38.0, -95, 50, -148, 1.6, 12, "l"),
+    ("neck1", -85, -40.0, -95, 52, -150, 1.8, 6, "l"),
+    ("neck2", -105, -39.0, -95, 53, -152, 2.0, 2, "l"),
+    ("neck_base", -125, -36.0, -95, 56, -154, 2.0, 0, "l"),
 ]
 ROW_INDEX = {r[0]: i for i, r in enumerate(ROWS)}
 # Lip protrusion (mm, at the midline) on top of xf; falls to 0 at the mouth corners.
@@ -119,7 +119,7 @@ def column_angles():
     front = [np.arcsin(min((z / w), 1.0) ** (e / 2.0)) for z in FRONT_Z]
     n_side = 4
     side = list(np.linspace(front[-1], np.pi / 2, n_side + 2)[1:])
-    back = list(np.linspace(np.pi / 2, np.pi, 7)[1:])
+    back = list(np.radians([100.0, 110.0, 120.0, 135.0, 150.0, 165.0, 180.0]))
     return np.array(front + side + back)
 
 
@@ -170,7 +170,9 @@ def bumps(name, p):
     r_eye = np.hypot((y - ey) / 8.0, (az - ez) / 21.0)
     x += 1.2 * bell((r_eye - 0.8) / 0.3)
     b = 1.0 - ramp(r_eye, 0.6, 1.0)
-    x = x * (1.0 - b) + (ex + EYE_RADIUS - 7.0) * b
+    # inside the opening the skin lies just behind the eyeball (sclera shows to the corners)
+    cap = np.sqrt(max(EYE_RADIUS**2 - (y - ey) ** 2 - (az - ez) ** 2, 0.0))
+    x = x * (1.0 - b) + (ex + max(cap - 2.5, -1.0)) * b
     x += 4.0 * bell(np.hypot((y - 47.0) / 13.0, (az - 52.0) / 16.0))
     if az > 30:
         z = np.sign(z) * (az + 3.0 * bell(np.hypot((y - 47.0) / 12.0, (x + 50.0) / 22.0)))
@@ -184,8 +186,8 @@ def bumps(name, p):
         gon = bell(np.hypot((x + 82.0) / 16.0, (y + 40.0) / 22.0))
         z = np.sign(z) * (az + 5.0 * gon)
     # ears: a flat bump on the side of the head
-    ear = bell(np.hypot((x + 106.0) / 12.0, (y - 38.0) / 28.0))
-    z = np.sign(z) * (abs(z) + 10.0 * ear) if az > 30 else z
+    ear = bell(np.hypot((x + 102.0) / 15.0, (y - 40.0) / 27.0))
+    z = np.sign(z) * (abs(z) + 14.0 * ear) if az > 30 else z
     return np.array([x, y, z])
 
 
@@ -273,7 +275,7 @@ def skin_weights(verts, ids, corner_z):
     vert = (p["jaw"] + (p["under_chin"] - p["jaw"]) * ramp(dy, 0.0, 6.0)
             + (p["neck"] - p["under_chin"]) * ramp(dy, 12.0, 20.0)
             - p["neck"] * ramp(dy, 40.0, 70.0))
-    back = 1.0 - ramp(-x, 80.0, 102.0)
+    back = 1.0 - ramp(-x, 70.0, 125.0)
     lat = ramp(phi, phi_in, phi_c)            # 0 in the middle of the mouth, 1 at the corners
     lat = np.where(phi > np.pi / 2, 1.0, lat)
     below = ramp(-y, 4.0, 30.0)               # mouth level -> mandible
