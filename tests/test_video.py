@@ -17,6 +17,7 @@ from cassi_fit.video import (
     frame_rate,
     media_info,
     slice_wav,
+    write_animation,
     write_video,
 )
 
@@ -144,3 +145,62 @@ def test_bad_suffix_and_empty_video(tmp_path):
     with pytest.raises(CassiError, match="no frames"):
         write_video(tmp_path / "empty.mp4", [], 10)
     assert not list(tmp_path.iterdir())
+
+
+class _FlatRenderer:
+    """Stands in for render.Renderer: a grey frame whose shade encodes the frame."""
+
+    def __init__(self):
+        self.captions = []
+
+    def render(self, vertices, *, caption=None, markers=None):
+        self.captions.append(caption)
+        return np.full((40, 48, 3), int(vertices[0, 0]) % 256, np.uint8)
+
+
+@pytest.mark.parametrize("stride", [1, 7])
+def test_animation_sound_is_aligned_for_any_stride(tmp_path, stride):
+    """Lines from index 50 (t_0 = 0.343 s); a click at recording time 0.9 s must sound at
+    video time 0.9 - t_0, whatever the stride."""
+    from types import SimpleNamespace
+
+    lines = np.arange(50, 250, stride)
+    m = len(lines)
+    animation = SimpleNamespace(
+        times=lines * FRAME_STEP_S,
+        frame_index=lines,
+        stride=stride,
+        n_frames=m,
+        vertices=np.arange(m)[:, None, None] * np.ones((m, 3, 3)),
+        pellets_measured=np.zeros((m, 8, 2)),
+        pellets_model=np.zeros((m, 8, 2)),
+        frame_status=np.zeros(m, int),
+    )
+    samples = np.zeros(2 * RATE)
+    samples[int(0.9 * RATE) : int(0.9 * RATE) + 80] = 20000
+    wav = _write_wav(tmp_path / "s.wav", samples)
+    renderer = _FlatRenderer()
+    path = write_animation(
+        tmp_path / "a.mp4", animation, renderer, subject="S", task="t", audio=wav, progress=False
+    )
+    assert count_frames(path) == m
+    assert "line 51" in renderer.captions[0] and "S t" in renderer.captions[0]
+    decoded = tmp_path / "decoded.wav"
+    subprocess.run(
+        [
+            _ffmpeg(),
+            "-loglevel",
+            "error",
+            "-i",
+            str(path),
+            "-ac",
+            "1",
+            "-ar",
+            str(RATE),
+            str(decoded),
+        ],
+        check=True,
+    )
+    heard, _ = _read_wav(decoded)
+    onset = np.argmax(np.abs(heard) > 5000) / RATE
+    assert onset == pytest.approx(0.9 - 50 * FRAME_STEP_S, abs=0.01)
