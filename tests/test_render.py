@@ -399,3 +399,22 @@ def test_an_already_imported_opengl_is_reported_not_guessed(renderer, fresh_gl, 
     monkeypatch.setattr(opengl_platform, "PLATFORM", GLXPlatform())
     with pytest.raises(RenderingUnavailableError, match="import cassi_fit.render first"):
         render.ensure_headless_gl()
+
+
+def test_culling_hidden_faces_changes_no_pixel(renderer, model):
+    with render.Renderer(model, size=SIZE, colours=TEST_COLOURS, cull=False) as double:
+        np.testing.assert_array_equal(
+            double.render(model.vertices), renderer.render(model.vertices)
+        )
+    assert any(p.cull for p in renderer._pieces)  # culling did happen
+    inside = [p for p in renderer._pieces if p.material == "skin" and "inside" in p.views]
+    assert inside and all(p.cull is None for p in inside)  # the cut's inside shows
+
+
+def test_winding_is_read_from_the_signed_volume():
+    sphere = trimesh.creation.icosphere(subdivisions=1)
+    v, f = np.asarray(sphere.vertices) * 30 + 5, np.asarray(sphere.faces)
+    assert render._winding(v, f) == 1
+    assert render._winding(v, f[:, ::-1]) == -1
+    sheet_v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]])
+    assert render._winding(sheet_v, np.array([[0, 1, 2], [1, 3, 2]])) == 0
