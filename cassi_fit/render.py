@@ -513,12 +513,12 @@ def _colour_only_renderer_class():
             for node in nodes:
                 for primitive in node.mesh.primitives:
                     program = self._get_primitive_program(primitive, flags, 0)
-                    if program is not bound:
+                    if program is not bound:  # every node has the identity pose
                         program._bind()
                         _uniform(program, "V", view)
                         _uniform(program, "P", projection)
+                        _uniform(program, "M", np.eye(4))
                         bound = program
-                    _uniform(program, "M", scene.get_pose(node))
                     _draw_primitive(gl, program, primitive)
             if bound is not None:
                 bound._unbind()
@@ -559,15 +559,22 @@ def _colour_only_renderer_class():
                     gl.GL_COLOR_BUFFER_BIT, gl.GL_LINEAR,
                 )  # fmt: skip
             gl.glBindFramebuffer(gl.GL_READ_FRAMEBUFFER, self._main_fb)
-            raw = gl.glReadPixels(0, 0, width, height, gl.GL_RGBA, gl.GL_UNSIGNED_BYTE)
-            image = np.frombuffer(raw, np.uint8).reshape(height, width, 4)
-            return np.ascontiguousarray(image[::-1, :, :3]), None
+            # RGB straight into a kept buffer: dropping alpha in numpy costs 1.4 ms a frame.
+            buffer = self.__dict__.get("_cassi_pixels")
+            if buffer is None or buffer.shape != (height, width, 3):
+                buffer = self._cassi_pixels = np.empty((height, width, 3), np.uint8)
+            gl.glPixelStorei(gl.GL_PACK_ALIGNMENT, 1)
+            gl.glReadPixels(0, 0, width, height, gl.GL_RGB, gl.GL_UNSIGNED_BYTE, buffer)
+            return buffer[::-1].copy(), None
 
     return _ColourOnlyRenderer
 
 
 def _uniform(program, name, value):
-    """Set a uniform of a pyrender ShaderProgram, its location cached on the program."""
+    """Set a uniform of a pyrender ShaderProgram, its location cached on the program.
+
+    ``value``: a (4,4) matrix, or a tuple of 1, 3 or 4 floats.
+    """
     from OpenGL import GL as gl
 
     locations = program.__dict__.setdefault("_cassi_locations", {})
@@ -576,23 +583,35 @@ def _uniform(program, name, value):
     loc = locations[name]
     if loc < 0:
         return
-    value = np.asarray(value, dtype=np.float32)
-    if value.ndim == 2:
-        gl.glUniformMatrix4fv(loc, 1, gl.GL_TRUE, value)
-    elif value.size == 4:
-        gl.glUniform4fv(loc, 1, value)
-    elif value.size == 3:
-        gl.glUniform3fv(loc, 1, value)
+    if isinstance(value, np.ndarray) and value.ndim == 2:
+        gl.glUniformMatrix4fv(loc, 1, gl.GL_TRUE, value.astype(np.float32))
+    elif len(value) == 4:
+        gl.glUniform4f(loc, *value)
+    elif len(value) == 3:
+        gl.glUniform3f(loc, *value)
     else:
-        gl.glUniform1f(loc, float(value))
+        gl.glUniform1f(loc, value[0])
+
+
+def _material_uniforms(material) -> tuple:
+    """(base colour (4,), emissive (3,), (roughness,)) as Python floats, for _uniform."""
+    return (
+        tuple(float(c) for c in material.baseColorFactor),
+        tuple(float(c) for c in material.emissiveFactor),
+        (float(material.roughnessFactor),),
+    )
 
 
 def _draw_primitive(gl, program, primitive):
     """Material uniforms, blending and culling, then one instanced draw of ``primitive``."""
     material = primitive.material
-    _uniform(program, "material.base_color_factor", material.baseColorFactor)
-    _uniform(program, "material.emissive_factor", material.emissiveFactor)
-    _uniform(program, "material.roughness_factor", material.roughnessFactor)
+    uniforms = primitive.__dict__.get("cassi_uniforms")
+    if uniforms is None:
+        uniforms = primitive.cassi_uniforms = _material_uniforms(material)
+    base, emissive, roughness = uniforms
+    _uniform(program, "material.base_color_factor", base)
+    _uniform(program, "material.emissive_factor", emissive)
+    _uniform(program, "material.roughness_factor", roughness)
     if material.alphaMode == "BLEND":
         gl.glEnable(gl.GL_BLEND)
         gl.glBlendFunc(gl.GL_SRC_ALPHA, gl.GL_ONE_MINUS_SRC_ALPHA)
