@@ -63,11 +63,17 @@ def main(argv=None) -> int:
     model, frames = frames_of_model(args.frames)
     markers = None
     if args.markers:
-        sites = np.asarray([frames[0][model.landmarks[k]] for k in
-                            ("UL", "LL", "T1", "T2", "T3", "T4", "MNI", "MNM")])
+        sites = np.asarray(
+            [
+                frames[0][model.landmarks[k]]
+                for k in ("UL", "LL", "T1", "T2", "T3", "T4", "MNI", "MNM")
+            ]
+        )
         markers = {"measured": sites, "model": sites + 1.0}
-    print(f"{len(frames)} frames, {width}x{height}, {frames.shape[1]} vertices, "
-          f"{len(model.faces)} triangles, {os.cpu_count()} CPUs")
+    print(
+        f"{len(frames)} frames, {width}x{height}, {frames.shape[1]} vertices, "
+        f"{len(model.faces)} triangles, {os.cpu_count()} CPUs"
+    )
     cases = [("grid (4 views)", VIEWS, True), ("grid + caption", VIEWS, True)]
     cases += [(f"single: {v}", (v,), False) for v in VIEWS]
     for label, views, _ in cases:
@@ -76,8 +82,10 @@ def main(argv=None) -> int:
         setup = time.perf_counter() - start
         wall, cpu = time_frames(renderer, frames, markers, caption="caption" in label)
         renderer.close()
-        print(f"{label:<18s} {wall:6.1f} ms/frame  {1e3 / wall:6.1f} frames/s  "
-              f"(CPU {cpu:5.1f} ms/frame, set-up {setup:4.2f} s)")
+        print(
+            f"{label:<18s} {wall:6.1f} ms/frame  {1e3 / wall:6.1f} frames/s  "
+            f"(CPU {cpu:5.1f} ms/frame, set-up {setup:4.2f} s)"
+        )
     return 0
 
 

@@ -2,20 +2,30 @@
 
 The paper judged every animation from four views (Scheidt & Hamilton 1999, section 4):
 ``front`` (the full face), ``side`` (the full face in profile, looking to the right of the
-image), ``inside`` (half the face from the side: the skin, lips, eyes, teeth and palate on
-the camera's side of the midsagittal plane z = 0 (the subject's right half) are cut away, or the skin drawn
-semi-transparent, so that the tongue, teeth and palate show) and ``top`` (skin hidden:
-palate, teeth and tongue seen from +y, the front of the mouth to the right).
+image), ``inside`` (half the face from the side: skin, lips, teeth and palate on the
+camera's side of the midsagittal plane z = 0 cut away, or the skin see-through, so that
+tongue, teeth and palate show) and ``top`` (skin hidden: palate, teeth and tongue seen from
+above, the front of the mouth to the right). Singly, in a row, or as a 2x2 grid (front,
+side / inside, top); pellet markers in the side and inside views; a caption.
 
-Speed: the whole 2x2 grid is ONE draw of ONE pyrender scene. Every material is split once
-into the triangles on either side of the midsagittal plane; each piece is a single pyrender primitive drawn *instanced*, one instance per view
-that shows it, each instance a similarity transform that places that view in its cell of
-the image in front of one orthographic camera. The lights are fixed to the camera, so every
-view is lit alike. Per frame only the vertex buffers are rewritten in place
-(``glBufferSubData``); the framebuffer has no multisampling and only colour is read back.
+Speed (llvmpipe, the software OpenGL of headless machines, is the target):
 
-Geometry is in the model frame (mm): x front, y up, z = 0 midsagittal (docs/ARCHITECTURE.md).
-Cameras are fitted once to the rest mesh with a margin, so a video does not jump.
+- The whole grid is ONE draw of ONE pyrender scene. Every material is split once into the
+  triangles on either side of the midsagittal plane; each piece is one pyrender primitive
+  drawn *instanced*, one instance per view that shows it. An instance matrix places its
+  view in its cell in front of one orthographic camera (and carries the cell, to which
+  the vertex shader clips). The lights live in the shader, fixed to the camera, so every
+  view is lit alike.
+- Per frame only the vertex buffers are rewritten in place (``glBufferSubData``).
+- pyrender's scene, buffers and context are kept; its PBR shading (lights re-bound in
+  Python for every draw), 4x multisampling and depth read-back are replaced by a light
+  two-sided shader, a plain framebuffer and an RGB read into a kept buffer.
+- Back faces are culled wherever no view can show them (materials with a clear winding,
+  away from the cut).
+
+Geometry is in the model frame (mm): x front, y up, z to the subject's left, z = 0
+midsagittal (docs/ARCHITECTURE.md). Cameras are fitted once to the rest mesh with a
+margin, so a video does not jump.
 """
 
 from __future__ import annotations
@@ -56,8 +66,8 @@ _IRIS_COLOUR = (0.25, 0.17, 0.10)
 # camera would (not mirrored) is a reflection in OpenGL's right-handed terms (det = -1):
 # front: the subject's left on the image's right; side and inside: the subject's right
 # side, the face looking to the right of the image; top: from above, the front of the
-# mouth to the right and the subject's left up. (Triangle winding flips with it, which
-# does not matter: everything is drawn double-sided and lit by the view direction.)
+# mouth to the right and the subject's left up. (Triangle winding flips on screen with it:
+# see _cull_face; lighting goes by the view direction, not the winding.)
 _VIEW_AXES = {
     "front": ((0, 0, 1), (0, 1, 0), (1, 0, 0)),
     "side": ((1, 0, 0), (0, 1, 0), (0, 0, -1)),
@@ -200,9 +210,8 @@ def ensure_headless_gl() -> str:
             return platform
         failures.append(f"{platform} ({reason})")
     raise RenderingUnavailableError(
-        "no offscreen OpenGL: tried " + "; ".join(failures) + ". Install Mesa EGL "
-        "(apt install libegl1 libgl1-mesa-dri) or OSMesa (libosmesa6), or set "
-        "PYOPENGL_PLATFORM".replace("\n", " ")
+        f"no offscreen OpenGL: tried {'; '.join(failures)}. Install Mesa EGL (apt install "
+        "libegl1 libgl1-mesa-dri) or OSMesa (libosmesa6), or set PYOPENGL_PLATFORM"
     )
 
 
@@ -308,7 +317,10 @@ class _Piece:
     def __init__(self, material, near, glass, vertex_index, faces, static, views, cull=None):
         self.material, self.near, self.glass, self.cull = material, near, glass, cull
         self.vertex_index, self.faces, self.static, self.views = (
-            vertex_index, faces, static, views
+            vertex_index,
+            faces,
+            static,
+            views,
         )
         self.buffer = np.zeros((len(vertex_index), 6 + static.shape[1]), np.float32)
         self.buffer[:, 6:] = static
@@ -378,7 +390,9 @@ def _split_pieces(vertices, faces, face_material, materials, views, skin, cull) 
                 if not mask.any() or not shown:
                     continue
                 index, local = np.unique(faces[mask], return_inverse=True)
-                static = iris[index] if (m == eye and iris is not None) else np.zeros((len(index), 0))
+                static = (
+                    iris[index] if (m == eye and iris is not None) else np.zeros((len(index), 0))
+                )
                 args = (name, near, glass, index, local.reshape(-1, 3), static)
                 if face is None or glass:
                     pieces.append(_Piece(*args, shown))
@@ -1047,7 +1061,9 @@ def save_png(path, image, *, overwrite=True) -> Path:
 
     array = np.asarray(image)
     if array.dtype != np.uint8 or array.ndim != 3 or array.shape[2] not in (3, 4):
-        raise CassiError(f"{path}: an image must be (H, W, 3|4) uint8, got {array.shape} {array.dtype}")
+        raise CassiError(
+            f"{path}: an image must be (H, W, 3|4) uint8, got {array.shape} {array.dtype}"
+        )
     buffer = io.BytesIO()
     Image.fromarray(array).save(buffer, format="PNG")
     return atomic_write(path, buffer.getvalue(), overwrite=overwrite)

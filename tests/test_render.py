@@ -247,7 +247,7 @@ def test_transparent_skin_shows_the_tongue(model):
         model, size=SIZE, views=("inside",), skin="transparent", colours=TEST_COLOURS
     ) as r:
         img = r.render(model.vertices)
-    tongue = green(img) | ((img[..., 1].astype(int) > img[..., 0] + 25))
+    tongue = green(img) | (img[..., 1].astype(int) > img[..., 0] + 25)
     assert tongue.sum() > 100
     assert blue(img).sum() > 200
 
