@@ -663,11 +663,11 @@ def _framebuffer(gl, dims, samples):
     return fb, colour, depth
 
 
-def _sphere(radius_subdivisions: int = 2):
+def _sphere(subdivisions: int = 2):
     """Unit icosphere (positions, normals, faces) for the markers."""
     import trimesh
 
-    s = trimesh.creation.icosphere(subdivisions=radius_subdivisions)
+    s = trimesh.creation.icosphere(subdivisions=subdivisions)
     return np.asarray(s.vertices), np.asarray(s.vertex_normals), np.asarray(s.faces)
 
 

@@ -418,3 +418,10 @@ def test_winding_is_read_from_the_signed_volume():
     assert render._winding(v, f[:, ::-1]) == -1
     sheet_v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]])
     assert render._winding(sheet_v, np.array([[0, 1, 2], [1, 3, 2]])) == 0
+
+
+def test_antialiasing_softens_edges_only(model, views):
+    with render.Renderer(model, size=SIZE, views=("side",), colours=TEST_COLOURS, antialias=4) as r:
+        smooth = r.render(model.vertices)
+    changed = np.any(smooth != views["side"], axis=-1)
+    assert 0 < changed.mean() < 0.1  # the silhouette's pixels, not the picture
