@@ -69,14 +69,14 @@ ROWS = [
     ("subnasale", 29.5, 12, -72, 61, -150, 2.6, 0, "u"),
     ("philtrum", 24, 11.5, -72, 60, -149, 2.5, 0, "u"),
     ("UL", 17.8, 6.0, -72, 59, -148, 2.4, 0, "u"),
-    ("ul_red", 9.5, 5.5, -73, 57.5, -147, 2.4, 0, "u"),
+    ("ul_red", 11.0, 5.5, -73, 57.5, -147, 2.4, 0, "u"),
     ("ul_low", 3.5, 5.0, -73, 57, -147, 2.4, 0, "u"),
     ("A", 0.2, 5.0, -74, 56.5, -147, 2.4, 0, "u"),
     ("A_in", 0.2, 5.0, -74, 56.5, -147, 2.4, 0, "u"),
     ("B_in", -0.2, 5.0, -74, 56.5, -147, 2.4, 0, "l"),
     ("B", -0.2, 5.0, -74, 56.5, -147, 2.4, 0, "l"),
     ("ll_high", -4, 5.0, -74, 56, -147, 2.4, 0, "l"),
-    ("ll_red", -11, 5.0, -75, 55, -147, 2.3, 0, "l"),
+    ("ll_red", -13.0, 5.0, -75, 55, -147, 2.3, 0, "l"),
     ("LL", -21.4, 4.0, -76, 54, -147, 2.2, 0.5, "l"),
     ("fold", -29, 3.0, -78, 52.5, -147, 2.1, 2, "l"),
     ("chin", -40, 8.0, -80, 50.5, -147, 1.9, 5, "l"),
@@ -152,16 +152,18 @@ def bumps(name, p):
     if name in ("UL", "ul_red", "ul_low", "ll_high", "ll_red", "LL"):
         # the vermilion is a lens: its height shrinks toward the mouth corners
         u = az / MOUTH_HALF_WIDTH
-        squeeze = np.where(u <= 1.0, 1.0 - 0.7 * u**2, 0.3 + 0.7 * ramp(u, 1.0, 1.8))
+        squeeze = np.where(u <= 1.0, 1.0 - 0.75 * u**3, 0.25 + 0.75 * ramp(u, 1.0, 1.8))
         y = y * squeeze
     if name in NOSE:
         h, hw = NOSE[name]
-        x += h * bell(az / hw) ** 1.3
+        x += h * bell(az / hw) ** (1.3 if h < 15 else 1.0)
         if name == "nostril":  # alar wings and the two nostril dents
-            x += 4.0 * bell((az - 14.0) / 5.0)
-            x -= 7.0 * bell((az - 6.0) / 3.5)
+            x += 6.0 * bell((az - 14.5) / 6.0)
+            x -= 8.0 * bell((az - 7.0) / 4.0)
         if name == "nose_tip":
-            x += 2.5 * bell((az - 14.0) / 5.0)
+            x += 4.0 * bell((az - 14.5) / 6.0)
+        if name == "subnasale":
+            x += 3.0 * bell((az - 15.0) / 5.0)
     # orbit, brow ridge, the eye opening (skin pulled back behind the eyeball's front in
     # an almond, with a slight lid margin around it), cheekbones
     ex, ey, ez = EYE_CENTRE
@@ -472,8 +474,10 @@ def build():
     nose_tip_i = index[(ROW_INDEX["nose_tip"], 0, 1)]
     fields = skin_fields(sv, ids, lower, corner_z, sv[nose_tip_i])
     names = [ROWS[i][0] for i in ids[:, 0]]
-    lip_row = np.isin(names, ["UL", "ul_red", "ul_low", "A", "A_in", "B_in", "B", "ll_high",
-                              "ll_red", "LL"])
+    # the red of the lips: from a little inside the pellet sites (UL, LL sit on the lips'
+    # outer surface, just beyond the vermilion) to the mouth line
+    lip_row = np.isin(names, ["ul_red", "ul_low", "A", "A_in", "B_in", "B", "ll_high",
+                              "ll_red"])
     in_mouth = (np.abs(sv[:, 2]) < corner_z + 1e-9) & (sv[:, 0] > -30.0)
     mouth_core = (np.abs(sv[:, 2]) < 16.0 + 1e-6) & (sv[:, 0] > -30.0)  # lips' jaw weight flat
     lip_vertex = lip_row & in_mouth
