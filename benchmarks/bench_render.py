@@ -74,11 +74,12 @@ def main(argv=None) -> int:
         f"{len(frames)} frames, {width}x{height}, {frames.shape[1]} vertices, "
         f"{len(model.faces)} triangles, {os.cpu_count()} CPUs"
     )
-    cases = [("grid (4 views)", VIEWS, True), ("grid + caption", VIEWS, True)]
-    cases += [(f"single: {v}", (v,), False) for v in VIEWS]
-    for label, views, _ in cases:
+    cases = [("grid (4 views)", VIEWS, 0), ("grid + caption", VIEWS, 0)]
+    cases += [("grid, 4x MSAA", VIEWS, 4)]
+    cases += [(f"single: {v}", (v,), 0) for v in VIEWS]
+    for label, views, samples in cases:
         start = time.perf_counter()
-        renderer = Renderer(model, size=(width, height), views=views)
+        renderer = Renderer(model, size=(width, height), views=views, antialias=samples)
         setup = time.perf_counter() - start
         wall, cpu = time_frames(renderer, frames, markers, caption="caption" in label)
         renderer.close()
