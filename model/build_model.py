@@ -168,7 +168,7 @@ def bumps(name, p):
     # an almond, with a slight lid margin around it), cheekbones
     ex, ey, ez = EYE_CENTRE
     x -= 3.0 * bell(np.hypot((y - ey) / 16.0, (az - ez) / 22.0))
-    x += 3.5 * bell(np.hypot((y - 84.0) / 7.0, (az - 30.0) / 24.0))
+    x += 3.0 * bell((y - 84.0) / 8.0) * (1.0 - ramp(az, 38.0, 60.0))  # brow ridge, glabella
     r_eye = np.hypot((y - ey) / 8.0, (az - ez) / 21.0)
     x += 1.2 * bell((r_eye - 0.8) / 0.3)
     b = 1.0 - ramp(r_eye, 0.6, 1.0)
@@ -274,10 +274,10 @@ def skin_weights(verts, ids, corner_z):
     # jaw line from menton to gonion; dy > 0 below it
     y_line = np.interp(x, [-84.0, -4.0], [-40.0, -56.0])
     dy = y_line - y
-    vert = (p["jaw"] + (p["under_chin"] - p["jaw"]) * ramp(dy, 0.0, 6.0)
-            + (p["neck"] - p["under_chin"]) * ramp(dy, 12.0, 20.0)
-            - p["neck"] * ramp(dy, 40.0, 70.0))
-    back = 1.0 - ramp(-x, 70.0, 125.0)
+    vert = (p["jaw"] + (p["under_chin"] - p["jaw"]) * ramp(dy, 0.5, 7.0)
+            + (p["neck"] - p["under_chin"]) * ramp(dy, 9.5, 18.0)
+            - p["neck"] * ramp(dy, 41.0, 80.0))
+    back = 1.0 - ramp(-x, 60.0, 140.0)
     lat = ramp(phi, phi_in, phi_c)            # 0 in the middle of the mouth, 1 at the corners
     lat = np.where(phi > np.pi / 2, 1.0, lat)
     below = ramp(-y, 4.0, 30.0)               # mouth level -> mandible
