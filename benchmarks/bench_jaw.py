@@ -28,7 +28,9 @@ def frames(n, seed=0):
     rel = REFERENCE[None] - PIVOT
     moved = np.stack([c[:, None] * rel[None, :, 0] + s[:, None] * rel[None, :, 1],
                       -s[:, None] * rel[None, :, 0] + c[:, None] * rel[None, :, 1]], -1)
-    return moved[:, 0] + PIVOT + rng.normal(0, 0.3, (n, 2, 2))
+    # moved (n, 2, 2): both pellets turned about PIVOT (an earlier version returned
+    # moved[:, 0], i.e. both pellets at MNI: a non-rigid, degenerate benchmark)
+    return moved + PIVOT + rng.normal(0, 0.3, (n, 2, 2))
 
 
 def numpy_closed_form(reference, current):

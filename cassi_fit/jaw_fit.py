@@ -83,22 +83,61 @@ def _tolerance(dtype):
     return 1e-8 if jnp.dtype(dtype) == jnp.float64 else 1e-4
 
 
-def solve(residuals, params0, args, solver="optimistix-lm"):
+class _GradientStop:
+    """Mixin for optimistix's Gauss-Newton family; see :meth:`terminate`."""
+
+    def terminate(self, fn, y, args, options, state, tags):
+        """optimistix's Cauchy test (small step in ``y`` and in the residuals), or first-order
+        optimality ``|J^T r|_inf <= atol (1 + |r|)`` at the last accepted point.
+
+        The Cauchy test is only evaluated after an *accepted* step. At the minimum the
+        predicted reduction is ~1e-30 and the actual one is rounding noise, so a trust-region
+        solver rejects about half of its steps there, shrinks its region and tries again; in
+        a vmapped fit the batch then runs until the unluckiest frame gets an acceptance
+        (6-7 steps for the per-frame fit started at its minimum). The gradient test (MINPACK's
+        ``gtol``) stops as soon as the last accepted point is stationary: for a start at the
+        minimum, after the first evaluation. Only for problems whose parameters are scaled so
+        that ``J^T J`` is of order 1 (the per-frame fit: exactly ``2 I``), where a gradient
+        below ``atol`` means a parameter error below ``atol``.
+        """
+        done, result = super().terminate(fn, y, args, options, state, tags)
+        info = state.f_info
+        grad = info.jac.transpose().mv(info.residual)
+        norm = jnp.sqrt(jnp.sum(info.residual**2))
+        stationary = (~state.first_step) & (jnp.max(jnp.abs(grad)) <= self.atol * (1.0 + norm))
+        return done | stationary, result
+
+
+class _LevenbergMarquardt(_GradientStop, optx.LevenbergMarquardt):
+    pass
+
+
+class _GaussNewton(_GradientStop, optx.GaussNewton):
+    pass
+
+
+class _Dogleg(_GradientStop, optx.Dogleg):
+    pass
+
+
+def solve(residuals, params0, args, solver="optimistix-lm", gradient_stop=False):
     """Minimise ``|residuals(params, args)|^2`` from ``params0`` with the named solver.
 
     Traceable (jit/vmap). Returns ``(params, converged)``. Failure comes back as a value
     (optimistix ``throw=False``), never as an exception from traced code. ``converged`` is
     the solver's own verdict, or first-order optimality at the answer
     (``|J^T r|_inf <= 100 tol (1 + |r|^2)``): a trust-region solver sitting exactly on the
-    minimum may stop by shrinking its region without declaring success.
+    minimum may stop by shrinking its region without declaring success. ``gradient_stop``
+    also ends the optimistix solvers at a stationary point (:class:`_GradientStop`); use it
+    only with well-scaled parameters.
     """
-    params, converged = _solve_raw(residuals, params0, args, solver)
+    params, converged = _solve_raw(residuals, params0, args, solver, gradient_stop)
     cost, grad = jax.value_and_grad(lambda p: 0.5 * jnp.sum(residuals(p, args) ** 2))(params)
     stationary = jnp.max(jnp.abs(grad)) <= 100 * _tolerance(params0.dtype) * (1.0 + 2.0 * cost)
     return params, converged | stationary
 
 
-def _solve_raw(residuals, params0, args, solver):
+def _solve_raw(residuals, params0, args, solver, gradient_stop=False):
     tol = _tolerance(params0.dtype)
     if solver.startswith("jaxopt-"):
         from . import _jaxopt_adapter
@@ -108,12 +147,12 @@ def _solve_raw(residuals, params0, args, solver):
             max_steps=_MAX_STEPS,
         )
     kinds = {
-        "optimistix-lm": optx.LevenbergMarquardt,
-        "optimistix-gn": optx.GaussNewton,
-        "optimistix-dogleg": optx.Dogleg,
+        "optimistix-lm": (optx.LevenbergMarquardt, _LevenbergMarquardt),
+        "optimistix-gn": (optx.GaussNewton, _GaussNewton),
+        "optimistix-dogleg": (optx.Dogleg, _Dogleg),
     }
     sol = optx.least_squares(
-        residuals, kinds[solver](rtol=tol, atol=tol), params0, args,
+        residuals, kinds[solver][int(gradient_stop)](rtol=tol, atol=tol), params0, args,
         max_steps=_MAX_STEPS, throw=False,
     )
     return sol.value, sol.result == optx.RESULTS.successful
@@ -129,6 +168,43 @@ def rigid_residuals(params, args):
     """One frame, ``params = (theta, tx, ty)``: ``R p_i + t - p_i'`` for both pellets, (4,) mm."""
     reference, current = args
     return (rigid.apply(params[0], params[1:], reference) - current).ravel()
+
+
+def _frame_scale(reference):
+    """Centroid ``c`` (2,) and rms radius ``ell`` (mm) of the reference jaw points."""
+    centre = jnp.mean(reference, axis=0)
+    return centre, jnp.sqrt(jnp.mean(jnp.sum((reference - centre) ** 2, axis=-1)))
+
+
+def scaled_rigid_residuals(z, args):
+    """One frame in scaled, centred coordinates ``z = (ell theta, s)``, (4,) mm.
+
+    ``p' = R(theta)(p - c) + c + s`` with ``c`` the reference centroid and ``ell`` its rms
+    radius. Both parameters are then in mm and decoupled: ``J^T J = 2 I`` at every ``z``
+    (the rotation column sums to zero over the two pellets about their centroid), so the
+    Levenberg-Marquardt damping ``lambda I`` acts evenly on all three, and one Gauss-Newton
+    step solves the problem up to its (small) curvature in theta.
+    """
+    reference, current = args
+    centre, ell = _frame_scale(reference)
+    theta = z[0] / ell
+    return (rigid.apply(theta, z[1:], reference - centre) + centre - current).ravel()
+
+
+def _unscale(z, reference):
+    """``(ell theta, s)`` -> ``(theta, t)`` with ``t = c + s - R(theta) c``."""
+    centre, ell = _frame_scale(reference)
+    theta = z[0] / ell
+    return jnp.concatenate([theta[None], centre + z[1:] - rigid.apply(theta, jnp.zeros(2), centre)])
+
+
+def _scaled_start(reference, current):
+    """Initial ``z``: the closed-form angle (the two-point least-squares angle) and the
+    centroid translation -- together the Procrustes motion, so well-posed frames start at
+    the minimum and the solver only confirms it."""
+    centre, ell = _frame_scale(reference)
+    theta = jaw.closed_form(reference, current).theta
+    return jnp.concatenate([(ell * theta)[None], jnp.mean(current, axis=0) - centre])
 
 
 def best_angle_about(pivot, reference, current):
@@ -206,7 +282,9 @@ def _frame_kernel(method, solver):
             g = g.reshape(3, 4)
             y, converged, unit_cov = y0, jnp.array(True), g @ g.T
         else:
-            y, converged = solve(rigid_residuals, y0, (reference, current), solver)
+            z, converged = solve(scaled_rigid_residuals, _scaled_start(reference, current),
+                                 (reference, current), solver, gradient_stop=True)
+            y = _unscale(z, reference)
             unit_cov = _unit_covariance(y, reference, current)
         return y, rigid_residuals(y, (reference, current)), converged, unit_cov
 
