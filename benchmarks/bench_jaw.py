@@ -22,14 +22,14 @@ PIVOT = np.array([-88.0, -8.0])
 
 
 def frames(n, seed=0):
+    """``n`` jaw frames (n, 2, 2) mm: the reference turned about PIVOT by speech-like angles
+    (0-11.5 degrees) plus 0.3 mm noise. (An earlier version broadcast the wrong axes and
+    returned frame 0 for every frame, with the two pellets' coordinates mixed up.)"""
     rng = np.random.default_rng(seed)
     theta = 0.2 * np.sin(np.linspace(0, 40, n)) ** 2
-    c, s = np.cos(theta), np.sin(theta)
-    rel = REFERENCE[None] - PIVOT
-    moved = np.stack([c[:, None] * rel[None, :, 0] + s[:, None] * rel[None, :, 1],
-                      -s[:, None] * rel[None, :, 0] + c[:, None] * rel[None, :, 1]], -1)
-    # moved (n, 2, 2): both pellets turned about PIVOT (an earlier version returned
-    # moved[:, 0], i.e. both pellets at MNI: a non-rigid, degenerate benchmark)
+    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
+    rel = REFERENCE - PIVOT  # (2, 2): [pellet, xy]
+    moved = np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]], -1)
     return moved + PIVOT + rng.normal(0, 0.3, (n, 2, 2))
 
 
