@@ -361,10 +361,10 @@ def build_arch(arch, teeth, y0, up, snaps=()):
 # (mm, along the inward normal) and half width at each control point.
 TONGUE = [  # x, y, thickness, half width
     (-9.0, -4.5, 6.0, 9.0), (-12.5, -1.0, 11.0, 14.0), (*SITES["T1"], 16.0, 18.0),
-    (-23.0, 4.5, 20.0, 20.5), (*SITES["T2"], 23.0, 22.0), (-35.0, 10.0, 25.0, 22.5),
-    (*SITES["T3"], 26.0, 22.5), (-47.0, 15.0, 26.0, 22.5), (*SITES["T4"], 25.0, 22.0),
-    (-61.0, 17.0, 23.0, 21.0), (-68.0, 13.5, 20.0, 19.5), (-73.0, 6.0, 17.0, 18.0),
-    (-75.5, -4.0, 14.0, 16.0), (-76.0, -14.0, 12.0, 15.0)]
+    (-23.0, 4.5, 20.0, 20.5), (*SITES["T2"], 24.0, 22.0), (-35.0, 10.0, 26.0, 22.5),
+    (*SITES["T3"], 28.0, 22.5), (-47.0, 15.0, 28.0, 22.5), (*SITES["T4"], 28.0, 22.0),
+    (-61.0, 17.0, 28.0, 21.0), (-68.0, 13.5, 28.0, 19.5), (-73.0, 6.0, 26.0, 18.0),
+    (-75.5, -4.0, 22.0, 16.0), (-76.0, -14.0, 18.0, 15.0)]
 TONGUE_RING = 12
 TONGUE_ANCHOR = 10  # control point index from which CASSI's fixed anchors hold the back
 
@@ -394,9 +394,11 @@ def build_tongue():
     psi = 2 * np.pi * np.arange(TONGUE_RING) / TONGUE_RING
     verts, svals = [], []
     for i in range(len(st)):
-        for a in psi:
-            off = thick[i] / 2 * (1 - np.cos(min(a, 2 * np.pi - a))) * n_in[i]  # mirror-exact
-            z = hw[i] * np.sign(np.sin(a)) * abs(np.sin(a)) ** 0.6
+        for k, a in enumerate(psi):
+            a_m = 2 * np.pi * min(k, TONGUE_RING - k) / TONGUE_RING  # mirror-exact
+            off = thick[i] / 2 * (1 - np.cos(a_m)) * n_in[i]
+            sgn = 0.0 if k in (0, TONGUE_RING // 2) else (1.0 if k < TONGUE_RING // 2 else -1.0)
+            z = hw[i] * sgn * abs(np.sin(a_m)) ** 0.6
             verts.append([xy[i, 0] + off[0], xy[i, 1] + off[1], z])
             svals.append(s[i])
     n_st = len(st)
