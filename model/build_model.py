@@ -277,7 +277,7 @@ def skin_weights(verts, ids, corner_z):
     dy = y_line - y
     vert = (p["jaw"] + (p["under_chin"] - p["jaw"]) * ramp(dy, 0.5, 7.0)
             + (p["neck"] - p["under_chin"]) * ramp(dy, 9.5, 18.0)
-            - p["neck"] * ramp(dy, 41.0, 80.0))
+            - p["neck"] * ramp(dy, 20.0, 80.0))
     back = 1.0 - ramp(-x, 60.0, 140.0)
     lat = ramp(phi, phi_in, phi_c)            # 0 in the middle of the mouth, 1 at the corners
     lat = np.where(phi > np.pi / 2, 1.0, lat)
