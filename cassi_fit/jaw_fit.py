@@ -125,15 +125,22 @@ def solve(residuals, params0, args, solver="optimistix-lm", gradient_stop=False)
 
     Traceable (jit/vmap). Returns ``(params, converged)``. Failure comes back as a value
     (optimistix ``throw=False``), never as an exception from traced code. ``converged`` is
-    the solver's own verdict, or first-order optimality at the answer
-    (``|J^T r|_inf <= 100 tol (1 + |r|^2)``): a trust-region solver sitting exactly on the
-    minimum may stop by shrinking its region without declaring success. ``gradient_stop``
+    the solver's own verdict, or a Gauss-Newton step from the answer that would gain less
+    than the cost can resolve (Newton decrement ``g^T (J^T J)^+ g <= max(tol^2, 100 eps)
+    (1 + |r|^2)``, scale-free in the parameters): a trust-region solver sitting exactly on
+    the minimum may stop by shrinking its region without declaring success. (An earlier
+    ``|J^T r|_inf <= 100 tol (1 + |r|^2)`` passed unconverged recordings: in float32 a
+    fixed pivot 0.8 mm = 1.5 sd from the minimum, after 0 steps.) ``gradient_stop``
     also ends the optimistix solvers at a stationary point (:class:`_GradientStop`); use it
     only with well-scaled parameters.
     """
     params, converged = _solve_raw(residuals, params0, args, solver, gradient_stop)
-    cost, grad = jax.value_and_grad(lambda p: 0.5 * jnp.sum(residuals(p, args) ** 2))(params)
-    stationary = jnp.max(jnp.abs(grad)) <= 100 * _tolerance(params0.dtype) * (1.0 + 2.0 * cost)
+    res = residuals(params, args)
+    jac = jax.jacfwd(residuals)(params, args)
+    grad = jac.T @ res
+    decrement = grad @ jnp.linalg.pinv(jac.T @ jac) @ grad
+    floor = jnp.maximum(_tolerance(params0.dtype) ** 2, 100 * jnp.finfo(params.dtype).eps)
+    stationary = decrement <= floor * (1.0 + jnp.sum(res**2))
     return params, converged | stationary
 
 
@@ -303,18 +310,6 @@ def _fixed_pivot_kernel(solver):
     return jax.jit(run)
 
 
-@functools.cache
-def _smooth_pivot_kernel(solver, spacing):
-    """Compiled smooth-pivot fit: ``(..., knots0) -> (knots, converged, J)``."""
-
-    def run(reference, current, weight, smoothness, knots0):
-        args = (reference, current, weight, smoothness, spacing)
-        knots, converged = solve(smooth_pivot_residuals, knots0, args, solver)
-        return knots, converged, jax.jacfwd(smooth_pivot_residuals)(knots, args)
-
-    return jax.jit(run)
-
-
 @jax.jit
 @functools.partial(jax.vmap, in_axes=(None, 0, 0))
 def _about_pivot_params(reference, current, pivot):
@@ -352,6 +347,158 @@ def _spline_weights(n, spacing, n_knots):
     weights[k, j] += 1.0 - f
     weights[k, np.minimum(j + 1, n_knots - 1)] += f
     return weights
+
+
+# ------------------------------------------------ smooth pivot: block-tridiagonal solver
+def _block_tridiagonal_solve(diag, upper, rhs):
+    """Solve ``N x = rhs`` for a symmetric block-tridiagonal ``N`` with 2x2 blocks.
+
+    diag (m, 2, 2) = ``N_jj``, upper (m - 1, 2, 2) = ``N_j,j+1`` (``N_j+1,j`` is its
+    transpose), rhs (m, 2). Block Thomas algorithm (block LDL^T; stable for positive
+    definite ``N``): O(m) work in one forward and one backward ``lax.scan``.
+    """
+    zero = jnp.zeros_like(diag[0])
+    upper_pad = jnp.concatenate([upper, zero[None]])
+    lower_prev = jnp.concatenate([zero[None], upper])  # N_j,j-1 = upper[j-1]^T
+
+    def forward(carry, blocks):
+        c_prev, d_prev = carry
+        dj, uj, lj, bj = blocks
+        lt = lj.T
+        pivot = dj - lt @ c_prev
+        c = jnp.linalg.solve(pivot, uj)
+        d = jnp.linalg.solve(pivot, bj - lt @ d_prev)
+        return (c, d), (c, d)
+
+    _, (c, d) = jax.lax.scan(forward, (zero, jnp.zeros_like(rhs[0])),
+                             (diag, upper_pad, lower_prev, rhs))
+
+    def backward(x_next, blocks):
+        cj, dj = blocks
+        x = dj - cj @ x_next
+        return x, x
+
+    _, x = jax.lax.scan(backward, jnp.zeros_like(rhs[0]), (c, d), reverse=True)
+    return x
+
+
+def _smooth_pivot_system(knots, reference, current, weight, smoothness, spacing):
+    """Cost, gradient (m, 2) and Gauss-Newton normal matrix (block-tridiagonal: diagonal
+    (m, 2, 2), upper (m-1, 2, 2)) of :func:`smooth_pivot_residuals` at ``knots`` (m, 2).
+
+    Assembled from per-frame blocks: frame ``k`` depends on its pivot ``q_k = (1-f) Q_j + f
+    Q_j+1`` only, through a (4, 2) Jacobian ``J_k`` (angle projected out), so it adds
+    ``w w' J_k^T J_k`` to blocks (j, j), (j, j+1), (j+1, j+1); the prior adds
+    ``smoothness / spacing`` times the difference operator. Never forms the (4 n, 2 m)
+    Jacobian.
+    """
+    n, m = current.shape[0], knots.shape[0]
+    k = jnp.arange(n)
+    j = k // spacing
+    f = (k % spacing) / spacing
+    path = (1.0 - f)[:, None] * knots[j] + f[:, None] * knots[j + 1]
+
+    def value_and_jac(q, cur, w):
+        r = _about_pivot(q, reference, cur, w)
+        return jax.jacfwd(lambda p: _about_pivot(p, reference, cur, w))(q), r
+
+    jac, res = jax.vmap(value_and_jac)(path, current, weight)  # (n, 4, 2), (n, 4)
+    a = jnp.einsum("kri,krj->kij", jac, jac)
+    g = jnp.einsum("kri,kr->ki", jac, res)
+    w0, w1 = 1.0 - f, f
+    diag = jnp.zeros((m, 2, 2)).at[j].add(w0[:, None, None] ** 2 * a)
+    diag = diag.at[j + 1].add(w1[:, None, None] ** 2 * a)
+    upper = jnp.zeros((m - 1, 2, 2)).at[j].add((w0 * w1)[:, None, None] * a)
+    grad = jnp.zeros((m, 2)).at[j].add(w0[:, None] * g).at[j + 1].add(w1[:, None] * g)
+    lam = smoothness / spacing
+    step = knots[1:] - knots[:-1]
+    eye = jnp.eye(2)
+    ends = jnp.zeros(m).at[:-1].add(1.0).at[1:].add(1.0)
+    diag = diag + lam * ends[:, None, None] * eye
+    upper = upper - lam * eye
+    grad = grad.at[:-1].add(-lam * step).at[1:].add(lam * step)
+    cost = 0.5 * (jnp.sum(res**2) + lam * jnp.sum(step**2))
+    return cost, grad, diag, upper
+
+
+@functools.cache
+def _smooth_pivot_kernel(damped, spacing):
+    """Compiled smooth-pivot fit on the block-tridiagonal normal equations.
+
+    ``(reference, current, weight, smoothness, knots0 (m, 2)) -> (knots, converged, steps,
+    diag, upper)`` (the last two: the Gauss-Newton normal matrix at the answer, for the
+    covariance). Levenberg-Marquardt (``damped``: ``lambda I`` added, Nielsen's update of
+    ``lambda``) or Gauss-Newton (``lambda = 0`` until a step fails to reduce the cost, then
+    damped like LM). Converged: at an accepted point the Gauss-Newton step is below
+    ``tol (1 + max |Q|)`` mm, or its predicted reduction ``g^T N^-1 g`` is below
+    ``max(tol^2, 100 eps) (1 + 2 cost)`` mm^2: a gain that the cost (a sum over thousands
+    of frames) cannot resolve in floating point, so no step could be verified anyway.
+    """
+
+    def run(reference, current, weight, smoothness, knots0):
+        tol = _tolerance(knots0.dtype)
+        system = functools.partial(_smooth_pivot_system, reference=reference, current=current,
+                                   weight=weight, smoothness=smoothness, spacing=spacing)
+
+        def stationary(knots, cost, grad, diag, upper):
+            newton = _block_tridiagonal_solve(diag, upper, -grad)
+            small = jnp.max(jnp.abs(newton)) <= tol * (1.0 + jnp.max(jnp.abs(knots)))
+            decrement = -jnp.sum(grad * newton)
+            floor = jnp.maximum(tol**2, 100 * jnp.finfo(knots.dtype).eps)
+            return small | (decrement <= floor * (1.0 + 2.0 * cost))
+
+        cost, grad, diag, upper = system(knots0)
+        scale = jnp.max(jnp.abs(jnp.diagonal(diag, axis1=1, axis2=2)))
+        lam0 = 1e-3 * scale
+        state = dict(knots=knots0, cost=cost, grad=grad, diag=diag, upper=upper,
+                     lam=lam0 if damped else jnp.zeros_like(lam0), nu=jnp.array(2.0),
+                     steps=jnp.array(0), done=stationary(knots0, cost, grad, diag, upper))
+
+        def body(s):
+            eye = jnp.eye(2)
+            delta = _block_tridiagonal_solve(s["diag"] + s["lam"] * eye, s["upper"], -s["grad"])
+            trial = s["knots"] + delta
+            t_cost, t_grad, t_diag, t_upper = system(trial)
+            predicted = -(jnp.sum(s["grad"] * delta) + 0.5 * _block_quadratic(
+                s["diag"], s["upper"], delta))
+            rho = (s["cost"] - t_cost) / jnp.where(predicted > 0, predicted, 1.0)
+            accept = jnp.isfinite(t_cost) & (t_cost <= s["cost"]) & (rho > 1e-4)
+            lam_ok = s["lam"] * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            lam_bad = jnp.maximum(s["lam"] * s["nu"], lam0)
+            new = dict(
+                knots=jnp.where(accept, trial, s["knots"]),
+                cost=jnp.where(accept, t_cost, s["cost"]),
+                grad=jnp.where(accept, t_grad, s["grad"]),
+                diag=jnp.where(accept, t_diag, s["diag"]),
+                upper=jnp.where(accept, t_upper, s["upper"]),
+                lam=jnp.where(accept, lam_ok, lam_bad),
+                nu=jnp.where(accept, 2.0, 2.0 * s["nu"]),
+                steps=s["steps"] + 1,
+            )
+            new["done"] = accept & stationary(new["knots"], new["cost"], new["grad"],
+                                              new["diag"], new["upper"])
+            return new
+
+        out = jax.lax.while_loop(lambda s: ~s["done"] & (s["steps"] < _MAX_STEPS), body, state)
+        return out["knots"], out["done"], out["steps"], out["diag"], out["upper"]
+
+    return jax.jit(run)
+
+
+def _block_quadratic(diag, upper, x):
+    """``x^T N x`` for the block-tridiagonal ``N`` of :func:`_block_tridiagonal_solve`."""
+    return (jnp.einsum("ji,jik,jk->", x, diag, x)
+            + 2.0 * jnp.einsum("ji,jik,jk->", x[:-1], upper, x[1:]))
+
+
+def _block_tridiagonal_dense(diag, upper):
+    m = diag.shape[0]
+    dense = np.zeros((m, 2, m, 2))
+    idx = np.arange(m)
+    dense[idx, :, idx, :] = diag
+    dense[idx[:-1], :, idx[1:], :] = upper
+    dense[idx[1:], :, idx[:-1], :] = np.swapaxes(upper, 1, 2)
+    return dense.reshape(2 * m, 2 * m)
 
 
 # --------------------------------------------------------------------- helpers
@@ -439,19 +586,21 @@ def _smooth_pivot(reference, current, usable, solver, smoothness, spacing):
     n = current.shape[0]
     n_knots = (n - 1) // spacing + 2
     pivot0 = _initial_pivot(reference, current, usable)
-    knots0 = np.tile(pivot0, n_knots)  # flat (2 m,): jaxopt wants a vector
-    knots, converged, jac = _smooth_pivot_kernel(solver, spacing)(
+    knots0 = np.tile(pivot0, (n_knots, 1))
+    knots, converged, _, diag, upper = _smooth_pivot_kernel(not solver.endswith("-gn"), spacing)(
         reference, current, usable.astype(float), float(smoothness), knots0
     )
-    jac = np.asarray(jac).reshape(-1, 2 * n_knots)
-    interp = _spline_weights(n, spacing, n_knots)
-
-    def pivot_cov(s2):
-        knot_cov = (s2 * np.linalg.pinv(jac.T @ jac)).reshape(n_knots, 2, n_knots, 2)
-        return np.einsum("kj,kl,jalb->kab", interp, interp, knot_cov)
-
-    path = interp @ np.asarray(knots).reshape(n_knots, 2)
-    return path, pivot_cov, bool(converged), 2 * n_knots
+    normal = _block_tridiagonal_dense(np.asarray(diag), np.asarray(upper))
+    unit_knot_cov = np.linalg.pinv(normal).reshape(n_knots, 2, n_knots, 2)
+    k = np.arange(n)
+    j, f = k // spacing, ((k % spacing) / spacing)[:, None, None]
+    # pivot q_k = (1 - f) Q_j + f Q_j+1: only blocks (j, j), (j, j+1), (j+1, j+1) matter
+    c00, c01 = unit_knot_cov[j, :, j, :], unit_knot_cov[j, :, j + 1, :]
+    c11 = unit_knot_cov[j + 1, :, j + 1, :]
+    unit_path_cov = ((1 - f) ** 2 * c00 + (1 - f) * f * (c01 + np.swapaxes(c01, 1, 2))
+                     + f**2 * c11)
+    path = _spline_weights(n, spacing, n_knots) @ np.asarray(knots)
+    return path, lambda s2: s2 * unit_path_cov, bool(converged), 2 * n_knots
 
 
 def fit_jaw(
