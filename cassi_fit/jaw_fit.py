@@ -21,7 +21,11 @@ uncertainty, as a :class:`JawFit`. Methods:
 
 Solvers (``solver=``): ``"optimistix-lm"`` (default), ``"optimistix-gn"``,
 ``"optimistix-dogleg"``, ``"jaxopt-lm"``, ``"jaxopt-gn"`` (the last two through
-:mod:`cassi_fit._jaxopt_adapter`). Initial guesses come from the closed form / Procrustes.
+:mod:`cassi_fit._jaxopt_adapter`). "smooth-pivot" has its own structured solver instead
+(normal equations assembled from per-frame 2x2 blocks, block-tridiagonal solve; the
+solver name only picks Gauss-Newton for ``*-gn`` and Levenberg-Marquardt otherwise;
+``JawFit.solver`` says ``"block-tridiagonal-lm"`` / ``"-gn"``). Initial guesses come from
+the closed form / Procrustes.
 Uncertainty: ``s^2 (J^T J)^-1`` with ``s^2`` pooled over the recording's usable frames.
 """
 
@@ -603,6 +607,14 @@ def _smooth_pivot(reference, current, usable, solver, smoothness, spacing):
     return path, lambda s2: s2 * unit_path_cov, bool(converged), 2 * n_knots
 
 
+def _solver_used(method, solver):
+    if method == "closed-form":
+        return "closed-form"
+    if method == "smooth-pivot":
+        return "block-tridiagonal-" + ("gn" if solver.endswith("-gn") else "lm")
+    return solver
+
+
 def fit_jaw(
     reference,
     current,
@@ -666,7 +678,7 @@ def fit_jaw(
         pivot_defined=defined & usable, residual=np.where(usable, residual, 0.0),
         status=status, converged=converged, covariance=covariance,
         pivot_covariance=pivot_cov, noise_mm=float(np.sqrt(s2)), method=method,
-        solver="closed-form" if method == "closed-form" else solver,
+        solver=_solver_used(method, solver),
     )
 
 

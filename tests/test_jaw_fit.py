@@ -139,3 +139,60 @@ def test_jaw_from_track_uses_first_valid_jaw_frame():
     np.testing.assert_allclose(fit.theta[3:17], expected.theta[3:17], atol=1e-12)
     assert abs(fit.theta[3]) < 1e-12 and list(fit.status[:3]) == [jaw.STATUS_INVALID_FRAME] * 3
     assert fit.status[17] == jaw.STATUS_INVALID_FRAME
+
+
+def test_frame_fit_lm_stops_at_once_from_procrustes_start():
+    """The scaled per-frame problem starts at its minimum; LM must confirm it in one
+    evaluation for every frame (the vmapped loop runs until the slowest frame stops)."""
+    import optimistix as optx
+
+    current = noisy(0.3)
+
+    def steps(c):
+        sol = optx.least_squares(
+            jaw_fit.scaled_rigid_residuals, jaw_fit._LevenbergMarquardt(rtol=1e-8, atol=1e-8),
+            jaw_fit._scaled_start(REFERENCE, c), (REFERENCE, c), max_steps=100, throw=False)
+        return sol.stats["num_steps"]
+
+    assert int(np.max(jax.vmap(steps)(current))) <= 2
+
+
+def test_smooth_pivot_equals_the_dense_least_squares_fit():
+    """The block-tridiagonal solver minimises the same objective as a dense LM on
+    :func:`smooth_pivot_residuals`, with the same covariance s^2 (J^T J)^-1."""
+    import optimistix as optx
+
+    current, spacing, smoothness = noisy(0.3), 16, 1.0
+    fit = jaw_fit.fit_jaw(REFERENCE, current, method="smooth-pivot", smoothness=smoothness,
+                          knot_spacing=spacing)
+    assert fit.converged and fit.solver == "block-tridiagonal-lm"
+    m = (N - 1) // spacing + 2
+    knots0 = np.tile(jaw_fit._initial_pivot(REFERENCE, current, np.ones(N, bool)), m)
+    args = (REFERENCE, current, np.ones(N), smoothness, spacing)
+    sol = optx.least_squares(jaw_fit.smooth_pivot_residuals,
+                             optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10), knots0, args)
+    weights = jaw_fit._spline_weights(N, spacing, m)
+    np.testing.assert_allclose(fit.pivot, weights @ np.asarray(sol.value).reshape(m, 2),
+                               atol=1e-5)
+    jac = np.asarray(jax.jacfwd(jaw_fit.smooth_pivot_residuals)(sol.value, args))
+    knot_cov = (fit.noise_mm**2 * np.linalg.inv(jac.T @ jac)).reshape(m, 2, m, 2)
+    dense = np.einsum("kj,kl,jalb->kab", weights, weights, knot_cov)
+    np.testing.assert_allclose(fit.pivot_covariance, dense, rtol=1e-5)
+
+
+@pytest.mark.parametrize("method", ["fixed-pivot", "smooth-pivot"])
+def test_unconverged_recording_fit_flags_every_frame(method, monkeypatch):
+    """A whole-recording fit stopped before convergence: status 5 on its frames, not ok."""
+    monkeypatch.setattr(jaw_fit, "_MAX_STEPS", 0)
+    for kernel in (jaw_fit._fixed_pivot_kernel, jaw_fit._smooth_pivot_kernel):
+        kernel.cache_clear()
+    try:
+        current = noisy(0.3).copy()
+        current[5, 0] = np.nan
+        fit = jaw_fit.fit_jaw(REFERENCE, current, method=method)
+    finally:
+        for kernel in (jaw_fit._fixed_pivot_kernel, jaw_fit._smooth_pivot_kernel):
+            kernel.cache_clear()
+    assert not fit.converged
+    assert fit.status[5] == jaw.STATUS_NON_FINITE
+    assert np.all(np.delete(fit.status, 5) == jaw.STATUS_NOT_CONVERGED)
