@@ -26,7 +26,7 @@ PIVOT = np.array([-88.0, -8.0])
 def frames(n, seed=0):
     """``n`` jaw frames (n, 2, 2) mm: the reference turned about PIVOT by speech-like angles
     (0-11.5 degrees) plus 0.3 mm noise. (An earlier version broadcast the wrong axes and
-    returned frame 0 for every frame, with the two pellets' coordinates mixed up.)"""
+    returned one configuration for every frame, its pellets 118 mm apart instead of 33.)"""
     rng = np.random.default_rng(seed)
     theta = 0.2 * np.sin(np.linspace(0, 40, n)) ** 2
     c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
