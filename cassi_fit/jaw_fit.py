@@ -445,7 +445,8 @@ def _smooth_pivot_kernel(damped, spacing):
                                    weight=weight, smoothness=smoothness, spacing=spacing)
 
         def stationary(knots, cost, grad, diag, upper):
-            newton = _block_tridiagonal_solve(diag, upper, -grad)
+            # a rounding-level ridge keeps knots without data and prior (smoothness 0) finite
+            newton = _block_tridiagonal_solve(diag + ridge * jnp.eye(2), upper, -grad)
             small = jnp.max(jnp.abs(newton)) <= tol * (1.0 + jnp.max(jnp.abs(knots)))
             decrement = -jnp.sum(grad * newton)
             floor = jnp.maximum(tol**2, 100 * jnp.finfo(knots.dtype).eps)
@@ -454,6 +455,7 @@ def _smooth_pivot_kernel(damped, spacing):
         cost, grad, diag, upper = system(knots0)
         scale = jnp.max(jnp.abs(jnp.diagonal(diag, axis1=1, axis2=2)))
         lam0 = 1e-3 * scale
+        ridge = 1e-12 * scale
         state = dict(knots=knots0, cost=cost, grad=grad, diag=diag, upper=upper,
                      lam=lam0 if damped else jnp.zeros_like(lam0), nu=jnp.array(2.0),
                      steps=jnp.array(0), done=stationary(knots0, cost, grad, diag, upper))
