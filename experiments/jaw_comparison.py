@@ -221,6 +221,10 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     from pathlib import Path
 
+    import jax
+
+    # Errors of a few hundredths of a mm are compared here: float32 would blur them.
+    jax.config.update("jax_enable_x64", True)
     from cassi_fit._io import atomic_write
 
     out = Path(args.out)

@@ -62,6 +62,11 @@ def format_rows(times, fit) -> str:
 
 
 def run(args) -> int:
+    import jax
+
+    # The CSV reports pivots to a micrometre; at small angles they need float64 (the pivot
+    # is a quotient by sin(theta/2)), so the command computes in float64.
+    jax.config.update("jax_enable_x64", True)
     from cassi_fit._io import atomic_write
     from cassi_fit.errors import OutputExistsError
     from cassi_fit.jaw_fit import jaw_from_track
