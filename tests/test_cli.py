@@ -32,7 +32,7 @@ def test_no_command_prints_help(capsys):
 
 def test_every_subcommand_has_help(capsys):
     parser = cli.build_parser()
-    names = parser._subparsers._group_actions[0].choices  # noqa: SLF001 - argparse has no public accessor
+    names = parser._subparsers._group_actions[0].choices  # argparse has no public accessor
     assert {"info", "synth", "jaw", "animate", "demo"} <= set(names)
     for name in names:
         with pytest.raises(SystemExit) as exit_info:

@@ -35,7 +35,7 @@ def test_writes_one_row_per_frame(pellet_file, tmp_path, capsys):
     path, theta = pellet_file
     out = tmp_path / "jaw.csv"
     assert cli.main(["jaw", str(path), "--method", "fixed-pivot", "--csv", str(out)]) == 0
-    rows = list(csv.DictReader(out.open()))
+    rows = list(csv.DictReader(out.read_text().splitlines()))
     assert len(rows) == 60 and list(rows[0]) == [
         "time_s", "theta_deg", "pivot_a_mm", "pivot_b_mm", "tx_mm", "ty_mm", "residual_mm",
         "status"]
