@@ -28,6 +28,7 @@ pictures: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_jaw.py
+	$(BIN)/python benchmarks/bench_render.py
 	$(BIN)/python benchmarks/bench_animation.py
 
 experiments: $(STAMP)
