@@ -572,31 +572,34 @@ def build():
             w_cassi, wp, full)
 
 
-PARAMETERS = [  # number, name, unit, min, max, default, description
-    ("J1", "jaw_theta", "rad", -0.1, 0.5, 0.0, "jaw rotation (Parke's jaw rotation; + opens)"),
-    ("J2", "jaw_translation_x", "mm", -15, 15, 0.0, "jaw translation x (rigid motion p' = R p + t)"),
-    ("J3", "jaw_translation_y", "mm", -15, 15, 0.0, "jaw translation y"),
-    ("C1", "mouth_width", "scale", 0.7, 1.3, 1.0, "mouth width scale (z of lips and corners)"),
-    ("C2", "upper_lip_thickness", "mm", -5, 10, 0.0, "added to the upper vermilion, outward"),
-    ("C3", "lower_lip_thickness", "mm", -5, 10, 0.0, "added to the lower vermilion, outward"),
-    ("C4", "face_width", "scale", 0.8, 1.2, 1.0, "face width scale (z of skin and eyes)"),
-    ("C5", "nose_tip_x", "mm", -10, 10, 0.0, "nose tip offset x (falloff 24 mm)"),
-    ("C6", "nose_tip_y", "mm", -10, 10, 0.0, "nose tip offset y"),
-    ("C7", "jaw_shape_theta", "rad", -0.3, 0.3, 0.0, "jaw/chin conformation rotation"),
-    ("C8", "jaw_shape_translation_x", "mm", -15, 15, 0.0, "jaw/chin conformation translation x"),
-    ("C9", "jaw_shape_translation_y", "mm", -15, 15, 0.0, "jaw/chin conformation translation y"),
-    ("55", "T1_X", "mm", -30, 30, 0.0, "tongue T1 site, x displacement"),
-    ("56", "T1_Z", "mm", -30, 30, 0.0, "tongue T1 site, vertical (y) displacement"),
-    ("57", "T2_X", "mm", -30, 30, 0.0, "tongue T2 site, x displacement"),
-    ("58", "T2_Z", "mm", -30, 30, 0.0, "tongue T2 site, vertical displacement"),
-    ("59", "T3_X", "mm", -30, 30, 0.0, "tongue T3 site, x displacement"),
-    ("60", "T3_Z", "mm", -30, 30, 0.0, "tongue T3 site, vertical displacement"),
-    ("61", "T4_X", "mm", -30, 30, 0.0, "tongue T4 site, x displacement"),
-    ("62", "T4_Z", "mm", -30, 30, 0.0, "tongue T4 site, vertical displacement"),
-    ("63", "upper_lip_X", "mm", -20, 20, 0.0, "upper lip (UL site) x displacement"),
-    ("64", "upper_lip_Z", "mm", -20, 20, 0.0, "upper lip vertical displacement"),
-    ("65", "lower_lip_X", "mm", -20, 20, 0.0, "lower lip x displacement, after the jaw"),
-    ("66", "lower_lip_Z", "mm", -20, 20, 0.0, "lower lip vertical displacement, after the jaw"),
+PARAMETERS = [  # number, name, unit, min, max, default, kind, stored positions / rule, description
+    # kind follows Parke: interpolation between two stored positions per vertex (the
+    # second stored position is the rest position plus the named vertices.csv field
+    # times a unit step), rotation about a pivot, scaling, translation.
+    ('J1', 'jaw_theta', 'rad', -0.1, 0.5, 0.0, 'rotation', "about the jaw motion's pivot; vertex i turns by w_cassi (or w_parke) x theta", "jaw rotation (Parke's jaw rotation; + opens)"),
+    ('J2', 'jaw_translation_x', 'mm', -15, 15, 0.0, 'rotation', "with J1 one rigid motion p' = R p + t; the pivot follows from it", 'jaw translation x'),
+    ('J3', 'jaw_translation_y', 'mm', -15, 15, 0.0, 'rotation', 'as J2', 'jaw translation y'),
+    ('C1', 'mouth_width', 'scale', 0.7, 1.3, 1.0, 'scale', 'z scaled by 1 + (value - 1) x mouth', 'mouth width scale (z of lips and corners)'),
+    ('C2', 'upper_lip_thickness', 'mm', -5, 10, 0.0, 'interpolation', 'rest (x y z) and rest + (upper_vermilion 0 0) at 1 mm', 'added to the upper vermilion; outward'),
+    ('C3', 'lower_lip_thickness', 'mm', -5, 10, 0.0, 'interpolation', 'rest (x y z) and rest + (lower_vermilion 0 0) at 1 mm', 'added to the lower vermilion; outward'),
+    ('C4', 'face_width', 'scale', 0.8, 1.2, 1.0, 'scale', 'z of skin and eyes scaled by value', 'face width scale'),
+    ('C5', 'nose_tip_x', 'mm', -10, 10, 0.0, 'translation', 'x moved by value x nose', 'nose tip offset x (falloff 24 mm)'),
+    ('C6', 'nose_tip_y', 'mm', -10, 10, 0.0, 'translation', 'y moved by value x nose', 'nose tip offset y'),
+    ('C7', 'jaw_shape_theta', 'rad', -0.3, 0.3, 0.0, 'rotation', "vertex i turns by jaw_shape x theta about the motion's pivot", 'jaw/chin conformation rotation'),
+    ('C8', 'jaw_shape_translation_x', 'mm', -15, 15, 0.0, 'rotation', 'with C7 one rigid motion', 'jaw/chin conformation translation x'),
+    ('C9', 'jaw_shape_translation_y', 'mm', -15, 15, 0.0, 'rotation', 'as C8', 'jaw/chin conformation translation y'),
+    ('55', 'T1_X', 'mm', -30, 30, 0.0, 'interpolation', 'along the tongue between the T1-T4 sites and the back anchors (cassi_fit.tongue)', 'tongue T1 site; x displacement'),
+    ('56', 'T1_Z', 'mm', -30, 30, 0.0, 'interpolation', 'as the X parameter', 'tongue T1 site; vertical (y) displacement'),
+    ('57', 'T2_X', 'mm', -30, 30, 0.0, 'interpolation', 'along the tongue between the T1-T4 sites and the back anchors (cassi_fit.tongue)', 'tongue T2 site; x displacement'),
+    ('58', 'T2_Z', 'mm', -30, 30, 0.0, 'interpolation', 'as the X parameter', 'tongue T2 site; vertical (y) displacement'),
+    ('59', 'T3_X', 'mm', -30, 30, 0.0, 'interpolation', 'along the tongue between the T1-T4 sites and the back anchors (cassi_fit.tongue)', 'tongue T3 site; x displacement'),
+    ('60', 'T3_Z', 'mm', -30, 30, 0.0, 'interpolation', 'as the X parameter', 'tongue T3 site; vertical (y) displacement'),
+    ('61', 'T4_X', 'mm', -30, 30, 0.0, 'interpolation', 'along the tongue between the T1-T4 sites and the back anchors (cassi_fit.tongue)', 'tongue T4 site; x displacement'),
+    ('62', 'T4_Z', 'mm', -30, 30, 0.0, 'interpolation', 'as the X parameter', 'tongue T4 site; vertical (y) displacement'),
+    ('63', 'upper_lip_X', 'mm', -20, 20, 0.0, 'interpolation', 'rest (x y z) and rest + (upper_lip 0 0) at 1 mm', 'upper lip (UL site) x displacement'),
+    ('64', 'upper_lip_Z', 'mm', -20, 20, 0.0, 'interpolation', 'rest (x y z) and rest + (0 upper_lip 0) at 1 mm; nose rises by nose_rise', 'upper lip vertical displacement'),
+    ('65', 'lower_lip_X', 'mm', -20, 20, 0.0, 'interpolation', 'jaw-moved position and that + (lower_lip 0 0) at 1 mm', 'lower lip x displacement; after the jaw'),
+    ('66', 'lower_lip_Z', 'mm', -20, 20, 0.0, 'interpolation', 'jaw-moved position and that + (0 lower_lip 0) at 1 mm', 'lower lip vertical displacement; after the jaw'),
 ]
 
 
@@ -625,7 +628,7 @@ def main(argv=None):
     atomic_write(out / "model.json", json.dumps(meta, indent=1) + "\n", overwrite=True)
     atomic_write(out / "parameters.csv",
                  _csv(PARAMETERS, ["number", "name", "unit", "min", "max", "default",
-                                   "description"]), overwrite=True)
+                                   "kind", "stored_positions", "description"]), overwrite=True)
     print(f"{len(V)} vertices, {len(F)} triangles -> {out}")
     return 0
 
