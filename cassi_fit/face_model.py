@@ -12,8 +12,8 @@ subject's left; z = 0 is the midsagittal plane, which is the XRMB pellet plane.
 from __future__ import annotations
 
 import csv
-import warnings
 import json
+import warnings
 from pathlib import Path
 
 import equinox as eqx
@@ -83,7 +83,8 @@ def _read_table(path: Path, columns) -> np.ndarray:
             try:
                 values = [float(row[k]) for k in pick]
             except (ValueError, IndexError):
-                raise DataFormatError(path, line, f"expected {len(header)} numbers, got {row!r}")
+                raise DataFormatError(
+                    path, line, f"expected {len(header)} numbers, got {row!r}") from None
             if not np.all(np.isfinite(values)):
                 raise DataFormatError(path, line, "non-finite value")
             rows.append(values)

@@ -238,7 +238,7 @@ def mirror_grid(grid, corner):
 
 def skin_faces(n_r, n_c, index, corner):
     """Quads between consecutive rows (not across the mouth opening), split in two."""
-    a_in, b_in = ROW_INDEX["A_in"], ROW_INDEX["B_in"]
+    a_in = ROW_INDEX["A_in"]
     faces = []
     for i in range(n_r - 1):
         for j in range(n_c - 1):
@@ -265,7 +265,7 @@ def skin_weights(verts, ids, corner_z):
     the lower neck, the ears and the back of the head. Inside the mouth both lips blend
     to the corner value (0.35) over the outer third of the mouth.
     """
-    x, y, z = verts[:, 0], verts[:, 1], np.abs(verts[:, 2])
+    x, y = verts[:, 0], verts[:, 1]
     lower = np.array([ROWS[i][8] == "l" for i in ids[:, 0]])
     phis = column_angles()
     phi = phis[ids[:, 1]]
@@ -395,7 +395,7 @@ def build_tongue():
     psi = 2 * np.pi * np.arange(TONGUE_RING) / TONGUE_RING
     verts, svals = [], []
     for i in range(len(st)):
-        for k, a in enumerate(psi):
+        for k in range(len(psi)):
             a_m = 2 * np.pi * min(k, TONGUE_RING - k) / TONGUE_RING  # mirror-exact
             off = thick[i] / 2 * (1 - np.cos(a_m)) * n_in[i]
             sgn = 0.0 if k in (0, TONGUE_RING // 2) else (1.0 if k < TONGUE_RING // 2 else -1.0)
@@ -445,7 +445,7 @@ def build_eye(centre, radius=12.0, n_lat=8, n_lon=12):
 # ---------------------------------------------------------------------------- assembly
 def skin_fields(verts, ids, lower, corner_z, nose_tip):
     """Deformation fields of the skin vertices (see model/README.md)."""
-    x, y, z = verts[:, 0], verts[:, 1], np.abs(verts[:, 2])
+    y, z = verts[:, 1], np.abs(verts[:, 2])
     names = [ROWS[i][0] for i in ids[:, 0]]
     lat = 1.0 - ramp(z, 6.0, corner_z + 8.0)
     up_v = {"philtrum": 0.55, "UL": 1, "ul_red": 1, "ul_low": 1, "A": 1, "A_in": 1}
@@ -618,7 +618,7 @@ def main(argv=None):
     fmt = lambda r: [f"{v:.4f}" for v in r[:3]] + [repr(float(v)) for v in r[3:5]] + [
         f"{v:.6f}" for v in r[5:]]
     atomic_write(out / "vertices.csv", _csv([fmt(r) for r in cols], names), overwrite=True)
-    atomic_write(out / "faces.csv", _csv([(*f, m) for f, m in zip(F, M)],
+    atomic_write(out / "faces.csv", _csv([(*f, m) for f, m in zip(F, M, strict=True)],
                                          ["a", "b", "c", "material"]), overwrite=True)
     meta = {"format": "cassi_fit face model 1",
             "frame": "mm; origin upper incisor tip; +x front, +y up, +z subject's left",

@@ -90,6 +90,6 @@ def test_pivot_recovered_and_undefined_at_zero():
 def test_jit_and_vmap_agree_with_eager():
     thetas = jnp.linspace(-0.3, 0.3, 7)
     ts = jnp.stack([jnp.linspace(-1, 1, 7), jnp.linspace(2, -2, 7)], axis=1)
-    eager = [rigid.fractional((th, t), 0.83) for th, t in zip(thetas, ts)]
+    eager = [rigid.fractional((th, t), 0.83) for th, t in zip(thetas, ts, strict=True)]
     batched = jax.jit(jax.vmap(lambda th, t: rigid.fractional((th, t), 0.83)))(thetas, ts)
     np.testing.assert_allclose(batched[1], np.stack([e[1] for e in eager]), atol=1e-12)

@@ -67,11 +67,11 @@ def run(args) -> int:
     # The CSV reports pivots to a micrometre; at small angles they need float64 (the pivot
     # is a quotient by sin(theta/2)), so the command computes in float64.
     jax.config.update("jax_enable_x64", True)
+    from pathlib import Path
+
     from cassi_fit._io import atomic_write
     from cassi_fit.errors import OutputExistsError
     from cassi_fit.jaw_fit import jaw_from_track
-
-    from pathlib import Path
 
     out = Path(args.csv)
     if out.exists() and not args.force:  # refuse before the (slower) fit
