@@ -31,20 +31,15 @@ import numpy as np
 
 from ._io import atomic_output_path, atomic_write, commit_output
 from .errors import CassiError, DataFormatError
+from .render import MATERIAL_COLOURS
 
 MESH_SUFFIXES = (".obj", ".ply")
 GLB_SUFFIX = ".glb"
 
-# linear RGB in [0, 1], by the face model's material names (face_model.MATERIALS)
-MATERIAL_COLORS = {
-    "skin": (0.86, 0.68, 0.57),
-    "lips": (0.74, 0.36, 0.38),
-    "eye": (0.93, 0.93, 0.95),
-    "teeth": (0.96, 0.94, 0.86),
-    "tongue": (0.83, 0.42, 0.45),
-    "palate": (0.90, 0.58, 0.60),
-}
-MATERIALS = tuple(MATERIAL_COLORS)
+# glTF vertex colours are linear RGB in [0, 1]; one colour table serves the renderer and
+# the export (render.MATERIAL_COLOURS, sRGB), so a .glb looks like the rendered video.
+MATERIAL_COLORS = {name: tuple(c**2.2 for c in srgb) for name, srgb in MATERIAL_COLOURS.items()}
+MATERIALS = tuple(MATERIAL_COLORS)  # the face model's material order (face_model.MATERIALS)
 
 _GLB_MAGIC, _GLB_VERSION = b"glTF", 2
 _CHUNK_JSON, _CHUNK_BIN = 0x4E4F534A, 0x004E4942
