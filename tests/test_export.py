@@ -14,6 +14,7 @@ from cassi_fit.export import (
     read_glb,
     vertex_colors,
 )
+from cassi_fit.render import MATERIAL_COLOURS
 
 STEP = 0.006866
 
@@ -161,4 +162,4 @@ def test_vertex_colors_follow_materials(sphere):
     material = np.full(len(faces), 4)  # tongue
     colors = vertex_colors(len(vertices), faces, material)
     assert colors.shape == (len(vertices), 3)
-    np.testing.assert_allclose(colors[faces[0, 0]], (0.83, 0.42, 0.45), atol=1e-6)
+    np.testing.assert_allclose(colors[faces[0, 0]], [c**2.2 for c in MATERIAL_COLOURS["tongue"]], atol=1e-6)
