@@ -43,6 +43,17 @@ def _read_wav(path):
         return np.frombuffer(r.readframes(r.getnframes()), "<i2"), r.getframerate()
 
 
+def _decoded_audio(path, tmp_path):
+    """The MP4's sound track as mono int16 samples at RATE, decoded by ffmpeg."""
+    decoded = tmp_path / "decoded.wav"
+    subprocess.run(
+        [_ffmpeg(), "-loglevel", "error", "-i", str(path), "-ac", "1", "-ar", str(RATE),
+         str(decoded)],
+        check=True,
+    )
+    return _read_wav(decoded)[0]
+
+
 def test_frame_rate_is_exact_rational():
     assert frame_rate(1) == Fraction(1_000_000, 6866)
     assert frame_rate(10) == Fraction(1_000_000, 68660)
@@ -92,23 +103,7 @@ def test_mp4_carries_audio_aligned_to_the_first_frame(tmp_path):
     info = media_info(path)
     assert info["video"] and info["audio"]
     assert count_frames(path) == 30
-    decoded = tmp_path / "decoded.wav"
-    subprocess.run(
-        [
-            _ffmpeg(),
-            "-loglevel",
-            "error",
-            "-i",
-            str(path),
-            "-ac",
-            "1",
-            "-ar",
-            str(RATE),
-            str(decoded),
-        ],
-        check=True,
-    )
-    heard, _ = _read_wav(decoded)
+    heard = _decoded_audio(path, tmp_path)
     onset = np.argmax(np.abs(heard) > 5000) / RATE
     assert onset == pytest.approx(0.2, abs=0.01)
     assert heard.size / RATE == pytest.approx(30 / float(fps), abs=0.05)
@@ -185,22 +180,6 @@ def test_animation_sound_is_aligned_for_any_stride(tmp_path, stride):
     )
     assert count_frames(path) == m
     assert "line 51" in renderer.captions[0] and "S t" in renderer.captions[0]
-    decoded = tmp_path / "decoded.wav"
-    subprocess.run(
-        [
-            _ffmpeg(),
-            "-loglevel",
-            "error",
-            "-i",
-            str(path),
-            "-ac",
-            "1",
-            "-ar",
-            str(RATE),
-            str(decoded),
-        ],
-        check=True,
-    )
-    heard, _ = _read_wav(decoded)
+    heard = _decoded_audio(path, tmp_path)
     onset = np.argmax(np.abs(heard) > 5000) / RATE
     assert onset == pytest.approx(0.9 - 50 * FRAME_STEP_S, abs=0.01)
