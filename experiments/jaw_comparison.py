@@ -72,7 +72,7 @@ def synthetic_table(small: bool):
     n_subjects, tasks, duration = (1, ("tp106",), 3.0) if small else (3, ("tp106", "tp040"), 6.0)
     pooled = {}
     for s in range(n_subjects):
-        anatomy = make_subject(f"JW9{s}", np.random.default_rng(100 + s))
+        anatomy = make_subject(f"S9{s}", np.random.default_rng(100 + s))
         for task in tasks:
             for noise in NOISES_MM:
                 track, truth = synth_recording(anatomy, task, seed=(s, len(task), 7),
