@@ -45,7 +45,8 @@ class FaceModel(eqx.Module):
     ``MATERIALS``) static; ``regions`` name -> vertex indices; ``jaw_weights`` "cassi" and
     "parke" -> (V,) fraction of the jaw rotation; ``landmarks`` name -> vertex index;
     ``measures`` name -> mm (plus ``jaw_pivot_x/y``, ``tongue_anchor_s``);
-    ``fields`` name -> (V,) deformation weights (``FIELDS``).
+    ``fields`` name -> (V,) deformation weights (``FIELDS``); ``collision`` name -> vertex
+    chains along the dental arches (``cassi_fit.collide``; empty if the model has none).
     """
 
     vertices: Array
@@ -56,6 +57,7 @@ class FaceModel(eqx.Module):
     landmarks: dict = eqx.field(static=True)
     measures: dict = eqx.field(static=True)
     fields: dict = eqx.field(default_factory=dict)
+    collision: dict = eqx.field(static=True, default_factory=dict)
 
 
 def default_model_dir() -> Path:
@@ -132,16 +134,22 @@ def load_model(path=None) -> FaceModel:
     landmarks = {k: int(v) for k, v in meta["landmarks"].items()}
     for k, v in landmarks.items():
         _check_index(mpath, f"landmark {k}", [v], n)
+    collision = {}
+    for k, v in meta.get("collision", {}).items():
+        index = np.asarray(v, dtype=np.int64)
+        collision[k] = index if k.endswith("_tooth") else _check_index(mpath, f"chain {k}", v, n)
     vertices = jnp.asarray(table[:, :3])
     fields = {f: jnp.asarray(fields_table[:, k]) for k, f in enumerate(extra)}
     for f in FIELDS:
         fields.setdefault(f, jnp.zeros(n))
     with warnings.catch_warnings():  # static index arrays are intended (hashed by identity)
         warnings.simplefilter("ignore", UserWarning)
-        return _make_model(vertices, faces, material, regions, table, landmarks, meta, fields)
+        return _make_model(
+            vertices, faces, material, regions, table, landmarks, meta, fields, collision
+        )
 
 
-def _make_model(vertices, faces, material, regions, table, landmarks, meta, fields):
+def _make_model(vertices, faces, material, regions, table, landmarks, meta, fields, collision):
     return FaceModel(
         vertices=vertices,
         faces=faces,
@@ -151,4 +159,5 @@ def _make_model(vertices, faces, material, regions, table, landmarks, meta, fiel
         landmarks=landmarks,
         measures={k: float(v) for k, v in meta["measures"].items()},
         fields=fields,
+        collision=collision,
     )

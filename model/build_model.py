@@ -361,12 +361,13 @@ def build_arch(arch, teeth, y0, up, snaps=()):
 # Upper-surface midline (x, y) from the tip to the root, through T1..T4 exactly; thickness
 # (mm, along the inward normal) and half width at each control point.
 TONGUE = [  # x, y, thickness, half width
-    (-9.0, -4.5, 6.0, 9.0), (-12.5, -1.0, 11.0, 14.0), (*SITES["T1"], 16.0, 18.0),
-    (-23.0, 4.5, 20.0, 20.5), (*SITES["T2"], 24.0, 22.0), (-35.0, 10.0, 26.0, 22.5),
+    (-9.0, -4.5, 6.0, 8.0), (-12.5, -1.0, 11.0, 11.5), (*SITES["T1"], 16.0, 14.5),
+    (-23.0, 4.5, 20.0, 18.0), (*SITES["T2"], 24.0, 21.0), (-35.0, 10.0, 26.0, 22.5),
     (*SITES["T3"], 28.0, 22.5), (-47.0, 15.0, 28.0, 22.5), (*SITES["T4"], 28.0, 22.0),
     (-61.0, 17.0, 28.0, 21.0), (-68.0, 13.5, 28.0, 19.5), (-73.0, 6.0, 26.0, 18.0),
     (-75.5, -4.0, 22.0, 16.0), (-76.0, -14.0, 18.0, 15.0)]
 TONGUE_RING = 12
+TONGUE_UNDER_TAPER = 0.35  # the underside narrows into the floor of the mouth
 TONGUE_ANCHOR = 10  # control point index from which CASSI's fixed anchors hold the back
 
 
@@ -400,6 +401,7 @@ def build_tongue():
             off = thick[i] / 2 * (1 - np.cos(a_m)) * n_in[i]
             sgn = 0.0 if k in (0, TONGUE_RING // 2) else (1.0 if k < TONGUE_RING // 2 else -1.0)
             z = hw[i] * sgn * abs(np.sin(a_m)) ** 0.6
+            z *= 1.0 - TONGUE_UNDER_TAPER * max(0.0, -np.cos(a_m))  # narrower below
             verts.append([xy[i, 0] + off[0], xy[i, 1] + off[1], z])
             svals.append(s[i])
     n_st = len(st)
@@ -568,8 +570,55 @@ def build():
         "tongue_anchor_s": float(anchor_s),
     }
     w_cassi = wp * CASSI_FACTOR
+    measures["collision"] = collision_chains(offsets, len(UPPER_TEETH))
+    V = tongue_at_rest(V, regions, measures["collision"])
     return (V, np.concatenate(faces), np.concatenate(mats), regions, landmarks, measures,
             w_cassi, wp, full)
+
+
+def tongue_at_rest(V, regions, chains):
+    """The rest tongue touching, never crossing, the teeth and the palate: its vertices
+    inside them are pushed out by ``cassi_fit.collide.project`` (where the round tube meets
+    the lingual faces of the crowns, it flattens against them as a real tongue does)."""
+    from types import SimpleNamespace
+
+    import jax
+    import jax.numpy as jnp
+
+    from cassi_fit.collide import project
+
+    jax.config.update("jax_enable_x64", True)
+
+    rest = SimpleNamespace(regions={**regions, "upper_lip": [], "lower_lip": []},
+                           collision={k: np.asarray(v) for k, v in chains.items()})
+    return np.asarray(project(rest, jnp.asarray(V, jnp.float64)))
+
+
+# Ring vertices of a crown (see ``tooth``): 0-5 occlusal ring, 6-11 cervical ring, at
+# angles 0, 60, ..., 300 degrees; 1, 2 labial (distal, mesial), 4, 5 lingual (mesial,
+# distal). 14 vertices per crown, left arch first, then the mirrored right arch.
+CHAIN_RING = {"lingual_occlusal": (4, 5), "lingual_cervical": (10, 11),
+              "labial_occlusal": (2, 1), "labial_cervical": (8, 7)}
+
+
+def collision_chains(offsets, n_teeth):
+    """Vertex chains along each dental arch for ``cassi_fit.collide``.
+
+    Each chain runs from the right back molar round the front to the left back molar,
+    two stations per crown (mesial, distal); ``*_tooth`` numbers each station's tooth
+    (0 = central incisor). Indices refer to vertices, so the chains move with the teeth.
+    """
+    chains = {}
+    for arch in ("upper", "lower"):
+        base = offsets[f"{arch}_teeth"]
+        half = 14 * n_teeth
+        for name, ring in CHAIN_RING.items():
+            left = [base + 14 * k + r for k in range(n_teeth) for r in ring]
+            right = [i + half for i in left][::-1]
+            chains[f"{arch}_{name}"] = right + left
+        teeth = [k for k in range(n_teeth) for _ in range(2)]
+        chains[f"{arch}_tooth"] = teeth[::-1] + teeth
+    return chains
 
 
 PARAMETERS = [  # number, name, unit, min, max, default, kind, stored positions / rule, description
@@ -620,10 +669,11 @@ def main(argv=None):
     atomic_write(out / "vertices.csv", _csv([fmt(r) for r in cols], names), overwrite=True)
     atomic_write(out / "faces.csv", _csv([(*f, m) for f, m in zip(F, M, strict=True)],
                                          ["a", "b", "c", "material"]), overwrite=True)
+    collision = measures.pop("collision")
     meta = {"format": "cassi_fit face model 1",
             "frame": "mm; origin upper incisor tip; +x front, +y up, +z subject's left",
             "materials": list(MATERIALS),
-            "measures": measures, "landmarks": landmarks,
+            "measures": measures, "landmarks": landmarks, "collision": collision,
             "regions": {k: [int(i) for i in v] for k, v in regions.items()}}
     atomic_write(out / "model.json", json.dumps(meta, indent=1) + "\n", overwrite=True)
     atomic_write(out / "parameters.csv",

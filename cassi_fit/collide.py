@@ -1,0 +1,250 @@
+"""Collisions: the tongue against the teeth and the palate, the lips against the teeth.
+
+CASSI's tongue poked through the front teeth for 13 of 15 subjects and through the palate
+for nearly all (report section 4); its future work asks for collision detection. This
+module measures how deep a point is inside an obstacle (mm), pushes it out (the
+projection used in animation) and gives a smooth penalty (used inside fits).
+
+Obstacles, all taken from the posed vertices of a frame, so they move with the jaw:
+
+* **Teeth (with the gum and bone around their roots).** Each dental arch is described by
+  vertex chains running from the right back molar round the front to the left back molar
+  (``FaceModel.collision``; written by ``model/build_model.py``): the lingual and the
+  labial faces of the crowns at their occlusal (biting) and cervical (gum) levels. At a
+  height ``y`` the lingual *wall* is the occlusal chain for ``y`` at the occlusal level,
+  the cervical chain from the gum line on, and in between a blend. For the **upper** arch,
+  a point is inside when it is beyond the lingual wall (on the lips' side of it, measured
+  in the horizontal x-z plane) *and* above the occlusal level; for the **lower** arch when
+  beyond its lingual wall and below its occlusal level. The depth is the shorter way out:
+  ``min(horizontal distance back to the wall, vertical distance to the occlusal level)``.
+  So a tongue between the open front teeth (interdental /th/, protrusion) is not inside
+  anything, but a tongue in front of or through a crown is. Behind the last molar nothing
+  counts. The lips test the same arches from the other side: a lip point is inside when
+  it is behind the *labial* wall and within the crown's height range.
+* **Palate.** The oral sheet of ``cassi_fit.palate`` is a height field ``y = h(x, z)``
+  over its footprint; a tongue point above it is inside by ``y - h``; the way out is down.
+
+All functions take one frame (``vertices (V, 3)`` mm) and are jit/vmap/grad friendly;
+the model's index chains are static.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .errors import CassiError
+
+#: Crowns counted as "front teeth" (0 central incisor, 1 lateral incisor, 2 canine).
+FRONT_TEETH = 2
+#: How far (mm) the projection pushes a point beyond the surface it was inside.
+PROJECTION_MARGIN_MM = 1e-3
+#: Alternating passes over the obstacles in :func:`project` (a push out of one obstacle
+#: may enter another; the measured depth after the passes is reported).
+PROJECTION_PASSES = 4
+#: Names of the per-frame depths :func:`report` returns (max over the part's vertices, mm).
+REPORT_KEYS = (
+    "tongue_palate",
+    "tongue_upper_teeth",
+    "tongue_lower_teeth",
+    "tongue_upper_front",
+    "tongue_lower_front",
+    "lips_upper_teeth",
+    "lips_lower_teeth",
+)
+_CHAINS = ("lingual_occlusal", "lingual_cervical", "labial_occlusal", "labial_cervical")
+_PALATE_ACROSS = 7  # cassi_fit.palate.N_ACROSS (the palate region's oral sheet layout)
+
+
+def has_collision_data(model) -> bool:
+    return all(f"{a}_{c}" in model.collision for a in ("upper", "lower") for c in _CHAINS)
+
+
+def _require(model):
+    if not has_collision_data(model):
+        raise CassiError(
+            "this face model has no collision chains (model.json 'collision'); rebuild it "
+            "with model/build_model.py to use collision handling"
+        )
+
+
+def _arch(model, vertices, arch):
+    """Positions of the four chains of ``arch`` (each (K, 3)) and the tooth numbers (K,)."""
+    chains = [vertices[np.asarray(model.collision[f"{arch}_{c}"])] for c in _CHAINS]
+    return chains, np.asarray(model.collision[f"{arch}_tooth"])
+
+
+def _perp(d):
+    """The horizontal (x, z) vector ``d`` turned by 90 degrees."""
+    return jnp.stack([-d[..., 1], d[..., 0]], -1)
+
+
+def _wall_distance(q, wall, outward, y_occ):
+    """Distance of one point ``q (3,)`` from a polyline ``wall (K, 2)`` (x, z) measured
+    positive toward ``outward (K, 2)``; returns ``(signed distance, occlusal y at the
+    closest point, unit normal (2,), closest segment, inside the chain's span)``."""
+    p = q[jnp.array([0, 2])]
+    a, b = wall[:-1], wall[1:]
+    ab = b - a
+    length2 = jnp.sum(ab * ab, -1)
+    safe = jnp.where(length2 > 0, length2, 1.0)
+    t_raw = jnp.sum((p - a) * ab, -1) / safe
+    t = jnp.clip(t_raw, 0.0, 1.0)
+    closest = a + t[:, None] * ab
+    d2 = jnp.sum((p - closest) ** 2, -1)
+    j = jnp.argmin(d2)
+    n = _perp(ab[j])
+    n_len = jnp.sqrt(jnp.maximum(jnp.sum(n * n), 1e-24))
+    n = n / n_len
+    out_dir = 0.5 * (outward[j] + outward[j + 1])
+    n = jnp.where(jnp.dot(n, out_dir) < 0, -n, n)
+    signed = jnp.dot(p - closest[j], n)
+    last = ab.shape[0] - 1
+    within = ~(((j == 0) & (t_raw[0] < 0)) | ((j == last) & (t_raw[last] > 1)))
+    y = y_occ[j] + t[j] * (y_occ[j + 1] - y_occ[j])
+    return signed, y, n, within
+
+
+def _teeth_depth(q, chains, upper: bool, side: str):
+    """Depth (mm, >= 0) of ``q`` inside one arch, and the displacement that takes it out."""
+    ling_o, ling_c, lab_o, lab_c = chains
+    sign = 1.0 if upper else -1.0
+    # blend occlusal -> cervical by the height of q at each station
+    span = ling_c[:, 1] - ling_o[:, 1]
+    span = jnp.where(jnp.abs(span) > 1e-9, span, sign * 1e-9)
+    f = jnp.clip((q[1] - ling_o[:, 1]) / span, 0.0, 1.0)[:, None]
+    ling = ling_o[:, [0, 2]] + f * (ling_c[:, [0, 2]] - ling_o[:, [0, 2]])
+    lab = lab_o[:, [0, 2]] + f * (lab_c[:, [0, 2]] - lab_o[:, [0, 2]])
+    if side == "lingual":  # points coming from inside the mouth (the tongue)
+        wall, outward = ling, lab - ling
+    else:  # points coming from outside (the lips): "outward" is into the mouth
+        wall, outward = lab, ling - lab
+    d_h, y_occ, n, within = _wall_distance(q, wall, outward, ling_o[:, 1])
+    d_v = sign * (q[1] - y_occ)
+    depth = jnp.where(within, jnp.maximum(jnp.minimum(d_h, d_v), 0.0), 0.0)
+    horizontal = d_h <= d_v
+    push = depth + jnp.where(depth > 0, PROJECTION_MARGIN_MM, 0.0)
+    move_h = -push * jnp.array([n[0], 0.0, n[1]])
+    move_v = jnp.array([0.0, -sign * push, 0.0])
+    return depth, jnp.where(horizontal, move_h, move_v)
+
+
+def _palate_sheet(model, vertices):
+    """The palate's oral sheet as ``(N_ALONG, N_ACROSS, 3)`` (``cassi_fit.palate`` layout)."""
+    index = np.asarray(model.regions["palate"])
+    n_along = len(index) // (2 * _PALATE_ACROSS)
+    if n_along < 2 or n_along * 2 * _PALATE_ACROSS != len(index):
+        raise CassiError("the model's palate region is not a cassi_fit.palate mesh")
+    return vertices[index[: n_along * _PALATE_ACROSS]].reshape(n_along, _PALATE_ACROSS, 3)
+
+
+def _palate_depth(q, sheet):
+    """Depth of ``q`` above the palate's oral surface (0 outside its footprint) and the
+    displacement out (straight down)."""
+    xs = sheet[:, 0, 0]  # rows run front (large x) to back
+    rows = jnp.arange(xs.shape[0], dtype=q.dtype)
+    r = jnp.interp(-q[0], -xs, rows)
+    i0 = jnp.clip(jnp.floor(r).astype(jnp.int32), 0, xs.shape[0] - 2)
+    w = r - i0
+
+    def row_height(i):
+        return jnp.interp(q[2], sheet[i, :, 2], sheet[i, :, 1])
+
+    h = (1 - w) * row_height(i0) + w * row_height(i0 + 1)
+    half = (1 - w) * sheet[i0, -1, 2] + w * sheet[i0 + 1, -1, 2]
+    inside = (q[0] <= xs[0]) & (q[0] >= xs[-1]) & (jnp.abs(q[2]) <= half)
+    depth = jnp.where(inside, jnp.maximum(q[1] - h, 0.0), 0.0)
+    push = depth + jnp.where(depth > 0, PROJECTION_MARGIN_MM, 0.0)
+    return depth, jnp.array([0.0, -1.0, 0.0]) * push
+
+
+def _parts(model):
+    tongue = np.asarray(model.regions["tongue"])
+    lips = np.concatenate([model.regions["upper_lip"], model.regions["lower_lip"]]).astype(np.int64)
+    return tongue, np.asarray(lips)
+
+
+def depths(model, vertices) -> dict:
+    """Per-vertex depths (mm) of one frame: ``tongue_palate``, ``tongue_upper`` and
+    ``tongue_lower`` (tongue vertices, the teeth of that arch), ``lips_upper`` and
+    ``lips_lower`` (lip vertices); plus ``tongue_upper_front``/``tongue_lower_front``,
+    the teeth depths counted only where the closest crown is a front tooth."""
+    _require(model)
+    tongue, lips = _parts(model)
+    vt, vl = vertices[tongue], vertices[lips]
+    sheet = _palate_sheet(model, vertices)
+    out = {"tongue_palate": jax.vmap(lambda q: _palate_depth(q, sheet)[0])(vt)}
+    for arch in ("upper", "lower"):
+        chains, teeth = _arch(model, vertices, arch)
+        upper = arch == "upper"
+        d_t = jax.vmap(lambda q, c=chains, u=upper: _teeth_depth(q, c, u, "lingual")[0])(vt)
+        d_l = jax.vmap(lambda q, c=chains, u=upper: _teeth_depth(q, c, u, "labial")[0])(vl)
+        front = _front_mask(vt, chains, teeth)
+        out[f"tongue_{arch}"] = d_t
+        out[f"tongue_{arch}_front"] = jnp.where(front, d_t, 0.0)
+        out[f"lips_{arch}"] = d_l
+    return out
+
+
+def _front_mask(points, chains, teeth):
+    """True where the closest occlusal-chain station belongs to a front tooth."""
+    station = chains[0][:, [0, 2]]
+    d2 = jnp.sum((points[:, None, [0, 2]] - station[None]) ** 2, -1)
+    nearest = jnp.argmin(d2, axis=1)
+    return jnp.asarray(teeth <= FRONT_TEETH)[nearest]
+
+
+def report(model, vertices) -> dict:
+    """The deepest point of each kind in one frame (mm): the keys of ``REPORT_KEYS``."""
+    d = depths(model, vertices)
+    return {
+        "tongue_palate": jnp.max(d["tongue_palate"]),
+        "tongue_upper_teeth": jnp.max(d["tongue_upper"]),
+        "tongue_lower_teeth": jnp.max(d["tongue_lower"]),
+        "tongue_upper_front": jnp.max(d["tongue_upper_front"]),
+        "tongue_lower_front": jnp.max(d["tongue_lower_front"]),
+        "lips_upper_teeth": jnp.max(d["lips_upper"]),
+        "lips_lower_teeth": jnp.max(d["lips_lower"]),
+    }
+
+
+def project(model, vertices, passes: int = PROJECTION_PASSES):
+    """One frame with the tongue pushed out of the palate and both arches, and the lips
+    out of both arches (each point by its shortest way out, ``passes`` alternating rounds).
+    Vertices that are inside nothing do not move."""
+    _require(model)
+    tongue, lips = _parts(model)
+    sheet = _palate_sheet(model, vertices)
+    arches = [(_arch(model, vertices, a)[0], a == "upper") for a in ("upper", "lower")]
+
+    def push_tongue(q):
+        for _ in range(passes):
+            q = q + _palate_depth(q, sheet)[1]
+            for chains, upper in arches:
+                q = q + _teeth_depth(q, chains, upper, "lingual")[1]
+        return q
+
+    def push_lip(q):
+        for _ in range(passes):
+            for chains, upper in arches:
+                q = q + _teeth_depth(q, chains, upper, "labial")[1]
+        return q
+
+    vertices = vertices.at[tongue].set(jax.vmap(push_tongue)(vertices[tongue]))
+    return vertices.at[lips].set(jax.vmap(push_lip)(vertices[lips]))
+
+
+def penalty_residuals(model, vertices, *, tongue=True, lips=True):
+    """Residuals for a least-squares fit: every depth (mm) of the chosen parts, one per
+    vertex and obstacle, flattened. Zero where nothing collides; the sum of their squares
+    is the penalty. Differentiable almost everywhere (its gradient pushes points out)."""
+    d = depths(model, vertices)
+    keys = []
+    if tongue:
+        keys += ["tongue_palate", "tongue_upper", "tongue_lower"]
+    if lips:
+        keys += ["lips_upper", "lips_lower"]
+    if not keys:
+        return jnp.zeros(0, vertices.dtype)
+    return jnp.concatenate([d[k] for k in keys])
