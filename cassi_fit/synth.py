@@ -63,7 +63,7 @@ __all__ = [
     "ensure_default_corpus",
 ]
 
-GENERATOR_VERSION = 1  # bump when the generated numbers change (invalidates the cache)
+GENERATOR_VERSION = 2  # bump when the generated numbers change (invalidates the cache)
 PELLETS = ("UL", "LL", "T1", "T2", "T3", "T4", "MNI", "MNM")  # = cassi_fit.txy.PELLET_NAMES
 _UL, _LL, _T1, _T2, _T3, _T4, _MNI, _MNM = range(8)
 _TONGUE = slice(_T1, _T4 + 1)
@@ -157,14 +157,16 @@ def make_subject(name: str, rng: np.random.Generator) -> SubjectAnatomy:
     condyle = tip + np.array([-r(90.0, 100.0), r(20.0, 30.0)])
     gnathion = tip + np.array([r(-1.0, 4.0), -r(38.0, 46.0)])
     gonion = condyle + np.array([r(2.0, 10.0), -r(50.0, 60.0)])
-    ul_thick, ll_thick, face_width = r(11.0, 15.0), r(12.0, 16.0), r(125.0, 150.0)
+    ul_thick, ll_thick, face_width = r(11.0, 15.0), r(10.5, 14.5), r(125.0, 150.0)
     scale = r(0.95, 1.05)  # vocal tract size
     tongue = scale * np.array([[-16.5, 1.5], [-28.0, 8.0], [-39.5, 15.0], [-53.0, 17.0]])
     tongue = tongue + rng.normal(0.0, 0.8, size=(4, 2))
     palate = _palate_outline(rng)
     tongue[:, 1] = np.minimum(tongue[:, 1], _palate_height(palate, tongue[:, 0]) - 4.0)
-    ul = np.array([ul_thick + r(0.5, 2.0), r(16.5, 19.5)])
-    ll = np.array([ll_thick - r(2.0, 4.0), r(-18.0, -15.5)])
+    # Lip thickness as Headmeasures defines it: how far the lip pellet (on the vermilion)
+    # sits ahead of the incisor tip, at rest (upper: from the origin; lower: from ``tip``).
+    ul = np.array([ul_thick, r(16.5, 19.5)])
+    ll = np.array([tip[0] + ll_thick, r(-18.0, -15.5)])
     pellets = np.concatenate([ul[None], ll[None], tongue, mni[None], mnm[None]])
     head = _head_measures(rng, gonion, gnathion, ul_thick, ll_thick, face_width)
     return SubjectAnatomy(
