@@ -1,0 +1,101 @@
+"""``cassi evaluate DATASET``: CASSI's Table 2 ratings, measured (``cassi_fit.evaluate``)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+JAW_METHODS = ("closed-form", "frame-fit", "fixed-pivot", "smooth-pivot")
+SUMMARY_NAME = "evaluation_summary.png"
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "evaluate",
+        help="rate teeth, lips and tongue per subject from measured problems (CASSI Table 2)",
+        description="Animate every recording of DATASET, measure the problems CASSI looked "
+        "for by eye (lower teeth sloping, teeth overlapping or apart, lips apart or crossing, "
+        "the tongue through the front teeth, ...), count them per subject and rate teeth, lips "
+        "and tongue EXCELLENT (0 problems), VERY GOOD (1), GOOD (2) or FAIR (3 or more). "
+        "Prints the table in Table 2's layout and writes evaluation_subjects.csv, "
+        "evaluation_recordings.csv, evaluation.md and evaluation_summary.png into --out. "
+        "Thresholds and their reasons: docs/EVALUATION.md.",
+    )
+    parser.add_argument("dataset", metavar="DATASET", help="dataset folder (either layout)")
+    parser.add_argument("--out", default="evaluation", metavar="DIR",
+                        help="output folder (default: evaluation/ in the current folder)")
+    which = parser.add_mutually_exclusive_group()
+    which.add_argument("--calibration", metavar="DIR",
+                       help="per-subject calibration files written by `cassi calibrate`")
+    which.add_argument("--cassi", action="store_true",
+                       help="CASSI-like: only the paper's conformation (jaw shape from gonion "
+                       "and gnathion) and no collision handling")
+    parser.add_argument("--collisions", choices=("off", "project"), default=None,
+                        help="push the tongue and lips out of the teeth and palate (project) "
+                        "or not (off; the default)")
+    parser.add_argument("--jaw", choices=JAW_METHODS, default="closed-form",
+                        help="how the jaw moves (as in `cassi animate`; default closed-form)")
+    parser.add_argument("--stride", type=int, default=1, metavar="N",
+                        help="use every Nth data line (default 1: every line)")
+    parser.add_argument("--tasks", nargs="+", metavar="TASK",
+                        help="only these tasks (names or comma-separated lists, e.g. tp040 "
+                        "tp106); default: every task of every subject")
+    parser.add_argument("--subjects", nargs="+", metavar="SUBJECT",
+                        help="only these subjects (default: all)")
+    parser.add_argument("--force", action="store_true", help="replace existing outputs")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.set_defaults(func=run)
+
+
+def _words(values):
+    """``["a,b", "c"]`` -> ``["a", "b", "c"]`` (None stays None)."""
+    if values is None:
+        return None
+    return [w.strip() for v in values for w in v.split(",") if w.strip()]
+
+
+def run(args) -> int:
+    from cassi_fit.errors import CassiError, OutputExistsError
+
+    if args.stride < 1:
+        raise CassiError(f"--stride must be at least 1, got {args.stride}")
+    if args.cassi and args.collisions == "project":
+        raise CassiError("--cassi means CASSI-like, without collision handling; drop "
+                         "--collisions project or --cassi")
+    dataset = Path(args.dataset)
+    if not dataset.is_dir():
+        raise CassiError(f"{dataset}: no such dataset folder")
+    out = Path(args.out)
+    from cassi_fit.evaluate import OUTPUT_NAMES
+
+    targets = [out / name for name in (*OUTPUT_NAMES, SUMMARY_NAME)]
+    existing = [str(p) for p in targets if p.exists()]
+    if existing and not args.force:  # refuse before the (slow) evaluation
+        raise OutputExistsError(f"{', '.join(existing)}: file exists (pass --force to replace)")
+    calibrations = None
+    if args.cassi:
+        calibrations = "cassi"
+    elif args.calibration:
+        from cassi_fit.calibrate import load_calibrations
+
+        folder = Path(args.calibration)
+        if not folder.is_dir():
+            raise CassiError(f"--calibration {folder}: no such folder")
+        calibrations = load_calibrations(folder)
+    from cassi_fit.evaluate import evaluate_dataset, markdown_table, plot_summary, write_table
+
+    result = evaluate_dataset(
+        dataset,
+        calibrations=calibrations,
+        collisions=args.collisions or "off",
+        tasks=_words(args.tasks),
+        subjects=_words(args.subjects),
+        progress=not args.quiet,
+        jaw=args.jaw,
+        stride=args.stride,
+    )
+    print(markdown_table(result), end="")
+    written = write_table(result, out, overwrite=args.force)
+    written.append(plot_summary(result, out / SUMMARY_NAME, overwrite=args.force))
+    print("wrote " + ", ".join(str(p) for p in written), file=sys.stderr)
+    return 1 if not any(s["ratings"] for s in result.subjects) else 0
