@@ -197,7 +197,7 @@ class _Sites:
 
     upper_tip: int
     lower_tip: int
-    upper_molar: np.ndarray  # occlusal stations of the last upper crown (both sides)
+    upper_molar: np.ndarray  # lingual occlusal stations of the last upper crown (both sides)
     lower_molar: np.ndarray
     upper_back: np.ndarray  # occlusal stations of the upper back teeth (tooth > 2)
     lower_back: np.ndarray
@@ -257,8 +257,12 @@ def _sites(model) -> _Sites:
     return _Sites(
         upper_tip=model.landmarks["upper_incisor_tip"],
         lower_tip=model.landmarks["lower_incisor_tip"],
-        upper_molar=_chain_stations(model, "upper", occlusal, lambda t: t == last["upper"]),
-        lower_molar=_chain_stations(model, "lower", occlusal, lambda t: t == last["lower"]),
+        # lingual stations only: the labial ones of the last lower molar carry the MNM
+        # pellet site, which sits below the crown's occlusal level
+        upper_molar=_chain_stations(
+            model, "upper", ("lingual_occlusal",), lambda t: t == last["upper"]),
+        lower_molar=_chain_stations(
+            model, "lower", ("lingual_occlusal",), lambda t: t == last["lower"]),
         upper_back=_chain_stations(model, "upper", occlusal, lambda t: t > _front_teeth()),
         lower_back=_chain_stations(model, "lower", occlusal, lambda t: t > _front_teeth()),
         upper_cervical=_chain_stations(model, "upper", cervical, lambda t: t == 0),
@@ -382,7 +386,7 @@ def penetration_of(model, vertices) -> dict:
     """``collide.report`` of every frame of ``vertices (m, V, 3)``: key -> ``(m,)`` mm.
 
     For geometry that did not come from ``animate.animate`` (which reports it itself);
-    compiled once per call.
+    compiled once per model object (the last few are kept).
     """
     from .collide import report
 
@@ -391,8 +395,16 @@ def penetration_of(model, vertices) -> dict:
     vertices = jnp.asarray(vertices)
     if size > m:
         vertices = jnp.concatenate([vertices, jnp.repeat(vertices[-1:], size - m, axis=0)])
-    out = jax.jit(jax.vmap(lambda v: report(model, v)))(vertices)
+    entry = _REPORTS.get(id(model))
+    if entry is None or entry[0] is not model:  # the model is kept, so its id stays its own
+        entry = _REPORTS[id(model)] = (model, jax.jit(jax.vmap(lambda v: report(model, v))))
+        while len(_REPORTS) > 4:
+            del _REPORTS[next(iter(_REPORTS))]
+    out = entry[1](vertices)
     return {k: np.asarray(v)[:m] for k, v in out.items()}
+
+
+_REPORTS: dict = {}
 
 
 def _penetration(model, anim):
