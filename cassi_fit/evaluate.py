@@ -594,9 +594,7 @@ def evaluate_recording(
     """
     from .animate import animate, initialize
 
-    # calibration=None is initialize's own default (also for a toolkit without the option)
-    options = {} if calibration is None else {"calibration": calibration}
-    state = initialize(recording, model, **options)
+    state = initialize(recording, model, calibration=calibration)
     anim = animate(state, recording, jaw=jaw, stride=stride, collisions=collisions)
     settings = {
         "frames": int(anim.n_frames),
