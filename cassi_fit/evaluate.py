@@ -225,7 +225,7 @@ def _chain_stations(model, arch, chains, select) -> np.ndarray:
 
 def _sites(model) -> _Sites:
     """The vertex sets of the measures; raises ``MissingDataError`` if the model lacks any."""
-    from .collide import has_collision_data
+    from .collide import FRONT_TEETH, has_collision_data
     from .palate import N_ACROSS, N_ALONG
 
     if not has_collision_data(model):
@@ -263,8 +263,8 @@ def _sites(model) -> _Sites:
             model, "upper", ("lingual_occlusal",), lambda t: t == last["upper"]),
         lower_molar=_chain_stations(
             model, "lower", ("lingual_occlusal",), lambda t: t == last["lower"]),
-        upper_back=_chain_stations(model, "upper", occlusal, lambda t: t > _front_teeth()),
-        lower_back=_chain_stations(model, "lower", occlusal, lambda t: t > _front_teeth()),
+        upper_back=_chain_stations(model, "upper", occlusal, lambda t: t > FRONT_TEETH),
+        lower_back=_chain_stations(model, "lower", occlusal, lambda t: t > FRONT_TEETH),
         upper_cervical=_chain_stations(model, "upper", cervical, lambda t: t == 0),
         lower_cervical=_chain_stations(model, "lower", cervical, lambda t: t == 0),
         lower_lingual_front=_chain_stations(
@@ -276,12 +276,6 @@ def _sites(model) -> _Sites:
         tongue=tongue,
         palate_oral=palate[: N_ALONG * N_ACROSS],
     )
-
-
-def _front_teeth() -> int:
-    from .collide import FRONT_TEETH
-
-    return FRONT_TEETH
 
 
 def _split(sites: _Sites, points):
@@ -310,8 +304,8 @@ def _frame_quantities(parts: dict) -> dict:
     front = lower_tip[1] - upper_tip[1]
     # each lower back station against the nearest upper back station (in x-z: top view)
     lo, up = p["lower_back"], p["upper_back"]
-    d2 = jnp.sum((lo[:, None, :][..., jnp.array([0, 2])] - up[None][..., jnp.array([0, 2])]) ** 2,
-                 -1)
+    xz = jnp.array([0, 2])
+    d2 = jnp.sum((lo[:, None, xz] - up[None, :, xz]) ** 2, -1)
     back = jnp.max(lo[:, 1] - up[jnp.argmin(d2, axis=1), 1])
     upper_edge = jnp.min(p["upper_lip_mid"][:, 1])
     lower_edge = jnp.max(p["lower_lip_mid"][:, 1])
@@ -719,8 +713,9 @@ def evaluate_dataset(
         except CassiError as exc:
             rows.append(_row(subject, task, f"error: {exc}", {
                 **settings, "frames": 0, "calibration": _calibration_label(calibration)}))
+    planned = list(dict.fromkeys(subject for subject, _ in plan))  # those with chosen tasks
     per_subject = [_subject_row(s, [r for r in rows if r["subject"] == s], settings)
-                   for s in names]
+                   for s in planned]
     return EvaluationResult(rows, per_subject, {**settings, "calibration": label})
 
 
