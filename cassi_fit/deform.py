@@ -49,13 +49,15 @@ class FaceParams(eqx.Module):
     nose_tip: Array
     jaw_shape_theta: Array
     jaw_shape_translation: Array
+    jaw_shape_scale: Array = None
 
 
 def default_params(model=None, dtype=float) -> FaceParams:
     """Neutral parameters: ``deform(model, default_params())`` is the rest mesh exactly."""
     z = lambda *shape: jnp.zeros(shape, dtype)
     one = jnp.ones((), dtype)
-    return FaceParams(z(), z(2), z(4, 2), z(2), z(2), one, z(), z(), one, z(2), z(), z(2))
+    return FaceParams(z(), z(2), z(4, 2), z(2), z(2), one, z(), z(), one, z(2), z(), z(2),
+                      jnp.ones(2, dtype))
 
 
 def _move_by_fraction(motion, weights, xy):
@@ -88,6 +90,9 @@ def conformation(model, v, p):
     x = v[:, 0] + p.upper_lip_thickness * f["upper_vermilion"] \
         + p.lower_lip_thickness * f["lower_vermilion"]
     xy = jnp.stack([x, v[:, 1]], -1) + p.nose_tip * f["nose"][:, None]
+    if p.jaw_shape_scale is not None:  # jaw proportions: scaled about the lower incisor tip
+        centre = jnp.asarray(model.vertices)[model.landmarks["lower_incisor_tip"], :2]
+        xy = xy + f["jaw_shape"][:, None] * (p.jaw_shape_scale - 1.0) * (xy - centre)
     xy = _move_by_fraction((p.jaw_shape_theta, p.jaw_shape_translation), f["jaw_shape"], xy)
     return jnp.concatenate([xy, z[:, None]], -1)
 

@@ -29,7 +29,7 @@ REGIONS = ("skin", "upper_lip", "lower_lip", "jaw", "under_chin", "neck", "cheek
            "eyes", "upper_teeth", "lower_teeth", "tongue", "palate")
 LANDMARKS = ("upper_incisor_tip", "lower_incisor_tip", "MNI", "MNM", "UL", "LL", "T1", "T2",
              "T3", "T4", "gonion", "gnathion", "nose_tip", "subnasale", "mouth_corner_left",
-             "mouth_corner_right")
+             "mouth_corner_right", "zygion_left", "zygion_right")
 MEASURES = ("face_width", "jaw_width", "mouth_width", "upper_lip_thickness",
             "lower_lip_thickness", "nose_protrusion")
 # Per-vertex deformation fields stored beside the positions (see model/README.md).

@@ -79,12 +79,12 @@ ROWS = [
     ("ll_red", -13.0, 5.0, -75, 55, -147, 2.3, 0, "l"),
     ("LL", -21.4, 4.0, -76, 54, -147, 2.2, 0.5, "l"),
     ("fold", -29, 3.0, -78, 52.5, -147, 2.0, 2, "l"),
-    ("chin", -40, 8.0, -80, 50.5, -147, 2.0, 5, "l"),
-    ("chin_low", -49, 6.0, -82, 48.5, -147, 2.0, 9, "l"),
-    ("menton", -56, -4.0, -84, 46, -147, 2.0, 13, "l"),
-    ("under_chin", -61, -24.0, -95, 48, -147, 2.0, 14, "l"),
-    ("throat", -68, -42.0, -92, 49, -140, 2.0, 12, "l"),
-    ("neck1", -85, -47.0, -90, 49, -132, 2.0, 6, "l"),
+    ("chin", -37, 8.0, -80, 50.5, -147, 2.0, 5, "l"),
+    ("chin_low", -44, 6.0, -82, 48.5, -147, 2.0, 9, "l"),
+    ("menton", -49.5, -4.0, -84, 46, -147, 2.0, 13, "l"),
+    ("under_chin", -55, -24.0, -95, 48, -147, 2.0, 14, "l"),
+    ("throat", -63, -42.0, -92, 49, -140, 2.0, 12, "l"),
+    ("neck1", -81, -47.0, -90, 49, -132, 2.0, 6, "l"),
     ("neck2", -105, -47.0, -90, 50, -130, 2.0, 2, "l"),
     ("neck_base", -125, -44.0, -90, 53, -134, 2.0, 0, "l"),
 ]
@@ -273,7 +273,7 @@ def skin_weights(verts, ids, corner_z):
     phi_in = phis[FRONT_Z.index(16)]
     p = PARKE
     # jaw line from menton to gonion; dy > 0 below it
-    y_line = np.interp(x, [-84.0, -4.0], [-40.0, -56.0])
+    y_line = np.interp(x, [-86.0, -4.0], [-34.0, -49.5])
     dy = y_line - y
     vert = (p["jaw"] + (p["under_chin"] - p["jaw"]) * ramp(dy, 0.5, 7.0)
             + (p["neck"] - p["under_chin"]) * ramp(dy, 9.5, 18.0)
@@ -287,6 +287,15 @@ def skin_weights(verts, ids, corner_z):
     w_upper = back * lat * p["cheek"] * (1.0 - ramp(y, 6.0, 30.0))
     w = np.where(lower, w_lower, w_upper)
     return w, lower
+
+
+def jaw_shape_field(verts):
+    """Weights of the jaw/chin conformation (C7-C11): the whole lower face and the neck
+    (1), fading smoothly to 0 from below the mouth up to the upper lip and toward the
+    back of the neck. Broader and smoother than the jaw rotation's region weights: the
+    conformation may move the jaw angle by 10-20 mm, which Parke's regions would crease."""
+    x, y = verts[:, 0], verts[:, 1]
+    return (1.0 - ramp(y, -15.0, 10.0)) * (1.0 - ramp(-x, 90.0, 135.0))
 
 
 def tooth(point, tangent, width, thick_cerv, thick_occ, height, up):
@@ -526,7 +535,7 @@ def build():
                                      "jaw_shape", "tongue_s")}
     for k, v in fields.items():
         full[k][: len(sv)] = v
-    full["jaw_shape"][: len(sv)] = w_parke
+    full["jaw_shape"][: len(sv)] = jaw_shape_field(sv)
     full["tongue_s"][regions["tongue"]] = ts
     skin = regions["skin"]
     row_of = {k: ids[:, 0] == ROW_INDEX[k] for k in ROW_INDEX}
@@ -545,7 +554,7 @@ def build():
     T = lambda k: offsets["tongue"] + tsites[k]
     ui = offsets["upper_teeth"] + 3
     li = offsets["lower_teeth"] + 3
-    gonion = int(np.argmin(np.linalg.norm(sv - [-84.0, -40.0, 52.0], axis=1)))
+    gonion = int(np.argmin(np.linalg.norm(sv - [-86.0, -34.0, 52.0], axis=1)))
     landmarks = {
         "upper_incisor_tip": ui, "lower_incisor_tip": li,
         "MNI": offsets["lower_teeth"] + 8, "MNM": offsets["lower_teeth"] + 6 * 14 + 1,
@@ -556,15 +565,19 @@ def build():
         "mouth_corner_left": index[(ROW_INDEX["A"], corner, 1)],
         "mouth_corner_right": index[(ROW_INDEX["A"], corner, -1)],
     }
+    cheek = np.flatnonzero(row_of["cheekbone"] & (sv[:, 0] > -75.0))  # skin comes first
+    landmarks["zygion_left"] = cheek[np.argmax(sv[cheek, 2])]
+    landmarks["zygion_right"] = cheek[np.argmin(sv[cheek, 2])]
     landmarks = {k: int(v) for k, v in landmarks.items()}
     P = lambda k: V[landmarks[k]]
-    cheek_row = sv[row_of["cheekbone"] & (sv[:, 0] > -75.0)]
+    forward = (P("MNI") - P("MNM"))[:2] / np.linalg.norm((P("MNI") - P("MNM"))[:2])
     measures = {
-        "face_width": float(2 * np.abs(cheek_row[:, 2]).max()),
+        "face_width": float(P("zygion_left")[2] - P("zygion_right")[2]),
         "jaw_width": float(2 * abs(P("gonion")[2])),
         "mouth_width": float(P("mouth_corner_left")[2] - P("mouth_corner_right")[2]),
         "upper_lip_thickness": float(P("UL")[0] - P("upper_incisor_tip")[0]),
-        "lower_lip_thickness": float(P("LL")[0] - P("lower_incisor_tip")[0]),
+        # along the mandible's forward direction (MNM -> MNI), as Headmeasures defines it
+        "lower_lip_thickness": float((P("LL") - P("lower_incisor_tip"))[:2] @ forward),
         "nose_protrusion": float(P("nose_tip")[0] - P("subnasale")[0]),
         "jaw_pivot_x": JAW_PIVOT[0], "jaw_pivot_y": JAW_PIVOT[1],
         "tongue_anchor_s": float(anchor_s),
@@ -637,6 +650,8 @@ PARAMETERS = [  # number, name, unit, min, max, default, kind, stored positions 
     ('C7', 'jaw_shape_theta', 'rad', -0.3, 0.3, 0.0, 'rotation', "vertex i turns by jaw_shape x theta about the motion's pivot", 'jaw/chin conformation rotation'),
     ('C8', 'jaw_shape_translation_x', 'mm', -15, 15, 0.0, 'rotation', 'with C7 one rigid motion', 'jaw/chin conformation translation x'),
     ('C9', 'jaw_shape_translation_y', 'mm', -15, 15, 0.0, 'rotation', 'as C8', 'jaw/chin conformation translation y'),
+    ('C10', 'jaw_shape_scale_x', 'scale', 0.7, 1.4, 1.0, 'scale', 'x moved by (value - 1) x jaw_shape x (x - lower incisor tip x), before C7-C9', 'jaw/chin conformation: scale along x about the lower incisor tip'),
+    ('C11', 'jaw_shape_scale_y', 'scale', 0.7, 1.4, 1.0, 'scale', 'y moved by (value - 1) x jaw_shape x (y - lower incisor tip y), before C7-C9', 'jaw/chin conformation: scale along y about the lower incisor tip'),
     ('55', 'T1_X', 'mm', -30, 30, 0.0, 'interpolation', 'along the tongue between the T1-T4 sites and the back anchors (cassi_fit.tongue)', 'tongue T1 site; x displacement'),
     ('56', 'T1_Z', 'mm', -30, 30, 0.0, 'interpolation', 'as the X parameter', 'tongue T1 site; vertical (y) displacement'),
     ('57', 'T2_X', 'mm', -30, 30, 0.0, 'interpolation', 'along the tongue between the T1-T4 sites and the back anchors (cassi_fit.tongue)', 'tongue T2 site; x displacement'),
