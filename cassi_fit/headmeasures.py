@@ -38,8 +38,8 @@ class HeadMeasures:
     face_width: float  # bizygomatic breadth
     jaw_width: float  # bigonial breadth
     mouth_width: float  # cheilion to cheilion
-    upper_lip_thickness: float  # front to back, at the upper vermilion (UL pellet)
-    lower_lip_thickness: float  # front to back, at the lower vermilion (LL pellet)
+    upper_lip_thickness: float  # UL pellet (on the vermilion) ahead of the upper incisor tip
+    lower_lip_thickness: float  # LL pellet ahead of the lower incisor tip, along MNM -> MNI
     nose_protrusion: float  # subnasale to pronasale
 
     def to_dict(self) -> dict[str, float]:
@@ -53,7 +53,7 @@ POSITIVE_FIELDS = FIELD_NAMES[4:]
 #: Adult averages, used when a dataset has no measures for a subject. Distances after
 #: Farkas-style norms (FACE_MODEL_NOTES.md: bizygomatic 135, bigonial 100, mouth 50,
 #: nose tip 20 from subnasale); lip thickness from the median UL/LL pellets (15, 18) and
-#: (9, -21) to the labial faces of the incisors; gonion about 85 mm behind and 35 mm below
+#: (9, -21) and a lower incisor tip near (-1.5, -1) on a jaw line sloping 3.5 degrees; gonion about 85 mm behind and 35 mm below
 #: the incisor tip (condyle 90-100 behind and 20-30 above, ramus about 55-60 tall);
 #: gnathion at the chin, about 43 mm below the incisor tip.
 DEFAULT_HEAD_MEASURES = HeadMeasures(
@@ -64,8 +64,8 @@ DEFAULT_HEAD_MEASURES = HeadMeasures(
     face_width=135.0,
     jaw_width=100.0,
     mouth_width=50.0,
-    upper_lip_thickness=12.0,
-    lower_lip_thickness=11.0,
+    upper_lip_thickness=15.0,
+    lower_lip_thickness=11.5,
     nose_protrusion=20.0,
 )
 

@@ -77,6 +77,12 @@ _TONGUE_JAW_SHARE = np.array([0.75, 0.65, 0.55, 0.45])
 _PALATE_MARGIN_MM = 1.0  # the tongue pellets stay at least this far below the palate ...
 _PALATE_SOFTNESS_MM = 0.7  # ... approached smoothly (a soft minimum of this width)
 AUDIO_RATE_HZ = 16000
+# The toolkit's face model (model/model.json; checked by tests/test_synth.py): how far its
+# MNI site sits ahead of its lower incisor tip along the jaw line MNM -> MNI, and its
+# MNI-MNM distance (mm).
+MODEL_TIP_TO_MNI_ALONG = 3.125
+MODEL_JAW_PELLET_DISTANCE = 43.2897
+MNI_BELOW_TIP_MM = 4.7  # MNI below the lower incisor tip, across the jaw line
 
 
 # --------------------------------------------------------------------------- anatomy
@@ -150,14 +156,21 @@ def _head_measures(rng, gonion, gnathion, ul_thick, ll_thick, face_width):
 def make_subject(name: str, rng: np.random.Generator) -> SubjectAnatomy:
     """Draw one subject's anatomy (see the class for units and frames)."""
     r = rng.uniform
-    tip = np.array([-r(0.8, 2.2), -r(0.5, 1.8)])  # lower incisor tip, behind/below origin
-    mni = tip + np.array([r(0.6, 1.6), -r(1.8, 2.8)])  # on the labial face, below the tip
-    spacing, slope = r(37.0, 44.5), np.deg2rad(r(1.0, 6.0))
+    tip = np.array([-r(2.5, 4.0), -r(0.5, 1.8)])  # lower incisor tip: 2.5-4 mm overjet
+    spacing, slope = r(37.0, 44.5), np.deg2rad(r(4.0, 9.0))
+    # MNI on the labial face below the tip: along the jaw line (MNM -> MNI) as far ahead
+    # of the tip as on the toolkit's model scaled to this jaw (so that the lower lip's
+    # thickness, measured along that line, is what the model can see), give or take
+    # 0.25 mm; across it, MNI_BELOW_TIP_MM lower, give or take 0.5 mm
+    forward = np.array([np.cos(slope), -np.sin(slope)])
+    up = np.array([np.sin(slope), np.cos(slope)])
+    along = spacing / MODEL_JAW_PELLET_DISTANCE * MODEL_TIP_TO_MNI_ALONG + r(-0.25, 0.25)
+    mni = tip + along * forward - (MNI_BELOW_TIP_MM + r(-0.5, 0.5)) * up
     mnm = mni + spacing * np.array([-np.cos(slope), np.sin(slope)])
     condyle = tip + np.array([-r(90.0, 100.0), r(20.0, 30.0)])
     gnathion = tip + np.array([r(-1.0, 4.0), -r(38.0, 46.0)])
     gonion = condyle + np.array([r(2.0, 10.0), -r(50.0, 60.0)])
-    ul_thick, ll_thick, face_width = r(11.0, 15.0), r(10.5, 14.5), r(125.0, 150.0)
+    ul_thick, ll_thick, face_width = r(12.0, 16.0), r(12.5, 16.5), r(125.0, 150.0)
     scale = r(0.95, 1.05)  # vocal tract size
     tongue = scale * np.array([[-16.5, 1.5], [-28.0, 8.0], [-39.5, 15.0], [-53.0, 17.0]])
     tongue = tongue + rng.normal(0.0, 0.8, size=(4, 2))
@@ -165,8 +178,12 @@ def make_subject(name: str, rng: np.random.Generator) -> SubjectAnatomy:
     tongue[:, 1] = np.minimum(tongue[:, 1], _palate_height(palate, tongue[:, 0]) - 4.0)
     # Lip thickness as Headmeasures defines it: how far the lip pellet (on the vermilion)
     # sits ahead of the incisor tip, at rest (upper: from the origin; lower: from ``tip``).
+    # (lower: along the mandible's forward direction, MNM -> MNI, so that it does not
+    # change as the jaw turns)
     ul = np.array([ul_thick, r(16.5, 19.5)])
-    ll = np.array([tip[0] + ll_thick, r(-18.0, -15.5)])
+    forward = (mni - mnm) / np.linalg.norm(mni - mnm)
+    ll_y = r(-18.0, -15.5)
+    ll = np.array([tip[0] + (ll_thick - (ll_y - tip[1]) * forward[1]) / forward[0], ll_y])
     pellets = np.concatenate([ul[None], ll[None], tongue, mni[None], mnm[None]])
     head = _head_measures(rng, gonion, gnathion, ul_thick, ll_thick, face_width)
     return SubjectAnatomy(

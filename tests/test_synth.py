@@ -59,7 +59,7 @@ def test_anatomy_is_plausible(index):
     assert y.min() > 4.0 and y.max() < 28.0
     assert 35.0 <= a.jaw_pellet_distance <= 45.0
     tip, mni = a.lower_incisor_tip_rest, a.mni_rest
-    assert -3 < tip[0] < 0 and -2 < tip[1] < 0
+    assert -4.5 < tip[0] < -2 and -2 < tip[1] < 0  # behind the upper tip: overjet
     assert mni[0] > tip[0] and mni[1] < tip[1] - 1.5  # MNI in front of and below the tip
     behind, above = tip - a.condyle_rest
     assert 90 <= behind <= 100 and -30 <= above <= -20
@@ -67,6 +67,30 @@ def test_anatomy_is_plausible(index):
     np.testing.assert_array_equal(a.pellets_rest[6:], [a.mni_rest, a.mnm_rest])
     assert a.upper_lip_thickness == a.head.upper_lip_thickness
     assert 120 < a.face_width == a.head.face_width < 155
+
+
+@pytest.mark.parametrize("index", range(4))
+def test_lip_thickness_is_what_the_pellets_show(index):
+    """Headmeasures' lip thickness (docs/FORMATS.md): the lip pellet ahead of the incisor
+    tip at rest; the lower one along the jaw line MNM -> MNI."""
+    a = zoo.subject(index)
+    rest = a.pellets_rest
+    assert rest[0, 0] == pytest.approx(a.upper_lip_thickness, abs=1e-3)  # um rounding
+    forward = (a.mni_rest - a.mnm_rest) / np.linalg.norm(a.mni_rest - a.mnm_rest)
+    ahead = (rest[1] - a.lower_incisor_tip_rest) @ forward
+    assert ahead == pytest.approx(a.lower_lip_thickness, abs=1e-3)  # um rounding
+
+
+def test_generator_constants_match_the_face_model():
+    from cassi_fit.face_model import load_model
+
+    model = load_model()
+    v = np.asarray(model.vertices)[:, :2]
+    mni, mnm = v[model.landmarks["MNI"]], v[model.landmarks["MNM"]]
+    tip = v[model.landmarks["lower_incisor_tip"]]
+    forward = (mni - mnm) / np.linalg.norm(mni - mnm)
+    assert synth.MODEL_JAW_PELLET_DISTANCE == pytest.approx(np.linalg.norm(mni - mnm), abs=1e-3)
+    assert synth.MODEL_TIP_TO_MNI_ALONG == pytest.approx((mni - tip) @ forward, abs=1e-3)
 
 
 def test_subjects_differ():
