@@ -49,6 +49,8 @@ PELLETS = ("UL", "LL", "T1", "T2", "T3", "T4", "MNI", "MNM")
 UL, LL, T1, T4, MNI, MNM = 0, 1, 2, 5, 6, 7
 JAW_METHODS = ("closed-form", "frame-fit", "fixed-pivot", "smooth-pivot")
 GAP_POLICIES = ("hold", "interpolate")
+COLLISION_MODES = ("off", "project")
+CONFORMATIONS = ("measures", "cassi")
 
 FRAME_OK, FRAME_HELD, FRAME_INTERPOLATED, FRAME_MISTRACKED = 0, 1, 2, 3
 FRAME_STATUS_NAMES = {
@@ -97,7 +99,11 @@ class Animation(eqx.Module):
     pellets_measured ``(m, 8, 2)`` mm, scaled by ``p / d`` and repaired; pellets_model
     ``(m, 8, 2)`` mm, where the model puts its pellet sites; repaired ``(m, 8)`` bool;
     mistracked ``(m, 8)`` bool; frame_status ``(m,)`` int (``FRAME_STATUS_NAMES``);
-    jaw_status ``(m,)`` int (``jaw.STATUS_NAMES``); stride and jaw method, static.
+    jaw_status ``(m,)`` int (``jaw.STATUS_NAMES``); penetration: ``collide.REPORT_KEYS``
+    -> ``(m,)`` mm, the deepest point of each kind per frame before any projection (empty
+    if the model has no collision data); penetration_after: the same after projection
+    (equal to ``penetration`` when collisions are off); stride, jaw method and collision
+    mode, static.
     """
 
     times: np.ndarray
@@ -110,8 +116,11 @@ class Animation(eqx.Module):
     mistracked: np.ndarray
     frame_status: np.ndarray
     jaw_status: np.ndarray
+    penetration: dict
+    penetration_after: dict
     stride: int = eqx.field(static=True)
     jaw_method: str = eqx.field(static=True)
+    collisions: str = eqx.field(static=True, default="off")
 
     @property
     def n_frames(self) -> int:
@@ -219,59 +228,87 @@ def _jaw_shape(model, head, scale):
     return float(motion.theta), np.asarray(motion.translation)
 
 
-def _lip_thickness(model, sites, first, scale, head, head_is_default):
-    """Millimetres added to the model's own lip thickness ``(upper, lower)``.
+def _lip_thickness(model, first, scale, head, head_is_default):
+    """Millimetres added to the model's lip thickness parameters ``(upper, lower)``.
 
-    With measured Headmeasures: the scaled measures minus the model's. With the default
-    measures only (the report's future work): from the first valid line, taken as a gently
-    closed mouth, the lip pellet's distance ahead of the incisor (UL from the upper incisor
-    tip at the origin, LL from the MNI pellet) minus the same distance on the model. Kept
-    within [-1/2, +1] of the model's own thickness so that a bad first line cannot turn a
-    lip inside out.
+    Lip thickness as Headmeasures defines it: the lip pellet ahead of the incisor tip
+    (upper: along x; lower: along the mandible's forward direction MNM -> MNI). From the
+    subject's measures if it has them, else (the report's future work) from the first
+    valid line, taken as a gently closed mouth, the lower incisor tip being the model's
+    placed on that line's jaw pellets. Kept within [-1/2, +1] of the model's own
+    thickness so that a bad first line cannot turn a lip inside out.
     """
     own = np.array([model.measures["upper_lip_thickness"], model.measures["lower_lip_thickness"]])
+    v = np.asarray(model.vertices)
+    lm = model.landmarks
+    forward = v[lm["MNI"], :2] - v[lm["MNM"], :2]
+    forward = forward / np.linalg.norm(forward)
     if not head_is_default:
         wanted = scale * np.array([head.upper_lip_thickness, head.lower_lip_thickness])
-        delta = wanted - own
     else:
-        subject = scale * np.array([first[UL, 0], first[LL, 0] - first[MNI, 0]])
-        model_ahead = np.array([sites[UL, 0], sites[LL, 0] - sites[MNI, 0]])
-        delta = np.where(np.isfinite(subject), subject - model_ahead, 0.0)
-    return np.clip(delta, -0.5 * own, own)
+        rest_jaw = jnp.asarray(v[[lm["MNI"], lm["MNM"]], :2])
+        motion = _closed_form_one(rest_jaw, jnp.asarray(scale * first[[MNI, MNM]]))
+        from .rigid import apply
+
+        tip = np.asarray(apply(motion.theta, motion.translation,
+                               jnp.asarray(v[lm["lower_incisor_tip"], :2])))
+        ahead = (first[MNI] - first[MNM]) / np.linalg.norm(first[MNI] - first[MNM])
+        wanted = np.array([scale * first[UL, 0], (scale * first[LL] - tip) @ ahead])
+        wanted = np.where(np.isfinite(wanted), wanted, own)
+    delta = np.clip(wanted - own, -0.5 * own, own)
+    # the thickness parameters move the vermilion along x: the lower one counts along
+    # the model's forward direction
+    return delta / np.array([1.0, forward[0]])
 
 
-def _conformation(model, recording, sites, first, scale):
-    """FaceParams of the subject's shape (no animation); see the module docstring, step 6."""
+def _conformation(model, recording, first, scale, mode="measures"):
+    """FaceParams of the subject's shape (no animation); see the module docstring, step
+    6. ``mode="cassi"``: only what the paper did (the jaw shape from gonion/gnathion)."""
     from .deform import default_params
 
     head, default = recording.head, bool(recording.head_is_default)
     params = default_params(model)
-    upper, lower = _lip_thickness(model, sites, first, scale, head, default)
-    changes = {"upper_lip_thickness": upper, "lower_lip_thickness": lower}
+    changes = {}
+    if mode == "measures":
+        upper, lower = _lip_thickness(model, first, scale, head, default)
+        changes.update(upper_lip_thickness=upper, lower_lip_thickness=lower)
     if not default:
         theta, t = _jaw_shape(model, head, scale)
-        nose = scale * head.nose_protrusion - model.measures["nose_protrusion"]
-        changes.update(
-            jaw_shape_theta=theta,
-            jaw_shape_translation=t,
-            face_width=scale * head.face_width / model.measures["face_width"],
-            mouth_width=scale * head.mouth_width / model.measures["mouth_width"],
-            nose_tip=np.array([nose, 0.0]),
-        )
+        changes.update(jaw_shape_theta=theta, jaw_shape_translation=t)
+        if mode == "measures":
+            nose = scale * head.nose_protrusion - model.measures["nose_protrusion"]
+            changes.update(
+                face_width=scale * head.face_width / model.measures["face_width"],
+                mouth_width=scale * head.mouth_width / model.measures["mouth_width"],
+                nose_tip=np.array([nose, 0.0]),
+            )
+    if not changes:
+        return params
     names = tuple(changes)
     values = tuple(jnp.asarray(changes[k], jnp.asarray(getattr(params, k)).dtype) for k in names)
     return eqx.tree_at(lambda p: tuple(getattr(p, k) for k in names), params, values)
 
 
 def initialize(
-    recording, model=None, *, jaw_weights="cassi", tongue_anchor="follow", gap_policy="hold"
+    recording,
+    model=None,
+    *,
+    calibration=None,
+    jaw_weights="cassi",
+    tongue_anchor="follow",
+    gap_policy="hold",
 ) -> SubjectState:
     """Fit the face model to the subject of ``recording`` (CASSI's initialization).
 
     ``recording``: a ``dataset.Recording``. ``model``: a ``FaceModel`` (default
-    ``load_model()``). Returns a :class:`SubjectState`; see the module docstring for the
-    steps. Raises ``MissingDataError`` (jaw pellets never tracked) or
-    ``DegenerateGeometryError`` (coincident jaw pellets on the first valid line).
+    ``load_model()``). ``calibration``: ``None`` (the subject's shape from its
+    Headmeasures and first valid line, step 6 of the module docstring), ``"cassi"`` (only
+    what the paper did: the jaw shape from gonion and gnathion), or a
+    ``calibrate.Calibration`` of this subject (its scale and fitted shape; ``cassi
+    calibrate``). Returns a :class:`SubjectState`; see the module docstring for the
+    steps. Raises ``MissingDataError`` (jaw pellets never tracked),
+    ``DegenerateGeometryError`` (coincident jaw pellets on the first valid line) or
+    ``CassiError`` (a calibration of another subject).
     """
     from .deform import model_pellets
     from .face_model import load_model
@@ -293,9 +330,22 @@ def initialize(
             f"{source}: MNI and MNM coincide on the first valid line ({first + 1})"
         )
     scale = p / d
+    fitted = calibration is not None and not isinstance(calibration, str)
+    if fitted:
+        if calibration.subject.upper() != str(recording.subject).upper():
+            raise CassiError(
+                f"{source}: the calibration is of subject {calibration.subject}, "
+                f"not {recording.subject}"
+            )
+        scale = float(calibration.scale)
+    elif calibration is not None:
+        _check_choice("calibration", calibration, CONFORMATIONS)
     if recording.palate is not None:
         model = with_palate(model, scale * np.asarray(recording.palate, np.float64))
-    conformation = _conformation(model, recording, sites, pellets, scale)
+    if fitted:
+        conformation = calibration.face_params(jnp.asarray(model.vertices).dtype)
+    else:
+        conformation = _conformation(model, recording, pellets, scale, calibration or "measures")
     # Compiled, not eager, and at the batch size animate() will use for every line of this
     # recording, so that both share one compilation (the extra frames cost ~0.1 s).
     size = _bucket(track.times.shape[0] - first)
@@ -381,6 +431,7 @@ def _batched_params(inputs, scaled, theta, translation):
 # the geometry function is compiled per model *content* (a digest of its static parts)
 # and receives only the model's array leaves; its tree structure is closed over.
 _GEOMETRY_CACHE: dict = {}
+_COLLISION_BATCH = 32
 
 
 def _digest(value, h) -> None:
@@ -421,15 +472,18 @@ def _is_array(x) -> bool:
     return isinstance(x, (jax.Array, np.ndarray, np.generic, float, int))
 
 
-def _geometry(model, params, jaw_weights, tongue_anchor):
-    """All frames at once: vertices ``(m, V, 3)`` and model pellet sites ``(m, 8, 2)``."""
+def _geometry(model, params, jaw_weights, tongue_anchor, collisions="off", report=False):
+    """All frames at once: vertices ``(m, V, 3)`` and model pellet sites ``(m, 8, 2)``;
+    with ``report``, also the per-frame penetration depths before and after projection
+    (two dicts of ``(m,)``, keys ``collide.REPORT_KEYS``)."""
     leaves, treedef = jax.tree.flatten(model)
-    key = (_model_key(model, leaves), jaw_weights, tongue_anchor)
+    key = (_model_key(model, leaves), jaw_weights, tongue_anchor, collisions, report)
     compiled = _GEOMETRY_CACHE.get(key)
     if compiled is None:
         constant = [None if _is_array(x) else x for x in leaves]
 
         def run(arrays, batch):
+            from . import collide
             from .deform import deform, model_pellets
 
             it = iter(arrays)
@@ -437,12 +491,23 @@ def _geometry(model, params, jaw_weights, tongue_anchor):
 
             def one(p):
                 vertices = deform(rebuilt, p, jaw_weights=jaw_weights, tongue_anchor=tongue_anchor)
-                return vertices, model_pellets(rebuilt, vertices)
+                before = collide.report(rebuilt, vertices) if report else None
+                if collisions == "project":
+                    vertices = collide.project(rebuilt, vertices)
+                after = before
+                if report and collisions == "project":
+                    after = collide.report(rebuilt, vertices)
+                return vertices, model_pellets(rebuilt, vertices), before, after
 
-            return jax.vmap(one)(batch)
+            if not report and collisions == "off":
+                return jax.vmap(one)(batch)
+            # the collision tests' per-vertex, per-segment intermediates stay in cache when
+            # frames go through in small batches (3-4x faster than one vmap over all)
+            return jax.lax.map(one, batch, batch_size=_COLLISION_BATCH)
 
         compiled = _GEOMETRY_CACHE[key] = jax.jit(run)
-    return compiled([x for x in leaves if _is_array(x)], params)
+    out = compiled([x for x in leaves if _is_array(x)], params)
+    return out if report else out[:2]
 
 
 def _bucket(m: int) -> int:
@@ -458,12 +523,16 @@ def _pad(x, size: int):
     return jnp.concatenate([x, jnp.repeat(x[-1:], size - x.shape[0], axis=0)])
 
 
-def geometry(state: SubjectState, params):
+def geometry(state: SubjectState, params, collisions="off"):
     """Vertices ``(m, V, 3)`` and model pellet sites ``(m, 8, 2)`` of a batch of params,
-    in one compiled call (frames padded to a size bucket so the compilation is reused)."""
+    in one compiled call (frames padded to a size bucket so the compilation is reused);
+    ``collisions="project"`` pushes the tongue and lips out of the teeth and palate."""
+    _check_choice("collisions", collisions, COLLISION_MODES)
     m = int(jnp.shape(params.jaw_theta)[0])
     batch = jax.tree.map(lambda x: _pad(x, _bucket(m)), params)
-    vertices, sites = _geometry(state.model, batch, state.jaw_weights, state.tongue_anchor)
+    vertices, sites = _geometry(
+        state.model, batch, state.jaw_weights, state.tongue_anchor, collisions
+    )
     return vertices[:m], sites[:m]
 
 
@@ -492,16 +561,27 @@ def _jaw_since_first(state, jaw_pellets, method, solver, size):
 
 
 def animate(
-    state: SubjectState, recording, *, jaw="closed-form", solver=None, stride=1, gap_policy=None
+    state: SubjectState,
+    recording,
+    *,
+    jaw="closed-form",
+    solver=None,
+    stride=1,
+    gap_policy=None,
+    collisions="off",
 ) -> Animation:
     """Animate the face over ``recording`` (every ``stride``-th data line from the first
     valid one, ``ceil((n - first) / stride)`` frames).
 
     ``jaw``: one of ``JAW_METHODS`` (the paper's closed form, or a fit from ``jaw_fit``,
     which gets ``solver`` if given). ``gap_policy``: ``"hold"`` or ``"interpolate"``
-    (default: the state's). Returns an :class:`Animation`.
+    (default: the state's). ``collisions``: ``"off"`` (CASSI: parts may pass through each
+    other) or ``"project"`` (the tongue pushed out of the teeth and the palate, the lips
+    out of the teeth, every frame; ``cassi_fit.collide``). Either way the penetration
+    depths of every frame are measured and returned. Returns an :class:`Animation`.
     """
     _check_choice("jaw method", jaw, JAW_METHODS)
+    _check_choice("collisions", collisions, COLLISION_MODES)
     policy = state.gap_policy if gap_policy is None else gap_policy
     _check_choice("gap policy", policy, GAP_POLICIES)
     if int(stride) != stride or stride < 1:
@@ -520,9 +600,20 @@ def animate(
         state, scaled[:, [MNI, MNM]], jaw, solver, size
     )
     params = _batched_params(_frame_inputs(state), _pad(scaled, size), theta, translation)
-    vertices, sites = _geometry(state.model, params, state.jaw_weights, state.tongue_anchor)
+    from .collide import has_collision_data
+
+    report = has_collision_data(state.model)
+    if collisions != "off" and not report:
+        from .collide import _require
+
+        _require(state.model)
+    out = _geometry(
+        state.model, params, state.jaw_weights, state.tongue_anchor, collisions, report
+    )
+    vertices, sites = out[0][:m], out[1][:m]
+    before, after = ({k: np.asarray(v)[:m] for k, v in d.items()} for d in out[2:]) if report \
+        else ({}, {})
     params = jax.tree.map(lambda x: x[:m], params)
-    vertices, sites = vertices[:m], sites[:m]
     tracked = np.array([name in state.tracked_pellets for name in PELLETS])
     return Animation(
         times=np.asarray(track.times)[rows],
@@ -535,6 +626,9 @@ def animate(
         mistracked=mistracked[rows],
         frame_status=frame_status(untracked[rows] & tracked, mistracked[rows], policy),
         jaw_status=jaw_status,
+        penetration=before,
+        penetration_after=after,
         stride=int(stride),
         jaw_method=jaw,
+        collisions=collisions,
     )

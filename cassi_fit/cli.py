@@ -23,6 +23,7 @@ SUBCOMMANDS = (
     "jaw",
     "animate",
     "export",
+    "calibrate",
     "evaluate",
 )
 

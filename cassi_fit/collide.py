@@ -209,27 +209,85 @@ def report(model, vertices) -> dict:
     }
 
 
+def _wall(q, chains, upper: bool, side: str):
+    """``(horizontal depth beyond the wall (> 0 outside), occlusal y, unit normal (2,),
+    within the arch's span)`` of ``q`` for one arch (see :func:`_teeth_depth`)."""
+    ling_o, ling_c, lab_o, lab_c = chains
+    sign = 1.0 if upper else -1.0
+    span = ling_c[:, 1] - ling_o[:, 1]
+    span = jnp.where(jnp.abs(span) > 1e-9, span, sign * 1e-9)
+    f = jnp.clip((q[1] - ling_o[:, 1]) / span, 0.0, 1.0)[:, None]
+    ling = ling_o[:, [0, 2]] + f * (ling_c[:, [0, 2]] - ling_o[:, [0, 2]])
+    lab = lab_o[:, [0, 2]] + f * (lab_c[:, [0, 2]] - lab_o[:, [0, 2]])
+    wall, outward = (ling, lab - ling) if side == "lingual" else (lab, ling - lab)
+    return _wall_distance(q, wall, outward, ling_o[:, 1])
+
+
+def _escape(q, arches, side, ceiling=None):
+    """The shortest move (3,) that takes ``q`` out of both arches (and below ``ceiling``,
+    the palate, if given): either vertically into the band the arches leave free (below
+    the upper occlusal level where ``q`` is beyond the upper wall, above the lower one
+    where beyond the lower wall), or horizontally back inside the walls it is beyond.
+    Where the band is empty (the teeth overlap, or the palate comes down to the lower
+    teeth) only the horizontal way is taken."""
+    (cu, _), (cl, _) = arches
+    du, yu, nu, wu = _wall(q, cu, True, side)
+    dl, yl, nl, wl = _wall(q, cl, False, side)
+    out_u, out_l = wu & (du > 0), wl & (dl > 0)
+    inf = jnp.asarray(jnp.inf, q.dtype)
+    hi = jnp.where(out_u, yu, inf)
+    if ceiling is not None:
+        hi = jnp.minimum(hi, ceiling)
+    lo = jnp.where(out_l, yl, -inf)
+    inside = (q[1] > hi) | (q[1] < lo)
+    band = lo <= hi
+    y_to = jnp.clip(q[1], lo, hi)
+    cost_v = jnp.where(band, jnp.abs(y_to - q[1]), inf)
+    h_u, h_l = jnp.where(out_u, du, 0.0), jnp.where(out_l, dl, 0.0)
+    cost_h = jnp.maximum(h_u, h_l)
+    n = jnp.where(h_u >= h_l, nu, nl)
+    # a palate problem alone has no horizontal way out
+    horizontal = (cost_h < cost_v) & (cost_h > 0)
+    margin = PROJECTION_MARGIN_MM
+    move_v = jnp.array([0.0, 1.0, 0.0]) * (y_to - q[1] + margin * jnp.sign(y_to - q[1]))
+    move_h = -(cost_h + margin) * jnp.array([n[0], 0.0, n[1]])
+    move = jnp.where(horizontal, move_h, jnp.where(band, move_v, jnp.zeros(3, q.dtype)))
+    return jnp.where(inside, move, jnp.zeros(3, q.dtype))
+
+
+def _palate_ceiling(q, sheet):
+    """The palate's height above ``q`` (+inf outside its footprint)."""
+    depth, _ = _palate_depth(q, sheet)
+    return jnp.where(depth > 0, q[1] - depth, jnp.inf)
+
+
 def project(model, vertices, passes: int = PROJECTION_PASSES):
     """One frame with the tongue pushed out of the palate and both arches, and the lips
-    out of both arches (each point by its shortest way out, ``passes`` alternating rounds).
-    Vertices that are inside nothing do not move."""
+    out of both arches, each point by its shortest way out of all of them at once
+    (:func:`_escape`; ``passes`` rounds, for the few points whose way out of one leads
+    into another). Vertices that are inside nothing do not move."""
     _require(model)
     tongue, lips = _parts(model)
     sheet = _palate_sheet(model, vertices)
     arches = [(_arch(model, vertices, a)[0], a == "upper") for a in ("upper", "lower")]
 
-    def push_tongue(q):
-        for _ in range(passes):
-            q = q + _palate_depth(q, sheet)[1]
-            for chains, upper in arches:
-                q = q + _teeth_depth(q, chains, upper, "lingual")[1]
-        return q
+    def until_out(step):
+        # up to ``passes`` rounds, stopping as soon as a round moves nothing
+        def push(q):
+            def body(carry):
+                q, k, _ = carry
+                move = step(q).astype(q.dtype)
+                return q + move, k + 1, jnp.any(move != 0)
 
-    def push_lip(q):
-        for _ in range(passes):
-            for chains, upper in arches:
-                q = q + _teeth_depth(q, chains, upper, "labial")[1]
-        return q
+            q, _, _ = jax.lax.while_loop(
+                lambda c: (c[1] < passes) & c[2], body, (q, 0, jnp.asarray(True))
+            )
+            return q
+
+        return push
+
+    push_tongue = until_out(lambda q: _escape(q, arches, "lingual", _palate_ceiling(q, sheet)))
+    push_lip = until_out(lambda q: _escape(q, arches, "labial"))
 
     vertices = vertices.at[tongue].set(jax.vmap(push_tongue)(vertices[tongue]))
     return vertices.at[lips].set(jax.vmap(push_lip)(vertices[lips]))

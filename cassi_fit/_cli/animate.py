@@ -53,6 +53,27 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
         "interpolate between good ones; repaired frames are flagged in the caption",
     )
     parser.add_argument(
+        "--calibration",
+        metavar="PATH",
+        help="the subject's calibration: a folder written by 'cassi calibrate' (the file "
+        "SUBJECT.calibration.json in it is used) or one such file; default: the subject's "
+        "shape straight from Headmeasures and the first valid line",
+    )
+    parser.add_argument(
+        "--cassi",
+        action="store_true",
+        help="CASSI-like: adjust only what the paper did (the jaw shape from gonion and "
+        "gnathion; no lip thickness, face or mouth width); not with --calibration",
+    )
+    parser.add_argument(
+        "--collisions",
+        choices=("off", "project"),
+        default="off",
+        help="off (default; as CASSI: the tongue may pass through the teeth and palate) or "
+        "project (every frame, the tongue is pushed out of the teeth and the palate and "
+        "the lips out of the teeth); penetration depths are measured either way",
+    )
+    parser.add_argument(
         "--jaw-weights",
         choices=("cassi", "parke"),
         default="cassi",
@@ -163,11 +184,31 @@ def animate_recording(recording, args):
         raise CassiError(f"--stride must be at least 1, got {args.stride}")
     state = initialize(
         recording,
+        calibration=calibration_choice(args, recording.subject),
         jaw_weights=args.jaw_weights,
         tongue_anchor=args.tongue_anchor,
         gap_policy=args.gap,
     )
-    return state, animate(state, recording, jaw=args.jaw, stride=args.stride)
+    return state, animate(
+        state, recording, jaw=args.jaw, stride=args.stride, collisions=args.collisions
+    )
+
+
+def calibration_choice(args, subject):
+    """``initialize``'s calibration for ``--calibration`` / ``--cassi``."""
+    from cassi_fit.errors import CassiError
+
+    path = getattr(args, "calibration", None)
+    if path and getattr(args, "cassi", False):
+        raise CassiError("--cassi and --calibration exclude each other")
+    if getattr(args, "cassi", False):
+        return "cassi"
+    if not path:
+        return None
+    from cassi_fit.calibrate import calibration_path, read_calibration
+
+    path = Path(path)
+    return read_calibration(calibration_path(path, subject) if path.is_dir() else path)
 
 
 def run(args) -> int:
