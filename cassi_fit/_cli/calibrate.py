@@ -1,0 +1,86 @@
+"""``cassi calibrate DATASET``: one calibrated face per subject (lip thickness, face width,
+jaw shape, scale), fitted through the differentiable model; see ``cassi_fit.calibrate``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "calibrate",
+        help="fit each subject's lip thickness, face width, jaw shape and scale",
+        description="For every subject of DATASET: lip thickness from the first valid line "
+        "of each of its recordings, face width and jaw shape (gonion, gnathion) from "
+        "Headmeasures.txt, and the p/d scale, fitted by least squares through the face "
+        "model (docs/CALIBRATION.md). Writes OUT/SUBJECT.calibration.json per subject "
+        "(use it with 'cassi animate --calibration OUT') and OUT/calibration_summary.csv.",
+    )
+    parser.add_argument("dataset", metavar="DATASET", help="a dataset folder")
+    parser.add_argument("--out", default="calibration", metavar="DIR",
+                        help="folder for the files (default: ./calibration)")
+    parser.add_argument("--method", choices=("separate", "joint"), default="separate",
+                        help="separate (default: scale = p/d, then each part on its own "
+                        "residuals) or joint (everything, the scale included, at once)")
+    parser.add_argument("--subjects", metavar="LIST",
+                        help="comma-separated subjects (default: all)")
+    parser.add_argument("--tasks", metavar="LIST",
+                        help="comma-separated tasks whose first valid lines are used "
+                        "(default: all of the subject's)")
+    parser.add_argument("--no-collisions", action="store_true",
+                        help="leave out the penalty that keeps the lips out of the teeth")
+    parser.add_argument("--force", action="store_true", help="replace existing files")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.set_defaults(func=run)
+
+
+def _words(text):
+    return None if not text else [w.strip() for w in text.split(",") if w.strip()]
+
+
+def run(args) -> int:
+    import jax
+
+    jax.config.update("jax_enable_x64", True)  # calibration residuals are sub-millimetre
+    from cassi_fit.calibrate import (
+        calibrate_dataset,
+        calibration_path,
+        write_calibration,
+        write_summary,
+    )
+    from cassi_fit.errors import CassiError, OutputExistsError
+
+    root = Path(args.dataset)
+    if not root.is_dir():
+        raise CassiError(f"{root}: no such dataset folder")
+    out = Path(args.out)
+    from cassi_fit.dataset import Dataset
+
+    dataset = Dataset(root)
+    subjects = _words(args.subjects) or dataset.subjects()
+    targets = [calibration_path(out, s) for s in subjects] + [out / "calibration_summary.csv"]
+    if not args.force:
+        existing = [str(p) for p in targets if p.exists()]
+        if existing:
+            raise OutputExistsError(f"{existing[0]}: file exists (pass --force to replace it)")
+    cals = calibrate_dataset(
+        dataset,
+        subjects=subjects,
+        tasks=_words(args.tasks),
+        method=args.method,
+        collisions=not args.no_collisions,
+        progress=not args.quiet,
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    for subject, cal in cals.items():
+        write_calibration(calibration_path(out, subject), cal, overwrite=args.force)
+    write_summary(out / "calibration_summary.csv", cals, overwrite=args.force)
+    print(f"{'subject':8} {'scale':>7} {'UL mm':>7} {'LL mm':>7} {'face mm':>8}  residuals (mm)")
+    for subject, c in cals.items():
+        worst = max(c.residuals.items(), key=lambda kv: kv[1])
+        flag = "" if c.converged else "  NOT CONVERGED"
+        print(f"{subject:8} {c.scale:7.4f} {c.upper_lip_thickness:7.2f} "
+              f"{c.lower_lip_thickness:7.2f} {c.face_width:8.1f}  largest {worst[0]} "
+              f"{worst[1]:.2f}{flag}")
+    print(f"wrote {len(cals)} calibration file(s) and calibration_summary.csv to {out}")
+    return 0

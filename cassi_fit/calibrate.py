@@ -1,0 +1,577 @@
+"""Subject-specific calibration of the face model, fitted through the differentiable model.
+
+CASSI used one generic face for every speaker and found that some faces fit it worse
+than others; its future work proposes lip thickness per speaker from the first valid
+line, and the face adjusted to the subject from ``Headmeasures.txt``. This module does
+both, as a least-squares fit (optimistix Levenberg-Marquardt, ``jaw_fit.solve``) of the
+model's conformation parameters, every residual computed on the vertices that
+``deform.deform`` produces:
+
+========================  ===============================================================
+unknown                   residuals it answers to (model mm)
+========================  ===============================================================
+scale ``p/d``             (joint only) the model's MNI-MNM distance vs ``s`` x the
+                          subject's on each recording's first valid line
+upper lip thickness       model: UL site ahead of the upper incisor tip (x); subject: the
+                          UL pellet's x on the first valid line (origin = incisor tip)
+lower lip thickness       model: LL site ahead of the lower incisor tip along the
+                          mandible's forward direction (MNM -> MNI); subject: the same for
+                          the LL pellet, the tip being the model's, placed on the first
+                          line's jaw pellets by the closed form (Eqs 1-3, 6-7)
+face width                model: zygion to zygion; subject: Headmeasures ``face_width``
+jaw shape (theta, kx, ky) model gonion and gnathion (x, y) vs Headmeasures', both points
+                          (CASSI used one point's closed form; here a turn and a scale
+                          along x and y, about the lower incisor tip: 3 unknowns for 4
+                          residuals, so a residual remains)
+(collisions)              every lip vertex's depth inside the teeth at rest (weighted
+                          penalty, ``cassi_fit.collide``)
+========================  ===============================================================
+
+Lip thickness is defined as Headmeasures defines it (``docs/FORMATS.md``): how far the
+lip pellet sits ahead of the incisor tip at rest. Each recording of the subject
+contributes its first valid line (the report's "likely a gently closed mouth"); with
+several recordings the fit is their least-squares compromise and the spread is reported.
+
+Methods: ``"separate"`` fixes ``s = p / d`` (the median over the recordings, as CASSI's
+per-file scale) and fits the jaw shape, then the face width, then the lips, each on its
+own residuals; ``"joint"`` fits all of them and the scale at once. Mouth width and nose
+protrusion come straight from Headmeasures (no pellet sees them). A subject without
+Headmeasures keeps the model's jaw shape, face width, mouth and nose.
+
+The result, :class:`Calibration`, is written one JSON file per subject
+(``<SUBJECT>.calibration.json``) by ``cassi calibrate`` and read back by
+``cassi animate --calibration`` and ``animate.initialize(..., calibration=...)``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .errors import CassiError, DataFormatError, DegenerateGeometryError, MissingDataError
+
+FORMAT = "cassi_fit calibration 1"
+METHODS = ("separate", "joint")
+#: Weight of the lips-in-teeth penalty residuals relative to a 1 mm lip residual.
+COLLISION_WEIGHT = 10.0
+UL, LL, MNI, MNM = 0, 1, 6, 7
+# The unknowns, in order (model units): log scale, upper and lower lip thickness change
+# (mm), face width change (mm), jaw shape rotation (rad) and log scales (x, y), the last
+# three about the model's lower incisor tip.
+_UNKNOWNS = ("log_scale", "upper_lip", "lower_lip", "face_width", "jaw_theta",
+             "log_jaw_scale_x", "log_jaw_scale_y")
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """One subject's calibrated face. Lengths in the subject's mm unless named ``model``.
+
+    ``scale``: model mm per subject mm (``p/d``). ``params``: the model's conformation
+    parameters (``deform.FaceParams`` names, model units). ``residuals``: what is left of
+    each residual group, subject mm (rms over recordings where there are several).
+    ``observed``: the per-recording first-line estimates of the lip thicknesses.
+    """
+
+    subject: str
+    method: str
+    scale: float
+    upper_lip_thickness: float
+    lower_lip_thickness: float
+    face_width: float
+    mouth_width: float
+    nose_protrusion: float
+    gonion: tuple
+    gnathion: tuple
+    params: dict
+    residuals: dict
+    observed: dict
+    recordings: tuple
+    first_lines: tuple
+    head_is_default: bool
+    collisions: bool
+    converged: bool
+    format: str = field(default=FORMAT)
+
+    def face_params(self, dtype=float):
+        """The conformation as a ``deform.FaceParams`` (no animation)."""
+        from .deform import default_params
+
+        p = default_params(dtype=dtype)
+        values = {k: jnp.asarray(v, dtype) for k, v in self.params.items()}
+        names = tuple(values)
+        return _set(p, names, tuple(values[k] for k in names))
+
+    def to_json(self) -> str:
+        return json.dumps(_plain(asdict(self)), indent=1) + "\n"
+
+
+def _plain(x):
+    if isinstance(x, dict):
+        return {k: _plain(v) for k, v in x.items()}
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, (np.floating, np.integer, np.bool_)):
+        return x.item()
+    return x
+
+
+def _set(params, names, values):
+    import equinox as eqx
+
+    return eqx.tree_at(lambda p: tuple(getattr(p, k) for k in names), params, values)
+
+
+# ------------------------------------------------------------------ the observations
+
+
+def _first_line(recording):
+    """``(first index, pellets (8, 2) mm with NaN for pellets never tracked)``."""
+    from .animate import PELLETS, _source, first_valid_line
+
+    source = _source(recording)
+    first, tracked = first_valid_line(recording.track, source)
+    pellets = np.array(recording.track.positions[first], np.float64)
+    for j, name in enumerate(PELLETS):
+        if name not in tracked:
+            pellets[j] = np.nan
+    d = float(np.linalg.norm(pellets[MNI] - pellets[MNM]))
+    if not d > 0:
+        raise DegenerateGeometryError(
+            f"{source}: MNI and MNM coincide on the first valid line ({first + 1})"
+        )
+    return first, pellets
+
+
+_INDEX = ("UL", "LL", "MNI", "MNM", "upper_incisor_tip", "lower_incisor_tip", "gonion",
+          "gnathion", "zygion_left", "zygion_right")
+
+
+def _data(model, pellets, head):
+    """The arrays the residuals depend on (a pytree; subject mm unless named)."""
+    p = np.asarray(pellets)  # (R, 8, 2) subject mm, NaN where never tracked
+    return {
+        "mask_ul": np.isfinite(p[:, UL, 0]).astype(float),
+        "mask_ll": np.isfinite(p[:, LL]).all(-1).astype(float),
+        "pellets": np.nan_to_num(p),
+        "d": np.linalg.norm(p[:, MNI] - p[:, MNM], axis=-1),
+        "head_xy": np.array([[head.gonion_x, head.gonion_y], [head.gnathion_x, head.gnathion_y]]),
+        "face_width": np.asarray(float(head.face_width)),
+        "mouth_width": np.asarray(float(head.mouth_width)),
+        "nose": np.asarray(float(head.nose_protrusion)),
+    }
+
+
+class _Problem:
+    """The residuals of one subject (model mm); ``model`` may be rebuilt inside jit."""
+
+    def __init__(self, model, data, measured):
+        self.model, self.data, self.measured = model, data, measured
+        self.index = {k: model.landmarks[k] for k in _INDEX}
+
+    def params(self, x):
+        """FaceParams of the unknowns ``x`` (``_UNKNOWNS``)."""
+        from .deform import default_params
+
+        m, data = self.model.measures, self.data
+        s = jnp.exp(x[0])
+        names = ["upper_lip_thickness", "lower_lip_thickness", "face_width"]
+        values = [x[1], x[2], 1.0 + x[3] / m["face_width"]]
+        if self.measured:
+            from .rigid import rotation_matrix
+
+            # the jaw's proportions (x, y scale) and a turn, both about the lower incisor
+            # tip, so that the skin over the teeth stays where the teeth are
+            tip = jnp.asarray(self.model.vertices)[self.index["lower_incisor_tip"], :2]
+            tip = tip.astype(x.dtype)
+            turn = tip - rotation_matrix(x[4]) @ tip
+            names += ["jaw_shape_theta", "jaw_shape_translation", "jaw_shape_scale",
+                      "mouth_width", "nose_tip"]
+            values += [x[4], turn, jnp.exp(x[5:7]), s * data["mouth_width"] / m["mouth_width"],
+                       jnp.stack([s * data["nose"] - m["nose_protrusion"], jnp.zeros_like(s)])]
+        p = default_params(dtype=x.dtype)
+        return _set(p, tuple(names), tuple(jnp.asarray(v, x.dtype) for v in values))
+
+    def vertices(self, x):
+        from .deform import deform
+
+        return deform(self.model, self.params(x))
+
+    def lip_thickness_model(self, v):
+        """(upper, lower) on the model at rest, model mm."""
+        i = self.index
+        upper = v[i["UL"], 0] - v[i["upper_incisor_tip"], 0]
+        fwd = v[i["MNI"], :2] - v[i["MNM"], :2]
+        fwd = fwd / jnp.linalg.norm(fwd)
+        lower = jnp.dot(v[i["LL"], :2] - v[i["lower_incisor_tip"], :2], fwd)
+        return upper, lower
+
+    def lip_thickness_observed(self, s):
+        """Per recording (R,) (upper, lower) in model mm at scale ``s``: the lip pellets
+        ahead of the incisor tips on the first valid line (the lower tip = the model's,
+        placed on that line's jaw pellets by the paper's closed form)."""
+        from . import rigid
+        from .jaw import closed_form
+
+        v = self.model.vertices
+        i = self.index
+        rest_jaw = jnp.stack([v[i["MNI"], :2], v[i["MNM"], :2]])
+        tip = v[i["lower_incisor_tip"], :2]
+
+        def one(pel):
+            jaw = s * pel[jnp.array([MNI, MNM])]
+            motion = closed_form(rest_jaw.astype(pel.dtype), jaw)
+            tip_here = rigid.apply(motion.theta, motion.translation, tip.astype(pel.dtype))
+            fwd = (pel[MNI] - pel[MNM]) / jnp.linalg.norm(pel[MNI] - pel[MNM])
+            return s * pel[UL, 0], jnp.dot(s * pel[LL] - tip_here, fwd)
+
+        return jax.vmap(one)(self.data["pellets"])
+
+    def residual_groups(self, x, collisions):
+        """Dict of residual vectors (model mm) at the unknowns ``x``."""
+        from .collide import penalty_residuals
+
+        data = self.data
+        s = jnp.exp(x[0])
+        v = self.vertices(x)
+        i = self.index
+        upper, lower = self.lip_thickness_model(v)
+        obs_u, obs_l = self.lip_thickness_observed(s)
+        groups = {
+            "upper_lip": data["mask_ul"] * (upper - obs_u),
+            "lower_lip": data["mask_ll"] * (lower - obs_l),
+            "jaw_pellets": jnp.linalg.norm(v[i["MNI"], :2] - v[i["MNM"], :2]) - s * data["d"],
+        }
+        if self.measured:
+            ours = jnp.stack([v[i["gonion"], :2], v[i["gnathion"], :2]])
+            groups["jaw_shape"] = (ours - s * data["head_xy"]).ravel()
+            width = v[i["zygion_left"], 2] - v[i["zygion_right"], 2]
+            groups["face_width"] = jnp.atleast_1d(width - s * data["face_width"])
+        if collisions:
+            depth = penalty_residuals(self.model, v, tongue=False, lips=True)
+            groups["collision"] = math.sqrt(COLLISION_WEIGHT) * depth
+        return groups
+
+
+# ------------------------------------------------------------------------ the fit
+
+_STAGES = {  # method -> [(free unknowns, residual groups)]
+    "separate": [
+        ((4, 5, 6), ("jaw_shape",)),
+        ((3,), ("face_width",)),
+        ((1, 2), ("upper_lip", "lower_lip", "collision")),
+    ],
+    "joint": [
+        ((0, 1, 2, 3, 4, 5, 6),
+         ("jaw_pellets", "upper_lip", "lower_lip", "jaw_shape", "face_width", "collision")),
+    ],
+}
+# Compiled stages, one per (model content, stage, collisions, head measured): the model's
+# array leaves are arguments, its static parts closed over (as in animate._geometry).
+_STAGE_CACHE: dict = {}
+
+
+def _solve_stage(model, data, measured, x, free, groups, collisions):
+    from .animate import _is_array, _model_key
+
+    leaves, treedef = jax.tree.flatten(model)
+    key = (_model_key(model, leaves), free, groups, collisions, measured)
+    compiled = _STAGE_CACHE.get(key)
+    if compiled is None:
+        constant = [None if _is_array(v) else v for v in leaves]
+        index = jnp.asarray(free)
+
+        def run(arrays, data, x):
+            from .jaw_fit import solve
+
+            it = iter(arrays)
+            rebuilt = jax.tree.unflatten(treedef, [next(it) if c is None else c for c in constant])
+            problem = _Problem(rebuilt, data, measured)
+
+            def residuals(y, base):
+                g = problem.residual_groups(base.at[index].set(y), collisions)
+                return jnp.concatenate([jnp.atleast_1d(g[k]) for k in groups if k in g])
+
+            y, converged = solve(residuals, x[index], x, "optimistix-lm")
+            return x.at[index].set(y), converged
+
+        compiled = _STAGE_CACHE[key] = jax.jit(run)
+    arrays = [v for v in leaves if _is_array(v)]
+    x, converged = compiled(arrays, jax.tree.map(jnp.asarray, data), x)
+    return x, bool(converged)
+
+
+def calibrate_subject(recordings, model=None, *, method="separate", collisions=True):
+    """Calibrate the face model to one subject from its recordings (``dataset.Recording``
+    objects, one or more, all of the same subject). Returns a :class:`Calibration`.
+
+    Raises ``CassiError`` for an unknown method or recordings of different subjects,
+    ``MissingDataError`` if no recording is given or a jaw pellet is never tracked,
+    ``DegenerateGeometryError`` for coincident jaw pellets on a first valid line.
+    """
+    from .face_model import load_model
+
+    if method not in METHODS:
+        raise CassiError(f"calibration method must be one of {', '.join(METHODS)}; got {method!r}")
+    recordings = list(recordings)
+    if not recordings:
+        raise MissingDataError("calibration needs at least one recording of the subject")
+    subjects = {r.subject.upper() for r in recordings}
+    if len(subjects) != 1:
+        raise CassiError(f"recordings of several subjects given: {', '.join(sorted(subjects))}")
+    model = load_model() if model is None else model
+    lines = [_first_line(r) for r in recordings]
+    pellets = np.stack([p for _, p in lines])
+    head, measured = recordings[0].head, not bool(recordings[0].head_is_default)
+    dtype = jnp.asarray(model.vertices).dtype
+    data = jax.tree.map(lambda a: jnp.asarray(a, dtype), _data(model, pellets, head))
+    sites = np.asarray(model.vertices)[[model.landmarks["MNI"], model.landmarks["MNM"]], :2]
+    s0 = float(np.linalg.norm(sites[0] - sites[1])) / float(np.median(np.asarray(data["d"])))
+    x = jnp.zeros(len(_UNKNOWNS), dtype).at[0].set(math.log(s0))
+    converged = True
+    for free, groups in _STAGES[method]:
+        if not measured:
+            free = tuple(k for k in free if k in (0, 1, 2))
+            groups = tuple(g for g in groups if g not in ("jaw_shape", "face_width"))
+        if not free:
+            continue
+        x, ok = _solve_stage(model, data, measured, x, free, groups, bool(collisions))
+        converged &= ok
+    problem = _Problem(model, data, measured)
+    result = _summarise(problem, x, method, collisions, converged, recordings, lines)
+    if not all(np.isfinite(v) for v in (result.scale, result.upper_lip_thickness,
+                                        result.lower_lip_thickness, result.face_width)):
+        raise CassiError(f"subject {result.subject}: calibration gave a non-finite value")
+    return result
+
+
+def _model_call(model, tag, make, *args):
+    """Call ``make(problem_model)(*args)`` compiled once per model content and ``tag``."""
+    from .animate import _is_array, _model_key
+
+    leaves, treedef = jax.tree.flatten(model)
+    key = (_model_key(model, leaves), tag)
+    compiled = _STAGE_CACHE.get(key)
+    if compiled is None:
+        constant = [None if _is_array(v) else v for v in leaves]
+
+        def run(arrays, *a):
+            it = iter(arrays)
+            rebuilt = jax.tree.unflatten(treedef, [next(it) if c is None else c for c in constant])
+            return make(rebuilt)(*a)
+
+        compiled = _STAGE_CACHE[key] = jax.jit(run)
+    return compiled([v for v in leaves if _is_array(v)], *args)
+
+
+def _summary_arrays(model, data, measured, x):
+    from .collide import depths
+
+    def make(rebuilt):
+        def f(data, x):
+            problem = _Problem(rebuilt, data, measured)
+            v = problem.vertices(x)
+            d = depths(rebuilt, v)
+            lips = jnp.maximum(jnp.max(d["lips_upper"]), jnp.max(d["lips_lower"]))
+            return (v, problem.residual_groups(x, False), problem.lip_thickness_model(v),
+                    problem.lip_thickness_observed(jnp.exp(x[0])), lips, problem.params(x))
+
+        return f
+
+    return _model_call(model, ("summary", measured), make, data, x)
+
+
+def _summarise(problem, x, method, collisions, converged, recordings, lines):
+    s = float(np.exp(x[0]))
+    v, groups, model_t, obs, lips_depth, params = _summary_arrays(
+        problem.model, problem.data, problem.measured, x)
+    groups = {k: np.asarray(g) for k, g in groups.items()}
+    upper, lower = (float(t) / s for t in model_t)
+    obs_u, obs_l = (np.asarray(t) / s for t in obs)
+    obs_u = np.where(np.asarray(problem.data["mask_ul"]) > 0, obs_u, np.nan)
+    obs_l = np.where(np.asarray(problem.data["mask_ll"]) > 0, obs_l, np.nan)
+
+    def rms(a):
+        a = np.asarray(a, float).ravel()
+        return float(np.sqrt(np.mean(a * a))) / s if a.size else 0.0
+
+    residuals = {"upper_lip": rms(groups["upper_lip"]), "lower_lip": rms(groups["lower_lip"]),
+                 "jaw_pellets": rms(groups["jaw_pellets"])}
+    if "jaw_shape" in groups:
+        js = groups["jaw_shape"].reshape(2, 2)
+        residuals["gonion"] = float(np.linalg.norm(js[0])) / s
+        residuals["gnathion"] = float(np.linalg.norm(js[1])) / s
+        residuals["face_width"] = rms(groups["face_width"])
+    # reported whether or not the fit was penalised
+    residuals["lips_in_teeth"] = float(lips_depth) / s
+    names = ["upper_lip_thickness", "lower_lip_thickness", "face_width", "mouth_width",
+             "nose_tip", "jaw_shape_theta", "jaw_shape_translation", "jaw_shape_scale"]
+    i = problem.index
+    vn = np.asarray(v)
+    return Calibration(
+        subject=recordings[0].subject.upper(),
+        method=method,
+        scale=s,
+        upper_lip_thickness=upper,
+        lower_lip_thickness=lower,
+        face_width=float(vn[i["zygion_left"], 2] - vn[i["zygion_right"], 2]) / s,
+        mouth_width=float(problem.data["mouth_width"]) if problem.measured
+        else problem.model.measures["mouth_width"] / s,
+        nose_protrusion=float(problem.data["nose"]) if problem.measured
+        else problem.model.measures["nose_protrusion"] / s,
+        gonion=tuple(float(c) / s for c in vn[i["gonion"], :2]),
+        gnathion=tuple(float(c) / s for c in vn[i["gnathion"], :2]),
+        params={k: _plain(np.asarray(getattr(params, k), float)) for k in names},
+        residuals=residuals,
+        observed={
+            "upper_lip_thickness": [None if np.isnan(a) else float(a) for a in obs_u],
+            "lower_lip_thickness": [None if np.isnan(a) else float(a) for a in obs_l],
+        },
+        recordings=tuple(r.task for r in recordings),
+        first_lines=tuple(int(f) + 1 for f, _ in lines),
+        head_is_default=not problem.measured,
+        collisions=bool(collisions),
+        converged=bool(converged),
+    )
+
+
+# ------------------------------------------------------------------------- files
+
+
+def calibration_path(folder, subject: str) -> Path:
+    return Path(folder) / f"{subject.upper()}.calibration.json"
+
+
+def write_calibration(path, calibration: Calibration, *, overwrite=False) -> Path:
+    """Write one subject's calibration as JSON (atomically; an existing file only with
+    ``overwrite``)."""
+    from ._io import atomic_write
+
+    return atomic_write(Path(path), calibration.to_json(), overwrite=overwrite)
+
+
+_REQUIRED = ("subject", "method", "scale", "upper_lip_thickness", "lower_lip_thickness",
+             "face_width", "params")
+
+
+def read_calibration(path) -> Calibration:
+    """Read a ``<SUBJECT>.calibration.json``; ``DataFormatError`` naming the file (and the
+    line, for invalid JSON) if it is not one."""
+    from ._io import register_input
+
+    path = Path(path)
+    if not path.is_file():
+        raise MissingDataError(f"{path}: calibration file not found")
+    register_input(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise DataFormatError(path, exc.lineno, f"invalid JSON: {exc.msg}") from None
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise DataFormatError(path, None, f"not a calibration file (format {FORMAT!r})")
+    missing = [k for k in _REQUIRED if k not in data]
+    if missing:
+        raise DataFormatError(path, None, f"missing {', '.join(missing)}")
+    known = {f for f in Calibration.__dataclass_fields__}
+    data = {k: v for k, v in data.items() if k in known}
+    defaults = {"mouth_width": float("nan"), "nose_protrusion": float("nan"),
+                "gonion": (math.nan, math.nan), "gnathion": (math.nan, math.nan),
+                "residuals": {}, "observed": {}, "recordings": (), "first_lines": (),
+                "head_is_default": False, "collisions": False, "converged": True}
+    for k, v in defaults.items():
+        data.setdefault(k, v)
+    params = data["params"]
+    allowed = {"upper_lip_thickness": (), "lower_lip_thickness": (), "face_width": (),
+               "mouth_width": (), "nose_tip": (2,), "jaw_shape_theta": (),
+               "jaw_shape_translation": (2,), "jaw_shape_scale": (2,)}
+    if not isinstance(params, dict):
+        raise DataFormatError(path, None, "params must be an object")
+    for k, v in params.items():
+        if k not in allowed:
+            raise DataFormatError(path, None, f"unknown parameter {k!r}")
+        a = np.asarray(v, float) if _numeric(v) else None
+        if a is None or a.shape != allowed[k] or not np.all(np.isfinite(a)):
+            raise DataFormatError(path, None, f"parameter {k}: expected {allowed[k] or 'a number'}")
+    for k in ("scale", "upper_lip_thickness", "lower_lip_thickness", "face_width"):
+        if not _numeric(data[k]) or not math.isfinite(float(data[k])) or float(data[k]) <= 0:
+            raise DataFormatError(path, None, f"{k} must be a positive number")
+    data["gonion"], data["gnathion"] = tuple(data["gonion"]), tuple(data["gnathion"])
+    data["recordings"], data["first_lines"] = tuple(data["recordings"]), tuple(data["first_lines"])
+    return Calibration(**data)
+
+
+def _numeric(v) -> bool:
+    try:
+        np.asarray(v, float)
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
+def load_calibrations(folder) -> dict:
+    """All ``*.calibration.json`` in ``folder``: subject (upper case) -> Calibration."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise MissingDataError(f"{folder}: calibration folder not found")
+    out = {}
+    for path in sorted(folder.glob("*.calibration.json")):
+        cal = read_calibration(path)
+        if cal.subject in out:
+            raise DataFormatError(path, None, f"a second calibration of subject {cal.subject}")
+        out[cal.subject] = cal
+    if not out:
+        raise MissingDataError(f"{folder}: no *.calibration.json files")
+    return out
+
+
+def calibrate_dataset(dataset, *, subjects=None, tasks=None, method="separate",
+                      collisions=True, model=None, progress=False):
+    """Calibrate every subject of a ``dataset.Dataset`` (or its folder): subject ->
+    Calibration. ``tasks``: the tasks whose first valid lines are used (default: all the
+    subject's tasks)."""
+    import warnings
+
+    from .dataset import Dataset
+    from .face_model import load_model
+
+    ds = dataset if isinstance(dataset, Dataset) else Dataset(dataset)
+    model = load_model() if model is None else model
+    names = ds.subjects() if subjects is None else [s.upper() for s in subjects]
+    out = {}
+    iterator = names
+    if progress:
+        from tqdm import tqdm
+
+        iterator = tqdm(names, desc="calibrating", unit="subject")
+    for subject in iterator:
+        wanted = ds.tasks(subject) if tasks is None else [t for t in tasks if t in ds.tasks(subject)]
+        if not wanted:
+            raise MissingDataError(f"{ds.root}: subject {subject} has none of the tasks {tasks}")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            recs = [ds.load(subject, t) for t in wanted]
+        out[subject] = calibrate_subject(recs, model, method=method, collisions=collisions)
+    return out
+
+
+def write_summary(path, calibrations: dict, *, overwrite=False) -> Path:
+    """A CSV, one row per subject: scale, the calibrated measures and the residuals."""
+    from ._io import atomic_write
+
+    res_keys = sorted({k for c in calibrations.values() for k in c.residuals})
+    header = ["subject", "method", "scale", "upper_lip_thickness_mm", "lower_lip_thickness_mm",
+              "face_width_mm", "converged"] + [f"residual_{k}_mm" for k in res_keys]
+    rows = [",".join(header)]
+    for name, c in calibrations.items():
+        values = [name, c.method, f"{c.scale:.6f}", f"{c.upper_lip_thickness:.3f}",
+                  f"{c.lower_lip_thickness:.3f}", f"{c.face_width:.3f}", str(c.converged)]
+        values += [f"{c.residuals.get(k, float('nan')):.4f}" for k in res_keys]
+        rows.append(",".join(values))
+    return atomic_write(Path(path), "\n".join(rows) + "\n", overwrite=overwrite)
