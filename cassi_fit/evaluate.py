@@ -53,10 +53,10 @@ SUSTAIN_S = 0.05
 
 # Teeth ----------------------------------------------------------------------------
 #: Lower occlusal line (lower molar occlusal point -> lower incisor tip) against the upper
-#: one, with the jaw most closed, degrees, + = rising toward the front. Over the ~42 mm
-#: from the back molar to the incisors, 3 deg lifts the front 2.2 mm (a fifth of a crown:
-#: the slope first shows in the side view, CASSI's "slight"); 7 deg lifts it 5 mm (half a
-#: crown: two problems); 11 deg lifts it 8 mm, about a whole lower incisor crown (9 mm):
+#: one, with the jaw most closed, degrees, + = rising toward the front. Over the 40 mm
+#: from the back molar to the incisor tip, 3 deg lifts the front 2.1 mm (a fifth of a
+#: crown: the slope first shows in the side view, CASSI's "slight"); 7 deg lifts it 4.9 mm
+#: (half a crown: two problems); 11 deg lifts it 7.7 mm, most of a lower incisor crown (9 mm):
 #: CASSI's "very steep" JW41, three problems.
 SLOPE_UP_DEG = 3.0
 SLOPE_STEEP_DEG = 7.0
@@ -116,8 +116,9 @@ TONGUE_POKE_MM = 1.0
 TONGUE_POKE_DEEP_MM = 4.5
 #: Tongue barely visible from the front: in the median frame its front-most point more
 #: than this behind the lingual face of the lower central incisors, mm. The model's rest
-#: tongue sits 7.6 mm behind it, level with the canines; twice that puts the tip behind
-#: the premolars, out of the front view's sight (CASSI's JW15, JW45).
+#: tongue tip sits 4 mm behind it (between the lateral incisors and the canines, 7 mm);
+#: beyond 15 mm it is behind the first premolars (14 mm), framed by the side teeth and out
+#: of the front view's sight (CASSI's JW15, JW45).
 TONGUE_HIDDEN_MM = 15.0
 
 # Reported, not counted (CASSI section 4) -------------------------------------------
