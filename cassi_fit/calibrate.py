@@ -262,50 +262,46 @@ class _Problem:
 
 # ------------------------------------------------------------------------ the fit
 
+_GROUPS = ("jaw_pellets", "upper_lip", "lower_lip", "jaw_shape", "face_width", "collision")
 _STAGES = {  # method -> [(free unknowns, residual groups)]
     "separate": [
         ((4, 5, 6), ("jaw_shape",)),
         ((3,), ("face_width",)),
         ((1, 2), ("upper_lip", "lower_lip", "collision")),
     ],
-    "joint": [
-        ((0, 1, 2, 3, 4, 5, 6),
-         ("jaw_pellets", "upper_lip", "lower_lip", "jaw_shape", "face_width", "collision")),
-    ],
+    "joint": [((0, 1, 2, 3, 4, 5, 6), _GROUPS)],
 }
-# Compiled stages, one per (model content, stage, collisions, head measured): the model's
-# array leaves are arguments, its static parts closed over (as in animate._geometry).
+# One compiled solver per (model content, head measured): which unknowns are free and
+# which residual groups count are arrays (a mask, weights), so every stage of both
+# methods, with or without the collision penalty, shares it. The model's array leaves are
+# arguments, its static parts closed over (as in animate._geometry).
 _STAGE_CACHE: dict = {}
 
 
 def _solve_stage(model, data, measured, x, free, groups, collisions):
-    from .animate import _is_array, _model_key
+    """Least squares over the unknowns ``free`` (others held at ``x``) of the residual
+    ``groups``; returns ``(x, converged)``."""
+    mask = jnp.zeros(x.shape, x.dtype).at[jnp.asarray(free)].set(1.0)
+    weights = {g: jnp.asarray(float(g in groups), x.dtype) for g in _GROUPS}
+    weights["collision"] = weights["collision"] * float(bool(collisions))
 
-    leaves, treedef = jax.tree.flatten(model)
-    key = (_model_key(model, leaves), free, groups, collisions, measured)
-    compiled = _STAGE_CACHE.get(key)
-    if compiled is None:
-        constant = [None if _is_array(v) else v for v in leaves]
-        index = jnp.asarray(free)
-
-        def run(arrays, data, x):
+    def make(rebuilt):
+        def run(data, x, mask, weights):
             from .jaw_fit import solve
 
-            it = iter(arrays)
-            rebuilt = jax.tree.unflatten(treedef, [next(it) if c is None else c for c in constant])
             problem = _Problem(rebuilt, data, measured)
 
             def residuals(y, base):
-                g = problem.residual_groups(base.at[index].set(y), collisions)
-                return jnp.concatenate([jnp.atleast_1d(g[k]) for k in groups if k in g])
+                g = problem.residual_groups(base + mask * (y - base), True)
+                return jnp.concatenate(
+                    [weights[k] * jnp.atleast_1d(g[k]) for k in _GROUPS if k in g])
 
-            y, converged = solve(residuals, x[index], x, "optimistix-lm")
-            return x.at[index].set(y), converged
+            return solve(residuals, x, x, "optimistix-lm")
 
-        compiled = _STAGE_CACHE[key] = jax.jit(run)
-    arrays = [v for v in leaves if _is_array(v)]
-    x, converged = compiled(arrays, jax.tree.map(jnp.asarray, data), x)
-    return x, bool(converged)
+        return run
+
+    y, converged = _model_call(model, ("stage", measured), make, data, x, mask, weights)
+    return x + mask * (y - x), bool(converged)
 
 
 def calibrate_subject(recordings, model=None, *, method="separate", collisions=True):
