@@ -63,7 +63,7 @@ __all__ = [
     "ensure_default_corpus",
 ]
 
-GENERATOR_VERSION = 2  # bump when the generated numbers change (invalidates the cache)
+GENERATOR_VERSION = 3  # bump when the generated numbers change (invalidates the cache)
 PELLETS = ("UL", "LL", "T1", "T2", "T3", "T4", "MNI", "MNM")  # = cassi_fit.txy.PELLET_NAMES
 _UL, _LL, _T1, _T2, _T3, _T4, _MNI, _MNM = range(8)
 _TONGUE = slice(_T1, _T4 + 1)
