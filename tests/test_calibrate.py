@@ -155,9 +155,16 @@ def test_cli_calibrate_writes_one_file_per_subject_and_animate_reads_them(
     assert "S01" in capsys.readouterr().out
     assert cli(["calibrate", str(corpus), "--out", str(out), "--subjects", "S01"]) == 2
     assert "exists" in capsys.readouterr().err
-    png = tmp_path / "s01.png"
+    png, depths = tmp_path / "s01.png", tmp_path / "depths.csv"
     args = ["animate", str(corpus), "S01", "tp040", "--calibration", str(out),
-            "--collisions", "project", "--stride", "50", "--out", str(png), "--size", "160x120"]
+            "--collisions", "project", "--stride", "50", "--penetration", str(depths),
+            "--out", str(png), "--size", "160x120"]
     assert cli(args) == 0 and png.is_file()
+    assert "tongue_upper_front" in capsys.readouterr().out
+    table = np.genfromtxt(depths, delimiter=",", names=True)
+    assert len(table) > 5 and {"tongue_palate_mm", "lips_lower_teeth_after_mm"} <= set(
+        table.dtype.names)
+    after = [n for n in table.dtype.names if n.endswith("_after_mm")]
+    assert max(float(table[n].max()) for n in after) < 0.01
     assert cli(args[:-4] + ["--cassi", "--out", str(png), "--force"]) == 2
     assert "exclude" in capsys.readouterr().err

@@ -124,6 +124,12 @@ def register(subparsers) -> None:
         action="store_true",
         help="draw the measured pellets (red) and the model's pellet sites (green)",
     )
+    parser.add_argument(
+        "--penetration",
+        metavar="CSV",
+        help="also write the per-frame penetration depths (mm; tongue in palate, teeth, "
+        "front teeth; lips in teeth), before and after any projection, to CSV",
+    )
     parser.add_argument("--no-audio", action="store_true", help="leave the sound out of an .mp4")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -222,13 +228,51 @@ def run(args) -> int:
     out = out or Path(f"{recording.subject}_{recording.task}.mp4")
     if out.exists() and not args.force:
         raise CassiError(f"{out}: file exists (pass --force to replace it)")
+    csv_out = Path(args.penetration) if args.penetration else None
+    if csv_out is not None and csv_out.exists() and not args.force:
+        raise CassiError(f"{csv_out}: file exists (pass --force to replace it)")
     state, animation = animate_recording(recording, args)
     from cassi_fit.render import Renderer
 
     renderer = Renderer(state.model, size=size, views=views, grid=len(views) > 1)
     written = write_output(out, animation, renderer, recording, args)
     print(f"wrote {written} ({animation.n_frames} frames, stride {animation.stride})")
+    print(penetration_summary(animation))
+    if csv_out is not None:
+        print(f"wrote {write_penetration_csv(csv_out, animation, overwrite=args.force)}")
     return 0
+
+
+def penetration_summary(animation) -> str:
+    """One line per kind: the 95th percentile and the maximum depth over the frames."""
+    import numpy as np
+
+    if not animation.penetration:
+        return "penetration: not measured (the model has no collision chains)"
+    lines = ["penetration depth, mm (95th percentile / max over frames)"
+             + ("; after projection" if animation.collisions == "project" else "")]
+    for key, before in animation.penetration.items():
+        after = animation.penetration_after[key]
+        text = f"  {key:20s} {np.percentile(before, 95):6.2f} / {before.max():6.2f}"
+        if animation.collisions == "project":
+            text += f"   -> {after.max():.3f}"
+        lines.append(text)
+    return "\n".join(lines)
+
+
+def write_penetration_csv(path: Path, animation, *, overwrite=False) -> Path:
+    """time_s, frame (1-based data line), then each depth before and after projection."""
+    from cassi_fit._io import atomic_write
+
+    keys = list(animation.penetration)
+    header = ["time_s", "line"] + [f"{k}_mm" for k in keys] + [f"{k}_after_mm" for k in keys]
+    rows = [",".join(header)]
+    for i in range(animation.n_frames):
+        values = [f"{animation.times[i]:.6f}", str(int(animation.frame_index[i]) + 1)]
+        values += [f"{animation.penetration[k][i]:.4f}" for k in keys]
+        values += [f"{animation.penetration_after[k][i]:.4f}" for k in keys]
+        rows.append(",".join(values))
+    return atomic_write(path, "\n".join(rows) + "\n", overwrite=overwrite)
 
 
 def write_output(out: Path, animation, renderer, recording, args) -> Path:
