@@ -10,11 +10,13 @@ def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "demo",
         help="animate a jaw-wagging task and a sentence of the synthetic corpus",
-        description="Create the synthetic corpus if it is absent, animate one subject's "
-        "jaw-wagging task and a spoken sentence, and write to --out: the two videos (the "
-        "sentence with its sound), the four views as stills, the sentence as a .glb, and a "
-        "plot of the paper's closed-form jaw rotation against a least-squares fit about one "
-        "pivot. Re-running replaces the demo's own files in --out.",
+        description="Create the synthetic corpus if it is absent, calibrate one subject's "
+        "face (lip thickness, face width, jaw shape), animate its jaw-wagging task and a "
+        "spoken sentence with the tongue and lips kept out of the teeth and palate, and "
+        "write to --out: the two videos (the sentence with its sound), the four views as "
+        "stills, the sentence as a .glb, a plot of the paper's closed-form jaw rotation "
+        "against least-squares pivot fits, and a still of CASSI-like against calibrated "
+        "with collisions. Re-running replaces the demo's own files in --out.",
     )
     parser.add_argument(
         "--out", default="demo_output", metavar="DIR", help="output folder (default demo_output)"
@@ -101,6 +103,31 @@ def jaw_plot(path, state, animation, *, title=""):
     return atomic_write(path, buffer.getvalue(), overwrite=True)
 
 
+def _comparison(path: Path, recording, animation, stride, size):
+    """Side by side at the frame where the CASSI-like tongue is deepest in the front
+    teeth: CASSI-like (paper's conformation, no collisions) and calibrated + projected."""
+    import numpy as np
+
+    from cassi_fit.animate import animate, initialize
+    from cassi_fit.render import Renderer, save_png
+
+    state = initialize(recording, calibration="cassi")
+    cassi = animate(state, recording, stride=stride, collisions="off")
+    depth = np.maximum(cassi.penetration["tongue_upper_front"],
+                       cassi.penetration["tongue_lower_front"])
+    k = int(np.argmax(depth))
+    width, height = size
+    renderer = Renderer(state.model, size=(width // 2 * 2, height), views=("inside", "front"))
+    t = float(cassi.times[k])
+    left = renderer.render(cassi.vertices[k], caption=(
+        f"CASSI-like, t={t:.2f} s: tongue {depth[k]:.1f} mm into the front teeth"))
+    after = max(float(animation.penetration_after["tongue_upper_front"][k]),
+                float(animation.penetration_after["tongue_lower_front"][k]))
+    right = renderer.render(animation.vertices[k], caption=(
+        f"calibrated + collisions: {after:.1f} mm"))
+    return save_png(path, np.concatenate([left, right], axis=0), overwrite=True)
+
+
 def _stills(out: Path, renderer, recording, animation):
     """The four views alone and the grid, at the frame of widest jaw opening."""
     import numpy as np
@@ -147,10 +174,16 @@ def run(args) -> int:
     written = []
     renderer = None
     recordings = _corpus_recordings(args.subject)  # [jaw wagging, sentence]
+    from cassi_fit.calibrate import calibrate_subject, calibration_path, write_calibration
+
+    print(f"calibrating {recordings[0].subject} ...", file=sys.stderr)
+    calibration = calibrate_subject(recordings)
+    written.append(write_calibration(calibration_path(out, calibration.subject), calibration,
+                                     overwrite=True))
     for recording in recordings:
         print(f"animating {recording.subject} {recording.task} ...", file=sys.stderr)
-        state = initialize(recording)
-        animation = animate(state, recording, stride=args.stride)
+        state = initialize(recording, calibration=calibration)
+        animation = animate(state, recording, stride=args.stride, collisions="project")
         renderer = renderer or Renderer(state.model, size=size)
         stem = f"{recording.subject}_{recording.task}"
         written.append(
@@ -166,7 +199,9 @@ def run(args) -> int:
             )
         )
         written += _stills(out, renderer, recording, animation)
-        if recording is recordings[-1]:  # the sentence: its animation as glTF
+        if recording is recordings[-1]:  # the sentence: CASSI-like against this, and glTF
+            written.append(_comparison(out / f"{stem}_cassi_vs_calibrated.png", recording,
+                                       animation, args.stride, size))
             written.append(
                 export_glb(
                     out / f"{stem}.glb",
