@@ -125,13 +125,13 @@ def recovery_rows(calibrations: dict, truths: dict | None = None) -> list[dict]:
 
 
 def worst_errors(rows: list[dict], quantities=tuple(QUANTITIES)) -> dict:
-    """``(method, quantity) -> largest |error| (percent)`` over the subjects of ``rows``."""
-    out = {}
+    """``(method, quantity) -> largest |error| (percent)`` over the subjects of ``rows``
+    (NaN if any is NaN)."""
+    errors = {}
     for row in rows:
         for q in quantities:
-            key = (row["method"], q)
-            out[key] = max(out.get(key, 0.0), abs(row[f"{q}_error_percent"]))
-    return out
+            errors.setdefault((row["method"], q), []).append(row[f"{q}_error_percent"])
+    return {key: float(np.max(np.abs(v))) for key, v in errors.items()}
 
 
 def all_within(rows: list[dict], quantities=CHECKED, tolerance=TOLERANCE_PERCENT) -> bool:

@@ -81,6 +81,7 @@ def test_worst_errors_and_the_tolerance():
     assert not sf.all_within(rows[2:], tolerance=1.0 - 1e-9)
     rows[2]["face_width_error_percent"] = float("nan")
     assert not sf.all_within(rows[2:])
+    assert np.isnan(sf.worst_errors(rows)[("joint", "face_width")])
     assert not sf.all_within([])
 
 
