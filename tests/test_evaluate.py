@@ -410,12 +410,13 @@ def _run(capsys, *argv):
 
 def test_cli_evaluate_cassi_like(corpus, tmp_path, capsys):
     out = tmp_path / "eval"
-    code, text, err = _run(capsys, "evaluate", corpus, "--out", out, "--cassi", "--quiet")
+    code, text, err = _run(capsys, "evaluate", corpus, "--out", out, "--cassi", "--quiet",
+                           "--stride", "4")  # every test animates at stride 4: one compilation
     assert code == 0, err
     assert "| Subject | Tasks | Teeth | Lips | Tongue |" in text
     assert "| S01 | tp040 |" in text
     assert "S01 tp999 (error:" in text  # the broken file is reported, not rated
-    assert "Calibration: cassi; collisions: off" in text
+    assert "Calibration: cassi; collisions: off; jaw: closed-form; stride 4" in text
     names = sorted(p.name for p in out.iterdir())
     assert names == sorted([*ev.OUTPUT_NAMES, "evaluation_summary.png"])
     code, _, err = _run(capsys, "evaluate", corpus, "--out", out, "--quiet")
@@ -457,7 +458,7 @@ def test_cli_calibration_folder_is_loaded_per_subject(corpus, tmp_path, capsys, 
     out = tmp_path / "eval"
     with pytest.warns(UserWarning, match="S01: no calibration given"):
         code, text, err = _run(capsys, "evaluate", corpus, "--calibration", folder, "--out",
-                               out, "--tasks", "tp040", "--stride", "8", "--quiet")
+                               out, "--tasks", "tp040", "--stride", "4", "--quiet")
     assert code == 0, err
     assert seen == [folder]
     assert "Calibration: calibrated" in text
