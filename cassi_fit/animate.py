@@ -73,7 +73,9 @@ class SubjectState(eqx.Module):
     t (2,) mm)``, the closed-form motion from the model's jaw sites onto them.
     conformation: ``FaceParams`` of the subject's shape (jaw shape, widths, lip thickness,
     nose) with no animation; rest_pellets ``(8, 2)`` mm: the model's pellet sites in that
-    shape. initial_params: the parameters of the first valid frame.
+    shape, from which the tongue and lip parameters are measured (with a calibration, UL
+    and LL raised by its ``lip_rest_offset``). initial_params: the parameters of the first
+    valid frame.
     """
 
     model: eqx.Module
@@ -351,6 +353,9 @@ def initialize(
     size = _bucket(track.times.shape[0] - first)
     batch = jax.tree.map(lambda x: jnp.broadcast_to(x, (size, *jnp.shape(x))), conformation)
     rest = _geometry(model, batch, jaw_weights, tongue_anchor)[1][0]
+    if fitted:  # the lips' vertical rest where the first valid lines have them
+        rest = rest.at[UL, 1].add(calibration.lip_rest_offset[0])
+        rest = rest.at[LL, 1].add(calibration.lip_rest_offset[1])
     reference = jnp.asarray(scale * pellets[[MNI, MNM]])
     initial = _closed_form_one(rest[jnp.array([MNI, MNM])], reference)
     state = SubjectState(

@@ -76,6 +76,11 @@ class Calibration:
     parameters (``deform.FaceParams`` names, model units). ``residuals``: what is left of
     each residual group, subject mm (rms over recordings where there are several).
     ``observed``: the per-recording first-line estimates of the lip thicknesses.
+    ``lip_rest_offset``: (upper, lower) model mm, how far above the model's UL and LL
+    sites the lip pellets sit on the first valid lines; animation measures the lips'
+    vertical displacement from there, so that the lips are together (at rest) where the
+    first valid line has them, as the report assumes, instead of being pushed into each
+    other or apart by a pellet placed higher or lower on the lip than the model's site.
     """
 
     subject: str
@@ -89,6 +94,7 @@ class Calibration:
     gonion: tuple
     gnathion: tuple
     params: dict
+    lip_rest_offset: tuple
     residuals: dict
     observed: dict
     recordings: tuple
@@ -234,6 +240,28 @@ class _Problem:
 
         return jax.vmap(one)(self.data["pellets"])
 
+    def lip_rest_offset(self, v, s):
+        """(upper, lower) model mm: how far above the model's UL and LL sites the lip
+        pellets sit on the first valid lines (the lower one after the model's jaw is placed
+        on that line's jaw pellets), averaged over the recordings that track them."""
+        from . import rigid
+        from .jaw import closed_form
+
+        i = self.index
+        rest_jaw = jnp.stack([v[i["MNI"], :2], v[i["MNM"], :2]])
+        w_ll = jnp.asarray(self.model.jaw_weights["cassi"])[i["LL"]]
+
+        def one(pel):
+            motion = closed_form(rest_jaw, s * pel[jnp.array([MNI, MNM])])
+            theta, t = rigid.fractional((motion.theta, motion.translation), w_ll)
+            ll = rigid.apply(theta, t, v[i["LL"], :2])
+            return s * pel[UL, 1] - v[i["UL"], 1], s * pel[LL, 1] - ll[1]
+
+        du, dl = jax.vmap(one)(self.data["pellets"])
+        mu, ml = self.data["mask_ul"], self.data["mask_ll"]
+        return (jnp.sum(mu * du) / jnp.maximum(jnp.sum(mu), 1.0),
+                jnp.sum(ml * dl) / jnp.maximum(jnp.sum(ml), 1.0))
+
     def residual_groups(self, x, collisions):
         """Dict of residual vectors (model mm) at the unknowns ``x``."""
         from .collide import penalty_residuals
@@ -377,7 +405,8 @@ def _summary_arrays(model, data, measured, x):
             d = depths(rebuilt, v)
             lips = jnp.maximum(jnp.max(d["lips_upper"]), jnp.max(d["lips_lower"]))
             return (v, problem.residual_groups(x, False), problem.lip_thickness_model(v),
-                    problem.lip_thickness_observed(jnp.exp(x[0])), lips, problem.params(x))
+                    problem.lip_thickness_observed(jnp.exp(x[0])), lips, problem.params(x),
+                    problem.lip_rest_offset(v, jnp.exp(x[0])))
 
         return f
 
@@ -386,7 +415,7 @@ def _summary_arrays(model, data, measured, x):
 
 def _summarise(problem, x, method, collisions, converged, recordings, lines):
     s = float(np.exp(x[0]))
-    v, groups, model_t, obs, lips_depth, params = _summary_arrays(
+    v, groups, model_t, obs, lips_depth, params, lip_rest = _summary_arrays(
         problem.model, problem.data, problem.measured, x)
     groups = {k: np.asarray(g) for k, g in groups.items()}
     upper, lower = (float(t) / s for t in model_t)
@@ -425,6 +454,7 @@ def _summarise(problem, x, method, collisions, converged, recordings, lines):
         gonion=tuple(float(c) / s for c in vn[i["gonion"], :2]),
         gnathion=tuple(float(c) / s for c in vn[i["gnathion"], :2]),
         params={k: _plain(np.asarray(getattr(params, k), float)) for k in names},
+        lip_rest_offset=tuple(float(d) for d in lip_rest),
         residuals=residuals,
         observed={
             "upper_lip_thickness": [None if np.isnan(a) else float(a) for a in obs_u],
@@ -479,6 +509,7 @@ def read_calibration(path) -> Calibration:
     data = {k: v for k, v in data.items() if k in known}
     defaults = {"mouth_width": float("nan"), "nose_protrusion": float("nan"),
                 "gonion": (math.nan, math.nan), "gnathion": (math.nan, math.nan),
+                "lip_rest_offset": (0.0, 0.0),
                 "residuals": {}, "observed": {}, "recordings": (), "first_lines": (),
                 "head_is_default": False, "collisions": False, "converged": True}
     for k, v in defaults.items():
@@ -498,6 +529,10 @@ def read_calibration(path) -> Calibration:
     for k in ("scale", "upper_lip_thickness", "lower_lip_thickness", "face_width"):
         if not _numeric(data[k]) or not math.isfinite(float(data[k])) or float(data[k]) <= 0:
             raise DataFormatError(path, None, f"{k} must be a positive number")
+    offset = data["lip_rest_offset"]
+    if not _numeric(offset) or np.shape(offset) != (2,) or not np.all(np.isfinite(offset)):
+        raise DataFormatError(path, None, "lip_rest_offset must be two numbers (mm)")
+    data["lip_rest_offset"] = tuple(float(d) for d in offset)
     data["gonion"], data["gnathion"] = tuple(data["gonion"]), tuple(data["gnathion"])
     data["recordings"], data["first_lines"] = tuple(data["recordings"]), tuple(data["first_lines"])
     return Calibration(**data)

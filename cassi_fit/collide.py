@@ -1,4 +1,5 @@
-"""Collisions: the tongue against the teeth and the palate, the lips against the teeth.
+"""Collisions: the tongue against the teeth and the palate, the lips against the teeth
+and each other.
 
 CASSI's tongue poked through the front teeth for 13 of 15 subjects and through the palate
 for nearly all (report section 4); its future work asks for collision detection. This
@@ -11,16 +12,21 @@ Obstacles, all taken from the posed vertices of a frame, so they move with the j
   vertex chains running from the right back molar round the front to the left back molar
   (``FaceModel.collision``; written by ``model/build_model.py``): the lingual and the
   labial faces of the crowns at their occlusal (biting) and cervical (gum) levels. At a
-  height ``y`` the lingual *wall* is the occlusal chain for ``y`` at the occlusal level,
-  the cervical chain from the gum line on, and in between a blend. For the **upper** arch,
-  a point is inside when it is beyond the lingual wall (on the lips' side of it, measured
-  in the horizontal x-z plane) *and* above the occlusal level; for the **lower** arch when
-  beyond its lingual wall and below its occlusal level. The depth is the shorter way out:
-  ``min(horizontal distance back to the wall, vertical distance to the occlusal level)``.
-  So a tongue between the open front teeth (interdental /th/, protrusion) is not inside
-  anything, but a tongue in front of or through a crown is. Behind the last molar nothing
-  counts. The lips test the same arches from the other side: a lip point is inside when
-  it is behind the *labial* wall and within the crown's height range.
+  height ``y`` each face is the occlusal chain for ``y`` at the occlusal level, the
+  cervical chain from the gum line on, and in between a blend; between the two faces lies
+  the band of the crowns (and, beyond the gum line, of the bone that holds them). For the
+  **upper** arch a point is inside when it is in that band (measured in the horizontal
+  x-z plane) *and* above the occlusal level; for the **lower** arch when in its band and
+  below its occlusal level. The depth is the shortest way out: ``min(distance to the
+  lingual face, distance to the labial face, vertical distance to the occlusal level)``.
+  So a tongue between the open front teeth (interdental /th/, protrusion), or already out
+  in front of them and hanging over the lower lip, is not inside anything, but a tongue
+  through a crown is. Behind the last molar nothing counts. The projection moves a
+  tongue point back across the lingual face or vertically (never forward through the
+  teeth), a lip point back across the labial face or vertically.
+* **The lips against each other.** Per skin column between the mouth corners, the lower
+  lip's highest point must not be above the upper lip's lowest; where it is, both are
+  brought to the middle (:func:`lips_apart`), as lips compress in a closure.
 * **Palate.** The oral sheet of ``cassi_fit.palate`` is a height field ``y = h(x, z)``
   over its footprint; a tongue point above it is inside by ``y - h``; the way out is down.
 
@@ -52,6 +58,7 @@ REPORT_KEYS = (
     "tongue_lower_front",
     "lips_upper_teeth",
     "lips_lower_teeth",
+    "lips_crossing",
 )
 _CHAINS = ("lingual_occlusal", "lingual_cervical", "labial_occlusal", "labial_cervical")
 _PALATE_ACROSS = 7  # cassi_fit.palate.N_ACROSS (the palate region's oral sheet layout)
@@ -80,10 +87,12 @@ def _perp(d):
     return jnp.stack([-d[..., 1], d[..., 0]], -1)
 
 
-def _wall_distance(q, wall, outward, y_occ):
-    """Distance of one point ``q (3,)`` from a polyline ``wall (K, 2)`` (x, z) measured
-    positive toward ``outward (K, 2)``; returns ``(signed distance, occlusal y at the
-    closest point, unit normal (2,), closest segment, inside the chain's span)``."""
+def _wall_distance(q, wall, far, outward, y_occ):
+    """Where one point ``q (3,)`` is across the band between two polylines (x, z): the
+    entry ``wall (K, 2)`` and the ``far`` wall (the other face of the crowns, same
+    stations). Returns ``(distance beyond the entry wall (> 0 into the band), distance
+    beyond the far wall (> 0 past the teeth), occlusal y at the closest point, unit normal
+    (2,) into the band, inside the chain's span)``; ``outward (K, 2)`` points into the band."""
     p = q[jnp.array([0, 2])]
     a, b = wall[:-1], wall[1:]
     ab = b - a
@@ -100,14 +109,21 @@ def _wall_distance(q, wall, outward, y_occ):
     out_dir = 0.5 * (outward[j] + outward[j + 1])
     n = jnp.where(jnp.dot(n, out_dir) < 0, -n, n)
     signed = jnp.dot(p - closest[j], n)
+    # the far face of the same crowns: the matching segment of the other chain
+    fa, fb = far[j], far[j + 1]
+    fab = fb - fa
+    ft = jnp.clip(jnp.dot(p - fa, fab) / jnp.maximum(jnp.dot(fab, fab), 1e-12), 0.0, 1.0)
+    beyond = jnp.dot(p - (fa + ft * fab), n)
     last = ab.shape[0] - 1
     within = ~(((j == 0) & (t_raw[0] < 0)) | ((j == last) & (t_raw[last] > 1)))
     y = y_occ[j] + t[j] * (y_occ[j + 1] - y_occ[j])
-    return signed, y, n, within
+    return signed, beyond, y, n, within
 
 
-def _teeth_depth(q, chains, upper: bool, side: str):
-    """Depth (mm, >= 0) of ``q`` inside one arch, and the displacement that takes it out."""
+def _walls(q, chains, upper: bool, side: str):
+    """The two faces of one arch's crowns at the height of ``q``, entry face first:
+    lingual then labial for ``side="lingual"`` (the tongue, from inside the mouth),
+    labial then lingual for ``"labial"`` (the lips, from outside)."""
     ling_o, ling_c, lab_o, lab_c = chains
     sign = 1.0 if upper else -1.0
     # blend occlusal -> cervical by the height of q at each station
@@ -116,15 +132,21 @@ def _teeth_depth(q, chains, upper: bool, side: str):
     f = jnp.clip((q[1] - ling_o[:, 1]) / span, 0.0, 1.0)[:, None]
     ling = ling_o[:, [0, 2]] + f * (ling_c[:, [0, 2]] - ling_o[:, [0, 2]])
     lab = lab_o[:, [0, 2]] + f * (lab_c[:, [0, 2]] - lab_o[:, [0, 2]])
-    if side == "lingual":  # points coming from inside the mouth (the tongue)
-        wall, outward = ling, lab - ling
-    else:  # points coming from outside (the lips): "outward" is into the mouth
-        wall, outward = lab, ling - lab
-    d_h, y_occ, n, within = _wall_distance(q, wall, outward, ling_o[:, 1])
+    if side == "lingual":
+        return _wall_distance(q, ling, lab, lab - ling, ling_o[:, 1])
+    return _wall_distance(q, lab, ling, ling - lab, ling_o[:, 1])
+
+
+def _teeth_depth(q, chains, upper: bool, side: str):
+    """Depth (mm, >= 0) of ``q`` inside one arch, and the displacement that takes it out
+    (back across the face it came in by, or vertically to the occlusal level)."""
+    sign = 1.0 if upper else -1.0
+    d_h, beyond, y_occ, n, within = _walls(q, chains, upper, side)
     d_v = sign * (q[1] - y_occ)
-    depth = jnp.where(within, jnp.maximum(jnp.minimum(d_h, d_v), 0.0), 0.0)
+    inside = within & (d_h > 0) & (beyond < 0) & (d_v > 0)
+    depth = jnp.where(inside, jnp.minimum(jnp.minimum(d_h, -beyond), d_v), 0.0)
     horizontal = d_h <= d_v
-    push = depth + jnp.where(depth > 0, PROJECTION_MARGIN_MM, 0.0)
+    push = jnp.where(inside, jnp.where(horizontal, d_h, d_v) + PROJECTION_MARGIN_MM, 0.0)
     move_h = -push * jnp.array([n[0], 0.0, n[1]])
     move_v = jnp.array([0.0, -sign * push, 0.0])
     return depth, jnp.where(horizontal, move_h, move_v)
@@ -206,21 +228,8 @@ def report(model, vertices) -> dict:
         "tongue_lower_front": jnp.max(d["tongue_lower_front"]),
         "lips_upper_teeth": jnp.max(d["lips_upper"]),
         "lips_lower_teeth": jnp.max(d["lips_lower"]),
+        "lips_crossing": jnp.maximum(jnp.max(lips_crossing(model, vertices)), 0.0),
     }
-
-
-def _wall(q, chains, upper: bool, side: str):
-    """``(horizontal depth beyond the wall (> 0 outside), occlusal y, unit normal (2,),
-    within the arch's span)`` of ``q`` for one arch (see :func:`_teeth_depth`)."""
-    ling_o, ling_c, lab_o, lab_c = chains
-    sign = 1.0 if upper else -1.0
-    span = ling_c[:, 1] - ling_o[:, 1]
-    span = jnp.where(jnp.abs(span) > 1e-9, span, sign * 1e-9)
-    f = jnp.clip((q[1] - ling_o[:, 1]) / span, 0.0, 1.0)[:, None]
-    ling = ling_o[:, [0, 2]] + f * (ling_c[:, [0, 2]] - ling_o[:, [0, 2]])
-    lab = lab_o[:, [0, 2]] + f * (lab_c[:, [0, 2]] - lab_o[:, [0, 2]])
-    wall, outward = (ling, lab - ling) if side == "lingual" else (lab, ling - lab)
-    return _wall_distance(q, wall, outward, ling_o[:, 1])
 
 
 def _escape(q, arches, side, ceiling=None):
@@ -231,9 +240,10 @@ def _escape(q, arches, side, ceiling=None):
     Where the band is empty (the teeth overlap, or the palate comes down to the lower
     teeth) only the horizontal way is taken."""
     (cu, _), (cl, _) = arches
-    du, yu, nu, wu = _wall(q, cu, True, side)
-    dl, yl, nl, wl = _wall(q, cl, False, side)
-    out_u, out_l = wu & (du > 0), wl & (dl > 0)
+    du, bu, yu, nu, wu = _walls(q, cu, True, side)
+    dl, bl, yl, nl, wl = _walls(q, cl, False, side)
+    # within the band of the crowns (and the bone above/below them) horizontally
+    out_u, out_l = wu & (du > 0) & (bu < 0), wl & (dl > 0) & (bl < 0)
     inf = jnp.asarray(jnp.inf, q.dtype)
     hi = jnp.where(out_u, yu, inf)
     if ceiling is not None:
@@ -290,7 +300,39 @@ def project(model, vertices, passes: int = PROJECTION_PASSES):
     push_lip = until_out(lambda q: _escape(q, arches, "labial"))
 
     vertices = vertices.at[tongue].set(jax.vmap(push_tongue)(vertices[tongue]))
-    return vertices.at[lips].set(jax.vmap(push_lip)(vertices[lips]))
+    for _ in range(3):  # the lips apart, then out of the teeth (which win where both pull)
+        vertices = lips_apart(model, vertices)
+        vertices = vertices.at[lips].set(jax.vmap(push_lip)(vertices[lips]))
+    return vertices
+
+
+def lips_crossing(model, vertices):
+    """Per lip column (C,), how far (mm) the lower lip's highest point is above the
+    upper lip's lowest (> 0: the lips pass into each other). Zeros if the model has no
+    lip columns."""
+    if "upper_lip_columns" not in model.collision:
+        return jnp.zeros(1, vertices.dtype)
+    upper = vertices[np.asarray(model.collision["upper_lip_columns"]), 1]
+    lower = vertices[np.asarray(model.collision["lower_lip_columns"]), 1]
+    return jnp.max(lower, axis=1) - jnp.min(upper, axis=1)
+
+
+def lips_apart(model, vertices):
+    """The lips pressed together instead of passing into each other: in every column
+    where they cross, both meet at the middle of the crossing (the upper lip's points
+    below it raised to it, the lower lip's above it lowered), as lips compress in a
+    closure. Columns that do not cross do not move."""
+    if "upper_lip_columns" not in model.collision:
+        return vertices
+    ui = np.asarray(model.collision["upper_lip_columns"])
+    li = np.asarray(model.collision["lower_lip_columns"])
+    uy, ly = vertices[ui, 1], vertices[li, 1]
+    top, bottom = jnp.max(ly, axis=1), jnp.min(uy, axis=1)
+    contact = (0.5 * (top + bottom))[:, None]
+    crossing = (top > bottom)[:, None]
+    uy = jnp.where(crossing, jnp.maximum(uy, contact), uy)
+    ly = jnp.where(crossing, jnp.minimum(ly, contact), ly)
+    return vertices.at[ui, 1].set(uy).at[li, 1].set(ly)
 
 
 def penalty_residuals(model, vertices, *, tongue=True, lips=True):

@@ -110,10 +110,12 @@ LIP_PROTRUSION_MM = 1.0
 #: "tongue_lower_front"), sustained, mm. The incisal edges are 1.5 mm thick, so 1 mm in
 #: is most of the way through; less hides in the rounding of the six-sided crowns.
 TONGUE_POKE_MM = 1.0
-#: Very noticeably through both (three problems, CASSI's JW11, JW21, JW24): deeper than
-#: the incisor crowns are thick halfway up (4.25 mm upper, 3.75 mm lower) in both arches,
-#: so the tongue is out in front of them.
-TONGUE_POKE_DEEP_MM = 4.5
+#: Very noticeably through both (three problems, CASSI's JW11, JW21, JW24): in both arches
+#: a tongue point 2 mm from every way out of the crowns (``collide`` measures the depth to
+#: the nearer face and to the biting edge): in the middle of the crowns where they are
+#: 4 mm thick or more, i.e. about halfway up the incisors (4.25 mm upper, 3.75 mm lower),
+#: so the tongue is through them, not grazing their edge.
+TONGUE_POKE_DEEP_MM = 2.0
 #: Tongue barely visible from the front: in the median frame its front-most point more
 #: than this behind the lingual face of the lower central incisors, mm. The model's rest
 #: tongue tip sits 4 mm behind it (between the lateral incisors and the canines, 7 mm);

@@ -138,6 +138,8 @@ def load_model(path=None) -> FaceModel:
     for k, v in meta.get("collision", {}).items():
         index = np.asarray(v, dtype=np.int64)
         collision[k] = index if k.endswith("_tooth") else _check_index(mpath, f"chain {k}", v, n)
+        if k.endswith("_columns") and index.ndim != 2:
+            raise DataFormatError(mpath, None, f"collision {k} must be a list of columns")
     vertices = jnp.asarray(table[:, :3])
     fields = {f: jnp.asarray(fields_table[:, k]) for k, f in enumerate(extra)}
     for f in FIELDS:

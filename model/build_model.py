@@ -584,9 +584,21 @@ def build():
     }
     w_cassi = wp * CASSI_FACTOR
     measures["collision"] = collision_chains(offsets, len(UPPER_TEETH))
+    measures["collision"].update(lip_columns(index, corner))
     V = tongue_at_rest(V, regions, measures["collision"])
     return (V, np.concatenate(faces), np.concatenate(mats), regions, landmarks, measures,
             w_cassi, wp, full)
+
+
+def lip_columns(index, corner):
+    """Per skin column between the mouth corners, the upper lip's vertices from its edge
+    up (rows A_in, A, ul_low, ul_red, UL) and the lower lip's from its edge down (B_in,
+    B, ll_high, ll_red, LL): ``cassi_fit.collide`` keeps the two lips from crossing."""
+    upper, lower = ("A_in", "A", "ul_low", "ul_red", "UL"), ("B_in", "B", "ll_high", "ll_red",
+                                                            "LL")
+    cols = [(j, side) for j in range(corner) for side in ((1,) if j == 0 else (1, -1))]
+    pick = lambda rows: [[int(index[(ROW_INDEX[r], j, side)]) for r in rows] for j, side in cols]
+    return {"upper_lip_columns": pick(upper), "lower_lip_columns": pick(lower)}
 
 
 def tongue_at_rest(V, regions, chains):

@@ -39,17 +39,21 @@ def test_the_rest_model_touches_nothing_and_projection_leaves_it_alone():
     np.testing.assert_array_equal(np.asarray(moved), np.asarray(MODEL.vertices))
 
 
-def test_depth_is_the_shorter_way_out_of_a_crown():
-    # just above the biting edge of the upper central incisors, 0.7 mm behind their labial
-    # face: beyond the lingual wall by about 0.7 mm, but only 0.3 mm above the edge
-    point = jnp.array([[-0.7, 0.3, 0.0]])
-    chains, _ = collide._arch(MODEL, MODEL.vertices, "upper")
-    depth, move = collide._teeth_depth(point[0], chains, True, "lingual")
+def test_depth_is_the_shortest_way_out_of_a_crown():
+    chains, teeth = collide._arch(MODEL, MODEL.vertices, "upper")
+    k = int(np.flatnonzero(teeth == 0)[-2])  # the left central incisor, mesial station
+    lingual, labial = np.asarray(chains[0][k]), np.asarray(chains[2][k])
+    assert 0.9 < np.linalg.norm((labial - lingual)[[0, 2]]) < 2.0  # a thin incisal edge
+    # 0.3 mm above the biting edge, halfway between the lingual and the labial face:
+    # 0.3 mm from the way out downward, more than 0.45 mm from either face
+    mid = 0.5 * (lingual + labial)
+    depth, move = collide._teeth_depth(jnp.array([mid[0], 0.3, mid[2]]), chains, True, "lingual")
     assert float(depth) == pytest.approx(0.3, abs=1e-6)
     np.testing.assert_allclose(np.asarray(move), [0.0, -0.3 - collide.PROJECTION_MARGIN_MM, 0.0])
-    # between the open teeth (below the upper edge) the same point is inside nothing
-    below = jnp.array([-0.7, -0.3, 0.0])
-    assert float(collide._teeth_depth(below, chains, True, "lingual")[0]) == 0.0
+    # between the open teeth (below the upper edge) the same point is inside nothing, and
+    # neither is one 2 mm in front of the crown (a tongue out over the lower lip)
+    for point in ([mid[0], -0.3, mid[2]], [labial[0] + 2.0, 3.0, labial[2]]):
+        assert float(collide._teeth_depth(jnp.array(point), chains, True, "lingual")[0]) == 0.0
 
 
 def test_a_tongue_pushed_through_the_front_teeth_is_measured_and_projected_out():
@@ -90,7 +94,23 @@ def test_lips_pushed_into_the_teeth_are_projected_out():
     before = _report(v)
     assert before["lips_upper_teeth"] > 1.0 or before["lips_lower_teeth"] > 1.0
     after = _report(_project(v))
-    assert max(after.values()) < TOL, after
+    # pushed into the teeth and into each other at once: the teeth win, and the lips are
+    # left crossing by a fraction of a millimetre at most
+    assert max(v for k, v in after.items() if k != "lips_crossing") < TOL, after
+    assert after["lips_crossing"] < 0.5
+
+
+def test_lips_closed_past_each_other_are_pressed_together_instead():
+    v = _posed(upper_lip=np.array([0.0, -3.0]), lower_lip=np.array([0.0, 5.0]))
+    assert _report(v)["lips_crossing"] > 7.0
+    projected = _project(v)
+    assert _report(projected)["lips_crossing"] == 0.0
+    crossing = np.asarray(collide.lips_crossing(MODEL, projected))
+    assert crossing.max() <= 1e-9  # the two edges meet, nothing crosses
+    untouched = ~np.isin(np.arange(len(v)), np.asarray(MODEL.collision["upper_lip_columns"]))
+    untouched &= ~np.isin(np.arange(len(v)), np.asarray(MODEL.collision["lower_lip_columns"]))
+    untouched &= ~np.isin(np.arange(len(v)), np.asarray(MODEL.regions["tongue"]))
+    np.testing.assert_array_equal(np.asarray(projected)[untouched], np.asarray(v)[untouched])
 
 
 def test_penalty_is_zero_at_rest_and_its_gradient_pushes_the_tongue_back():
