@@ -33,6 +33,7 @@ bench: $(STAMP)
 
 experiments: $(STAMP)
 	$(BIN)/python experiments/jaw_comparison.py --out experiments/output
+	$(BIN)/python experiments/subject_fitting.py --out experiments/output --force
 
 lint: $(STAMP)
 	$(BIN)/ruff check cassi_fit tests experiments benchmarks model

@@ -74,6 +74,15 @@ _PUBLIC = {
     # the modules (`from cassi_fit.deform import deform`) so that a name means one thing.
     "initialize": "animate",
     "Renderer": "render",
+    # subject fitting, collisions, evaluation
+    "Calibration": "calibrate",
+    "calibrate_subject": "calibrate",
+    "calibrate_dataset": "calibrate",
+    "read_calibration": "calibrate",
+    "write_calibration": "calibrate",
+    "load_calibrations": "calibrate",
+    "evaluate_dataset": "evaluate",
+    "evaluate_recording": "evaluate",
 }
 
 __all__ = sorted(_PUBLIC) + ["rigid"]
