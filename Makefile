@@ -32,7 +32,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_animation.py
 
 experiments: $(STAMP)
-	$(BIN)/python experiments/jaw_comparison.py --out experiments/output
+	$(BIN)/python experiments/jaw_comparison.py --out experiments/output --force
 	$(BIN)/python experiments/subject_fitting.py --out experiments/output --force
 
 lint: $(STAMP)

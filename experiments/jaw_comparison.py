@@ -1,6 +1,6 @@
 """Closed form or fit? Jaw-rotation methods compared on synthetic truth (and on real data).
 
-    python experiments/jaw_comparison.py --out experiments/output [--small] [--dataset DIR]
+    python experiments/jaw_comparison.py --out experiments/output [--small] [--dataset DIR] [--force]
 
 Synthetic part (cassi_fit.synth, true jaw motion known): for each noise level (0, 0.1, 0.3,
 0.6 mm per coordinate) and each method, per frame: angle error, pivot error (against the
@@ -218,8 +218,18 @@ def main(argv=None) -> int:
     parser.add_argument("--small", action="store_true", help="one subject, one task (fast)")
     parser.add_argument("--dataset", help="also compare the methods on this dataset folder")
     parser.add_argument("--limit", type=int, default=6, help="dataset recordings to use")
+    parser.add_argument("--force", action="store_true", help="replace existing outputs")
     args = parser.parse_args(argv)
     from pathlib import Path
+
+    outputs = ["jaw_comparison.csv", "pivot_error_vs_theta.png", "point_error_vs_noise.png"]
+    if args.dataset:
+        outputs += ["dataset_methods.csv", "dataset_pivots.png"]
+    existing = [Path(args.out) / n for n in outputs if (Path(args.out) / n).exists()]
+    if existing and not args.force:  # refuse before any work, as the toolkit's writers do
+        print(f"jaw_comparison: {existing[0]} exists (pass --force to replace it)",
+              file=sys.stderr)
+        return 1
 
     import jax
 
@@ -229,8 +239,8 @@ def main(argv=None) -> int:
 
     out = Path(args.out)
     rows = synthetic_table(args.small)
-    atomic_write(out / "jaw_comparison.csv", _csv(rows), overwrite=True)
-    _figures(rows, out, overwrite=True)
+    atomic_write(out / "jaw_comparison.csv", _csv(rows), overwrite=args.force)
+    _figures(rows, out, overwrite=args.force)
     threshold = trust_threshold(rows)
     print(f"closed-form pivot trustworthy (median error < {TRUST_PIVOT_MM} mm at 0.3 mm noise) "
           f"from |theta| >= {threshold} deg" if threshold is not None else
@@ -241,7 +251,7 @@ def main(argv=None) -> int:
                   f"pivot {r['median_pivot_err_mm']:9.2f} mm  chin {r['median_chin_err_mm']:.3f}"
                   f" mm  angle {r['median_angle_err_deg']:.3f} deg")
     if args.dataset:
-        dataset_report(args.dataset, out, True, args.limit)
+        dataset_report(args.dataset, out, args.force, args.limit)
     return 0
 
 

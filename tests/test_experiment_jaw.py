@@ -31,3 +31,10 @@ def test_notebook_runs_and_shows_figures(tmp_path):
     assert sum("image/png" in o.get("data", {}) for o in outputs) == 2
     text = "".join(o.get("text", "") for o in outputs)
     assert "closed-form pivot" in text and "smooth-pivot" in text
+
+
+def test_existing_outputs_are_kept_unless_forced(tmp_path, capsys):
+    (tmp_path / "jaw_comparison.csv").write_text("mine\n")
+    assert jaw_comparison.main(["--small", "--out", str(tmp_path)]) == 1
+    assert "exists" in capsys.readouterr().err
+    assert (tmp_path / "jaw_comparison.csv").read_text() == "mine\n"
