@@ -93,3 +93,21 @@ def commit_output(tmp: str | os.PathLike, final: str | os.PathLike) -> Path:
     """Move a finished temporary output into place (atomic on one file system)."""
     os.replace(tmp, final)
     return Path(final)
+
+
+def read_json(path: str | os.PathLike, what: str):
+    """The JSON document in ``path``, registered as an input: ``MissingDataError`` if
+    there is no such file (``what`` names it), ``DataFormatError`` naming the file and
+    the line if it is not valid JSON."""
+    import json
+
+    from .errors import DataFormatError, MissingDataError
+
+    path = Path(path)
+    if not path.is_file():
+        raise MissingDataError(f"{path}: {what} not found")
+    register_input(path)
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise DataFormatError(path, exc.lineno, f"invalid JSON: {exc.msg}") from None

@@ -248,15 +248,11 @@ def _lip_thickness(model, first, scale, head, head_is_default):
     if not head_is_default:
         wanted = scale * np.array([head.upper_lip_thickness, head.lower_lip_thickness])
     else:
-        rest_jaw = jnp.asarray(v[[lm["MNI"], lm["MNM"]], :2])
-        motion = _closed_form_one(rest_jaw, jnp.asarray(scale * first[[MNI, MNM]]))
-        from .rigid import apply
+        from .calibrate import lips_ahead
 
-        tip = np.asarray(apply(motion.theta, motion.translation,
-                               jnp.asarray(v[lm["lower_incisor_tip"], :2])))
-        ahead = (first[MNI] - first[MNM]) / np.linalg.norm(first[MNI] - first[MNM])
-        wanted = np.array([scale * first[UL, 0], (scale * first[LL] - tip) @ ahead])
-        wanted = np.where(np.isfinite(wanted), wanted, own)
+        seen = lips_ahead(jnp.asarray(v[[lm["MNI"], lm["MNM"]], :2]),
+                          jnp.asarray(v[lm["lower_incisor_tip"], :2]), jnp.asarray(first), scale)
+        wanted = np.where(np.isfinite(seen), np.asarray(seen, np.float64), own)
     delta = np.clip(wanted - own, -0.5 * own, own)
     # the thickness parameters move the vermilion along x: the lower one counts along
     # the model's forward direction
@@ -432,9 +428,7 @@ def _batched_params(inputs, scaled, theta, translation):
     return jax.vmap(lambda s, a, t: _frame_params_of(inputs, s, (a, t)))(scaled, theta, translation)
 
 
-# The face model keeps numpy arrays in static fields, which jit cannot hash or compare, so
-# the geometry function is compiled per model *content* (a digest of its static parts)
-# and receives only the model's array leaves; its tree structure is closed over.
+# Functions compiled per model content (``model_call``): geometry, calibration, evaluation.
 _GEOMETRY_CACHE: dict = {}
 _COLLISION_BATCH = 32
 
@@ -477,41 +471,58 @@ def _is_array(x) -> bool:
     return isinstance(x, (jax.Array, np.ndarray, np.generic, float, int))
 
 
-def _geometry(model, params, jaw_weights, tongue_anchor, collisions="off", report=False):
-    """All frames at once: vertices ``(m, V, 3)`` and model pellet sites ``(m, 8, 2)``;
-    with ``report``, also the per-frame penetration depths before and after projection
-    (two dicts of ``(m,)``, keys ``collide.REPORT_KEYS``)."""
+def model_call(model, tag, make, *args):
+    """``make(model)(*args)``, compiled once per model *content* and hashable ``tag``.
+
+    ``FaceModel`` keeps numpy arrays in static fields, which ``jit`` can neither hash nor
+    compare across model objects; so the compiled function receives only the model's array
+    leaves, rebuilds the model inside (its static parts closed over) and calls
+    ``make(rebuilt)``. Used by the geometry here, the calibration and the evaluation."""
     leaves, treedef = jax.tree.flatten(model)
-    key = (_model_key(model, leaves), jaw_weights, tongue_anchor, collisions, report)
+    key = (_model_key(model, leaves), tag)
     compiled = _GEOMETRY_CACHE.get(key)
     if compiled is None:
         constant = [None if _is_array(x) else x for x in leaves]
 
-        def run(arrays, batch):
-            from . import collide
-            from .deform import deform, model_pellets
-
+        def run(arrays, *a):
             it = iter(arrays)
             rebuilt = jax.tree.unflatten(treedef, [next(it) if c is None else c for c in constant])
+            return make(rebuilt)(*a)
 
-            def one(p):
-                vertices = deform(rebuilt, p, jaw_weights=jaw_weights, tongue_anchor=tongue_anchor)
-                before = collide.report(rebuilt, vertices) if report else None
-                if collisions == "project":
-                    vertices = collide.project(rebuilt, vertices)
-                after = before
-                if report and collisions == "project":
-                    after = collide.report(rebuilt, vertices)
-                return vertices, model_pellets(rebuilt, vertices), before, after
+        compiled = _GEOMETRY_CACHE[key] = jax.jit(run)
+    return compiled([x for x in leaves if _is_array(x)], *args)
 
+
+def _geometry(model, params, jaw_weights, tongue_anchor, collisions="off", report=False):
+    """All frames at once: vertices ``(m, V, 3)`` and model pellet sites ``(m, 8, 2)``;
+    with ``report``, also the per-frame penetration depths before and after projection
+    (two dicts of ``(m,)``, keys ``collide.REPORT_KEYS``)."""
+
+    def make(rebuilt):
+        from . import collide
+        from .deform import deform, model_pellets
+
+        def one(p):
+            vertices = deform(rebuilt, p, jaw_weights=jaw_weights, tongue_anchor=tongue_anchor)
+            before = collide.report(rebuilt, vertices) if report else None
+            if collisions == "project":
+                vertices = collide.project(rebuilt, vertices)
+            after = before
+            if report and collisions == "project":
+                after = collide.report(rebuilt, vertices)
+            return vertices, model_pellets(rebuilt, vertices), before, after
+
+        def run(batch):
             if not report and collisions == "off":
                 return jax.vmap(one)(batch)
             # the collision tests' per-vertex, per-segment intermediates stay in cache when
             # frames go through in small batches (3-4x faster than one vmap over all)
             return jax.lax.map(one, batch, batch_size=_COLLISION_BATCH)
 
-        compiled = _GEOMETRY_CACHE[key] = jax.jit(run)
-    out = compiled([x for x in leaves if _is_array(x)], params)
+        return run
+
+    tag = ("geometry", jaw_weights, tongue_anchor, collisions, report)
+    out = model_call(model, tag, make, params)
     return out if report else out[:2]
 
 

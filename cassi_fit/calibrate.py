@@ -54,6 +54,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .animate import model_call
 from .errors import CassiError, DataFormatError, DegenerateGeometryError, MissingDataError
 
 FORMAT = "cassi_fit calibration 1"
@@ -156,6 +157,24 @@ def _first_line(recording):
     return first, pellets
 
 
+@jax.jit
+def lips_ahead(rest_jaw, tip, pellets, s):
+    """Lip thickness as Headmeasures defines it, seen on one data line, in model mm:
+    ``(upper, lower)``, the UL pellet ahead of the upper incisor tip (x) and the LL pellet
+    ahead of the lower incisor tip along the jaw line (MNM -> MNI). ``pellets (8, 2)``
+    subject mm, ``s`` the scale; the lower tip is the model's (``tip (2,)``), placed on
+    the line's jaw pellets by the paper's closed form from the model's jaw sites
+    ``rest_jaw (2, 2)`` [MNI, MNM]."""
+    from . import rigid
+    from .jaw import closed_form
+
+    dtype = pellets.dtype
+    motion = closed_form(rest_jaw.astype(dtype), s * pellets[jnp.array([MNI, MNM])])
+    tip_here = rigid.apply(motion.theta, motion.translation, tip.astype(dtype))
+    forward = (pellets[MNI] - pellets[MNM]) / jnp.linalg.norm(pellets[MNI] - pellets[MNM])
+    return s * pellets[UL, 0], jnp.dot(s * pellets[LL] - tip_here, forward)
+
+
 _INDEX = ("UL", "LL", "MNI", "MNM", "upper_incisor_tip", "lower_incisor_tip", "gonion",
           "gnathion", "zygion_left", "zygion_right")
 
@@ -223,22 +242,11 @@ class _Problem:
         """Per recording (R,) (upper, lower) in model mm at scale ``s``: the lip pellets
         ahead of the incisor tips on the first valid line (the lower tip = the model's,
         placed on that line's jaw pellets by the paper's closed form)."""
-        from . import rigid
-        from .jaw import closed_form
-
         v = self.model.vertices
         i = self.index
         rest_jaw = jnp.stack([v[i["MNI"], :2], v[i["MNM"], :2]])
         tip = v[i["lower_incisor_tip"], :2]
-
-        def one(pel):
-            jaw = s * pel[jnp.array([MNI, MNM])]
-            motion = closed_form(rest_jaw.astype(pel.dtype), jaw)
-            tip_here = rigid.apply(motion.theta, motion.translation, tip.astype(pel.dtype))
-            fwd = (pel[MNI] - pel[MNM]) / jnp.linalg.norm(pel[MNI] - pel[MNM])
-            return s * pel[UL, 0], jnp.dot(s * pel[LL] - tip_here, fwd)
-
-        return jax.vmap(one)(self.data["pellets"])
+        return jax.vmap(lambda pel: lips_ahead(rest_jaw, tip, pel, s))(self.data["pellets"])
 
     def lip_rest_offset(self, v, s):
         """(upper, lower) model mm: how far above the model's UL and LL sites the lip
@@ -299,11 +307,9 @@ _STAGES = {  # method -> [(free unknowns, residual groups)]
     ],
     "joint": [((0, 1, 2, 3, 4, 5, 6), _GROUPS)],
 }
-# One compiled solver per (model content, head measured): which unknowns are free and
-# which residual groups count are arrays (a mask, weights), so every stage of both
-# methods, with or without the collision penalty, shares it. The model's array leaves are
-# arguments, its static parts closed over (as in animate._geometry).
-_STAGE_CACHE: dict = {}
+# One compiled solver per (model content, head measured) (``animate.model_call``): which
+# unknowns are free and which residual groups count are arrays (a mask, weights), so
+# every stage of both methods, with or without the collision penalty, shares it.
 
 
 def _solve_stage(model, data, measured, x, free, groups, collisions):
@@ -328,7 +334,7 @@ def _solve_stage(model, data, measured, x, free, groups, collisions):
 
         return run
 
-    y, converged = _model_call(model, ("stage", measured), make, data, x, mask, weights)
+    y, converged = model_call(model, ("calibrate-stage", measured), make, data, x, mask, weights)
     return x + mask * (y - x), bool(converged)
 
 
@@ -376,25 +382,6 @@ def calibrate_subject(recordings, model=None, *, method="separate", collisions=T
     return result
 
 
-def _model_call(model, tag, make, *args):
-    """Call ``make(problem_model)(*args)`` compiled once per model content and ``tag``."""
-    from .animate import _is_array, _model_key
-
-    leaves, treedef = jax.tree.flatten(model)
-    key = (_model_key(model, leaves), tag)
-    compiled = _STAGE_CACHE.get(key)
-    if compiled is None:
-        constant = [None if _is_array(v) else v for v in leaves]
-
-        def run(arrays, *a):
-            it = iter(arrays)
-            rebuilt = jax.tree.unflatten(treedef, [next(it) if c is None else c for c in constant])
-            return make(rebuilt)(*a)
-
-        compiled = _STAGE_CACHE[key] = jax.jit(run)
-    return compiled([v for v in leaves if _is_array(v)], *args)
-
-
 def _summary_arrays(model, data, measured, x):
     from .collide import depths
 
@@ -410,7 +397,7 @@ def _summary_arrays(model, data, measured, x):
 
         return f
 
-    return _model_call(model, ("summary", measured), make, data, x)
+    return model_call(model, ("calibrate-summary", measured), make, data, x)
 
 
 def _summarise(problem, x, method, collisions, converged, recordings, lines):
@@ -490,16 +477,10 @@ _REQUIRED = ("subject", "method", "scale", "upper_lip_thickness", "lower_lip_thi
 def read_calibration(path) -> Calibration:
     """Read a ``<SUBJECT>.calibration.json``; ``DataFormatError`` naming the file (and the
     line, for invalid JSON) if it is not one."""
-    from ._io import register_input
+    from ._io import read_json
 
     path = Path(path)
-    if not path.is_file():
-        raise MissingDataError(f"{path}: calibration file not found")
-    register_input(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise DataFormatError(path, exc.lineno, f"invalid JSON: {exc.msg}") from None
+    data = read_json(path, "calibration file")
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise DataFormatError(path, None, f"not a calibration file (format {FORMAT!r})")
     missing = [k for k in _REQUIRED if k not in data]

@@ -43,6 +43,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .animate import _bucket, _pad, model_call
 from .errors import CassiError, DegenerateGeometryError, MissingDataError
 
 # ----------------------------------------------------------------------------- thresholds
@@ -336,9 +337,7 @@ def _per_frame(sites: _Sites, points) -> dict:
     multiples of 256) so recordings of similar length share the compiled function.
     """
     m = points.shape[0]
-    size = _bucket(m)
-    if size > m:
-        points = jnp.concatenate([points, jnp.repeat(points[-1:], size - m, axis=0)])
+    points = _pad(points, _bucket(m))
     key = tuple(np.atleast_1d(np.asarray(getattr(sites, f))).size
                 for f in sites.__dataclass_fields__)
     kernel = _KERNELS.get(key)
@@ -347,12 +346,6 @@ def _per_frame(sites: _Sites, points) -> dict:
             jax.vmap(lambda pts: _frame_quantities(_split(sites, pts)))
         )
     return {k: np.asarray(v)[:m] for k, v in kernel(points).items()}
-
-
-def _bucket(m: int) -> int:
-    if m > 512:
-        return 256 * math.ceil(m / 256)
-    return 64 * 2 ** max(math.ceil(math.log2(max(m, 1) / 64)), 0)
 
 
 def sustain_frames(times) -> int:
@@ -383,25 +376,15 @@ def penetration_of(model, vertices) -> dict:
     """``collide.report`` of every frame of ``vertices (m, V, 3)``: key -> ``(m,)`` mm.
 
     For geometry that did not come from ``animate.animate`` (which reports it itself);
-    compiled once per model object (the last few are kept).
+    compiled once per model content (``animate.model_call``).
     """
     from .collide import report
 
     m = vertices.shape[0]
-    size = _bucket(m)
-    vertices = jnp.asarray(vertices)
-    if size > m:
-        vertices = jnp.concatenate([vertices, jnp.repeat(vertices[-1:], size - m, axis=0)])
-    entry = _REPORTS.get(id(model))
-    if entry is None or entry[0] is not model:  # the model is kept, so its id stays its own
-        entry = _REPORTS[id(model)] = (model, jax.jit(jax.vmap(lambda v: report(model, v))))
-        while len(_REPORTS) > 4:
-            del _REPORTS[next(iter(_REPORTS))]
-    out = entry[1](vertices)
+    vertices = _pad(vertices, _bucket(m))
+    out = model_call(model, "evaluate-report",
+                     lambda rebuilt: jax.vmap(lambda v: report(rebuilt, v)), vertices)
     return {k: np.asarray(v)[:m] for k, v in out.items()}
-
-
-_REPORTS: dict = {}
 
 
 def _penetration(model, anim):

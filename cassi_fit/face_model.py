@@ -12,7 +12,6 @@ subject's left; z = 0 is the midsagittal plane, which is the XRMB pellet plane.
 from __future__ import annotations
 
 import csv
-import json
 import warnings
 from pathlib import Path
 
@@ -21,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from ._io import register_input
+from ._io import read_json, register_input
 from .errors import DataFormatError, MissingDataError
 
 MATERIALS = ("skin", "lips", "eye", "teeth", "tongue", "palate")
@@ -118,13 +117,7 @@ def load_model(path=None) -> FaceModel:
     material = ftable[:, 3].astype(np.int64)
     if material.min() < 0 or material.max() >= len(MATERIALS):
         raise DataFormatError(fpath, None, f"material index outside 0..{len(MATERIALS) - 1}")
-    if not mpath.exists():
-        raise MissingDataError(f"{mpath}: model file not found")
-    register_input(mpath)
-    try:
-        meta = json.loads(mpath.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise DataFormatError(mpath, exc.lineno, f"invalid JSON: {exc.msg}") from None
+    meta = read_json(mpath, "model file")
     for key in ("regions", "landmarks", "measures"):
         if key not in meta:
             raise DataFormatError(mpath, None, f"missing the {key!r} entry")
