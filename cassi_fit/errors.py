@@ -45,3 +45,8 @@ class OutputExistsError(CassiError, FileExistsError):
 
 class RenderingUnavailableError(CassiError):
     """No offscreen OpenGL (EGL or OSMesa) could be initialised."""
+
+
+class InvalidChoiceError(CassiError, ValueError):
+    """An option value outside its vocabulary (:mod:`cassi_fit.options`); one type wherever
+    the choice is checked, library or command line."""

@@ -1,0 +1,44 @@
+"""Every option vocabulary of the toolkit, in one light module.
+
+The command line imports this module to build its parsers without starting JAX; the library
+checks a user's choice against the same tuples with :func:`check_choice`, so a bad choice
+raises one error type (:class:`~cassi_fit.errors.InvalidChoiceError`, a ``ValueError`` and a
+``CassiError``) wherever it is made. Strings here are the names users type; in Python the
+jaw methods and solvers are objects (:mod:`cassi_fit.jaw_fit`) and these names are aliases.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from .errors import InvalidChoiceError
+
+#: Jaw-motion methods (docs/JAW.md): the paper's Eqs 1-7, a rigid fit per frame, Parke's
+#: fixed pivot, and a pivot that moves smoothly in time.
+JAW_METHODS = ("closed-form", "frame-fit", "fixed-pivot", "smooth-pivot")
+#: Least-squares solvers for the fitted jaw methods; jaxopt's sit behind one adapter.
+SOLVERS = ("optimistix-lm", "optimistix-gn", "optimistix-dogleg", "jaxopt-lm", "jaxopt-gn")
+#: How an untracked or mistracked pellet value is replaced during animation.
+GAP_POLICIES = ("hold", "interpolate")
+#: Collision handling during animation.
+COLLISION_MODES = ("off", "project")
+#: Which subject conformation initialization builds: from Headmeasures, or the paper's.
+CONFORMATIONS = ("measures", "cassi")
+#: How the subject calibration is fitted (docs/CALIBRATION.md).
+CALIBRATION_METHODS = ("separate", "joint")
+#: Where the tongue's back anchor points go (CASSI anchored them behind and below T4).
+TONGUE_ANCHORS = ("fixed", "follow", "none")
+#: Jaw region weights: CASSI's percentages (Parke's times 1.11111) or Parke's own.
+JAW_WEIGHTS = ("cassi", "parke")
+#: The rendered views (the paper's four).
+VIEWS = ("front", "side", "inside", "top")
+#: Output kinds of ``cassi animate``.
+ANIMATION_SUFFIXES = (".mp4", ".gif", ".png")
+
+
+def check_choice(what: str, value: object, choices: Sequence[str]) -> str:
+    """``value`` if it is one of ``choices``; else :class:`InvalidChoiceError` naming ``what``
+    and the choices."""
+    if not isinstance(value, str) or value not in choices:
+        raise InvalidChoiceError(f"unknown {what} {value!r}; choose one of {', '.join(choices)}")
+    return value
