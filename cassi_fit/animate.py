@@ -346,7 +346,7 @@ def initialize(
         conformation = _conformation(model, recording, pellets, scale, calibration or "measures")
     # Compiled, not eager, and at the batch size animate() will use for every line of this
     # recording, so that both share one compilation (the extra frames cost ~0.1 s).
-    size = _bucket(track.times.shape[0] - first)
+    size = frame_bucket(track.times.shape[0] - first)
     batch = jax.tree.map(lambda x: jnp.broadcast_to(x, (size, *jnp.shape(x))), conformation)
     rest = _geometry(model, batch, jaw_weights, tongue_anchor)[1][0]
     if fitted:  # the lips' vertical rest where the first valid lines have them
@@ -526,14 +526,14 @@ def _geometry(model, params, jaw_weights, tongue_anchor, collisions="off", repor
     return out if report else out[:2]
 
 
-def _bucket(m: int) -> int:
+def frame_bucket(m: int) -> int:
     """Padded batch size: 64, 128, 256, 512, then multiples of 256."""
     if m > 8 * _FRAME_BUCKET:
         return 4 * _FRAME_BUCKET * math.ceil(m / (4 * _FRAME_BUCKET))
     return _FRAME_BUCKET * 2 ** max(math.ceil(math.log2(max(m, 1) / _FRAME_BUCKET)), 0)
 
 
-def _pad(x, size: int):
+def pad_frames(x, size: int):
     """``x`` with its last row repeated along axis 0 up to ``size`` rows."""
     x = jnp.asarray(x)
     return jnp.concatenate([x, jnp.repeat(x[-1:], size - x.shape[0], axis=0)])
@@ -545,7 +545,7 @@ def geometry(state: SubjectState, params, collisions="off"):
     ``collisions="project"`` pushes the tongue and lips out of the teeth and palate."""
     _check_choice("collisions", collisions, COLLISION_MODES)
     m = int(jnp.shape(params.jaw_theta)[0])
-    batch = jax.tree.map(lambda x: _pad(x, _bucket(m)), params)
+    batch = jax.tree.map(lambda x: pad_frames(x, frame_bucket(m)), params)
     vertices, sites = _geometry(
         state.model, batch, state.jaw_weights, state.tongue_anchor, collisions
     )
@@ -567,13 +567,13 @@ def _jaw_since_first(state, jaw_pellets, method, solver, size):
     (one compilation per size bucket); a fit sees only the real frames."""
     m = jaw_pellets.shape[0]
     if method == "closed-form":
-        theta, t, status = _closed_form_batch(state.reference_jaw, _pad(jaw_pellets, size))
+        theta, t, status = _closed_form_batch(state.reference_jaw, pad_frames(jaw_pellets, size))
         return theta, t, np.asarray(status)[:m]
     from .jaw_fit import fit_jaw
 
     kwargs = {} if solver is None else {"solver": solver}
     fit = fit_jaw(state.reference_jaw, jnp.asarray(jaw_pellets), method=method, **kwargs)
-    return _pad(fit.theta, size), _pad(fit.translation, size), np.asarray(fit.status)
+    return pad_frames(fit.theta, size), pad_frames(fit.translation, size), np.asarray(fit.status)
 
 
 def animate(
@@ -611,11 +611,11 @@ def animate(
     jaw_ok = ~bad[:, [MNI, MNM]].any(axis=1)
     if not jaw_ok.any():
         raise MissingDataError(f"{_source(recording)}: the jaw pellets are never tracked well")
-    m, size = len(rows), _bucket(len(rows))
+    m, size = len(rows), frame_bucket(len(rows))
     theta, translation, jaw_status = _jaw_since_first(
         state, scaled[:, [MNI, MNM]], jaw, solver, size
     )
-    params = _batched_params(_frame_inputs(state), _pad(scaled, size), theta, translation)
+    params = _batched_params(_frame_inputs(state), pad_frames(scaled, size), theta, translation)
     from .collide import has_collision_data
 
     report = has_collision_data(state.model)

@@ -43,7 +43,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .animate import _bucket, _pad, model_call
+from .animate import frame_bucket, model_call, pad_frames
 from .errors import CassiError, DegenerateGeometryError, MissingDataError
 
 # ----------------------------------------------------------------------------- thresholds
@@ -337,7 +337,7 @@ def _per_frame(sites: _Sites, points) -> dict:
     multiples of 256) so recordings of similar length share the compiled function.
     """
     m = points.shape[0]
-    points = _pad(points, _bucket(m))
+    points = pad_frames(points, frame_bucket(m))
     key = tuple(np.atleast_1d(np.asarray(getattr(sites, f))).size
                 for f in sites.__dataclass_fields__)
     kernel = _KERNELS.get(key)
@@ -381,7 +381,7 @@ def penetration_of(model, vertices) -> dict:
     from .collide import report
 
     m = vertices.shape[0]
-    vertices = _pad(vertices, _bucket(m))
+    vertices = pad_frames(vertices, frame_bucket(m))
     out = model_call(model, "evaluate-report",
                      lambda rebuilt: jax.vmap(lambda v: report(rebuilt, v)), vertices)
     return {k: np.asarray(v)[:m] for k, v in out.items()}
