@@ -1,6 +1,7 @@
 """The toolkit's Parke-style face model (with the inside of the mouth) and its loader.
 
-The data live in the repository's ``model/`` folder (format: ``model/README.md``):
+The data live in the repository's ``model/`` folder, installed as the package data of
+``cassi_fit.model`` (format: ``model/README.md``):
 ``vertices.csv`` (positions, jaw weights, deformation fields), ``faces.csv``
 (triangles with a material), ``model.json`` (regions, landmarks, measures) and
 ``parameters.csv`` (the parameter table). Any mesh written in that format loads here.
@@ -12,6 +13,7 @@ subject's left; z = 0 is the midsagittal plane, which is the XRMB pellet plane.
 from __future__ import annotations
 
 import csv
+import importlib.resources
 import warnings
 from pathlib import Path
 
@@ -60,9 +62,22 @@ class FaceModel(eqx.Module):
 
 
 def default_model_dir() -> Path:
-    import cassi_fit
+    """The folder holding the toolkit's own face model (``vertices.csv``, ``model.json`` ...).
 
-    return Path(cassi_fit.__file__).resolve().parents[1] / "model"
+    Installed (wheel, ``pip install .``, editable), the files are the package data of
+    ``cassi_fit.model`` (the checkout's ``model/`` folder, mapped by pyproject.toml) and are
+    found through ``importlib.resources``. From a source checkout that is merely on
+    ``sys.path`` that subpackage does not exist, and the checkout's ``model/`` is used.
+    """
+    try:
+        root = importlib.resources.files("cassi_fit.model")
+    except ModuleNotFoundError as exc:
+        if exc.name != "cassi_fit.model":
+            raise
+        return Path(__file__).resolve().parents[1] / "model"
+    if not isinstance(root, Path):  # e.g. a zipped install: the loader needs real files
+        raise MissingDataError(f"{root}: the face model must be installed as files, not zipped")
+    return root
 
 
 def _read_table(path: Path, columns) -> np.ndarray:

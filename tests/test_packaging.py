@@ -1,0 +1,115 @@
+"""A normal install carries the face model and runs outside the checkout (issue 10).
+
+The wheel is built from a copy of the sources (so a stale ``build/`` folder cannot supply
+files the package configuration forgot), installed with ``pip install --target`` into a
+temporary folder, and used from a temporary working directory by a Python started with
+``-S``: no ``.pth`` file runs, so neither the checkout nor an editable install is on the
+path, only the installed wheel and the test environment's site-packages (for the
+dependencies).
+"""
+
+from __future__ import annotations
+
+import csv
+import fnmatch
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SOURCES = ("pyproject.toml", "README.md", "cassi_fit", "model")
+
+
+def _package_data_patterns() -> list[str]:
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    setuptools = config["tool"]["setuptools"]
+    assert setuptools["package-dir"]["cassi_fit.model"] == "model"
+    assert "cassi_fit.model" in setuptools["packages"]
+    return setuptools["package-data"]["cassi_fit.model"]
+
+
+def test_every_model_data_file_is_package_data():
+    """Each file the loader reads from model/ matches a package-data pattern (fast check)."""
+    patterns = _package_data_patterns()
+    data = [p.name for p in (ROOT / "model").iterdir() if p.suffix in (".csv", ".json")]
+    assert {"vertices.csv", "faces.csv", "model.json", "parameters.csv"} <= set(data)
+    missed = [n for n in data if not any(fnmatch.fnmatch(n, pat) for pat in patterns)]
+    assert not missed, f"model files left out of the wheel: {missed}"
+
+
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory) -> Path:
+    """A folder into which the freshly built wheel is installed (``pip --target``)."""
+    work = tmp_path_factory.mktemp("wheel")
+    src = work / "src"
+    for name in SOURCES:
+        path = ROOT / name
+        if path.is_dir():
+            shutil.copytree(path, src / name, ignore=shutil.ignore_patterns("__pycache__"))
+        else:
+            src.mkdir(exist_ok=True)
+            shutil.copy2(path, src / name)
+    pip = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
+    wheels = work / "dist"
+    subprocess.run([*pip, "wheel", "--no-deps", "-w", str(wheels), str(src)],
+                   check=True, cwd=work, timeout=600)
+    (wheel,) = wheels.glob("cassi_fit-*.whl")
+    target = work / "target"
+    subprocess.run([*pip, "install", "--no-deps", "--target", str(target), str(wheel)],
+                   check=True, cwd=work, timeout=600)
+    return target
+
+
+def _run_installed(target: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    """Run ``python -S *args`` seeing only the installed wheel and the dependencies."""
+    deps = [p for p in sys.path if Path(p).name in ("site-packages", "dist-packages")]
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
+    env["PYTHONPATH"] = os.pathsep.join([str(target), *deps])
+    env.setdefault("JAX_PLATFORMS", "cpu")
+    out = subprocess.run([sys.executable, "-S", *args], cwd=cwd, env=env, capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == 0, f"{args}\nstdout:\n{out.stdout}\nstderr:\n{out.stderr}"
+    return out
+
+
+@pytest.mark.slow
+def test_wheel_contains_the_model(installed):
+    for name in ("vertices.csv", "faces.csv", "model.json", "parameters.csv"):
+        assert (installed / "cassi_fit" / "model" / name).is_file(), name
+
+
+LOAD = """
+import sys
+from pathlib import Path
+import cassi_fit
+from cassi_fit import load_model
+from cassi_fit.face_model import default_model_dir
+
+here, checkout = Path(sys.argv[1]).resolve(), Path(sys.argv[2]).resolve()
+assert Path(cassi_fit.__file__).resolve().is_relative_to(here), cassi_fit.__file__
+assert not any(Path(p or ".").resolve() == checkout for p in sys.path), sys.path
+assert default_model_dir().resolve().is_relative_to(here), default_model_dir()
+print(load_model().vertices.shape[0])
+"""
+
+
+@pytest.mark.slow
+def test_installed_wheel_loads_the_model_and_runs_commands(installed, tmp_path):
+    out = _run_installed(installed, tmp_path, "-c", LOAD, str(installed), str(ROOT))
+    with open(ROOT / "model" / "vertices.csv", newline="", encoding="utf-8") as fh:
+        rows = sum(1 for row in csv.reader(fh) if row) - 1
+    assert int(out.stdout.split()[-1]) == rows
+
+    corpus = tmp_path / "corpus"
+    _run_installed(installed, tmp_path, "-m", "cassi_fit.cli", "synth", str(corpus),
+                   "--subjects", "1", "--tasks", "tp106", "--no-audio")
+    info = _run_installed(installed, tmp_path, "-m", "cassi_fit.cli", "info", str(corpus),
+                          "--json")
+    text = json.dumps(json.loads(info.stdout))
+    assert "S01" in text and "tp106" in text.lower()
