@@ -3,49 +3,136 @@
 A 3D Parke-style face with tongue, teeth and palate, animated from X-ray microbeam pellet
 trajectories, with the jaw rotation computed by the paper's closed form or by least squares.
 
-The public names below are imported lazily, so ``import cassi_fit`` is cheap and does not
-start JAX or OpenGL until something that needs them is used.
+This module is the one public surface: everything the README and the notebooks use is
+importable from ``cassi_fit`` and listed in ``__all__``. The names are imported lazily
+(``_PUBLIC`` says from where), so ``import cassi_fit`` is cheap and neither starts JAX or
+OpenGL nor changes the environment (JAX's platform is the user's choice; the ``cassi``
+command picks the CPU for itself). The ``TYPE_CHECKING`` block states the same imports in
+``from ._x import Y as Y`` form for type checkers and readers; tests/test_public_api.py
+keeps the two in step.
+
+``animate``, ``deform`` and ``synth`` are modules (a name means one thing: the function
+``animate`` is ``cassi_fit.animate.animate``), as is ``rigid``.
 """
 
 from __future__ import annotations
 
 import importlib
-import os
+from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
 
-# JAX on this toolkit's machines is CPU-only; keep it from probing for accelerators.
-os.environ.setdefault("JAX_PLATFORMS", "cpu")
+if TYPE_CHECKING:
+    from . import animate as animate
+    from . import deform as deform
+    from . import rigid as rigid
+    from . import synth as synth
+    from .animate import FRAME_STATUS_NAMES as FRAME_STATUS_NAMES
+    from .animate import Animation as Animation
+    from .animate import SubjectState as SubjectState
+    from .animate import initialize as initialize
+    from .calibrate import Calibration as Calibration
+    from .calibrate import calibrate_dataset as calibrate_dataset
+    from .calibrate import calibrate_subject as calibrate_subject
+    from .calibrate import load_calibrations as load_calibrations
+    from .calibrate import read_calibration as read_calibration
+    from .calibrate import write_calibration as write_calibration
+    from .dataset import Dataset as Dataset
+    from .dataset import DefaultHeadMeasuresWarning as DefaultHeadMeasuresWarning
+    from .dataset import Recording as Recording
+    from .dataset import load_recording as load_recording
+    from .deform import FaceParams as FaceParams
+    from .deform import default_params as default_params
+    from .deform import model_pellets as model_pellets
+    from .deform import vertex_normals as vertex_normals
+    from .errors import CassiError as CassiError
+    from .errors import DataFormatError as DataFormatError
+    from .errors import DegenerateGeometryError as DegenerateGeometryError
+    from .errors import InvalidChoiceError as InvalidChoiceError
+    from .errors import MissingDataError as MissingDataError
+    from .errors import OutputExistsError as OutputExistsError
+    from .errors import RenderingUnavailableError as RenderingUnavailableError
+    from .evaluate import EvaluationResult as EvaluationResult
+    from .evaluate import compare as compare
+    from .evaluate import evaluate_dataset as evaluate_dataset
+    from .evaluate import evaluate_recording as evaluate_recording
+    from .evaluate import write_table as write_table
+    from .face_model import MATERIALS as MATERIALS
+    from .face_model import FaceModel as FaceModel
+    from .face_model import load_model as load_model
+    from .headmeasures import DEFAULT_HEAD_MEASURES as DEFAULT_HEAD_MEASURES
+    from .headmeasures import HeadMeasures as HeadMeasures
+    from .headmeasures import read_headmeasures as read_headmeasures
+    from .headmeasures import write_headmeasures as write_headmeasures
+    from .jaw import closed_form as closed_form
+    from .jaw import closed_form_paper as closed_form_paper
+    from .jaw_fit import JawFit as JawFit
+    from .jaw_fit import fit_jaw as fit_jaw
+    from .jaw_fit import jaw_from_track as jaw_from_track
+    from .outlines import read_outline as read_outline
+    from .outlines import write_outline as write_outline
+    from .palate import build_palate as build_palate
+    from .palate import with_palate as with_palate
+    from .quality import QualityReport as QualityReport
+    from .quality import detect_mistracks as detect_mistracks
+    from .quality import quality_report as quality_report
+    from .render import Renderer as Renderer
+    from .status import STATUS_LABELS as STATUS_LABELS
+    from .status import Status as Status
+    from .synth import TASKS as TASKS
+    from .synth import JawTruth as JawTruth
+    from .synth import SubjectAnatomy as SubjectAnatomy
+    from .synth import ensure_default_corpus as ensure_default_corpus
+    from .synth import generate_corpus as generate_corpus
+    from .synth import load_anatomy as load_anatomy
+    from .synth import load_truth as load_truth
+    from .synth import make_subject as make_subject
+    from .synth import synth_recording as synth_recording
+    from .txy import PELLET_NAMES as PELLET_NAMES
+    from .txy import PelletTrack as PelletTrack
+    from .txy import first_valid_frame as first_valid_frame
+    from .txy import read_txy as read_txy
+    from .txy import require_tracked as require_tracked
+    from .txy import write_txy as write_txy
+    from .video import write_animation as write_animation
 
 _PUBLIC = {
-    # errors
+    # errors (base)
     "CassiError": "errors",
     "DataFormatError": "errors",
     "MissingDataError": "errors",
     "DegenerateGeometryError": "errors",
     "OutputExistsError": "errors",
     "RenderingUnavailableError": "errors",
-    # data layer
+    "InvalidChoiceError": "errors",
+    # status (base)
+    "Status": "status",
+    "STATUS_LABELS": "status",
+    # txy (data)
     "PELLET_NAMES": "txy",
     "PelletTrack": "txy",
     "read_txy": "txy",
     "write_txy": "txy",
     "first_valid_frame": "txy",
+    "require_tracked": "txy",
+    # outlines (data)
     "read_outline": "outlines",
     "write_outline": "outlines",
+    # headmeasures (data)
     "HeadMeasures": "headmeasures",
     "read_headmeasures": "headmeasures",
     "write_headmeasures": "headmeasures",
     "DEFAULT_HEAD_MEASURES": "headmeasures",
+    # dataset (data)
     "Dataset": "dataset",
     "Recording": "dataset",
     "load_recording": "dataset",
-    "require_tracked": "txy",
     "DefaultHeadMeasuresWarning": "dataset",
+    # quality (data)
     "QualityReport": "quality",
     "quality_report": "quality",
     "detect_mistracks": "quality",
-    # synthetic corpus
+    # synth (synthetic corpus)
     "generate_corpus": "synth",
     "load_truth": "synth",
     "load_anatomy": "synth",
@@ -55,42 +142,72 @@ _PUBLIC = {
     "synth_recording": "synth",
     "ensure_default_corpus": "synth",
     "TASKS": "synth",
-    # jaw
-    "closed_form": "jaw",
-    "closed_form_paper": "jaw",
-    "fit_jaw": "jaw_fit",
-    # face model
+    # face_model (model)
     "FaceModel": "face_model",
     "load_model": "face_model",
+    "MATERIALS": "face_model",
+    # deform (model)
     "FaceParams": "deform",
     "default_params": "deform",
-    "MATERIALS": "face_model",
     "vertex_normals": "deform",
     "model_pellets": "deform",
+    # palate (model)
     "build_palate": "palate",
     "with_palate": "palate",
-    # pipeline
-    # `deform` and `animate` are module names too; their functions are imported from
-    # the modules (`from cassi_fit.deform import deform`) so that a name means one thing.
-    "initialize": "animate",
-    "Renderer": "render",
-    # subject fitting, collisions, evaluation
+    # jaw (fitting)
+    "closed_form": "jaw",
+    "closed_form_paper": "jaw",
+    # jaw_fit (fitting)
+    "fit_jaw": "jaw_fit",
+    "jaw_from_track": "jaw_fit",
+    "JawFit": "jaw_fit",
+    # calibrate (fitting)
     "Calibration": "calibrate",
     "calibrate_subject": "calibrate",
     "calibrate_dataset": "calibrate",
     "read_calibration": "calibrate",
     "write_calibration": "calibrate",
     "load_calibrations": "calibrate",
+    # animate (pipeline)
+    "initialize": "animate",
+    "SubjectState": "animate",
+    "Animation": "animate",
+    "FRAME_STATUS_NAMES": "animate",
+    # render (outputs)
+    "Renderer": "render",
+    # video (outputs)
+    "write_animation": "video",
+    # evaluate (outputs)
     "evaluate_dataset": "evaluate",
     "evaluate_recording": "evaluate",
+    "EvaluationResult": "evaluate",
+    "write_table": "evaluate",
+    "compare": "evaluate",
 }
+# Submodules offered as namespaces (their names are modules, never functions).
+_MODULES = ("animate", "deform", "rigid", "synth")
 
-__all__ = sorted(_PUBLIC) + ["rigid"]
+__all__ = [
+    "Animation", "Calibration", "CassiError", "DEFAULT_HEAD_MEASURES", "DataFormatError",
+    "Dataset", "DefaultHeadMeasuresWarning", "DegenerateGeometryError", "EvaluationResult",
+    "FRAME_STATUS_NAMES", "FaceModel", "FaceParams", "HeadMeasures", "InvalidChoiceError",
+    "JawFit", "JawTruth", "MATERIALS", "MissingDataError", "OutputExistsError", "PELLET_NAMES",
+    "PelletTrack", "QualityReport", "Recording", "Renderer", "RenderingUnavailableError",
+    "STATUS_LABELS", "Status", "SubjectAnatomy", "SubjectState", "TASKS", "animate",
+    "build_palate", "calibrate_dataset", "calibrate_subject", "closed_form", "closed_form_paper",
+    "compare", "default_params", "deform", "detect_mistracks", "ensure_default_corpus",
+    "evaluate_dataset", "evaluate_recording", "first_valid_frame", "fit_jaw", "generate_corpus",
+    "initialize", "jaw_from_track", "load_anatomy", "load_calibrations", "load_model",
+    "load_recording", "load_truth", "make_subject", "model_pellets", "quality_report",
+    "read_calibration", "read_headmeasures", "read_outline", "read_txy", "require_tracked",
+    "rigid", "synth", "synth_recording", "vertex_normals", "with_palate", "write_animation",
+    "write_calibration", "write_headmeasures", "write_outline", "write_table", "write_txy",
+]
 
 
-def __getattr__(name: str):
-    if name == "rigid":
-        return importlib.import_module(".rigid", __name__)
+def __getattr__(name: str) -> object:
+    if name in _MODULES:
+        return importlib.import_module(f".{name}", __name__)
     module = _PUBLIC.get(name)
     if module is None:
         raise AttributeError(f"module 'cassi_fit' has no attribute {name!r}")
@@ -99,5 +216,5 @@ def __getattr__(name: str):
     return value
 
 
-def __dir__():
-    return __all__
+def __dir__() -> list[str]:
+    return list(__all__)

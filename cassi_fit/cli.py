@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 # (module under cassi_fit._cli, one-line help). Order = order in --help.
@@ -37,6 +38,11 @@ def build_parser() -> argparse.ArgumentParser:
             "jaw rotation by the paper's closed form or by least squares."
         ),
     )
+    parser.epilog = (
+        "JAX runs on the CPU: the command sets JAX_PLATFORMS=cpu for itself unless "
+        "JAX_PLATFORMS is already set (e.g. JAX_PLATFORMS=cuda to use a GPU). Importing "
+        "cassi_fit as a library leaves that choice to you."
+    )
     parser.add_argument(
         "--debug", action="store_true", help="show the full traceback when something fails"
     )
@@ -53,6 +59,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    # The command (not the library) picks the CPU, before anything imports JAX, so that
+    # JAX does not probe for accelerators; a platform the user set wins.
+    os.environ.setdefault("JAX_PLATFORMS", "cpu")
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
