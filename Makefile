@@ -1,6 +1,7 @@
 # Two commands do all set-up on a fresh machine (Python 3.11 only):
 #   make demo   -- build the venv if needed, then run `cassi demo` on the synthetic corpus
 #   make test   -- build the venv if needed, then run the whole test suite
+#   make lint   -- ruff, the import-linter contracts and the public annotations check
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
@@ -11,7 +12,7 @@ STAMP  := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -e '.[test,corpus]'
 	$(BIN)/python -m ipykernel install --prefix $(VENV) --name python3 >/dev/null
 	@touch $(STAMP)
 
@@ -35,8 +36,12 @@ experiments: $(STAMP)
 	$(BIN)/python experiments/jaw_comparison.py --out experiments/output --force
 	$(BIN)/python experiments/subject_fitting.py --out experiments/output --force
 
+# ruff; the import-linter contracts (layers, no cycles; pyproject.toml); the public surface's
+# type annotations (tests/test_architecture.py, which also runs the contracts).
 lint: $(STAMP)
 	$(BIN)/ruff check cassi_fit tests experiments benchmarks model
+	$(BIN)/lint-imports --no-cache
+	$(BIN)/python -m pytest -q -p no:cacheprovider tests/test_architecture.py
 
 clean:
 	rm -rf $(VENV) demo_output

@@ -1,0 +1,198 @@
+"""The architecture of docs/ARCHITECTURE.md, enforced (issue 10); `make lint` runs this file.
+
+* The import-linter contracts in pyproject.toml (the layers, and no import cycle among
+  cassi_fit's modules) hold; a check on a small made-up package shows that the same
+  contract types do catch a cycle and an upward import.
+* Every public function and method (everything in ``cassi_fit.__all__``, and the public
+  functions of the modules listed there) has complete type annotations, and an array
+  annotation carries a jaxtyping shape (``Float[Array, "n 2"]``), never a bare
+  ``np.ndarray`` / ``jax.Array``. This reads the source (no JAX is started).
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import cassi_fit
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "cassi_fit"
+
+LINT_IMPORTS = "import sys; from importlinter.cli import lint_imports; sys.exit(lint_imports("
+LINT_IMPORTS += "config_filename=sys.argv[1], no_cache=True, no_logo=True))"
+
+
+def _lint_imports(config: Path, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", LINT_IMPORTS, str(config)], cwd=cwd,
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_import_contracts_hold():
+    """Layers and no cycles (pyproject.toml [tool.importlinter]); the output names each break."""
+    out = _lint_imports(ROOT / "pyproject.toml", ROOT)
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
+def test_the_contract_types_catch_a_cycle_and_an_upward_import(tmp_path):
+    """The same contract types on a made-up package: ``low`` imports ``high`` (upward and a
+    cycle, since ``high`` imports ``low``). Guards against a contract that cannot fail."""
+    pkg = tmp_path / "toy"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "high.py").write_text("from . import low\n")
+    (pkg / "low.py").write_text("from . import high\n")
+    (tmp_path / "setup.cfg").write_text(textwrap.dedent("""\
+        [importlinter]
+        root_package = toy
+        [importlinter:contract:layers]
+        name = toy layers
+        type = layers
+        containers = toy
+        layers =
+            high
+            low
+        [importlinter:contract:cycles]
+        name = toy cycles
+        type = acyclic_siblings
+        ancestors = toy
+        """))
+    out = _lint_imports(tmp_path / "setup.cfg", tmp_path)
+    assert out.returncode != 0
+    assert "toy.low is not allowed to import toy.high" in out.stdout
+    assert "toy cycles BROKEN" in out.stdout
+
+
+# ---- annotations of the public surface -------------------------------------------------
+
+# jaxtyping's dtype markers: an array type inside one of them has a shape.
+JAXTYPING = {"Float", "Int", "Bool", "Shaped", "Real", "Num", "Integer", "Inexact", "Complex",
+             "UInt", "Key", "Float32", "Float64", "Int32", "Int64", "UInt8", "Complex64",
+             "Complex128", "PRNGKeyArray"}
+# Array types that need a jaxtyping shape around them.
+ARRAYS = {"ndarray", "Array", "NDArray", "ArrayLike"}
+
+
+def _terminal(node: ast.AST) -> str | None:
+    if isinstance(node, ast.Name):
+        return node.id
+    if isinstance(node, ast.Attribute):
+        return node.attr
+    return None
+
+
+def bare_arrays(annotation: ast.AST) -> list[str]:
+    """Array types in an annotation that are not wrapped in a jaxtyping dtype[...]."""
+    if isinstance(annotation, ast.Constant) and isinstance(annotation.value, str):
+        try:
+            annotation = ast.parse(annotation.value, mode="eval").body
+        except SyntaxError:
+            return []
+    if isinstance(annotation, ast.Subscript) and _terminal(annotation.value) in JAXTYPING:
+        return []
+    if _terminal(annotation) in ARRAYS:
+        return [ast.unparse(annotation)]
+    found = []
+    for child in ast.iter_child_nodes(annotation):
+        found += bare_arrays(child)
+    return found
+
+
+def function_problems(fn: ast.FunctionDef | ast.AsyncFunctionDef, method: bool) -> list[str]:
+    """What a public function or method lacks: parameter or return annotations, shapes."""
+    args = fn.args
+    params = args.posonlyargs + args.args + args.kwonlyargs
+    params += [a for a in (args.vararg, args.kwarg) if a is not None]
+    if method and params and params[0].arg in ("self", "cls") and params[0].annotation is None:
+        params = params[1:]
+    problems = [f"parameter {p.arg} unannotated" for p in params if p.annotation is None]
+    if fn.returns is None and fn.name != "__init__":
+        problems.append("no return annotation")
+    for node in [p.annotation for p in params] + [fn.returns]:
+        if node is not None:
+            problems += [f"bare array type {a}" for a in bare_arrays(node)]
+    return problems
+
+
+def _is_public_method(node: ast.AST) -> bool:
+    return isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and (
+        not node.name.startswith("_") or node.name in ("__init__", "__call__"))
+
+
+def definition_problems(node: ast.AST) -> dict[str, list[str]]:
+    """qualified name -> problems, for a top-level def or class (its public methods)."""
+    if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+        return {node.name: function_problems(node, method=False)}
+    if isinstance(node, ast.ClassDef):
+        return {f"{node.name}.{m.name}": function_problems(m, method=True)
+                for m in node.body if _is_public_method(m)}
+    return {}
+
+
+def _module_tree(module: str) -> ast.Module:
+    path = PACKAGE / f"{module}.py"
+    if not path.exists():
+        path = PACKAGE / module / "__init__.py"
+    return ast.parse(path.read_text(encoding="utf-8"))
+
+
+def _definitions(tree: ast.Module) -> dict[str, ast.AST]:
+    return {n.name: n for n in tree.body
+            if isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef)}
+
+
+def _public_definitions(module: str) -> list[tuple[str, str]]:
+    """(module, name) of a module's public functions and classes (its ``__all__`` if any)."""
+    tree = _module_tree(module)
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(
+                isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets):
+            return [(module, name) for name in ast.literal_eval(node.value)]
+    return [(module, name) for name in _definitions(tree) if not name.startswith("_")]
+
+
+def annotation_offenders() -> dict[str, list[str]]:
+    """``module.name -> problems`` over the public surface (empty when everything is typed)."""
+    wanted = [(module, name) for name, module in cassi_fit._PUBLIC.items()]
+    for module in cassi_fit._MODULES:
+        wanted += _public_definitions(module)
+    offenders: dict[str, list[str]] = {}
+    trees: dict[str, ast.Module] = {}
+    for module, name in sorted(set(wanted)):
+        tree = trees.setdefault(module, _module_tree(module))
+        node = _definitions(tree).get(name)
+        if node is None:  # a constant, or a name imported into the module: checked at home
+            continue
+        for qualname, problems in definition_problems(node).items():
+            if problems:
+                offenders[f"{module}.{qualname}"] = problems
+    return offenders
+
+
+def test_the_annotation_check_sees_missing_and_bare_annotations():
+    code = textwrap.dedent("""\
+        def ok(x: Float[Array, "n 2"], *, k: int = 1) -> Float[np.ndarray, "n"]: ...
+        def untyped(x, y: int): ...
+        def bare(x: np.ndarray) -> jax.Array | None: ...
+        class C:
+            def __init__(self, a: int): ...
+            def m(self, b) -> "Array": ...
+            def _private(self, c): ...
+        """)
+    found = {}
+    for node in ast.parse(code).body:
+        found.update({k: v for k, v in definition_problems(node).items() if v})
+    assert found == {
+        "untyped": ["parameter x unannotated", "no return annotation"],
+        "bare": ["bare array type np.ndarray", "bare array type jax.Array"],
+        "C.m": ["parameter b unannotated", "bare array type Array"],
+    }
+
+
+def test_public_functions_are_fully_annotated_with_array_shapes():
+    offenders = annotation_offenders()
+    listing = "\n".join(f"  {name}: {'; '.join(p)}" for name, p in sorted(offenders.items()))
+    assert not offenders, f"{len(offenders)} public functions/methods lack annotations:\n{listing}"
