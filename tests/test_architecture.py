@@ -196,3 +196,34 @@ def test_public_functions_are_fully_annotated_with_array_shapes():
     offenders = annotation_offenders()
     listing = "\n".join(f"  {name}: {'; '.join(p)}" for name, p in sorted(offenders.items()))
     assert not offenders, f"{len(offenders)} public functions/methods lack annotations:\n{listing}"
+
+
+# ---- the documented layers are the enforced ones ----------------------------------------
+
+
+def _contract_layers() -> list[list[str]]:
+    import tomllib
+
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    (layers,) = [c for c in config["tool"]["importlinter"]["contracts"] if c["type"] == "layers"]
+    assert layers["containers"] == ["cassi_fit"]
+    return [[m.strip().strip("()") for m in layer.split(":")] for layer in layers["layers"]]
+
+
+def _documented_layers() -> list[list[str]]:
+    """The module table of docs/ARCHITECTURE.md as [[modules of layer 1], [layer 2] ...]."""
+    import re
+
+    layers: list[list[str]] = []
+    for line in (ROOT / "docs" / "ARCHITECTURE.md").read_text(encoding="utf-8").splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) != 3 or not re.match(r"^(\d+ \w+)?$", cells[0]) or "`" not in cells[1]:
+            continue
+        if cells[0]:
+            layers.append([])
+        layers[-1] += [m.rstrip("/*") for m in re.findall(r"`([\w/*]+)`", cells[1])]
+    return layers
+
+
+def test_docs_state_the_layers_the_contract_enforces():
+    assert [sorted(x) for x in _documented_layers()] == [sorted(x) for x in _contract_layers()]
