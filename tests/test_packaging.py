@@ -43,37 +43,49 @@ def test_every_model_data_file_is_package_data():
     assert not missed, f"model files left out of the wheel: {missed}"
 
 
+PIP = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
+
+
+def _copy_sources(dest: Path) -> Path:
+    """What a source distribution holds, copied (no build/ or egg-info left over)."""
+    for name in SOURCES:
+        path = ROOT / name
+        if path.is_dir():
+            shutil.copytree(path, dest / name, ignore=shutil.ignore_patterns("__pycache__"))
+        else:
+            dest.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(path, dest / name)
+    return dest
+
+
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory) -> Path:
     """A folder into which the freshly built wheel is installed (``pip --target``)."""
     work = tmp_path_factory.mktemp("wheel")
-    src = work / "src"
-    for name in SOURCES:
-        path = ROOT / name
-        if path.is_dir():
-            shutil.copytree(path, src / name, ignore=shutil.ignore_patterns("__pycache__"))
-        else:
-            src.mkdir(exist_ok=True)
-            shutil.copy2(path, src / name)
-    pip = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
+    src = _copy_sources(work / "src")
     wheels = work / "dist"
-    subprocess.run([*pip, "wheel", "--no-deps", "-w", str(wheels), str(src)],
+    subprocess.run([*PIP, "wheel", "--no-deps", "-w", str(wheels), str(src)],
                    check=True, cwd=work, timeout=600)
     (wheel,) = wheels.glob("cassi_fit-*.whl")
     target = work / "target"
-    subprocess.run([*pip, "install", "--no-deps", "--target", str(target), str(wheel)],
+    subprocess.run([*PIP, "install", "--no-deps", "--target", str(target), str(wheel)],
                    check=True, cwd=work, timeout=600)
     return target
 
 
-def _run_installed(target: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess:
-    """Run ``python -S *args`` seeing only the installed wheel and the dependencies."""
+def _dependencies_env(*first: Path) -> dict[str, str]:
+    """The environment with PYTHONPATH = ``first`` + this test run's site-packages."""
     deps = [p for p in sys.path if Path(p).name in ("site-packages", "dist-packages")]
     env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
-    env["PYTHONPATH"] = os.pathsep.join([str(target), *deps])
+    env["PYTHONPATH"] = os.pathsep.join([*map(str, first), *deps])
     env.setdefault("JAX_PLATFORMS", "cpu")
-    out = subprocess.run([sys.executable, "-S", *args], cwd=cwd, env=env, capture_output=True,
-                         text=True, timeout=600)
+    return env
+
+
+def _run_installed(target: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    """Run ``python -S *args`` seeing only the installed wheel and the dependencies."""
+    out = subprocess.run([sys.executable, "-S", *args], cwd=cwd, env=_dependencies_env(target),
+                         capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, f"{args}\nstdout:\n{out.stdout}\nstderr:\n{out.stderr}"
     return out
 
@@ -113,3 +125,36 @@ def test_installed_wheel_loads_the_model_and_runs_commands(installed, tmp_path):
                           "--json")
     text = json.dumps(json.loads(info.stdout))
     assert "S01" in text and "tp106" in text.lower()
+
+
+EDITABLE = """
+from pathlib import Path
+import cassi_fit.model
+from cassi_fit.face_model import default_model_dir, load_model
+
+print(Path(cassi_fit.model.__file__).parent, default_model_dir(), load_model().vertices.shape[0])
+"""
+
+
+@pytest.mark.slow
+def test_editable_install_reads_the_model_folder_through_the_mapping(tmp_path):
+    """``pip install -e`` of a source tree: ``cassi_fit.model`` is that tree's ``model/``."""
+    src = _copy_sources(tmp_path / "src")
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
+    python = venv / "bin" / "python"
+    subprocess.run([*PIP, "--python", str(python), "install", "--no-deps", "-e", str(src)],
+                   check=True, cwd=tmp_path, timeout=600)
+    # The dependencies come after the venv's own site-packages (a .pth sorted last), so that
+    # its editable hook, not one of this test environment's, is the one imported.
+    deps = [p for p in sys.path if Path(p).name in ("site-packages", "dist-packages")]
+    (site,) = (venv / "lib").glob("python3*/site-packages")
+    (site / "zz_test_dependencies.pth").write_text("\n".join(deps) + "\n")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
+    env.setdefault("JAX_PLATFORMS", "cpu")
+    out = subprocess.run([str(python), "-c", EDITABLE], cwd=tmp_path, env=env, text=True,
+                         capture_output=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    package, folder, n = out.stdout.split()
+    assert Path(package) == Path(folder) == src / "model"
+    assert int(n) > 0
