@@ -154,6 +154,16 @@ def _public_definitions(module: str) -> list[tuple[str, str]]:
     return [(module, name) for name in _definitions(tree) if not name.startswith("_")]
 
 
+def _home(module: str, name: str) -> tuple[str, str]:
+    """Follow ``from .x import name`` re-exports to the module that defines ``name``."""
+    for node in _module_tree(module).body:
+        if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module:
+            for alias in node.names:
+                if (alias.asname or alias.name) == name:
+                    return _home(node.module, alias.name)
+    return module, name
+
+
 def annotation_offenders() -> dict[str, list[str]]:
     """``module.name -> problems`` over the public surface (empty when everything is typed)."""
     wanted = [(module, name) for name, module in cassi_fit._PUBLIC.items()]
@@ -162,9 +172,10 @@ def annotation_offenders() -> dict[str, list[str]]:
     offenders: dict[str, list[str]] = {}
     trees: dict[str, ast.Module] = {}
     for module, name in sorted(set(wanted)):
+        module, name = _home(module, name)
         tree = trees.setdefault(module, _module_tree(module))
         node = _definitions(tree).get(name)
-        if node is None:  # a constant, or a name imported into the module: checked at home
+        if node is None:  # a constant
             continue
         for qualname, problems in definition_problems(node).items():
             if problems:
