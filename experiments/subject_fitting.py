@@ -398,7 +398,7 @@ def write_evaluation(results: dict, penetration: list[dict], out: Path, overwrit
         plot_summary(result, out / folder / "evaluation_summary.png", overwrite=overwrite)
     a, b = (results[k] for k in SETTINGS)
     text = compare(a, b, labels=tuple(label for *_, label in SETTINGS.values()))
-    failed = [f"{r['subject']} {r['task']} ({r['status']})" for k in SETTINGS
+    failed = [f"{r.subject} {r.task} ({r.status_text})" for k in SETTINGS
               for r in results[k].failed]
     atomic_write(out / "evaluation_comparison.md",
                  "# CASSI-like vs calibrated + collisions\n\n" + text

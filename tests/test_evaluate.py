@@ -1,6 +1,7 @@
 """The objective evaluation: counting rule, thresholds, measured geometry, writers, CLI."""
 
 import dataclasses
+import logging
 import shutil
 from types import SimpleNamespace
 
@@ -13,8 +14,14 @@ import zoo
 from cassi_fit import cli, rigid
 from cassi_fit import evaluate as ev
 from cassi_fit.deform import default_params, deform
-from cassi_fit.errors import CassiError, DegenerateGeometryError, OutputExistsError
+from cassi_fit.errors import (
+    CassiError,
+    DegenerateGeometryError,
+    InvalidChoiceError,
+    OutputExistsError,
+)
 from cassi_fit.face_model import load_model
+from cassi_fit.status import Status
 
 EPS = 1e-3
 
@@ -105,11 +112,11 @@ def test_each_threshold(name, limit, direction, component, problem):
     others = [c for c in ("teeth", "lips", "tongue", "not_counted") if c != component]
     assert all(beyond[c] == [] for c in others)
     if component != "not_counted":  # reported, never rated
-        assert ev._rate(with_(**{name: limit + direction * EPS}))[1][component] == "VERY GOOD"
+        assert ev.rate(with_(**{name: limit + direction * EPS}))[1][component] == "VERY GOOD"
 
 
 def test_not_counted_problems_leave_the_ratings_excellent():
-    found, ratings = ev._rate(with_(tongue_palate_mm=9.0, palate_below_incisor_mm=2.0))
+    found, ratings = ev.rate(with_(tongue_palate_mm=9.0, palate_below_incisor_mm=2.0))
     assert len(found["not_counted"]) == 2
     assert ratings == {"teeth": "EXCELLENT", "lips": "EXCELLENT", "tongue": "EXCELLENT"}
 
@@ -169,16 +176,16 @@ def test_problems_add_up_across_kinds():
         back_overlap_mm=ev.BACK_OVERLAP_MM + 1,  # one with the front overlap
         teeth_in_lower_lip_mm=3.0,
     )
-    found, ratings = ev._rate(teeth)
+    found, ratings = ev.rate(teeth)
     assert len(found["teeth"]) == 5
     assert "front and back teeth overlap" in found["teeth"]
     assert ratings["teeth"] == "FAIR"
     lips = with_(lip_gap_median_mm=-3.0, lower_lip_protrusion_mm=2.0)
-    found, ratings = ev._rate(lips)
+    found, ratings = ev.rate(lips)
     assert found["lips"] == ["lips too tightly together", "lower lip protrudes"]
     assert ratings["lips"] == "GOOD"
     tongue = with_(tongue_upper_front_mm=2.0, tongue_behind_incisors_mm=20.0)
-    assert ev._rate(tongue)[1]["tongue"] == "GOOD"
+    assert ev.rate(tongue)[1]["tongue"] == "GOOD"
 
 
 def test_missing_or_nan_measure_is_not_rated():
@@ -216,8 +223,8 @@ def test_sustain_window_from_frame_times():
 
 
 def test_combine_takes_the_sensible_direction():
-    a = {"measures": with_(lip_gap_min_mm=4.0, tongue_upper_front_mm=0.5, lower_slope_deg=2.0)}
-    b = {"measures": with_(lip_gap_min_mm=-1.0, tongue_upper_front_mm=3.0, lower_slope_deg=4.0)}
+    a = with_(lip_gap_min_mm=4.0, tongue_upper_front_mm=0.5, lower_slope_deg=2.0)
+    b = with_(lip_gap_min_mm=-1.0, tongue_upper_front_mm=3.0, lower_slope_deg=4.0)
     both = ev.combine([a, b])
     assert both["lip_gap_min_mm"] == -1.0  # one task closing the lips clears the subject
     assert both["tongue_upper_front_mm"] == 3.0  # one task poking through counts
@@ -267,7 +274,7 @@ def test_rest_model_measures(model):
     assert abs(m["lower_slope_deg"]) < 0.5
     assert m["tongue_upper_front_mm"] < 0.05 and m["tongue_lower_front_mm"] < 0.05
     assert m["palate_below_incisor_mm"] < 0.0
-    assert ev._rate(m)[1] == {"teeth": "EXCELLENT", "lips": "EXCELLENT", "tongue": "EXCELLENT"}
+    assert ev.rate(m)[1] == {"teeth": "EXCELLENT", "lips": "EXCELLENT", "tongue": "EXCELLENT"}
 
 
 def test_opening_the_jaw_opens_the_gaps(model):
@@ -317,20 +324,67 @@ def test_penetration_from_the_animation_is_used(model):
     assert m["tongue_upper_front_before_mm"] == 3.0
 
 
+def test_a_second_animation_of_the_same_shape_compiles_nothing(model, caplog):
+    state = SimpleNamespace(model=model)
+    ev.measure(state, posed(model))  # compiles the per-frame kernel and the report
+    other = posed(model, **opened(model, 0.1))  # new content, same shapes
+    with jax.log_compiles(), caplog.at_level(logging.WARNING):
+        m = ev.measure(state, other)
+    compiled = [r.getMessage() for r in caplog.records if r.getMessage().startswith("Compiling")]
+    assert compiled == []
+    assert m["teeth_gap_mm"] > ev.measure(state, posed(model))["teeth_gap_mm"]  # measured anew
+
+
 # ----------------------------------------------------------------------------- writers
-def hand_result():
-    settings = {"frames": 10, "stride": 1, "jaw": "closed-form", "calibration": "cassi",
-                "collisions": "off"}
+SETTINGS = {"stride": 1, "jaw": "closed-form", "collisions": "off"}
+
+
+def hand_result(with_unrated=False):
+    """S01 clean, S02 with its lips far apart and one failed task (and, ``with_unrated``,
+    S03 whose only task failed)."""
     bad_lips = with_(lip_gap_min_mm=ev.LIP_APART_LARGE_MM + 1, tongue_palate_mm=3.0)
+    ok = dict(frames=10, calibration="cassi", **SETTINGS)
+    failed = "S02/tp106: jaw pellet(s) MNI never tracked"
     recs = [
-        ev._row("S01", "tp040", "ok", settings, CLEAN),
-        ev._row("S02", "tp040", "ok", settings, bad_lips),
-        ev._row("S02", "tp106", "error: S02/tp106: jaw pellet(s) MNI never tracked",
-                settings),
+        ev.RecordingRow.evaluated("S01", "tp040", CLEAN, **ok),
+        ev.RecordingRow.evaluated("S02", "tp040", bad_lips, **ok),
+        ev.RecordingRow.not_evaluated("S02", "tp106", failed, calibration="cassi", **SETTINGS),
     ]
-    subjects = [ev._subject_row(s, [r for r in recs if r["subject"] == s], settings)
-                for s in ("S01", "S02")]
-    return ev.EvaluationResult(recs, subjects, {**settings, "calibration": "cassi"})
+    names = ("S01", "S02")
+    if with_unrated:
+        recs.append(ev.RecordingRow.not_evaluated("S03", "tp040", "S03/tp040: bad",
+                                                  calibration="cassi", **SETTINGS))
+        names += ("S03",)
+    subjects = [ev.SubjectRow.of_recordings(s, [r for r in recs if r.subject == s], **SETTINGS)
+                for s in names]
+    return ev.EvaluationResult(recs, subjects, {**SETTINGS, "calibration": "cassi"})
+
+
+def test_rows_are_typed_records_with_a_status():
+    result = hand_result(with_unrated=True)
+    s01, s02_ok, s02_bad, s03 = result.recordings
+    assert s01.status is Status.OK and s01.rated and s01.status_text == "ok"
+    assert s01.ratings == {"teeth": "EXCELLENT", "lips": "EXCELLENT", "tongue": "EXCELLENT"}
+    assert s02_bad.status is Status.FAILED and not s02_bad.rated
+    assert s02_bad.status_text == "error: S02/tp106: jaw pellet(s) MNI never tracked"
+    assert (s02_bad.frames, s02_bad.measures, s02_bad.ratings) == (0, {}, {})
+    assert result.failed == [s02_bad, s03]
+    s1, s2, s3 = result.subjects
+    assert (s2.tasks, s2.recordings, s2.failed, s2.calibration) == ("tp040", 1, 1, "cassi")
+    assert s2.measures == s02_ok.measures and s2.ratings["lips"] == "GOOD"
+    assert s3.status is Status.FAILED and s3.status_text == ev.NO_RECORDING
+    assert (s3.tasks, s3.recordings, s3.failed, s3.calibration, s3.ratings) == ("", 0, 1, "",
+                                                                                {})
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        s01.status = Status.FAILED
+    with pytest.raises(CassiError, match="one-line error"):
+        ev.RecordingRow("S01", "tp040", Status.FAILED, 0, 1, "closed-form", "cassi", "off")
+    with pytest.raises(CassiError, match="carries an error"):
+        ev.RecordingRow("S01", "tp040", Status.OK, 5, 1, "closed-form", "cassi", "off",
+                        error="boom")
+    with pytest.raises(CassiError, match="not-converged"):
+        ev.RecordingRow("S01", "tp040", Status.NOT_CONVERGED, 5, 1, "closed-form", "cassi",
+                        "off")
 
 
 def test_markdown_table_layout():
@@ -346,7 +400,9 @@ def test_markdown_table_layout():
     assert lines[header + 4] == ("| **Total** (EXCELLENT/VERY GOOD/GOOD/FAIR) | | 2/0/0/0 | "
                                  "1/0/1/0 | 2/0/0/0 |")
     assert "S02: tongue through the palate" in text
-    assert "S02 tp106 (error:" in text
+    assert "S02 tp106 (error: S02/tp106: jaw pellet(s) MNI never tracked)" in text
+    unrated = ev.markdown_table(hand_result(with_unrated=True)).splitlines()
+    assert "| S03 |  | not rated | not rated | not rated |" in unrated
 
 
 def test_write_table_csv_and_refusal(tmp_path):
@@ -360,7 +416,8 @@ def test_write_table_csv_and_refusal(tmp_path):
     assert [r["task"] for r in rows] == ["tp040", "tp040", "tp106"]
     assert rows[1]["lips_rating"] == "GOOD" and rows[1]["lips_problems_n"] == "2"
     assert float(rows[1]["lip_gap_min_mm"]) == pytest.approx(ev.LIP_APART_LARGE_MM + 1)
-    assert rows[2]["status"].startswith("error:") and rows[2]["lips_rating"] == ""
+    assert rows[2]["status"] == "error: S02/tp106: jaw pellet(s) MNI never tracked"
+    assert rows[2]["frames"] == "0" and rows[2]["lips_rating"] == ""
     with open(tmp_path / "evaluation_subjects.csv", newline="") as fh:
         subjects = list(csv.DictReader(fh))
     assert [(s["subject"], s["recordings"], s["failed"]) for s in subjects] == [
@@ -371,6 +428,12 @@ def test_write_table_csv_and_refusal(tmp_path):
         ev.write_table(result, tmp_path)
     assert (tmp_path / "evaluation.md").read_text() == before
     ev.write_table(result, tmp_path, overwrite=True)
+    ev.write_table(hand_result(with_unrated=True), tmp_path, overwrite=True)
+    with open(tmp_path / "evaluation_subjects.csv", newline="") as fh:
+        s03 = list(csv.DictReader(fh))[2]
+    assert (s03["subject"], s03["status"], s03["tasks"], s03["calibration"]) == (
+        "S03", "no recording evaluated", "", "")
+    assert s03["teeth_rating"] == "" and s03["lip_gap_min_mm"] == ""
 
 
 def test_plot_and_compare(tmp_path):
@@ -430,15 +493,14 @@ def test_evaluate_dataset_rows(corpus):
     result = ev.evaluate_dataset(corpus, calibrations="cassi", tasks=["tp040"], progress=False,
                                  stride=4)
     (row,) = result.recordings
-    assert (row["subject"], row["task"], row["status"], row["stride"]) == (
-        "S01", "tp040", "ok", 4)
-    assert row["calibration"] == "cassi"
-    assert set(row["measures"]) == set(ev.MEASURES)
-    assert all(np.isfinite(v) for v in row["measures"].values())
+    assert (row.subject, row.task, row.status, row.stride) == ("S01", "tp040", Status.OK, 4)
+    assert row.calibration == "cassi" and row.frames > 0 and row.error == ""
+    assert set(row.measures) == set(ev.MEASURES)
+    assert all(np.isfinite(v) for v in row.measures.values())
     (subject,) = result.subjects
-    assert subject["tasks"] == "tp040"
-    assert subject["ratings"] == row["ratings"]
-    assert subject["measures"] == row["measures"]
+    assert subject.tasks == "tp040"
+    assert subject.ratings == row.ratings
+    assert subject.measures == row.measures
     with pytest.raises(CassiError, match="tp404"):
         ev.evaluate_dataset(corpus, tasks=["tp404"], progress=False)
 
@@ -467,3 +529,15 @@ def test_cli_calibration_folder_is_loaded_per_subject(corpus, tmp_path, capsys, 
     code, _, err = _run(capsys, "evaluate", corpus, "--calibration", tmp_path / "nowhere",
                         "--out", tmp_path / "other", "--quiet")
     assert code == 2 and "no such folder" in err
+
+
+def test_bad_choices_are_refused_before_animating(corpus):
+    # unchecked, each of these would only fail every recording one by one (FAILED rows)
+    with pytest.raises(InvalidChoiceError, match="collisions"):
+        ev.evaluate_dataset(corpus, collisions="push", progress=False)
+    with pytest.raises(InvalidChoiceError, match="jaw method"):
+        ev.evaluate_dataset(corpus, jaw="hinge", progress=False)
+    with pytest.raises(InvalidChoiceError, match="calibrations"):
+        ev.evaluate_dataset(corpus, calibrations="paper", progress=False)
+    with pytest.raises(CassiError, match="stride"):
+        ev.evaluate_dataset(corpus, stride=0, progress=False)

@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
-JAW_METHODS = ("closed-form", "frame-fit", "fixed-pivot", "smooth-pivot")
+from cassi_fit.options import COLLISION_MODES, JAW_METHODS
+
 SUMMARY_NAME = "evaluation_summary.png"
 
 
-def register(subparsers) -> None:
+def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "evaluate",
         help="rate teeth, lips and tongue per subject from measured problems (CASSI Table 2)",
@@ -30,7 +32,7 @@ def register(subparsers) -> None:
     which.add_argument("--cassi", action="store_true",
                        help="CASSI-like: only the paper's conformation (jaw shape from gonion "
                        "and gnathion) and no collision handling")
-    parser.add_argument("--collisions", choices=("off", "project"), default=None,
+    parser.add_argument("--collisions", choices=COLLISION_MODES, default=None,
                         help="push the tongue and lips out of the teeth and palate (project) "
                         "or not (off; the default)")
     parser.add_argument("--jaw", choices=JAW_METHODS, default="closed-form",
@@ -47,14 +49,14 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-def _words(values):
+def _words(values: list[str] | None) -> list[str] | None:
     """``["a,b", "c"]`` -> ``["a", "b", "c"]`` (None stays None)."""
     if values is None:
         return None
     return [w.strip() for v in values for w in v.split(",") if w.strip()]
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     from cassi_fit.errors import CassiError, OutputExistsError
 
     if args.stride < 1:
@@ -98,4 +100,4 @@ def run(args) -> int:
     written = write_table(result, out, overwrite=args.force)
     written.append(plot_summary(result, out / SUMMARY_NAME, overwrite=args.force))
     print("wrote " + ", ".join(str(p) for p in written), file=sys.stderr)
-    return 1 if not any(s["ratings"] for s in result.subjects) else 0
+    return 1 if not any(s.rated for s in result.subjects) else 0
