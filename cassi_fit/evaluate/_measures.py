@@ -18,7 +18,6 @@ together, the lower lip protruding, the tongue hidden, the lips beyond the teeth
 measured on the median frame.
 """
 
-# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m v 3", are not forward references)
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
