@@ -43,6 +43,19 @@ def test_every_model_data_file_is_package_data():
     assert not missed, f"model files left out of the wheel: {missed}"
 
 
+def test_every_subpackage_is_packaged():
+    """Each folder of cassi_fit/ with an __init__.py is listed in [tool.setuptools] packages, so
+    a wheel cannot silently leave a subpackage (evaluate/, render/, ...) out (fast check)."""
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    listed = set(config["tool"]["setuptools"]["packages"])
+    found = {
+        ".".join(init.parent.relative_to(ROOT).parts)
+        for init in (ROOT / "cassi_fit").rglob("__init__.py")
+        if "__pycache__" not in init.parts
+    }
+    assert found <= listed, f"subpackages missing from pyproject.toml: {sorted(found - listed)}"
+
+
 PIP = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
 
 
