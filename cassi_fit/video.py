@@ -27,13 +27,12 @@ import re
 import subprocess
 import tempfile
 import wave
-from fractions import Fraction
 from collections.abc import Iterable, Iterator
+from fractions import Fraction
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
-
 from jaxtyping import UInt8
 
 from ._io import atomic_output_path, atomic_write, commit_output, register_input, remove_quietly

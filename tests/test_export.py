@@ -162,7 +162,9 @@ def test_vertex_colors_follow_materials(sphere):
     material = np.full(len(faces), 4)  # tongue
     colors = vertex_colors(len(vertices), faces, material)
     assert colors.shape == (len(vertices), 3)
-    np.testing.assert_allclose(colors[faces[0, 0]], [c**2.2 for c in MATERIAL_COLOURS["tongue"]], atol=1e-6)
+    np.testing.assert_allclose(
+        colors[faces[0, 0]], [c**2.2 for c in MATERIAL_COLOURS["tongue"]], atol=1e-6
+    )
 
 
 def test_exports_get_the_users_normal_mode(tmp_path, sphere):

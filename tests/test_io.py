@@ -77,8 +77,16 @@ def test_outputs_get_the_users_normal_mode(tmp_path, umask_022):
 
 
 @pytest.mark.parametrize(
-    "name", ["TP101.TXY", "tp005.txy", "PAL.DAT", "pha.dat", "jw11_pal.dat",
-             "Headmeasures.txt", "TP101.WAV"],
+    "name",
+    [
+        "TP101.TXY",
+        "tp005.txy",
+        "PAL.DAT",
+        "pha.dat",
+        "jw11_pal.dat",
+        "Headmeasures.txt",
+        "TP101.WAV",
+    ],
 )
 def test_recording_data_are_never_replaced_by_an_output(tmp_path, name):
     path = tmp_path / name

@@ -47,8 +47,18 @@ def _decoded_audio(path, tmp_path):
     """The MP4's sound track as mono int16 samples at RATE, decoded by ffmpeg."""
     decoded = tmp_path / "decoded.wav"
     subprocess.run(
-        [_ffmpeg(), "-loglevel", "error", "-i", str(path), "-ac", "1", "-ar", str(RATE),
-         str(decoded)],
+        [
+            _ffmpeg(),
+            "-loglevel",
+            "error",
+            "-i",
+            str(path),
+            "-ac",
+            "1",
+            "-ar",
+            str(RATE),
+            str(decoded),
+        ],
         check=True,
     )
     return _read_wav(decoded)[0]
@@ -288,7 +298,6 @@ write_video(sys.argv[1], frames, 25)
 def test_ctrl_c_in_a_real_process_leaves_no_partial_file(tmp_path, name):
     import shutil
     import sys
-
     import time
 
     if shutil.which("timeout") is None:

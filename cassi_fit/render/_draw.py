@@ -93,6 +93,7 @@ class _Program(ShaderProgram):
             text = text.replace(key, str(value))
         return text
 
+
 class ColourOnlyRenderer(pyrender.Renderer):
     """pyrender's Renderer with the toolkit's light shader and a plain framebuffer.
 

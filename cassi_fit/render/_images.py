@@ -14,6 +14,7 @@ from jaxtyping import UInt8
 from .._io import atomic_write
 from ..errors import CassiError
 
+
 @functools.lru_cache(maxsize=8)  # a font at one size, not a computation: kept
 def _font(size: int):
     from PIL import ImageFont

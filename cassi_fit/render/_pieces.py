@@ -169,9 +169,7 @@ def _piece_views(material: str, near: bool, glass: bool, views, skin: str) -> tu
     return tuple(out)
 
 
-def triangle_winding(
-    vertices: Float[np.ndarray, "v 3"], faces: Integer[np.ndarray, "f 3"]
-) -> int:
+def triangle_winding(vertices: Float[np.ndarray, "v 3"], faces: Integer[np.ndarray, "f 3"]) -> int:
     """+1 if the triangles turn counter-clockwise seen from outside, -1 if clockwise, 0 if
     unclear (signed volume under 5 % of the bounding box: open sheets, mixed winding)."""
     used = np.unique(faces)

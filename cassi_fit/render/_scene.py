@@ -20,7 +20,7 @@ from typing import Any, Protocol
 import numpy as np
 from jaxtyping import Float, Integer, UInt8
 
-from ..errors import CassiError
+from ..errors import CassiError, RenderingUnavailableError
 from ..options import VIEWS, check_choice
 from ._gl import ensure_headless_gl
 from ._images import add_caption
