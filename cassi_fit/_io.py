@@ -13,7 +13,8 @@ Promises:
   even with ``overwrite``, unless the writer writes that kind of file itself
   (``data_file=True``: ``write_txy``, ``write_outline``, ...);
 - :func:`check_outputs` lets a command check all its outputs at once, before any work:
-  the rules above, plus no two outputs on one path.
+  the rules above, plus no two outputs on one path; :func:`atomic_outputs` writes several
+  files all or nothing (none appears unless all were written).
 
 Every refusal is one line naming the file.
 """
@@ -22,7 +23,8 @@ from __future__ import annotations
 
 import os
 import secrets
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
@@ -224,6 +226,70 @@ def commit_output(tmp: str | os.PathLike, final: str | os.PathLike) -> Path:
     os.chmod(tmp, default_mode())
     os.replace(tmp, final)
     return Path(final)
+
+
+class OutputGroup:
+    """Several outputs written all or nothing; made by :func:`atomic_outputs`."""
+
+    def __init__(self, overwrite: bool):
+        self.overwrite = overwrite
+        self._pending: dict[str, tuple[Path, Path]] = {}  # key -> (tmp, final)
+
+    def path(self, path: str | os.PathLike, *, data_file: bool = False) -> Path:
+        """A temporary file to write ``path``'s content to (for writers that need a
+        name, e.g. matplotlib); it is moved to ``path`` when the group ends well."""
+        final = _prepare(path, self.overwrite, data_file)
+        if _key(final) in self._pending:
+            raise OutputExistsError(f"{final}: given twice as an output")
+        fd, tmp = _temporary(final)
+        os.close(fd)
+        self._pending[_key(final)] = (tmp, final)
+        return tmp
+
+    def write(
+        self,
+        path: str | os.PathLike,
+        content: bytes | str,
+        *,
+        data_file: bool = False,
+    ) -> Path:
+        """Stage ``content`` (bytes, or text written as UTF-8) for ``path``; returns ``path``."""
+        tmp = self.path(path, data_file=data_file)
+        if isinstance(content, bytes):
+            tmp.write_bytes(content)
+        else:
+            with open(tmp, "w", encoding="utf-8", newline="") as fh:
+                fh.write(content)
+        return self._pending[_key(path)][1]
+
+    def _commit(self) -> list[Path]:
+        for tmp, _ in self._pending.values():
+            with open(tmp, "rb") as fh:
+                os.fsync(fh.fileno())
+        return [commit_output(tmp, final) for tmp, final in self._pending.values()]
+
+    def _discard(self) -> None:
+        for tmp, _ in self._pending.values():
+            remove_quietly(tmp)
+
+
+@contextmanager
+def atomic_outputs(*, overwrite: bool = False) -> Iterator[OutputGroup]:
+    """Write several files all or nothing: ``with atomic_outputs(overwrite=f) as group:``
+    then ``group.write(path, text)`` or ``group.path(path)`` (a temporary to write to).
+
+    Each path is checked as :func:`check_output` says (and none twice) when it is staged.
+    Only when the block ends without error are the files moved into place, one
+    ``os.replace`` each; on any error or interrupt every temporary is removed and no
+    output appears (e.g. an evaluation's table, report and figures).
+    """
+    group = OutputGroup(overwrite)
+    try:
+        yield group
+        group._commit()
+    except BaseException:
+        group._discard()
+        raise
 
 
 def read_json(path: str | os.PathLike, what: str) -> Any:

@@ -148,3 +148,27 @@ def test_temporary_files_are_hidden_and_keep_the_suffix(tmp_path):
     _io.remove_quietly(tmp)
     _io.remove_quietly(tmp)  # already gone: no error
     assert list(tmp_path.iterdir()) == []
+
+
+def test_atomic_outputs_are_all_or_nothing(tmp_path):
+    table, figure = tmp_path / "table.csv", tmp_path / "figure.png"
+    with pytest.raises(KeyboardInterrupt):
+        with _io.atomic_outputs() as group:
+            group.write(table, "a,b\n1,2\n")
+            group.path(figure).write_bytes(b"\x89PNG half")
+            raise KeyboardInterrupt  # Ctrl-C before the last file is done
+    assert list(tmp_path.iterdir()) == []
+    with _io.atomic_outputs() as group:
+        group.write(table, "a,b\n1,2\n")
+        group.path(figure).write_bytes(b"\x89PNG")
+        assert not table.exists()  # nothing appears before the end
+    assert table.read_text() == "a,b\n1,2\n" and figure.read_bytes() == b"\x89PNG"
+    with pytest.raises(OutputExistsError, match="file exists"):
+        with _io.atomic_outputs() as group:
+            group.write(table, "new")
+    with pytest.raises(OutputExistsError, match="given twice"):
+        with _io.atomic_outputs(overwrite=True) as group:
+            group.write(table, "new")
+            group.write(table, "again")
+    assert table.read_text() == "a,b\n1,2\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["figure.png", "table.csv"]
