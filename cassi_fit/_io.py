@@ -292,6 +292,29 @@ def atomic_outputs(*, overwrite: bool = False) -> Iterator[OutputGroup]:
         raise
 
 
+@contextmanager
+def terminate_as_interrupt() -> Iterator[None]:
+    """Within the block, SIGTERM (``kill``, ``timeout``'s default) raises
+    ``KeyboardInterrupt`` as Ctrl-C does, so that the writers' clean-up runs and no
+    temporary file stays; for a command's main function. Outside the main thread it
+    does nothing (Python delivers signals there only)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def read_json(path: str | os.PathLike, what: str) -> Any:
     """The JSON document in ``path``, registered as an input: ``MissingDataError`` if
     there is no such file (``what`` names it), ``DataFormatError`` naming the file and

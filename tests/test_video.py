@@ -326,3 +326,26 @@ def test_videos_get_the_users_normal_mode(tmp_path):
             assert path.stat().st_mode & 0o777 == 0o644, path
     finally:
         os.umask(old)
+
+
+_TERMINATED = """
+import sys, numpy as np
+from cassi_fit._io import terminate_as_interrupt
+from cassi_fit.video import write_video
+rng = np.random.default_rng(0)
+frames = (rng.integers(0, 256, (240, 320, 3), dtype=np.uint8) for _ in range(100000))
+with terminate_as_interrupt():
+    write_video(sys.argv[1], frames, 25)
+"""
+
+
+def test_sigterm_inside_terminate_as_interrupt_leaves_no_partial_file(tmp_path):
+    import shutil
+    import sys
+
+    if shutil.which("timeout") is None:
+        pytest.skip("needs coreutils' timeout")
+    command = [sys.executable, "-c", _TERMINATED, str(tmp_path / "clip.mp4")]
+    done = subprocess.run(["timeout", "4", *command], capture_output=True, text=True)
+    assert done.returncode != 0 and "KeyboardInterrupt" in done.stderr
+    _only(tmp_path)
