@@ -24,17 +24,24 @@ File size is bounded by ``max_keyframes`` (keyframes evenly subsampled from the 
 from __future__ import annotations
 
 import json
+import os
 import struct
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from jaxtyping import Float, Integer
 
-from ._io import atomic_output_path, atomic_write, commit_output
+from ._io import atomic_output_path, atomic_write, commit_output, remove_quietly
 from .errors import CassiError, DataFormatError
+from .options import check_choice
 from .render import MATERIAL_COLOURS
 
 MESH_SUFFIXES = (".obj", ".ply")
 GLB_SUFFIX = ".glb"
+#: glTF's keyframe interpolations used here: blend neighbouring keyframes, or hold each.
+GLB_INTERPOLATIONS = ("LINEAR", "STEP")
 
 # glTF vertex colours are linear RGB in [0, 1]; one colour table serves the renderer and
 # the export (render.MATERIAL_COLOURS, sRGB), so a .glb looks like the rendered video.
@@ -50,7 +57,12 @@ _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
 _MODEL_TO_GLTF = [0, 0, 0.001, 0, 0, 0.001, 0, 0, 0.001, 0, 0, 0, 0, 0, 0, 1]
 
 
-def vertex_colors(n_vertices: int, faces, face_material=None, materials=MATERIALS) -> np.ndarray:
+def vertex_colors(
+    n_vertices: int,
+    faces: Integer[np.ndarray, "f 3"],
+    face_material: Integer[np.ndarray, " f"] | None = None,
+    materials: Sequence[str] = MATERIALS,
+) -> Float[np.ndarray, "v 3"]:
     """(V, 3) float32 RGB per vertex: the colour of (one of) the faces that use it; skin
     where no material is given."""
     colors = np.tile(np.asarray(MATERIAL_COLORS["skin"], np.float32), (n_vertices, 1))
@@ -66,7 +78,14 @@ def vertex_colors(n_vertices: int, faces, face_material=None, materials=MATERIAL
     return colors
 
 
-def export_frame(path, vertices, faces, *, face_material=None, overwrite=False) -> Path:
+def export_frame(
+    path: str | os.PathLike,
+    vertices: Float[Any, "v 3"],
+    faces: Integer[Any, "f 3"],
+    *,
+    face_material: Integer[Any, " f"] | None = None,
+    overwrite: bool = False,
+) -> Path:
     """Write one frame (``vertices (V, 3)`` mm, ``faces (F, 3)``) as ``.obj`` or ``.ply``
     with per-vertex colours. Returns the path written."""
     import trimesh
@@ -86,13 +105,13 @@ def export_frame(path, vertices, faces, *, face_material=None, overwrite=False) 
     tmp, final = atomic_output_path(path, overwrite=overwrite)
     try:
         mesh.export(tmp, file_type=suffix[1:])
-    except BaseException:
-        tmp.unlink(missing_ok=True)
+    except BaseException:  # Ctrl-C included: no partial hidden file stays
+        remove_quietly(tmp)
         raise
     return commit_output(tmp, final)
 
 
-def keyframe_indices(n_frames: int, max_keyframes: int | None) -> np.ndarray:
+def keyframe_indices(n_frames: int, max_keyframes: int | None) -> Integer[np.ndarray, " k"]:
     """Indices of at most ``max_keyframes`` frames, evenly spread, first and last included."""
     if max_keyframes is None or n_frames <= max_keyframes:
         return np.arange(n_frames)
@@ -185,35 +204,24 @@ def _glb_bytes(document: dict, binary: bytes) -> bytes:
 
 
 def glb_document(
-    frames,
-    faces,
-    times,
+    frames: Float[Any, "m v 3"],
+    faces: Integer[Any, "f 3"],
+    times: Float[Any, " m"],
     *,
-    face_material=None,
-    materials=MATERIALS,
-    max_keyframes=240,
-    interpolation="LINEAR",
-    tolerance_mm=1e-3,
-    name="cassi_face",
-    extras=None,
-) -> tuple[dict, bytes]:
+    face_material: Integer[Any, " f"] | None = None,
+    materials: Sequence[str] = MATERIALS,
+    max_keyframes: int | None = 240,
+    interpolation: str = "LINEAR",
+    tolerance_mm: float = 1e-3,
+    name: str = "cassi_face",
+    extras: dict[str, Any] | None = None,
+) -> tuple[dict[str, Any], bytes]:
     """The glTF JSON and binary buffer of an animation; see the module docstring.
 
     ``frames (m, V, 3)`` mm, ``faces (F, 3)``, ``times (m,)`` s, strictly increasing.
     Returns ``(document, binary)``.
     """
-    frames = np.asarray(frames, np.float32)
-    times = np.asarray(times, np.float64)
-    if frames.ndim != 3 or frames.shape[2] != 3 or len(times) != len(frames) or len(frames) == 0:
-        raise CassiError(
-            f"glTF export needs frames (m, V, 3) and times (m,), got {frames.shape}, {times.shape}"
-        )
-    if not np.all(np.isfinite(frames)):
-        raise CassiError("glTF export: the vertices are not all finite")
-    if np.any(np.diff(times) <= 0):
-        raise CassiError("glTF export: frame times must increase strictly")
-    if interpolation not in ("LINEAR", "STEP"):
-        raise CassiError(f"interpolation must be LINEAR or STEP, got {interpolation!r}")
+    frames, times = _checked_animation(frames, times, interpolation)
     keys = keyframe_indices(len(frames), max_keyframes)
     base = frames[keys[0]]
     buf = _Buffer()
@@ -230,7 +238,43 @@ def glb_document(
         "mode": 4,
     }
     mesh = {"name": name, "primitives": [primitive]}
-    document = {
+    document = _scene_document(name, mesh)
+    document["extras"] = {
+        "recording_start_s": float(times[0]),
+        "units": "mm (node scale 0.001 m)",
+        "keyframes": [int(k) for k in keys],
+        **(extras or {}),
+    }
+    if targets:
+        primitive["targets"] = targets
+        mesh["weights"] = [0.0] * len(targets)
+        mesh["extras"] = {"targetNames": [f"t={times[k]:.6f}s" for k in keys[1:]]}
+        document["animations"] = [_weights_animation(buf, times, keys, interpolation)]
+    document["accessors"] = buf.accessors
+    document["bufferViews"] = buf.views
+    document["buffers"] = [{"byteLength": len(buf.data)}]
+    return document, bytes(buf.data)
+
+
+def _checked_animation(frames, times, interpolation) -> tuple[np.ndarray, np.ndarray]:
+    """``frames`` as float32 (m, V, 3) and ``times`` as float64 (m,), or one clear error."""
+    frames = np.asarray(frames, np.float32)
+    times = np.asarray(times, np.float64)
+    if frames.ndim != 3 or frames.shape[2] != 3 or len(times) != len(frames) or len(frames) == 0:
+        raise CassiError(
+            f"glTF export needs frames (m, V, 3) and times (m,), got {frames.shape}, {times.shape}"
+        )
+    if not np.all(np.isfinite(frames)):
+        raise CassiError("glTF export: the vertices are not all finite")
+    if np.any(np.diff(times) <= 0):
+        raise CassiError("glTF export: frame times must increase strictly")
+    check_choice("glTF interpolation", interpolation, GLB_INTERPOLATIONS)
+    return frames, times
+
+
+def _scene_document(name: str, mesh: dict) -> dict:
+    """The document's scene: the model-frame node (mm -> m, glTF axes) over the mesh."""
+    return {
         "asset": {"version": "2.0", "generator": "cassi_fit.export"},
         "scene": 0,
         "scenes": [{"nodes": [0]}],
@@ -250,39 +294,36 @@ def glb_document(
             }
         ],
         "meshes": [mesh],
-        "extras": {
-            "recording_start_s": float(times[0]),
-            "units": "mm (node scale 0.001 m)",
-            "keyframes": [int(k) for k in keys],
-            **(extras or {}),
-        },
     }
-    if targets:
-        primitive["targets"] = targets
-        mesh["weights"] = [0.0] * len(targets)
-        mesh["extras"] = {"targetNames": [f"t={times[k]:.6f}s" for k in keys[1:]]}
-        key_times = (times[keys] - times[keys[0]]).astype(np.float32)
-        weights = np.zeros((len(keys), len(targets)), np.float32)
-        weights[np.arange(1, len(keys)), np.arange(len(targets))] = 1.0
-        sampler = {
-            "input": buf.dense(key_times, "SCALAR", bounds=True),
-            "output": buf.dense(weights.reshape(-1), "SCALAR"),
-            "interpolation": interpolation,
-        }
-        document["animations"] = [
-            {
-                "name": "speech",
-                "samplers": [sampler],
-                "channels": [{"sampler": 0, "target": {"node": 1, "path": "weights"}}],
-            }
-        ]
-    document["accessors"] = buf.accessors
-    document["bufferViews"] = buf.views
-    document["buffers"] = [{"byteLength": len(buf.data)}]
-    return document, bytes(buf.data)
 
 
-def export_glb(path, frames, faces, times, *, overwrite=False, **options) -> Path:
+def _weights_animation(buf: _Buffer, times, keys, interpolation: str) -> dict:
+    """The animation: keyframe times from the first key (s), one-hot morph weights."""
+    n_targets = len(keys) - 1
+    key_times = (times[keys] - times[keys[0]]).astype(np.float32)
+    weights = np.zeros((len(keys), n_targets), np.float32)
+    weights[np.arange(1, len(keys)), np.arange(n_targets)] = 1.0
+    sampler = {
+        "input": buf.dense(key_times, "SCALAR", bounds=True),
+        "output": buf.dense(weights.reshape(-1), "SCALAR"),
+        "interpolation": interpolation,
+    }
+    return {
+        "name": "speech",
+        "samplers": [sampler],
+        "channels": [{"sampler": 0, "target": {"node": 1, "path": "weights"}}],
+    }
+
+
+def export_glb(
+    path: str | os.PathLike,
+    frames: Float[Any, "m v 3"],
+    faces: Integer[Any, "f 3"],
+    times: Float[Any, " m"],
+    *,
+    overwrite: bool = False,
+    **options: Any,
+) -> Path:
     """Write the animation ``frames (m, V, 3)`` mm at ``times (m,)`` s as one ``.glb``;
     ``options`` as :func:`glb_document`. Returns the path written."""
     path = Path(path)
@@ -292,7 +333,7 @@ def export_glb(path, frames, faces, times, *, overwrite=False, **options) -> Pat
     return atomic_write(path, _glb_bytes(document, binary), overwrite=overwrite)
 
 
-def read_glb(path) -> tuple[dict, bytes]:
+def read_glb(path: str | os.PathLike) -> tuple[dict[str, Any], bytes]:
     """Parse a ``.glb`` into ``(json document, binary chunk)``, checking the container."""
     path = Path(path)
     data = path.read_bytes()
@@ -315,7 +356,7 @@ def read_glb(path) -> tuple[dict, bytes]:
     return document, binary
 
 
-def accessor_array(document: dict, binary: bytes, index: int) -> np.ndarray:
+def accessor_array(document: dict[str, Any], binary: bytes, index: int) -> np.ndarray:
     """Decode accessor ``index`` (dense or sparse, float32 or uint32) to a numpy array."""
     acc = document["accessors"][index]
     width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[acc["type"]]

@@ -165,4 +165,5 @@ def write_headmeasures(
                 path, None, f"cannot write: non-finite or non-positive measure for {name}"
             )
         out.append("\t".join([name] + [f"{v:.3f}" for v in values]))
-    return atomic_write(path, "".join(s + "\r\n" for s in out), overwrite=overwrite)
+    text = "".join(s + "\r\n" for s in out)
+    return atomic_write(path, text, overwrite=overwrite, data_file=True)

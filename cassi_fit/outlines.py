@@ -69,4 +69,4 @@ def write_outline(path: str | os.PathLike, points_mm, *, overwrite: bool = False
     if np.any(np.abs(um) >= UNTRACKED):
         raise DataFormatError(path, None, f"cannot write: a point is beyond +-{UNTRACKED} um")
     text = "".join(f" {x:>7d} {y:>7d}\r\n" for x, y in um.tolist())
-    return atomic_write(path, text, overwrite=overwrite)
+    return atomic_write(path, text, overwrite=overwrite, data_file=True)

@@ -517,7 +517,7 @@ def _write_wav(path: Path, samples: np.ndarray, *, overwrite: bool) -> Path:
             w.setframerate(AUDIO_RATE_HZ)
             w.writeframes(samples.astype("<i2").tobytes())
 
-    return atomic_write(path, write, overwrite=overwrite, binary=True)
+    return atomic_write(path, write, overwrite=overwrite, binary=True, data_file=True)
 
 
 # ----------------------------------------------------------------------- truth files

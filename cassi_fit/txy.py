@@ -255,7 +255,7 @@ def write_txy(path: str | os.PathLike, track: PelletTrack, *, overwrite: bool = 
     path = Path(path)
     rows = _to_int_rows(path, track)
     text = "".join("\t".join(map(str, r)) + "\r\n" for r in rows.tolist())
-    return atomic_write(path, text, overwrite=overwrite)
+    return atomic_write(path, text, overwrite=overwrite, data_file=True)
 
 
 def pad_untracked(track: PelletTrack, n_rows: int) -> PelletTrack:

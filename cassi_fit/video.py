@@ -27,13 +27,20 @@ import re
 import subprocess
 import tempfile
 import wave
+from collections.abc import Iterable, Iterator
 from fractions import Fraction
 from pathlib import Path
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
+from jaxtyping import UInt8
 
-from ._io import atomic_output_path, commit_output
+from ._io import atomic_output_path, atomic_write, commit_output, register_input, remove_quietly
 from .errors import CassiError, DataFormatError
+
+if TYPE_CHECKING:
+    from .animate import Animation
+    from .render import Renderer
 
 FRAME_STEP_US = 6866
 """XRMB data-line period, microseconds."""
@@ -63,21 +70,52 @@ def _ffmpeg() -> str:
 # --------------------------------------------------------------------------- audio
 
 
-def slice_wav(source, destination, start_s: float, duration_s: float) -> Path:
+def check_wav(path: str | os.PathLike) -> wave._wave_params:
+    """The parameters of a readable integer-PCM ``.wav`` with sound in it; registers it as
+    an input (no output may replace it). Otherwise one :class:`DataFormatError` naming the
+    file: not a WAVE file, empty, float or compressed samples, a rate or channel count of
+    0, no samples."""
+    params, _ = _read_pcm(path)
+    return params
+
+
+def _read_pcm(path: str | os.PathLike) -> tuple[wave._wave_params, bytes]:
+    """(parameters, sample bytes) of a PCM ``.wav``, checked as :func:`check_wav` says."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataFormatError(path, None, "sound file not found (or not a regular file)")
+    try:
+        with wave.open(str(path), "rb") as src:
+            params = src.getparams()
+            data = src.readframes(params.nframes)
+    except (wave.Error, EOFError, OSError) as exc:
+        reason = str(exc) or "empty or truncated header"
+        if "unknown format: 3" in reason:
+            reason = "float samples; only integer PCM is read"
+        raise DataFormatError(path, None, f"not a readable PCM .wav file ({reason})") from None
+    register_input(path)
+    if params.framerate <= 0 or params.nchannels <= 0 or params.sampwidth not in (1, 2, 3, 4):
+        raise DataFormatError(
+            path, None, f"bad .wav header: rate {params.framerate} Hz, "
+            f"{params.nchannels} channels, {params.sampwidth}-byte samples",
+        )  # fmt: skip
+    if len(data) < params.sampwidth * params.nchannels:
+        raise DataFormatError(path, None, "the .wav file holds no sound samples")
+    return params, data
+
+
+def slice_wav(
+    source: str | os.PathLike, destination: str | os.PathLike, start_s: float, duration_s: float
+) -> Path:
     """Write the samples of ``source`` in ``[start_s, start_s + duration_s)`` to ``destination``.
 
     Times in seconds on the recording's clock (sample 0 = time 0). Where the interval
     reaches outside the sound it is filled with silence, so the result is always exactly
     ``round(duration_s * rate)`` samples long and sample 0 of the result is recording time
     ``start_s`` (to within half a sample). Any PCM sample width and channel count.
+    ``destination`` is written atomically.
     """
-    source = Path(source)
-    try:
-        with wave.open(str(source), "rb") as src:
-            params = src.getparams()
-            data = src.readframes(params.nframes)
-    except (wave.Error, EOFError) as exc:
-        raise DataFormatError(source, None, f"not a readable PCM .wav file ({exc})") from None
+    params, data = _read_pcm(source)
     frame_bytes = params.sampwidth * params.nchannels
     n_have = len(data) // frame_bytes
     first = int(round(start_s * params.framerate))
@@ -88,22 +126,18 @@ def slice_wav(source, destination, start_s: float, duration_s: float) -> Path:
     if hi > lo:
         at = (lo - first) * frame_bytes
         out[at : at + (hi - lo) * frame_bytes] = data[lo * frame_bytes : hi * frame_bytes]
-    with wave.open(str(destination), "wb") as dst:
-        dst.setnchannels(params.nchannels)
-        dst.setsampwidth(params.sampwidth)
-        dst.setframerate(params.framerate)
-        dst.writeframes(bytes(out))
-    return Path(destination)
+
+    def write(fh: IO[bytes]) -> None:
+        with wave.open(fh, "wb") as dst:
+            dst.setnchannels(params.nchannels)
+            dst.setsampwidth(params.sampwidth)
+            dst.setframerate(params.framerate)
+            dst.writeframes(bytes(out))
+
+    return atomic_write(destination, write, overwrite=True, binary=True, data_file=True)
 
 
 # --------------------------------------------------------------------------- writers
-
-
-def _default_permissions(path) -> None:
-    """Give a finished temporary file (created 0600) the usual ``0666 & ~umask`` mode."""
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(path, 0o666 & ~umask)
 
 
 class VideoWriter:
@@ -111,12 +145,22 @@ class VideoWriter:
 
     ``path``: ``.mp4`` or ``.gif``. ``fps``: frames per second (a ``Fraction`` keeps the
     XRMB rate exact; see :func:`frame_rate`). ``audio``: optional ``.wav`` (MP4 only)
-    whose recording time ``audio_start`` seconds is put at video time 0. Frames are
-    ``uint8 (H, W, 3)``, all the same size. Nothing appears at ``path`` until the writer
-    closes without error.
+    whose recording time ``audio_start`` seconds is put at video time 0; it is checked
+    (:func:`check_wav`) before anything is written. Frames are ``uint8 (H, W, 3)``, all
+    the same size. Nothing appears at ``path`` until the writer closes without error;
+    on any error or interrupt (``KeyboardInterrupt`` included) the hidden temporary file
+    is removed.
     """
 
-    def __init__(self, path, fps, *, audio=None, audio_start: float = 0.0, overwrite=False):
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        fps: Fraction | float,
+        *,
+        audio: str | os.PathLike | None = None,
+        audio_start: float = 0.0,
+        overwrite: bool = False,
+    ):
         self.path = Path(path)
         self.suffix = self.path.suffix.lower()
         if self.suffix not in VIDEO_SUFFIXES:
@@ -124,16 +168,29 @@ class VideoWriter:
         if audio is not None and self.suffix != ".mp4":
             raise CassiError(f"{self.path}: audio can only be carried by an .mp4 video")
         self.fps = Fraction(fps).limit_denominator(10**7)
+        if self.fps <= 0:
+            raise CassiError(f"{self.path}: the frame rate must be positive, got {fps}")
         self.audio = None if audio is None else Path(audio)
+        if self.audio is not None:
+            check_wav(self.audio)  # before any file is made: a bad .wav leaves nothing
         self.audio_start = float(audio_start)
         self.tmp, self.final = atomic_output_path(self.path, overwrite=overwrite)
         self.count = 0
-        self.size = None
-        self._proc = None
-        self._gif = None
+        self.size: tuple[int, int] | None = None
+        self._proc: subprocess.Popen | None = None
+        self._errfile: IO[bytes] | None = None
+        self._gif: list[np.ndarray] | None = None
 
     # -- frames
-    def append(self, frame) -> None:
+    def append(self, frame: UInt8[np.ndarray, "h w 3"]) -> None:
+        """Add one frame; any error discards the temporary file."""
+        try:
+            self._append(frame)
+        except BaseException:
+            self._discard()
+            raise
+
+    def _append(self, frame) -> None:
         frame = np.ascontiguousarray(frame, dtype=np.uint8)
         if frame.ndim != 3 or frame.shape[2] != 3:
             raise CassiError(f"{self.path}: frames must be (H, W, 3) uint8, got {frame.shape}")
@@ -174,57 +231,77 @@ class VideoWriter:
 
     # -- finishing
     def close(self) -> Path:
-        """Finish the file, mux the audio, move it into place; returns the final path."""
-        if self.count == 0:
+        """Finish the file, mux the audio, move it into place; returns the final path.
+
+        On any failure or interrupt the temporary file is removed and nothing appears.
+        """
+        try:
+            self._finish()
+        except BaseException:
             self._discard()
+            raise
+        return commit_output(self.tmp, self.final)
+
+    def _finish(self) -> None:
+        if self.count == 0:
             raise CassiError(f"{self.path}: no frames to write")
         if self._gif is not None:
             self._write_gif()
-        else:
-            self._proc.stdin.close()
-            if self._proc.wait() != 0:
-                message = self._stderr()
-                self._discard()
-                raise VideoError(f"{self.path}: ffmpeg failed: {message}")
-            self._errfile.close()
-            if self.audio is not None:
-                self._mux_audio()
-        _default_permissions(self.tmp)
-        return commit_output(self.tmp, self.final)
+            return
+        self._proc.stdin.close()
+        if self._proc.wait() != 0:
+            raise VideoError(f"{self.path}: ffmpeg failed: {self._stderr()}")
+        self._errfile.close()
+        if self.audio is not None:
+            self._mux_audio()
 
     def _write_gif(self) -> None:
-        import imageio.v3 as iio
+        """Pillow directly (the bytes imageio's plugin would write): imageio re-runs an
+        interrupted save in its ``close()``, so a Ctrl-C would first encode the GIF again."""
+        from PIL import Image
 
         # GIF durations are in 1/100 s; Pillow rounds the milliseconds given here.
         duration_ms = float(1000 / self.fps)
-        iio.imwrite(self.tmp, np.stack(self._gif), extension=".gif", duration=duration_ms, loop=0)
+        first, *rest = (Image.fromarray(frame) for frame in self._gif)
+        options = {"save_all": True, "append_images": rest} if rest else {}
+        first.save(self.tmp, format="GIF", duration=duration_ms, loop=0, **options)
 
     def _mux_audio(self) -> None:
+        """Replace the silent temporary MP4 by one with the cut sound as AAC. The muxed
+        file is a second hidden temporary next to the output (same file system, so the
+        final ``os.replace`` stays atomic), removed if anything fails."""
         duration = self.count / float(self.fps)
-        with tempfile.TemporaryDirectory() as folder:
-            cut = slice_wav(self.audio, Path(folder) / "audio.wav", self.audio_start, duration)
-            muxed = Path(folder) / "muxed.mp4"
-            cmd = [_ffmpeg(), "-y", "-loglevel", "error", "-i", str(self.tmp), "-i", str(cut)]
-            cmd += ["-map", "0:v:0", "-map", "1:a:0", "-c:v", "copy", "-c:a", "aac"]
-            cmd += ["-b:a", "128k", "-movflags", "+faststart", str(muxed)]
-            done = subprocess.run(cmd, capture_output=True, text=True)
+        muxed, _ = atomic_output_path(self.final, overwrite=True)
+        try:
+            with tempfile.TemporaryDirectory() as folder:
+                cut = slice_wav(self.audio, Path(folder) / "audio.wav", self.audio_start, duration)
+                cmd = [_ffmpeg(), "-y", "-loglevel", "error", "-i", str(self.tmp), "-i", str(cut)]
+                cmd += ["-map", "0:v:0", "-map", "1:a:0", "-c:v", "copy", "-c:a", "aac"]
+                cmd += ["-b:a", "128k", "-movflags", "+faststart", "-f", "mp4", str(muxed)]
+                done = subprocess.run(cmd, capture_output=True, text=True)
             if done.returncode != 0:
-                self._discard()
                 last = (done.stderr.strip().splitlines() or ["unknown error"])[-1]
                 raise VideoError(f"{self.path}: could not add audio {self.audio}: {last}")
             os.replace(muxed, self.tmp)
+        except BaseException:
+            remove_quietly(muxed)
+            raise
 
     def _discard(self) -> None:
-        if self._proc is not None and self._proc.poll() is None:
-            self._proc.stdin.close()
-            self._proc.wait()
-        if self.tmp.exists():
-            self.tmp.unlink()
+        """Stop ffmpeg (without letting it finish the file) and remove the temporary."""
+        try:
+            if self._proc is not None and self._proc.poll() is None:
+                self._proc.kill()
+                self._proc.wait()
+        finally:
+            remove_quietly(self.tmp)
+            if self._errfile is not None:
+                self._errfile.close()
 
-    def __enter__(self):
+    def __enter__(self) -> VideoWriter:
         return self
 
-    def __exit__(self, exc_type, exc, tb):
+    def __exit__(self, exc_type, exc, tb) -> bool:
         if exc_type is None:
             self.close()
         else:
@@ -232,7 +309,15 @@ class VideoWriter:
         return False
 
 
-def write_video(path, frames, fps, *, audio=None, audio_start=0.0, overwrite=False) -> Path:
+def write_video(
+    path: str | os.PathLike,
+    frames: Iterable[UInt8[np.ndarray, "h w 3"]],
+    fps: Fraction | float,
+    *,
+    audio: str | os.PathLike | None = None,
+    audio_start: float = 0.0,
+    overwrite: bool = False,
+) -> Path:
     """Write an iterable of ``uint8 (H, W, 3)`` frames to ``path`` (.mp4 or .gif); see
     :class:`VideoWriter`. Returns the path written."""
     writer = VideoWriter(path, fps, audio=audio, audio_start=audio_start, overwrite=overwrite)
@@ -248,7 +333,7 @@ _DURATION = re.compile(r"Duration:\s*(\d+):(\d+):([\d.]+)")
 _FRAME_COUNT = re.compile(r"frame=\s*(\d+)")
 
 
-def media_info(path) -> dict:
+def media_info(path: str | os.PathLike) -> dict[str, Any]:
     """What ffmpeg says about a media file: ``{"video": bool, "audio": bool, "duration": s,
     "streams": [stream lines]}`` (parsed from ``ffmpeg -i``; no ffprobe needed)."""
     done = subprocess.run(
@@ -268,7 +353,7 @@ def media_info(path) -> dict:
     }
 
 
-def count_frames(path) -> int:
+def count_frames(path: str | os.PathLike) -> int:
     """Number of video frames in ``path``, by decoding it (ffmpeg to the null muxer)."""
     cmd = [_ffmpeg(), "-hide_banner", "-nostats", "-i", str(path), "-map", "0:v:0"]
     cmd += ["-f", "null", "-progress", "pipe:1", "-"]
@@ -291,12 +376,19 @@ def frame_caption(subject: str, task: str, time_s: float, line: int, status: str
 
 
 def animation_frames(
-    animation, renderer, *, subject="", task="", markers=False, progress=True, indices=None
-):
+    animation: Animation,
+    renderer: Renderer,
+    *,
+    subject: str = "",
+    task: str = "",
+    markers: bool = False,
+    progress: bool = True,
+    indices: Iterable[int] | None = None,
+) -> Iterator[UInt8[np.ndarray, "h w 3"]]:
     """Render the frames ``indices`` (default all) of an ``animate.Animation`` with
-    ``renderer`` (a ``render.Renderer``); yields ``uint8 (H, W, 3)`` images. ``markers``: draw the measured
-    pellets and the model's pellet sites (never-tracked pellets left out). The progress
-    bar goes to stderr."""
+    ``renderer`` (a ``render.Renderer``); yields ``uint8 (H, W, 3)`` images. ``markers``:
+    draw the measured pellets and the model's pellet sites (never-tracked pellets left
+    out). The progress bar goes to stderr."""
     import sys
 
     from tqdm import tqdm
@@ -324,22 +416,22 @@ def animation_frames(
         yield renderer.render(vertices[k], caption=caption, **kwargs)
 
 
-def _in_3d(points_2d) -> np.ndarray:
+def _in_3d(points_2d: np.ndarray) -> np.ndarray:
     """Pellet (x, y) in the midsagittal plane as model points (x, y, 0)."""
     return np.concatenate([points_2d, np.zeros((len(points_2d), 1))], axis=1)
 
 
 def write_animation(
-    path,
-    animation,
-    renderer,
+    path: str | os.PathLike,
+    animation: Animation,
+    renderer: Renderer,
     *,
-    subject="",
-    task="",
-    audio=None,
-    markers=False,
-    progress=True,
-    overwrite=False,
+    subject: str = "",
+    task: str = "",
+    audio: str | os.PathLike | None = None,
+    markers: bool = False,
+    progress: bool = True,
+    overwrite: bool = False,
 ) -> Path:
     """Render ``animation`` to an MP4/GIF at the recording's pace (``frame_rate(stride)``);
     an MP4 carries ``audio`` (a ``.wav`` on the recording's clock) aligned so that the

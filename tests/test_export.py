@@ -162,4 +162,44 @@ def test_vertex_colors_follow_materials(sphere):
     material = np.full(len(faces), 4)  # tongue
     colors = vertex_colors(len(vertices), faces, material)
     assert colors.shape == (len(vertices), 3)
-    np.testing.assert_allclose(colors[faces[0, 0]], [c**2.2 for c in MATERIAL_COLOURS["tongue"]], atol=1e-6)
+    np.testing.assert_allclose(
+        colors[faces[0, 0]], [c**2.2 for c in MATERIAL_COLOURS["tongue"]], atol=1e-6
+    )
+
+
+def test_exports_get_the_users_normal_mode(tmp_path, sphere):
+    import os
+
+    vertices, faces = sphere
+    frames, times, _ = _animation(vertices, m=4)
+    old = os.umask(0o022)
+    try:
+        paths = [export_frame(tmp_path / f"f{s}", vertices, faces) for s in (".obj", ".ply")]
+        paths.append(export_glb(tmp_path / "a.glb", frames, faces, times))
+    finally:
+        os.umask(old)
+    for path in paths:
+        assert path.stat().st_mode & 0o777 == 0o644, path
+
+
+def test_an_interrupted_frame_export_leaves_nothing(tmp_path, sphere, monkeypatch):
+    vertices, faces = sphere
+
+    def interrupted(self, file_obj=None, **kwargs):
+        open(file_obj, "w").write("ply\nhalf")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(trimesh.Trimesh, "export", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        export_frame(tmp_path / "frame.ply", vertices, faces)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_bad_interpolation_is_an_invalid_choice(tmp_path, sphere):
+    from cassi_fit.errors import InvalidChoiceError
+
+    vertices, faces = sphere
+    frames, times, _ = _animation(vertices, m=3)
+    with pytest.raises(InvalidChoiceError, match="LINEAR, STEP"):
+        export_glb(tmp_path / "a.glb", frames, faces, times, interpolation="CUBIC")
+    assert list(tmp_path.iterdir()) == []

@@ -48,3 +48,127 @@ def test_output_path_then_commit(tmp_path):
     tmp.write_bytes(b"abc")
     _io.commit_output(tmp, final)
     assert final.read_bytes() == b"abc" and not tmp.exists()
+
+
+def _mode(path):
+    return path.stat().st_mode & 0o777
+
+
+@pytest.fixture
+def umask_022():
+    import os
+
+    old = os.umask(0o022)
+    yield
+    os.umask(old)
+
+
+def test_outputs_get_the_users_normal_mode(tmp_path, umask_022):
+    import os
+
+    written = _io.atomic_write(tmp_path / "table.csv", "a,b\n")
+    assert _mode(written) == 0o644
+    tmp, final = _io.atomic_output_path(tmp_path / "mesh.ply")
+    tmp.write_bytes(b"ply")
+    assert _mode(_io.commit_output(tmp, final)) == 0o644
+    os.umask(0o027)  # a stricter umask is respected, as open() would
+    assert _mode(_io.atomic_write(tmp_path / "private.json", "{}")) == 0o640
+    assert _io.default_mode() == 0o640
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "TP101.TXY",
+        "tp005.txy",
+        "PAL.DAT",
+        "pha.dat",
+        "jw11_pal.dat",
+        "Headmeasures.txt",
+        "TP101.WAV",
+    ],
+)
+def test_recording_data_are_never_replaced_by_an_output(tmp_path, name):
+    path = tmp_path / name
+    path.write_bytes(b"data")
+    with pytest.raises(OutputExistsError, match=f"{name}: refusing to replace") as info:
+        _io.atomic_write(path, "time,theta\n", overwrite=True)
+    assert "\n" not in str(info.value)
+    with pytest.raises(OutputExistsError, match="recording data"):
+        _io.atomic_output_path(path, overwrite=True)
+    with pytest.raises(OutputExistsError, match="recording data"):
+        _io.check_outputs([path], overwrite=True)
+    assert path.read_bytes() == b"data"
+    assert [p.name for p in tmp_path.iterdir()] == [name]
+    # the writer of that very kind (write_txy, write_outline, ...) may replace it
+    _io.atomic_write(path, "new", overwrite=True, data_file=True)
+    assert path.read_text() == "new"
+
+
+def test_data_kind_by_name():
+    assert _io.data_kind("x/TP101.TXY") == "a pellet file"
+    assert _io.data_kind("PHA.DAT") == "a pharynx trace"
+    assert _io.data_kind("headmeasures.TXT") == "a Headmeasures file"
+    assert _io.data_kind("out.csv") is None and _io.data_kind("pal.dat.csv") is None
+
+
+def test_check_outputs_refuses_one_path_twice(tmp_path):
+    out, csv = tmp_path / "a.png", tmp_path / "sub" / ".." / "a.png"
+    with pytest.raises(OutputExistsError, match="given twice") as info:
+        _io.check_outputs([out, None, csv], overwrite=True)
+    assert str(out) in str(info.value) and "\n" not in str(info.value)
+    assert _io.check_outputs([out, None, tmp_path / "b.csv"]) == [out, tmp_path / "b.csv"]
+    out.write_text("old")
+    with pytest.raises(OutputExistsError, match="--force"):
+        _io.check_outputs([out])
+    assert list(tmp_path.iterdir()) == [out]  # checking writes nothing
+
+
+def test_folders_and_paths_under_files_are_one_clear_line(tmp_path):
+    (tmp_path / "plain").write_text("x")
+    with pytest.raises(CassiError, match="is a folder"):
+        _io.atomic_write(tmp_path, "x", overwrite=True)
+    with pytest.raises(CassiError, match="a parent is a file"):
+        _io.atomic_write(tmp_path / "plain" / "out.csv", "x")
+
+
+def test_an_interrupt_leaves_no_temporary_file(tmp_path):
+    def interrupted(fh):
+        fh.write("half")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        _io.atomic_write(tmp_path / "out.csv", interrupted)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_temporary_files_are_hidden_and_keep_the_suffix(tmp_path):
+    tmp, final = _io.atomic_output_path(tmp_path / "clip.mp4")
+    assert tmp.name.startswith(".clip.") and tmp.suffix == ".mp4" and tmp.exists()
+    _io.remove_quietly(tmp)
+    _io.remove_quietly(tmp)  # already gone: no error
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_atomic_outputs_are_all_or_nothing(tmp_path):
+    table, figure = tmp_path / "table.csv", tmp_path / "figure.png"
+    with pytest.raises(KeyboardInterrupt):
+        with _io.atomic_outputs() as group:
+            group.write(table, "a,b\n1,2\n")
+            group.path(figure).write_bytes(b"\x89PNG half")
+            raise KeyboardInterrupt  # Ctrl-C before the last file is done
+    assert list(tmp_path.iterdir()) == []
+    with _io.atomic_outputs() as group:
+        group.write(table, "a,b\n1,2\n")
+        group.path(figure).write_bytes(b"\x89PNG")
+        assert not table.exists()  # nothing appears before the end
+    assert table.read_text() == "a,b\n1,2\n" and figure.read_bytes() == b"\x89PNG"
+    with pytest.raises(OutputExistsError, match="file exists"):
+        with _io.atomic_outputs() as group:
+            group.write(table, "new")
+    with pytest.raises(OutputExistsError, match="given twice"):
+        with _io.atomic_outputs(overwrite=True) as group:
+            group.write(table, "new")
+            group.write(table, "again")
+    assert table.read_text() == "a,b\n1,2\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["figure.png", "table.csv"]

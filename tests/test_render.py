@@ -13,7 +13,12 @@ import trimesh
 
 from cassi_fit import render
 from cassi_fit._io import register_input
-from cassi_fit.errors import CassiError, OutputExistsError, RenderingUnavailableError
+from cassi_fit.errors import (
+    CassiError,
+    InvalidChoiceError,
+    OutputExistsError,
+    RenderingUnavailableError,
+)
 
 pytestmark = pytest.mark.render
 
@@ -103,69 +108,95 @@ def views(renderer, model):
 # -- headless GL selection ----------------------------------------------------------------
 
 
-@pytest.fixture
-def fresh_gl(monkeypatch):
-    """No platform chosen yet, no display, PyOpenGL not imported; the probe records calls."""
-    import sys
+class FakeProbe:
+    """Stands in for probe_gl_platform: ``working`` platforms create a context."""
 
-    monkeypatch.setattr(render, "_PLATFORM", None)
-    imported = sys.modules.get("OpenGL.platform")
-    monkeypatch.delitem(sys.modules, "OpenGL.platform", raising=False)
-    for name in ("DISPLAY", "WAYLAND_DISPLAY", "PYOPENGL_PLATFORM"):
-        monkeypatch.delenv(name, raising=False)
-    calls = []
+    def __init__(self, working):
+        self.working, self.calls = set(working), []
 
-    def use(working):
-        def probe(platform):
-            calls.append(platform)
-            return None if platform in working else f"{platform} does not work here"
-
-        monkeypatch.setattr(render, "_probe_platform", probe)
-
-    return SimpleNamespace(use=use, calls=calls, imported=imported)
+    def __call__(self, platform):
+        self.calls.append(platform)
+        return None if platform in self.working else f"{platform} does not work here"
 
 
-def test_headless_picks_egl_without_display(fresh_gl):
-    import os
-
-    fresh_gl.use({"egl", "osmesa", "native"})
-    assert render.ensure_headless_gl() == "egl"
-    assert os.environ["PYOPENGL_PLATFORM"] == "egl"
-    assert fresh_gl.calls == ["egl"]
-    assert render.ensure_headless_gl() == "egl" and fresh_gl.calls == ["egl"]  # cached
+def choose(working, environ=None, imported=None):
+    probe = FakeProbe(working)
+    platform = render.choose_gl_platform(probe=probe, environ=environ or {}, imported=imported)
+    return platform, probe.calls
 
 
-def test_headless_falls_back_to_osmesa(fresh_gl):
-    fresh_gl.use({"osmesa"})
-    assert render.ensure_headless_gl() == "osmesa"
-    assert fresh_gl.calls == ["egl", "osmesa"]
+def test_headless_picks_egl_without_display():
+    assert choose({"egl", "osmesa", "native"}) == ("egl", ["egl"])
 
 
-def test_headless_tries_native_first_with_a_display(fresh_gl, monkeypatch):
-    monkeypatch.setenv("DISPLAY", ":0")
-    fresh_gl.use({"egl"})
-    assert render.ensure_headless_gl() == "egl"
-    assert fresh_gl.calls == ["native", "egl"]
+def test_headless_falls_back_to_osmesa():
+    assert choose({"osmesa"}) == ("osmesa", ["egl", "osmesa"])
 
 
-def test_headless_respects_the_users_platform(fresh_gl, monkeypatch):
-    monkeypatch.setenv("PYOPENGL_PLATFORM", "osmesa")
-    fresh_gl.use(set())
-    assert render.ensure_headless_gl() == "osmesa"
-    assert fresh_gl.calls == []
+def test_headless_tries_native_first_with_a_display():
+    assert choose({"egl"}, {"DISPLAY": ":0"}) == ("egl", ["native", "egl"])
+    assert choose({"native", "egl"}, {"WAYLAND_DISPLAY": "w"}) == ("native", ["native"])
 
 
-def test_no_gl_is_one_clear_line(fresh_gl):
-    fresh_gl.use(set())
+def test_headless_respects_the_users_platform():
+    assert choose(set(), {"PYOPENGL_PLATFORM": "osmesa"}) == ("osmesa", [])
+
+
+def test_no_gl_is_one_clear_line():
     with pytest.raises(RenderingUnavailableError) as info:
-        render.ensure_headless_gl()
+        choose(set())
     message = str(info.value)
     assert "\n" not in message
     assert "egl" in message and "osmesa" in message and "libegl1" in message
 
 
+def test_an_already_imported_opengl_is_reported_not_guessed():
+    """Once PyOpenGL is imported its platform is fixed: the answer is that platform, or
+    one clear error if pyrender cannot use it headless."""
+
+    class EGLPlatform:
+        pass
+
+    class GLXPlatform:
+        pass
+
+    assert choose({"osmesa"}, imported=EGLPlatform()) == ("egl", [])
+    assert choose(set(), {"DISPLAY": ":0"}, imported=GLXPlatform()) == ("native", [])
+    with pytest.raises(RenderingUnavailableError, match="import cassi_fit.render first"):
+        choose({"egl"}, imported=GLXPlatform())
+
+
+_FRESH = """
+import os, sys
+import cassi_fit.render as render
+assert not [m for m in sys.modules if m.split(".")[0] in ("OpenGL", "pyrender", "jax")], "eager"
+platform = render.ensure_headless_gl()
+assert "OpenGL" not in sys.modules, "OpenGL imported by the choice"
+assert render.ensure_headless_gl() == platform  # cached
+print(platform, os.environ.get("PYOPENGL_PLATFORM"))
+"""
+
+
+def test_importing_render_imports_no_opengl_and_the_choice_comes_first():
+    """In a fresh process without a display: importing cassi_fit.render imports neither
+    OpenGL, pyrender nor JAX; ensure_headless_gl writes its choice (EGL here) into
+    PYOPENGL_PLATFORM before anything imports OpenGL."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("DISPLAY", "WAYLAND_DISPLAY", "PYOPENGL_PLATFORM")}  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-c", _FRESH], capture_output=True, text=True, env=env, timeout=300
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["egl", "egl"]
+
+
 def test_egl_really_works_here():
-    assert render._probe_platform("egl") is None
+    assert render.probe_gl_platform("egl") is None
+    assert render.ensure_headless_gl() in render.HEADLESS_PLATFORMS
 
 
 # -- the views ------------------------------------------------------------------------------
@@ -296,10 +327,12 @@ def test_bad_vertices_raise_clear_errors(renderer, model):
 
 
 def test_bad_options_raise_clear_errors(model):
-    with pytest.raises(CassiError, match="views"):
+    with pytest.raises(InvalidChoiceError, match="unknown view 'back'; choose one of front"):
         render.Renderer(model, views=("back",))
-    with pytest.raises(CassiError, match="skin"):
+    with pytest.raises(InvalidChoiceError, match="unknown skin 'glass'; choose one of cut"):
         render.Renderer(model, skin="glass")
+    with pytest.raises(CassiError, match="distinct"):
+        render.Renderer(model, views=("side", "side"))
     with pytest.raises(CassiError, match="size"):
         render.Renderer(model, size=(4, 4))
 
@@ -315,6 +348,24 @@ def test_save_png_round_trip_and_refusals(tmp_path, renderer, model):
     register_input(path)
     with pytest.raises(OutputExistsError):
         render.save_png(path, img)
+
+
+def test_png_gets_the_users_mode_and_spares_recording_data(tmp_path, renderer, model):
+    import os
+
+    img = renderer.render(model.vertices)
+    old = os.umask(0o022)
+    try:
+        path = render.save_png(tmp_path / "still.png", img)
+    finally:
+        os.umask(old)
+    assert path.stat().st_mode & 0o777 == 0o644
+    pal = tmp_path / "PAL.DAT"
+    pal.write_text("1 2\n")
+    with pytest.raises(OutputExistsError, match="PAL.DAT: refusing to replace a palate trace"):
+        render.save_png(pal, img)
+    assert pal.read_text() == "1 2\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["PAL.DAT", "still.png"]
 
 
 def test_jax_vertices_are_accepted(renderer, model):
@@ -377,47 +428,23 @@ def test_views_are_clipped_to_their_cells(renderer, model):
     assert green(cells["inside"]).sum() == 0
 
 
-def test_an_already_imported_opengl_is_reported_not_guessed(renderer, fresh_gl, monkeypatch):
-    """Once PyOpenGL is imported its platform is fixed; ensure_headless_gl says which.
-
-    (The ``renderer`` fixture makes sure this process imported PyOpenGL with EGL; the
-    module is never re-imported here, which would replace the process's GL platform.)
-    """
-    import sys
-
-    opengl_platform = fresh_gl.imported
-    assert opengl_platform is not None
-    fresh_gl.use({"egl"})
-    monkeypatch.setitem(sys.modules, "OpenGL.platform", opengl_platform)
-    assert render.ensure_headless_gl() == "egl"  # this process runs EGL
-    assert fresh_gl.calls == []
-
-    class GLXPlatform:
-        pass
-
-    monkeypatch.setattr(render, "_PLATFORM", None)
-    monkeypatch.setattr(opengl_platform, "PLATFORM", GLXPlatform())
-    with pytest.raises(RenderingUnavailableError, match="import cassi_fit.render first"):
-        render.ensure_headless_gl()
-
-
 def test_culling_hidden_faces_changes_no_pixel(renderer, model):
     with render.Renderer(model, size=SIZE, colours=TEST_COLOURS, cull=False) as double:
         np.testing.assert_array_equal(
             double.render(model.vertices), renderer.render(model.vertices)
         )
-    assert any(p.cull for p in renderer._pieces)  # culling did happen
-    inside = [p for p in renderer._pieces if p.material == "skin" and "inside" in p.views]
+    assert any(p.cull for p in renderer.pieces)  # culling did happen
+    inside = [p for p in renderer.pieces if p.material == "skin" and "inside" in p.views]
     assert inside and all(p.cull is None for p in inside)  # the cut's inside shows
 
 
 def test_winding_is_read_from_the_signed_volume():
     sphere = trimesh.creation.icosphere(subdivisions=1)
     v, f = np.asarray(sphere.vertices) * 30 + 5, np.asarray(sphere.faces)
-    assert render._winding(v, f) == 1
-    assert render._winding(v, f[:, ::-1]) == -1
+    assert render.triangle_winding(v, f) == 1
+    assert render.triangle_winding(v, f[:, ::-1]) == -1
     sheet_v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]])
-    assert render._winding(sheet_v, np.array([[0, 1, 2], [1, 3, 2]])) == 0
+    assert render.triangle_winding(sheet_v, np.array([[0, 1, 2], [1, 3, 2]])) == 0
 
 
 def test_antialiasing_softens_edges_only(model, views):

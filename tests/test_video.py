@@ -47,8 +47,18 @@ def _decoded_audio(path, tmp_path):
     """The MP4's sound track as mono int16 samples at RATE, decoded by ffmpeg."""
     decoded = tmp_path / "decoded.wav"
     subprocess.run(
-        [_ffmpeg(), "-loglevel", "error", "-i", str(path), "-ac", "1", "-ar", str(RATE),
-         str(decoded)],
+        [
+            _ffmpeg(),
+            "-loglevel",
+            "error",
+            "-i",
+            str(path),
+            "-ac",
+            "1",
+            "-ar",
+            str(RATE),
+            str(decoded),
+        ],
         check=True,
     )
     return _read_wav(decoded)[0]
@@ -183,3 +193,159 @@ def test_animation_sound_is_aligned_for_any_stride(tmp_path, stride):
     heard = _decoded_audio(path, tmp_path)
     onset = np.argmax(np.abs(heard) > 5000) / RATE
     assert onset == pytest.approx(0.9 - 50 * FRAME_STEP_S, abs=0.01)
+
+
+# -- no lost, destroyed or partial files (issue 12) -------------------------------------------
+
+
+def _wav_bytes(fmt=1, channels=1, rate=RATE, width=2, samples=b"\x00\x01" * 100):
+    """A RIFF/WAVE file written by hand, so that broken headers can be made."""
+    import struct
+
+    block = channels * width
+    fmt_chunk = struct.pack("<HHIIHH", fmt, channels, rate, rate * block, block, 8 * width)
+    body = b"WAVE" + b"fmt " + struct.pack("<I", 16) + fmt_chunk
+    body += b"data" + struct.pack("<I", len(samples)) + samples
+    return b"RIFF" + struct.pack("<I", len(body)) + body
+
+
+BAD_WAVS = {
+    "garbage": b"this is not a sound file, just text\n" * 4,
+    "empty": b"",
+    "float": _wav_bytes(fmt=3, width=4, samples=b"\x00" * 400),
+    "rate0": _wav_bytes(rate=0),
+    "silent": _wav_bytes(samples=b""),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(BAD_WAVS))
+def test_a_bad_wav_is_one_error_and_leaves_no_file(tmp_path, kind):
+    wav = tmp_path / f"{kind}.wav"
+    wav.write_bytes(BAD_WAVS[kind])
+    with pytest.raises(DataFormatError) as info:
+        write_video(tmp_path / "out_X.mp4", _frames(3), 10, audio=wav)
+    message = str(info.value)
+    assert message.startswith(str(wav)) and "\n" not in message
+    assert sorted(p.name for p in tmp_path.iterdir()) == [wav.name]
+    assert wav.read_bytes() == BAD_WAVS[kind]
+
+
+def test_the_audio_is_registered_as_an_input(tmp_path):
+    wav = _write_wav(tmp_path / "speech.wav", np.zeros(RATE))
+    before = wav.read_bytes()
+    write_video(tmp_path / "talk.mp4", _frames(2), 10, audio=wav)
+    assert _io.is_input(wav)
+    with pytest.raises(OutputExistsError, match="input"):
+        _io.atomic_write(wav, "not sound", overwrite=True)
+    assert wav.read_bytes() == before
+
+
+def _only(folder, *names):
+    """The folder holds exactly ``names``: no partial or hidden file."""
+    assert sorted(p.name for p in folder.iterdir()) == sorted(names)
+
+
+def test_an_interrupt_while_encoding_a_gif_leaves_nothing(tmp_path, monkeypatch):
+    from PIL import Image
+
+    def interrupted(image, path, *args, **kwargs):
+        open(path, "wb").write(b"GIF89a half")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Image.Image, "save", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        write_video(tmp_path / "clip.gif", _frames(4), 10)
+    _only(tmp_path)
+
+
+def test_an_interrupt_while_finishing_an_mp4_leaves_nothing(tmp_path, monkeypatch):
+    import cassi_fit.video as video
+
+    wav = _write_wav(tmp_path / "s.wav", np.zeros(RATE))
+
+    def interrupted(cmd, *args, **kwargs):  # the audio mux, the MP4's last step
+        open(cmd[-1], "wb").write(b"half an mp4")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(video.subprocess, "run", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        write_video(tmp_path / "talk.mp4", _frames(5), 10, audio=wav)
+    _only(tmp_path, "s.wav")
+
+
+def test_an_interrupt_between_frames_stops_ffmpeg_and_leaves_nothing(tmp_path):
+    def frames():
+        yield from _frames(3)
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        write_video(tmp_path / "clip.mp4", frames(), 10)
+    _only(tmp_path)
+
+
+_WRITER = """
+import sys, numpy as np
+from cassi_fit.video import write_video
+rng = np.random.default_rng(0)
+frames = (rng.integers(0, 256, (240, 320, 3), dtype=np.uint8) for _ in range(100000))
+if sys.argv[1].endswith(".gif"):
+    frames = [next(frames) for _ in range(60)]  # Pillow quantises noise at ~2 frames/s
+write_video(sys.argv[1], frames, 25)
+"""
+
+
+@pytest.mark.parametrize("name", ["clip.mp4", "clip.gif"])
+def test_ctrl_c_in_a_real_process_leaves_no_partial_file(tmp_path, name):
+    import shutil
+    import sys
+    import time
+
+    if shutil.which("timeout") is None:
+        pytest.skip("needs coreutils' timeout")
+    start = time.perf_counter()
+    done = subprocess.run(
+        ["timeout", "-s", "INT", "4", sys.executable, "-c", _WRITER, str(tmp_path / name)],
+        capture_output=True, text=True, cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode != 0 and "KeyboardInterrupt" in done.stderr
+    assert time.perf_counter() - start < 15  # stopped at once, not after finishing the file
+    _only(tmp_path)
+
+
+def test_videos_get_the_users_normal_mode(tmp_path):
+    import os
+
+    old = os.umask(0o022)
+    try:
+        wav = _write_wav(tmp_path / "s.wav", np.zeros(RATE))
+        for path in (
+            write_video(tmp_path / "a.mp4", _frames(3), 10),
+            write_video(tmp_path / "b.mp4", _frames(3), 10, audio=wav),
+            write_video(tmp_path / "c.gif", _frames(3), 10),
+        ):
+            assert path.stat().st_mode & 0o777 == 0o644, path
+    finally:
+        os.umask(old)
+
+
+_TERMINATED = """
+import sys, numpy as np
+from cassi_fit._io import terminate_as_interrupt
+from cassi_fit.video import write_video
+rng = np.random.default_rng(0)
+frames = (rng.integers(0, 256, (240, 320, 3), dtype=np.uint8) for _ in range(100000))
+with terminate_as_interrupt():
+    write_video(sys.argv[1], frames, 25)
+"""
+
+
+def test_sigterm_inside_terminate_as_interrupt_leaves_no_partial_file(tmp_path):
+    import shutil
+    import sys
+
+    if shutil.which("timeout") is None:
+        pytest.skip("needs coreutils' timeout")
+    command = [sys.executable, "-c", _TERMINATED, str(tmp_path / "clip.mp4")]
+    done = subprocess.run(["timeout", "4", *command], capture_output=True, text=True)
+    assert done.returncode != 0 and "KeyboardInterrupt" in done.stderr
+    _only(tmp_path)

@@ -1,0 +1,69 @@
+"""Offscreen rendering of the face model in the paper's four evaluation views.
+
+The paper judged every animation from four views (Scheidt & Hamilton 1999, section 4):
+``front`` (the full face), ``side`` (the full face in profile, looking to the right of the
+image), ``inside`` (half the face from the side: skin, lips, teeth and palate on the
+camera's side of the midsagittal plane z = 0 cut away, or the skin see-through, so that
+tongue, teeth and palate show) and ``top`` (skin hidden: palate, teeth and tongue seen from
+above, the front of the mouth to the right). Singly, in a row, or as a 2x2 grid (front,
+side / inside, top); pellet markers in the side and inside views; a caption.
+
+Speed (llvmpipe, the software OpenGL of headless machines, is the target):
+
+- The whole grid is ONE draw of ONE pyrender scene. Every material is split once into the
+  triangles on either side of the midsagittal plane; each piece is one pyrender primitive
+  drawn *instanced*, one instance per view that shows it. An instance matrix places its
+  view in its cell in front of one orthographic camera (and carries the cell, to which
+  the vertex shader clips). The lights live in the shader, fixed to the camera, so every
+  view is lit alike.
+- Per frame only the vertex buffers are rewritten in place (``glBufferSubData``).
+- pyrender's scene, buffers and context are kept; its PBR shading (lights re-bound in
+  Python for every draw), 4x multisampling and depth read-back are replaced by a light
+  two-sided shader, a plain framebuffer and an RGB read into a kept buffer.
+- Back faces are culled wherever no view can show them (materials with a clear winding,
+  away from the cut).
+
+The package, by concern: ``_gl`` chooses the OpenGL platform (probes in subprocesses;
+EGL with llvmpipe when there is no display, OSMesa as fallback) before OpenGL is
+imported; ``_pieces`` cuts the mesh into drawable pieces (numpy); ``_scene`` holds the
+:class:`Renderer` (cameras, layout, markers); ``_draw`` the shaders and the OpenGL calls
+(the only module that imports pyrender and OpenGL, when a Renderer is made); ``_images``
+captions and PNG files. Importing :mod:`cassi_fit.render` imports neither OpenGL nor
+pyrender, JAX or Pillow.
+"""
+
+from __future__ import annotations
+
+from ..options import VIEWS as VIEWS
+from ._gl import HEADLESS_PLATFORMS as HEADLESS_PLATFORMS
+from ._gl import choose_gl_platform as choose_gl_platform
+from ._gl import ensure_headless_gl as ensure_headless_gl
+from ._gl import probe_gl_platform as probe_gl_platform
+from ._images import add_caption as add_caption
+from ._images import save_png as save_png
+from ._pieces import MARKER_COLOURS as MARKER_COLOURS
+from ._pieces import MATERIAL_COLOURS as MATERIAL_COLOURS
+from ._pieces import SKINS as SKINS
+from ._pieces import PieceInfo as PieceInfo
+from ._pieces import triangle_winding as triangle_winding
+from ._scene import Markers as Markers
+from ._scene import MeshModel as MeshModel
+from ._scene import Renderer as Renderer
+
+__all__ = [
+    "HEADLESS_PLATFORMS",
+    "MARKER_COLOURS",
+    "MATERIAL_COLOURS",
+    "SKINS",
+    "VIEWS",
+    "Markers",
+    "MeshModel",
+    "PieceInfo",
+    "Renderer",
+    "add_caption",
+    "choose_gl_platform",
+    "ensure_headless_gl",
+    "probe_gl_platform",
+    "save_png",
+    "triangle_winding",
+]

@@ -1,0 +1,170 @@
+"""Choosing the OpenGL platform for offscreen rendering, before OpenGL is imported.
+
+PyOpenGL fixes its platform (``PYOPENGL_PLATFORM``: the native window system, ``egl``,
+``osmesa``) when it is first imported, and cannot change it afterwards. So the choice is
+made here, by probing each candidate in a fresh interpreter, and written into
+``PYOPENGL_PLATFORM`` before this process imports pyrender or OpenGL (which only
+:mod:`cassi_fit.render._draw` does, when a :class:`~cassi_fit.render.Renderer` is made).
+Without a display, EGL with Mesa's llvmpipe (software rendering, no GPU needed) comes
+first, OSMesa second.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from collections.abc import Callable, Mapping
+
+from ..errors import RenderingUnavailableError
+
+#: Offscreen OpenGL platforms, in the order tried without a display.
+HEADLESS_PLATFORMS = ("egl", "osmesa")
+
+_PLATFORM: str | None = None  # the answer of ensure_headless_gl, cached per process
+
+# Probes run in a fresh interpreter (PyOpenGL fixes its platform at first import). They
+# create a context the way pyrender will (EGL: the first device's platform display) but
+# import only PyOpenGL, not pyrender: about 0.1 s instead of 1 s.
+_PROBES = {
+    "egl": """
+import ctypes, os
+os.environ["PYOPENGL_PLATFORM"] = "egl"
+from OpenGL import EGL
+def ext(name, restype):
+    address = EGL.eglGetProcAddress(name)
+    if address is None:
+        return None
+    return ctypes.CFUNCTYPE(restype)(address)
+query = ext("eglQueryDevicesEXT", EGL.EGLBoolean)
+display = None
+if query is not None:
+    from OpenGL._opaque import opaque_pointer_cls
+    device_type = opaque_pointer_cls("EGLDeviceEXT")
+    n = EGL.EGLint()
+    devices = (device_type * 8)()
+    query.argtypes = [EGL.EGLint, ctypes.POINTER(device_type), ctypes.POINTER(EGL.EGLint)]
+    if query(8, devices, ctypes.pointer(n)) and n.value > 0:
+        get_display = ext("eglGetPlatformDisplayEXT", EGL.EGLDisplay)
+        display = get_display(0x313F, devices[0], None)
+if display is None:
+    display = EGL.eglGetDisplay(EGL.EGL_DEFAULT_DISPLAY)
+EGL.eglInitialize(display, None, None)
+attrs = [EGL.EGL_SURFACE_TYPE, EGL.EGL_PBUFFER_BIT, EGL.EGL_RENDERABLE_TYPE,
+         EGL.EGL_OPENGL_BIT, EGL.EGL_DEPTH_SIZE, 24, EGL.EGL_NONE]
+config, n = EGL.EGLConfig(), EGL.EGLint()
+ok = EGL.eglChooseConfig(display, (EGL.EGLint * len(attrs))(*attrs), ctypes.pointer(config),
+                         1, ctypes.pointer(n))
+assert ok and n.value > 0, "no EGL configuration with OpenGL and a depth buffer"
+EGL.eglBindAPI(EGL.EGL_OPENGL_API)
+context = EGL.eglCreateContext(display, config, EGL.EGL_NO_CONTEXT, None)
+EGL.eglMakeCurrent(display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, context)
+""",
+    "osmesa": """
+import os
+os.environ["PYOPENGL_PLATFORM"] = "osmesa"
+from OpenGL import osmesa
+assert osmesa.OSMesaCreateContextExt(osmesa.OSMESA_RGBA, 24, 0, 0, None), "no OSMesa context"
+""",
+    "native": """
+import os
+os.environ.pop("PYOPENGL_PLATFORM", None)
+import pyrender
+pyrender.OffscreenRenderer(16, 16).delete()
+""",
+}
+
+
+def probe_gl_platform(platform: str) -> str | None:
+    """Try an offscreen context with ``platform`` (``"native"``, ``"egl"``, ``"osmesa"``)
+    in a fresh interpreter; ``None`` if a context was created, else the reason (one line).
+
+    PyOpenGL fixes its platform at first import, so each candidate needs its own process.
+    """
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-c", _PROBES[platform]], capture_output=True, text=True, timeout=120
+        )
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return f"{type(exc).__name__}: {exc}"
+    if proc.returncode == 0:
+        return None
+    lines = [ln.strip() for ln in proc.stderr.strip().splitlines() if ln.strip()]
+    return lines[-1] if lines else f"exit code {proc.returncode}"
+
+
+def _has_display(environ: Mapping[str, str]) -> bool:
+    return bool(environ.get("DISPLAY") or environ.get("WAYLAND_DISPLAY"))
+
+
+def _imported_platform(platform_object: object, environ: Mapping[str, str]) -> str:
+    """The platform of an already imported PyOpenGL (its ``OpenGL.platform.PLATFORM``),
+    if pyrender can use it."""
+    name = type(platform_object).__name__.lower()
+    for platform in HEADLESS_PLATFORMS:
+        if name.startswith(platform):
+            return platform
+    if _has_display(environ):
+        return "native"
+    raise RenderingUnavailableError(
+        f"OpenGL was imported (platform {name}) before cassi_fit.render could choose a "
+        "headless one: import cassi_fit.render first, or set PYOPENGL_PLATFORM=egl"
+    )
+
+
+def _opengl_platform_object() -> object | None:
+    """PyOpenGL's platform object if PyOpenGL is imported already, else None."""
+    module = sys.modules.get("OpenGL.platform")
+    return None if module is None else module.PLATFORM
+
+
+def choose_gl_platform(
+    *,
+    probe: Callable[[str], str | None] = probe_gl_platform,
+    environ: Mapping[str, str] | None = None,
+    imported: object | None = None,
+) -> str:
+    """The OpenGL platform offscreen rendering should use (no caching, nothing changed).
+
+    A ``PYOPENGL_PLATFORM`` in ``environ`` (default ``os.environ``) is respected as is.
+    If PyOpenGL is imported already (``imported``: its ``OpenGL.platform.PLATFORM``,
+    found in ``sys.modules`` by default), its platform is the answer, or a
+    :class:`RenderingUnavailableError` if pyrender cannot use it. Otherwise the
+    candidates are, in order: ``"native"`` (only with ``DISPLAY``/``WAYLAND_DISPLAY``),
+    ``"egl"``, ``"osmesa"``, each tried with ``probe``; none working is one
+    :class:`RenderingUnavailableError` line naming each candidate's reason.
+    """
+    environ = os.environ if environ is None else environ
+    if environ.get("PYOPENGL_PLATFORM"):
+        return environ["PYOPENGL_PLATFORM"]
+    imported = _opengl_platform_object() if imported is None else imported
+    if imported is not None:  # too late to choose: PyOpenGL has its platform
+        return _imported_platform(imported, environ)
+    candidates = ["native"] * _has_display(environ) + list(HEADLESS_PLATFORMS)
+    failures = []
+    for platform in candidates:
+        reason = probe(platform)
+        if reason is None:
+            return platform
+        failures.append(f"{platform} ({reason})")
+    raise RenderingUnavailableError(
+        f"no offscreen OpenGL: tried {'; '.join(failures)}. Install Mesa EGL (apt install "
+        "libegl1 libgl1-mesa-dri) or OSMesa (libosmesa6), or set PYOPENGL_PLATFORM"
+    )
+
+
+def ensure_headless_gl() -> str:
+    """Choose the OpenGL platform for offscreen rendering (:func:`choose_gl_platform`),
+    once per process; returns its name.
+
+    A headless choice is written into ``PYOPENGL_PLATFORM`` before pyrender or OpenGL
+    are imported here. Raises :class:`RenderingUnavailableError` (one line) if no
+    platform works.
+    """
+    global _PLATFORM
+    if _PLATFORM is None:
+        platform = choose_gl_platform()
+        if platform != "native" and "OpenGL.platform" not in sys.modules:
+            os.environ["PYOPENGL_PLATFORM"] = platform
+        _PLATFORM = platform
+    return _PLATFORM

@@ -1,0 +1,233 @@
+"""The face mesh cut into drawable pieces: by material, by side of the midsagittal plane,
+and by the views that show each piece (numpy only: no OpenGL here).
+
+The paper's ``inside`` view removes the near half of skin, lips, eyes, teeth and palate
+(or draws the skin see-through), so every material is split once into the triangles on
+either side of z = 0; each piece becomes one instanced pyrender primitive drawn once per
+view that shows it (:mod:`cassi_fit.render._scene`). Back faces are culled wherever no
+view can show them (materials with a clear winding, away from the cut).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from jaxtyping import Float, Integer
+
+# The face model's material order (cassi_fit.face_model.MATERIALS); repeated here so that
+# rendering does not import JAX.
+_MATERIALS = ("skin", "lips", "eye", "teeth", "tongue", "palate")
+
+# sRGB colours. The paper draws the palate as the darkest object.
+MATERIAL_COLOURS = {
+    "skin": (0.89, 0.72, 0.60),
+    "lips": (0.70, 0.30, 0.30),
+    "eye": (0.96, 0.96, 0.94),
+    "teeth": (0.96, 0.94, 0.86),
+    "tongue": (0.93, 0.52, 0.58),
+    "palate": (0.42, 0.17, 0.20),
+}
+MARKER_COLOURS = {"measured": (0.90, 0.08, 0.08), "model": (0.10, 0.72, 0.22)}
+_EXTRA_MARKER_COLOURS = ((0.15, 0.35, 0.95), (0.98, 0.60, 0.05), (0.60, 0.20, 0.80))
+_IRIS_COLOUR = (0.25, 0.17, 0.10)
+
+# Rows: image right, image up, toward the camera, in model axes. The model frame (x front,
+# y up, z to the subject's LEFT) is left-handed, so a view that shows the subject as a
+# camera would (not mirrored) is a reflection in OpenGL's right-handed terms (det = -1):
+# front: the subject's left on the image's right; side and inside: the subject's right
+# side, the face looking to the right of the image; top: from above, the front of the
+# mouth to the right and the subject's left up. (Triangle winding flips on screen with it:
+# see _cull_face; lighting goes by the view direction, not the winding.)
+_VIEW_AXES = {
+    "front": ((0, 0, 1), (0, 1, 0), (1, 0, 0)),
+    "side": ((1, 0, 0), (0, 1, 0), (0, 0, -1)),
+    "inside": ((1, 0, 0), (0, 1, 0), (0, 0, -1)),
+    "top": ((1, 0, 0), (0, 0, 1), (0, 1, 0)),
+}
+_SHOWN = {
+    "front": set(_MATERIALS),
+    "side": set(_MATERIALS),
+    "inside": set(_MATERIALS) - {"eye"},  # an eyeball floating in the cut head distracts
+    "top": {"teeth", "tongue", "palate"},
+}
+_CUT = {"skin", "lips", "eye", "teeth", "palate"}  # near half removed in the inside view
+_GLASS = {"skin", "lips", "eye"}  # near half see-through with skin="transparent"
+_MARKER_VIEWS = ("side", "inside")
+#: How the ``inside`` view opens the head: the near half cut away, or see-through skin.
+SKINS = ("cut", "transparent")
+_MARGIN_MM = 10.0  # free space around each view's rest bounds, for the motion
+
+
+class PieceInfo(NamedTuple):
+    """What one drawn piece is (:attr:`Renderer.pieces <cassi_fit.render.Renderer.pieces>`):
+    a material's triangles on one side of z = 0 (``near``: the inside view's camera
+    side), see-through (``glass``) or not, the views that draw it, and the on-screen face
+    culled (``"front"``/``"back"``) or None (drawn double-sided)."""
+
+    material: str
+    near: bool
+    glass: bool
+    views: tuple[str, ...]
+    cull: str | None
+
+
+def _linear(srgb) -> tuple[float, ...]:
+    """sRGB in [0, 1] -> linear (pyrender's shader applies gamma 1/2.2 on output)."""
+    return tuple(float(c) ** 2.2 for c in srgb)
+
+
+def _vertex_normals(vertices: np.ndarray, faces: np.ndarray, incidence) -> np.ndarray:
+    """Area-weighted unit vertex normals, (V,3) float32.
+
+    ``incidence`` is the sparse (V,F) vertex-face matrix. A vertex whose summed normal is
+    zero (only zero-area triangles) gets (0, 0, 0): the shader then lights it with ambient
+    light only, instead of dividing by zero.
+    """
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    summed = incidence @ np.cross(b - a, c - a)
+    length = np.linalg.norm(summed, axis=1, keepdims=True)
+    out = np.zeros_like(summed)
+    np.divide(summed, length, out=out, where=length > 0)
+    return out.astype(np.float32)
+
+
+def _incidence(faces: np.ndarray, n_vertices: int):
+    """Sparse (V,F) matrix with a 1 where a vertex belongs to a face."""
+    import scipy.sparse
+
+    rows = faces.ravel()
+    cols = np.repeat(np.arange(len(faces)), 3)
+    return scipy.sparse.csr_matrix(
+        (np.ones(len(rows)), (rows, cols)), shape=(n_vertices, len(faces))
+    )
+
+
+def _iris_factors(vertices: np.ndarray, faces: np.ndarray, face_material, eye: int):
+    """Per-vertex colour factor (V,4) darkening the front of each eyeball into an iris.
+
+    Each eye is the set of 'eye' vertices on one side of z = 0; its iris is the front half
+    (x above the eye's centre) within 62 % of the eye's half-height of the gaze axis (the
+    +x line through the centre), whatever the eyeball's shape or tessellation. Returns
+    None if the model has no eye material.
+    """
+    used = np.unique(faces[face_material == eye])
+    if used.size == 0:
+        return None
+    factors = np.ones((len(vertices), 4))
+    ratio = np.array(_linear(_IRIS_COLOUR)) / np.array(_linear(MATERIAL_COLOURS["eye"]))
+    for side in (used[vertices[used, 2] > 0], used[vertices[used, 2] <= 0]):
+        if side.size < 4:
+            continue
+        p = vertices[side]
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        centre, half = (lo + hi) / 2, (hi[1] - lo[1]) / 2
+        off_axis = np.hypot(p[:, 1] - centre[1], p[:, 2] - centre[2])
+        iris = (p[:, 0] > centre[0]) & (off_axis < 0.62 * half)
+        factors[side[iris], :3] = ratio
+    return factors
+
+
+class _Piece:
+    """The triangles of one material on one side of z = 0: one instanced pyrender primitive.
+
+    ``vertex_index`` (n,) picks the piece's vertices from the whole mesh; ``faces`` (m,3)
+    index into them; ``static`` (n,k) holds extra per-vertex columns (colour) that follow
+    position and normal in the interleaved vertex buffer; ``views`` are the views that draw
+    it; ``cull`` is the OpenGL face to cull ("front"/"back" on screen) or None (drawn
+    double-sided).
+    """
+
+    def __init__(self, material, near, glass, vertex_index, faces, static, views, cull=None):
+        self.material, self.near, self.glass, self.cull = material, near, glass, cull
+        self.vertex_index, self.faces, self.static, self.views = (
+            vertex_index,
+            faces,
+            static,
+            views,
+        )
+        self.buffer = np.zeros((len(vertex_index), 6 + static.shape[1]), np.float32)
+        self.buffer[:, 6:] = static
+        self.primitive = self.mesh = None
+
+    def info(self) -> PieceInfo:
+        return PieceInfo(self.material, self.near, self.glass, self.views, self.cull)
+
+
+def _piece_views(material: str, near: bool, glass: bool, views, skin: str) -> tuple:
+    """The views among ``views`` that draw this piece."""
+    out = []
+    for v in views:
+        if material not in _SHOWN[v]:
+            continue
+        cut = v == "inside" and near and material in _CUT
+        if skin == "transparent" and material not in _GLASS:
+            cut = False  # see-through skin: teeth and palate stay whole
+        glass_here = v == "inside" and near and skin == "transparent" and material in _GLASS
+        if (glass and glass_here) or (not glass and not cut and not glass_here):
+            out.append(v)
+    return tuple(out)
+
+
+def triangle_winding(vertices: Float[np.ndarray, "v 3"], faces: Integer[np.ndarray, "f 3"]) -> int:
+    """+1 if the triangles turn counter-clockwise seen from outside, -1 if clockwise, 0 if
+    unclear (signed volume under 5 % of the bounding box: open sheets, mixed winding)."""
+    used = np.unique(faces)
+    if used.size < 4:
+        return 0
+    p = vertices - vertices[used].mean(axis=0)
+    a, b, c = (p[faces[:, k]] for k in range(3))
+    volume = np.einsum("ij,ij->", a, np.cross(b, c)) / 6
+    box = np.prod(np.ptp(p[used], axis=0))
+    ratio = volume / box if box > 0 else 0.0
+    return 1 if ratio > 0.05 else (-1 if ratio < -0.05 else 0)
+
+
+def _cull_face(winding: int) -> str | None:
+    """The on-screen face to cull for a material of this winding, or None.
+
+    Every view is a reflection (det = -1, see _VIEW_AXES), which turns an outside that
+    winds counter-clockwise into clockwise on screen: OpenGL's front faces are then the
+    inside ones.
+    """
+    assert all(np.linalg.det(np.asarray(r, float)) < 0 for r in _VIEW_AXES.values())
+    return {1: "front", -1: "back"}.get(winding)
+
+
+def _split_pieces(vertices, faces, face_material, materials, views, skin, cull) -> list[_Piece]:
+    """Split the mesh by material and by side of the midsagittal plane (triangle centroid);
+    "near" is the inside view's camera side.
+
+    With ``cull``, a material with a clear winding hides its back faces wherever they
+    cannot be seen, the far half of a cut material in the inside view (whose inside shows)
+    being its own double-sided piece: back faces cost as much to rasterise as visible ones.
+    """
+    toward_camera = np.asarray(_VIEW_AXES["inside"][2], float)
+    near_side = vertices[faces].mean(axis=1) @ toward_camera > 0
+    eye = materials.index("eye") if "eye" in materials else -1
+    iris = _iris_factors(vertices, faces, face_material, eye) if eye >= 0 else None
+    pieces = []
+    for m, name in enumerate(materials):
+        winding = triangle_winding(vertices, faces[face_material == m]) if cull else 0
+        face = _cull_face(winding)
+        opened = name in _CUT and (skin == "cut" or name in _GLASS)  # inside shows at the cut
+        for near in (False, True):
+            for glass in (False, True):
+                mask = (face_material == m) & (near_side == near)
+                shown = _piece_views(name, near, glass, views, skin)
+                if not mask.any() or not shown:
+                    continue
+                index, local = np.unique(faces[mask], return_inverse=True)
+                static = (
+                    iris[index] if (m == eye and iris is not None) else np.zeros((len(index), 0))
+                )
+                args = (name, near, glass, index, local.reshape(-1, 3), static)
+                if face is None or glass:
+                    pieces.append(_Piece(*args, shown))
+                    continue
+                if opened and not near and "inside" in shown:
+                    pieces.append(_Piece(*args, ("inside",)))
+                    shown = tuple(v for v in shown if v != "inside")
+                if shown:
+                    pieces.append(_Piece(*args, shown, cull=face))
+    return pieces
