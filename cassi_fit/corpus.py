@@ -1,0 +1,617 @@
+"""Whole corpora: one runner for every per-recording command, on any Executor.
+
+A corpus run applies one **task function** to many :class:`CorpusItem` s (a recording, or a
+subject for per-subject work such as calibration) and collects one summary row per item.
+
+* **Where it runs.** Items are independent tasks submitted to a
+  :class:`concurrent.futures.Executor`: ``jobs=N`` starts a local process pool ('spawn'
+  start method: JAX is not fork-safe), ``scheduler=ADDRESS`` sends the same tasks to a
+  running ``dask.distributed`` cluster (through ``Client.get_executor()``), ``executor=``
+  takes any Executor (or a Dask ``Client``), and ``jobs=1`` runs in this process with no
+  pool. Workers live for the whole run, so what JAX compiles (cached by ``jax.jit`` /
+  ``eqx.filter_jit`` in the worker process) and the face model (:func:`worker_model`) are
+  paid once per worker, not once per recording.
+* **Task functions** are module-level (picklable) functions
+  ``task(item, out_dir, *, overwrite, **options) -> TaskResult`` taking plain arguments:
+  they read the item's files, write their outputs under ``out_dir`` atomically, and return
+  the summary row (a flat dict of numbers and strings) and the outputs' paths.
+* **Failure isolation.** An item whose task raises (or whose worker dies) becomes a row
+  with status ``FAILED`` and its one-line error; the run goes on. ``CorpusRun.failed``
+  lists them, ``CorpusRun.failure_summary()`` describes them; callers exit non-zero.
+* **Resumable.** After an item's outputs are written, a completion marker
+  ``out_dir/.cassi-corpus/SUBJECT/TASK.json`` is written last, atomically; it holds the
+  row, a fingerprint of the task and its options, and each output's size and SHA-256.
+  ``resume=True`` skips items whose marker matches and whose outputs are all present and
+  unchanged, and takes their rows from the markers. Failed items get no marker.
+* **Deterministic.** Results are sorted by (subject, task) in natural order; floats are
+  written with fixed precision; workers compute with the calling process's float64
+  setting; :func:`item_rng` seeds per item. Tables are byte-identical whatever the number
+  of workers, the scheduler or the completion order.
+
+:func:`jaw_task` is ``cassi jaw DATASET``'s task; :func:`write_table` writes a corpus
+table as CSV, and as Parquet when pyarrow is importable.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import hashlib
+import io
+import json
+import math
+import os
+import re
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ._io import atomic_write
+from .errors import CassiError, OutputExistsError
+from .status import Status
+
+MARKER_DIR = ".cassi-corpus"
+ID_COLUMNS = ("subject", "task", "status", "error")
+FLOAT_DIGITS = 6  # decimals written for floats: um, micro-degrees, us
+
+
+# ------------------------------------------------------------------------ items
+@dataclass(frozen=True, order=False)
+class CorpusItem:
+    """One unit of work: ``subject`` (upper case), ``task`` (lower case; ``""`` for
+    per-subject work) and ``path``: the pellet file (or, per subject, the dataset folder)."""
+
+    subject: str
+    task: str
+    path: str
+
+
+@dataclass(frozen=True)
+class TaskResult:
+    """What a task function returns: its summary ``row`` (flat dict: str, int, float,
+    bool, None) and the ``outputs`` it wrote (paths)."""
+
+    row: dict
+    outputs: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class ItemResult:
+    """One item's outcome: ``status`` OK or FAILED, ``error`` (one line, ``""`` if OK),
+    the task's ``row`` (empty if failed), ``resumed`` if taken from a completion marker."""
+
+    item: CorpusItem
+    status: Status
+    error: str = ""
+    row: dict = field(default_factory=dict)
+    resumed: bool = False
+
+
+def _natural(text: str) -> list:
+    return [int(s) if s.isdigit() else s for s in re.split(r"([0-9]+)", text)]
+
+
+def _order(item: CorpusItem) -> tuple:
+    return (_natural(item.subject), _natural(item.task))
+
+
+def dataset_items(dataset, *, subjects: Iterable[str] | None = None,
+                  tasks: Iterable[str] | None = None,
+                  per_subject: bool = False) -> list[CorpusItem]:
+    """The items of a ``dataset.Dataset`` (or its folder), in natural order: one per
+    recording, or with ``per_subject`` one per subject (``task=""``, ``path`` = the
+    dataset folder). ``subjects``/``tasks`` restrict the choice (names, any case)."""
+    from .dataset import Dataset
+
+    ds = dataset if isinstance(dataset, Dataset) else Dataset(dataset)
+    names = ds.subjects() if subjects is None else [str(s).upper() for s in subjects]
+    wanted = None if tasks is None else {str(t).lower() for t in tasks}
+    items = []
+    for subject in names:
+        chosen = [t for t in ds.tasks(subject) if wanted is None or t in wanted]
+        if per_subject and chosen:
+            items.append(CorpusItem(subject, "", str(ds.root)))
+        elif not per_subject:
+            items += [CorpusItem(subject, t, str(ds.pellet_path(subject, t))) for t in chosen]
+    return items
+
+
+def item_rng(item: CorpusItem, seed: int = 0):
+    """A numpy Generator that depends only on ``(seed, subject, task)``, for tasks that
+    draw random numbers: the same on every worker and in every order."""
+    import numpy as np
+
+    digest = hashlib.sha256(f"{item.subject}\0{item.task}".encode()).digest()
+    return np.random.default_rng([int(seed), *(int.from_bytes(digest[i:i + 4], "little")
+                                               for i in range(0, 16, 4))])
+
+
+# --------------------------------------------------------- markers and resuming
+def marker_path(out_dir: str | os.PathLike, item: CorpusItem) -> Path:
+    """Where ``item``'s completion marker lives."""
+    return Path(out_dir) / MARKER_DIR / item.subject / f"{item.task or '_subject'}.json"
+
+
+def task_fingerprint(task: Callable, options: Mapping[str, Any]) -> str:
+    """SHA-256 of the task's qualified name and its options: a marker written with other
+    settings does not count as done."""
+    text = json.dumps([task.__module__, task.__qualname__, dict(sorted(options.items()))],
+                      sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _file_digest(path: Path) -> dict:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return {"bytes": path.stat().st_size, "sha256": h.hexdigest()}
+
+
+def _write_marker(out_dir: str, item: CorpusItem, fingerprint: str, result: TaskResult):
+    root = Path(out_dir)
+    outputs = {}
+    for p in result.outputs:
+        p = Path(p)
+        rel = os.path.relpath(p, root) if p.is_absolute() else str(p)
+        outputs[rel] = _file_digest(root / rel)
+    doc = {"subject": item.subject, "task": item.task, "fingerprint": fingerprint,
+           "row": result.row, "outputs": outputs}
+    atomic_write(marker_path(out_dir, item), json.dumps(doc, indent=1, sort_keys=True) + "\n",
+                 overwrite=True)
+
+
+def completed_row(out_dir: str | os.PathLike, item: CorpusItem, fingerprint: str) -> dict | None:
+    """The row stored for ``item`` if its marker exists, was written with ``fingerprint``
+    and every output it lists is present with the recorded size and SHA-256; else None."""
+    path = marker_path(out_dir, item)
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if doc.get("fingerprint") != fingerprint:
+        return None
+    for rel, want in doc.get("outputs", {}).items():
+        out = Path(out_dir) / rel
+        if not out.is_file() or out.stat().st_size != want["bytes"] or _file_digest(out) != want:
+            return None
+    return doc["row"]
+
+
+# ------------------------------------------------------------ running one item
+def _one_line(exc: BaseException) -> str:
+    """The error as one line: the message of a CassiError, else ``Type: message``."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    if not isinstance(exc, CassiError):
+        text = f"{type(exc).__name__}: {text}"
+    return text if len(text) <= 300 else text[:297] + "..."
+
+
+def _set_x64(x64: bool | None) -> None:
+    if x64 is None:
+        return
+    import jax
+
+    if bool(jax.config.jax_enable_x64) != x64:
+        jax.config.update("jax_enable_x64", x64)
+
+
+def run_item(task: Callable[..., TaskResult], item: CorpusItem, out_dir: str,
+             options: Mapping[str, Any], fingerprint: str, x64: bool | None) -> ItemResult:
+    """Run ``task`` on one item (in a worker): ``ItemResult`` OK with the row after the
+    marker is written, or FAILED with the one-line error. KeyboardInterrupt and SystemExit
+    pass through: an interrupted run stops, and its finished items stay marked."""
+    try:
+        _set_x64(x64)  # a Dask worker is shared and long-lived: set it for every task
+        result = task(item, out_dir, **options)
+        if not isinstance(result, TaskResult):
+            raise TypeError(f"{task.__qualname__} returned {type(result).__name__}, "
+                            "not a TaskResult")
+        _write_marker(out_dir, item, fingerprint, result)
+    except Exception as exc:  # noqa: BLE001 -- isolation: one bad recording, one FAILED row
+        return ItemResult(item, Status.FAILED, _one_line(exc))
+    return ItemResult(item, Status.OK, "", result.row)
+
+
+def _init_worker(x64: bool | None) -> None:
+    _set_x64(x64)
+
+
+# ---------------------------------------------------------------- the executor
+def default_jobs() -> int:
+    """The cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+@dataclass
+class _Pool:
+    executor: cf.Executor | None  # None: run in this process
+    workers: int
+    close: Callable[[], None] = lambda: None
+
+
+def _dask_pool(client, close) -> _Pool:
+    workers = client.scheduler_info().get("workers", {})
+    threads = sum(int(w.get("nthreads", 1)) for w in workers.values()) or 1
+    return _Pool(client.get_executor(pure=False), threads, close)
+
+
+def _open_pool(executor, jobs, scheduler, n_items: int, x64) -> _Pool:
+    if executor is not None:
+        if hasattr(executor, "get_executor"):  # a dask.distributed.Client
+            return _dask_pool(executor, lambda: None)
+        workers = getattr(executor, "_max_workers", None) or 0
+        return _Pool(executor, int(workers))
+    if scheduler is not None:
+        from distributed import Client
+
+        client = Client(scheduler)
+        return _dask_pool(client, client.close)
+    jobs = default_jobs() if jobs is None else int(jobs)
+    if jobs < 1:
+        raise CassiError(f"jobs must be at least 1, got {jobs}")
+    jobs = min(jobs, max(n_items, 1))
+    if jobs == 1:
+        return _Pool(None, 1)
+    import multiprocessing
+
+    pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context(
+        "spawn"), initializer=_init_worker, initargs=(x64,))
+    return _Pool(pool, jobs, lambda: pool.shutdown(wait=True))
+
+
+def _current_x64() -> bool | None:
+    import sys
+
+    if "jax" not in sys.modules:
+        return None
+    return bool(sys.modules["jax"].config.jax_enable_x64)
+
+
+# ------------------------------------------------------------------- the runner
+@dataclass
+class CorpusRun:
+    """A finished run: ``results`` sorted by (subject, task), ``workers`` used."""
+
+    results: list[ItemResult]
+    workers: int
+
+    @property
+    def failed(self) -> list[ItemResult]:
+        return [r for r in self.results if r.status == Status.FAILED]
+
+    @property
+    def resumed(self) -> int:
+        return sum(r.resumed for r in self.results)
+
+    def rows(self) -> list[dict]:
+        """The corpus table: ``subject, task, status, error`` then the task's columns."""
+        return [{"subject": r.item.subject, "task": r.item.task, "status": r.status.label,
+                 "error": r.error, **r.row} for r in self.results]
+
+    def failure_summary(self) -> str:
+        """``"k of n failed:"`` and one line per failed item; ``""`` if none failed."""
+        if not self.failed:
+            return ""
+        lines = [f"{len(self.failed)} of {len(self.results)} failed:"]
+        lines += [f"  {r.item.subject} {r.item.task}: {r.error}".rstrip() for r in self.failed]
+        return "\n".join(lines)
+
+
+def run_corpus(
+    task: Callable[..., TaskResult],
+    items: Sequence[CorpusItem],
+    out_dir: str | os.PathLike,
+    *,
+    options: Mapping[str, Any] | None = None,
+    executor: cf.Executor | Any | None = None,
+    jobs: int | None = None,
+    scheduler: str | None = None,
+    resume: bool = False,
+    overwrite: bool = False,
+    x64: bool | None = None,
+    progress: bool = True,
+    desc: str = "corpus",
+) -> CorpusRun:
+    """Run ``task(item, out_dir, overwrite=..., **options)`` on every item; see the
+    module doc. Where: ``executor`` (any Executor or a Dask Client), else ``scheduler``
+    (a Dask scheduler address), else ``jobs`` processes (default: all cores; 1 = this
+    process). ``resume`` skips items already done with the same task and options;
+    without ``resume`` or ``overwrite`` a folder holding markers of an earlier run is
+    refused (OutputExistsError). ``x64``: float64 in the workers (default: as here).
+    Returns every item's result, failed ones included; raises only for the run itself
+    (bad arguments, an interruption).
+    """
+    out = Path(out_dir)
+    markers = out / MARKER_DIR
+    if not (resume or overwrite) and markers.is_dir() and any(markers.iterdir()):
+        raise OutputExistsError(f"{out}: holds an earlier corpus run (pass resume=True / "
+                                "--resume to continue it, or overwrite=True / --force)")
+    options = {**(options or {}), "overwrite": bool(overwrite or resume)}
+    fingerprint = task_fingerprint(task, {k: v for k, v in options.items() if k != "overwrite"})
+    items = sorted(dict.fromkeys(items), key=_order)
+    done, todo = [], []
+    for item in items:
+        row = completed_row(out, item, fingerprint) if resume else None
+        if row is None:
+            todo.append(item)
+        else:
+            done.append(ItemResult(item, Status.OK, "", row, resumed=True))
+    x64 = _current_x64() if x64 is None else x64
+    pool = _open_pool(executor, jobs, scheduler, len(todo), x64) if todo else _Pool(None, 1)
+    try:
+        results = _collect(pool, task, todo, str(out), options, fingerprint, x64,
+                           progress, desc, len(items), len(done))
+    finally:
+        pool.close()
+    return CorpusRun(sorted(done + results, key=lambda r: _order(r.item)), pool.workers)
+
+
+def _progress_bar(progress, desc, workers, total, initial):
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=initial, disable=not progress, unit="rec",
+                desc=f"{desc} ({workers} worker{'s' if workers != 1 else ''})")
+
+
+def _collect(pool, task, todo, out, options, fingerprint, x64, progress, desc, total, initial):
+    bar = _progress_bar(progress, desc, pool.workers, total, initial)
+    results, failed = [], 0
+
+    def record(result):
+        nonlocal failed
+        results.append(result)
+        failed += result.status == Status.FAILED
+        bar.update(1)
+        if failed:
+            bar.set_postfix_str(f"{failed} failed")
+
+    try:
+        if pool.executor is None:
+            for item in todo:
+                record(run_item(task, item, out, options, fingerprint, x64))
+            return results
+        futures = {pool.executor.submit(run_item, task, item, out, options, fingerprint, x64):
+                   item for item in todo}
+        try:
+            for future in cf.as_completed(futures):
+                try:
+                    record(future.result())
+                except Exception as exc:  # noqa: BLE001 -- the worker died, or pickling
+                    record(ItemResult(futures[future], Status.FAILED, _one_line(exc)))
+        except BaseException:
+            for future in futures:
+                future.cancel()
+            raise
+        return results
+    finally:
+        bar.close()
+
+
+# ----------------------------------------------------------------------- tables
+def _cell(value) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "nan"
+        return f"{value:.{FLOAT_DIGITS}f}"
+    return str(value)
+
+
+def table_columns(rows: Sequence[Mapping]) -> list[str]:
+    """``ID_COLUMNS`` first (those present), then the others in first-seen order."""
+    seen = dict.fromkeys(c for c in ID_COLUMNS if any(c in r for r in rows))
+    for row in rows:
+        seen.update(dict.fromkeys(row))
+    return list(seen)
+
+
+def csv_text(rows: Sequence[Mapping], columns: Sequence[str] | None = None) -> str:
+    """The rows as CSV text: floats with ``FLOAT_DIGITS`` decimals, None as empty."""
+    import csv
+
+    columns = table_columns(rows) if columns is None else list(columns)
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(columns)
+    for row in rows:
+        writer.writerow([_cell(row.get(c)) for c in columns])
+    return buffer.getvalue()
+
+
+def _parquet_bytes(rows, columns) -> bytes:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pa.Table.from_pylist([{c: r.get(c) for c in columns} for r in rows])
+    buffer = io.BytesIO()
+    pq.write_table(table, buffer)
+    return buffer.getvalue()
+
+
+def parquet_available() -> bool:
+    try:
+        import pyarrow.parquet  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def write_table(rows: Sequence[Mapping], path: str | os.PathLike, *,
+                columns: Sequence[str] | None = None, parquet: bool | None = None,
+                overwrite: bool = False) -> list[Path]:
+    """Write ``rows`` to ``path`` (``.csv``) and, when pyarrow is importable (or
+    ``parquet=True``), beside it with the suffix ``.parquet``. Atomic. Returns the paths."""
+    path = Path(path)
+    columns = table_columns(rows) if columns is None else list(columns)
+    written = [atomic_write(path, csv_text(rows, columns), overwrite=overwrite)]
+    if parquet_available() if parquet is None else parquet:
+        written.append(atomic_write(path.with_suffix(".parquet"), _parquet_bytes(rows, columns),
+                                    overwrite=overwrite))
+    return written
+
+
+# ------------------------------------------------------------- per-worker model
+_MODELS: dict[str, Any] = {}
+
+
+def model_digest(model_dir: str | os.PathLike | None = None) -> str:
+    """SHA-256 over the files of a model folder (default: the package's model)."""
+    from .face_model import default_model_dir
+
+    folder = Path(model_dir) if model_dir is not None else default_model_dir()
+    h = hashlib.sha256()
+    for p in sorted(q for q in folder.iterdir() if q.is_file()):
+        h.update(p.name.encode() + b"\0" + p.read_bytes())
+    return h.hexdigest()
+
+
+def worker_model(model_dir: str | os.PathLike | None = None):
+    """The face model, loaded once per worker process and kept by content digest, so
+    that task functions can take a plain folder name and still reuse what the worker
+    compiled for it (``eqx.filter_jit`` caches on the model's static topology)."""
+    from .face_model import load_model
+
+    key = model_digest(model_dir)
+    if key not in _MODELS:
+        _MODELS[key] = load_model(model_dir)
+    return _MODELS[key]
+
+
+# ----------------------------------------------------------- `cassi jaw DATASET`
+JAW_FRAME_COLUMNS = ("time_s", "theta_deg", "pivot_a_mm", "pivot_b_mm", "tx_mm", "ty_mm",
+                     "residual_mm", "status")
+#: the jaw statuses counted per recording (Status values 0-5)
+JAW_STATUSES = (Status.OK, Status.PIVOT_UNDEFINED, Status.DEGENERATE, Status.NON_FINITE,
+                Status.INVALID_FRAME, Status.NOT_CONVERGED)
+
+
+def jaw_frame_csv(times, fit, labels=None) -> str:
+    """One recording's jaw table, as ``cassi jaw RECORDING`` writes it (one row per frame,
+    :data:`JAW_FRAME_COLUMNS`), plus a ``label`` column when ``labels`` are given
+    (``labels.Labels``; ``""`` between labelled intervals)."""
+    import numpy as np
+
+    columns = list(JAW_FRAME_COLUMNS) + (["label"] if labels is not None else [])
+    theta_deg = np.rad2deg(fit.theta)
+    names = [Status(int(c)).label for c in fit.status]
+    current = labels.at(times) if labels is not None else None
+    lines = [",".join(columns)]
+    for k in range(len(times)):
+        values = (times[k], theta_deg[k], fit.pivot[k, 0], fit.pivot[k, 1],
+                  fit.translation[k, 0], fit.translation[k, 1], fit.residual[k])
+        line = ",".join(f"{v:.6f}" for v in values) + f",{names[k]}"
+        if current is not None:
+            line += "," + _csv_field(str(current[k]))
+        lines.append(line)
+    return "\n".join(lines) + "\n"
+
+
+def _csv_field(text: str) -> str:
+    return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n\r') else text
+
+
+def _iqr(x) -> float | None:
+    import numpy as np
+
+    if x.size == 0:
+        return None
+    q1, q3 = np.percentile(x, [25, 75])
+    return float(q3 - q1)
+
+
+def jaw_summary_row(fit, *, label_file: str = "") -> dict:
+    """The corpus-table row of one jaw fit: method, frames, angle range (deg) over the
+    fitted frames, pivot spread (interquartile range of the pivot's a and b over frames
+    with a defined pivot, mm), residuals (rms and max over fitted frames, mm), the noise
+    estimate, convergence and the number of frames per status."""
+    import numpy as np
+
+    fitted = fit.status == int(Status.OK)
+    theta_deg = np.rad2deg(fit.theta[fitted])
+    pivots = fit.pivot[fitted & fit.pivot_defined]
+    residual = fit.residual[fitted]
+    row = {
+        "method": fit.method, "solver": fit.solver, "frames": int(fit.status.size),
+        "theta_min_deg": float(theta_deg.min()) if theta_deg.size else None,
+        "theta_max_deg": float(theta_deg.max()) if theta_deg.size else None,
+        "theta_range_deg": float(np.ptp(theta_deg)) if theta_deg.size else None,
+        "pivot_iqr_a_mm": _iqr(pivots[:, 0]), "pivot_iqr_b_mm": _iqr(pivots[:, 1]),
+        "residual_rms_mm": float(np.sqrt(np.mean(residual**2))) if residual.size else None,
+        "residual_max_mm": float(residual.max()) if residual.size else None,
+        "noise_mm": float(fit.noise_mm), "converged": bool(fit.converged),
+    }
+    for s in JAW_STATUSES:
+        row[f"frames_{s.label.replace('-', '_')}"] = int(np.sum(fit.status == int(s)))
+    row["label_file"] = label_file
+    return row
+
+
+def fit_jaw_bucketed(track, *, method: str = "closed-form", solver: str = "optimistix-lm",
+                     smoothness: float = 1.0):
+    """``jaw_fit.jaw_from_track`` with the frames padded to a size bucket
+    (``animate.frame_bucket``: 512, 768, 1024, ... frames), so that a worker compiles the
+    fit once per bucket instead of once per recording length (the XRMB lengths all
+    differ). The padding is untracked frames after the last: the per-frame methods give
+    the real frames the values of an unpadded fit (they are fitted frame by frame and
+    the noise is pooled over usable frames only), and "fixed-pivot" gets zero weight for
+    them. "smooth-pivot" is not padded: its pivot-path knots depend on the length."""
+    import dataclasses
+
+    import numpy as np
+
+    from .animate import frame_bucket
+    from .jaw_fit import jaw_from_track
+    from .txy import FRAME_STEP_US, PelletTrack
+
+    if method == "smooth-pivot":
+        return jaw_from_track(track, method=method, solver=solver, smoothness=float(smoothness))
+    n = track.n_frames
+    extra = frame_bucket(n) - n
+    step = FRAME_STEP_US * 1e-6
+    padded = PelletTrack(
+        times=np.concatenate([track.times, track.times[-1] + step * np.arange(1, extra + 1)]),
+        positions=np.concatenate([track.positions, np.full((extra, 8, 2), np.nan)]),
+        valid=np.concatenate([track.valid, np.zeros((extra, 8, 2), bool)]),
+        path=track.path,
+    )
+    fit = jaw_from_track(padded, method=method, solver=solver)
+    per_frame = {f.name: getattr(fit, f.name)[:n] for f in dataclasses.fields(fit)
+                 if isinstance(getattr(fit, f.name), np.ndarray)
+                 and getattr(fit, f.name).shape[:1] == (n + extra,)}
+    return dataclasses.replace(fit, **per_frame)
+
+
+def jaw_output_path(out_dir: str | os.PathLike, item: CorpusItem) -> Path:
+    """``out_dir/SUBJECT/TASK.jaw.csv``."""
+    return Path(out_dir) / item.subject / f"{item.task}.jaw.csv"
+
+
+def jaw_task(item: CorpusItem, out_dir: str, *, method: str = "closed-form",
+             solver: str = "optimistix-lm", smoothness: float = 1.0,
+             labels: bool = True, overwrite: bool = False) -> TaskResult:
+    """``cassi jaw DATASET``'s task: fit the jaw of one pellet file
+    (``jaw_fit.jaw_from_track``), write ``out_dir/SUBJECT/TASK.jaw.csv`` (one row per
+    frame, with a ``label`` column when ``labels`` and a label file lies beside the
+    pellet file) and return the summary row (:func:`jaw_summary_row`)."""
+    from .labels import labels_for
+    from .txy import read_txy
+
+    track = read_txy(item.path)
+    fit = fit_jaw_bucketed(track, method=method, solver=solver, smoothness=smoothness)
+    found = labels_for(item.path) if labels else None
+    out = jaw_output_path(out_dir, item)
+    atomic_write(out, jaw_frame_csv(track.times, fit, found), overwrite=overwrite)
+    label_file = found.path.name if found is not None and found.path is not None else ""
+    return TaskResult(jaw_summary_row(fit, label_file=label_file), (str(out),))
+
+
+def jaw_corpus_path(out_dir: str | os.PathLike) -> Path:
+    """``out_dir/jaw_corpus.csv`` (and ``.parquet`` beside it)."""
+    return Path(out_dir) / "jaw_corpus.csv"
