@@ -1,0 +1,218 @@
+"""The corpus runner: identical tables in this process, on a local process pool and on a
+Dask cluster; a broken file becomes one FAILED row; an interrupted run resumes with only
+the rest; markers check their outputs; the jaw task's per-recording and corpus tables."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cassi_fit.corpus import (
+    CorpusItem,
+    TaskResult,
+    csv_text,
+    dataset_items,
+    item_rng,
+    jaw_corpus_path,
+    jaw_output_path,
+    jaw_task,
+    marker_path,
+    run_corpus,
+    write_table,
+)
+from cassi_fit.errors import OutputExistsError
+from cassi_fit.labels import Labels, write_lab
+from cassi_fit.status import Status
+from cassi_fit.synth import generate_corpus
+
+TASKS = ("tp040", "tp106")  # the synthetic corpus's two shortest speech tasks
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory):
+    """2 subjects x 2 tasks, one of them labelled, plus one broken pellet file (S02/TP999)."""
+    root = generate_corpus(tmp_path_factory.mktemp("corpus"), n_subjects=2, tasks=TASKS,
+                           audio=False)
+    write_lab(root / "S01" / "TP040.lab", Labels([0.5, 1.0], [1.0, 1.5], ("pa", "ta")))
+    (root / "S02" / "TP999.TXY").write_text("0\t1\t2\n")  # 3 fields, not 17
+    return root
+
+
+@pytest.fixture(scope="module")
+def serial(corpus, tmp_path_factory):
+    """The reference run: in this process (jobs=1)."""
+    out = tmp_path_factory.mktemp("serial")
+    run = run_corpus(jaw_task, dataset_items(corpus), out, jobs=1, progress=False)
+    write_table(run.rows(), jaw_corpus_path(out))
+    return out, run
+
+
+def _outputs(out: Path) -> dict[str, bytes]:
+    """Every table the run wrote (markers aside), by relative path."""
+    return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*"))
+            if p.is_file() and ".cassi-corpus" not in p.parts}
+
+
+def test_broken_file_is_one_failed_row_and_the_rest_run(serial, corpus):
+    out, run = serial
+    assert [(r.item.subject, r.item.task) for r in run.results] == [
+        ("S01", "tp040"), ("S01", "tp106"), ("S02", "tp040"), ("S02", "tp106"),
+        ("S02", "tp999")]
+    assert [r.status for r in run.failed] == [Status.FAILED]
+    bad = run.failed[0]
+    assert bad.item.task == "tp999" and "TP999.TXY:1:" in bad.error and "\n" not in bad.error
+    assert not marker_path(out, bad.item).exists()
+    assert "1 of 5 failed" in run.failure_summary() and "tp999" in run.failure_summary()
+    rows = run.rows()
+    assert [r["status"] for r in rows] == ["ok"] * 4 + ["failed"]
+    ok = rows[0]
+    assert ok["method"] == "closed-form" and ok["frames"] > 100
+    assert ok["frames_ok"] + ok["frames_invalid_frame"] + ok["frames_pivot_undefined"] == (
+        ok["frames"])
+    assert 2.0 < ok["theta_range_deg"] < 30.0 and 0.0 < ok["residual_rms_mm"] < 2.0
+    assert ok["label_file"] == "TP040.lab" and rows[1]["label_file"] == ""
+
+
+def test_jaw_csv_per_recording_with_labels(serial, corpus):
+    out, run = serial
+    item = run.results[0].item
+    lines = jaw_output_path(out, item).read_text().splitlines()
+    header = lines[0].split(",")
+    assert header[-1] == "label" and header[:2] == ["time_s", "theta_deg"]
+    rows = [line.split(",") for line in lines[1:]]
+    assert len(rows) == run.results[0].row["frames"]
+    by_label = {r[-1] for r in rows if 0.5 <= float(r[0]) < 1.0}
+    assert by_label == {"pa"}
+    assert {r[-1] for r in rows if float(r[0]) >= 1.5} == {""}
+    no_labels = jaw_output_path(out, run.results[1].item).read_text().splitlines()[0]
+    assert not no_labels.endswith(",label")
+
+
+def test_tables_are_written_as_csv_and_parquet(serial):
+    import pyarrow.parquet as pq
+
+    out, run = serial
+    csv = jaw_corpus_path(out)
+    assert csv.read_text() == csv_text(run.rows())
+    table = pq.read_table(csv.with_suffix(".parquet")).to_pylist()
+    assert [r["task"] for r in table] == [r["task"] for r in run.rows()]
+    assert table[0]["theta_range_deg"] == run.rows()[0]["theta_range_deg"]
+    assert table[-1]["status"] == "failed" and table[-1]["theta_range_deg"] is None
+
+
+def test_process_pool_gives_identical_tables(serial, corpus, tmp_path):
+    out, reference = serial
+    run = run_corpus(jaw_task, dataset_items(corpus), tmp_path, jobs=2, progress=False)
+    assert run.workers == 2
+    write_table(run.rows(), jaw_corpus_path(tmp_path))
+    assert _outputs(tmp_path) == _outputs(out)
+
+
+@pytest.fixture(scope="module")
+def dask_cluster():
+    distributed = pytest.importorskip("distributed")
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                       dashboard_address=None)
+    yield cluster
+    cluster.close()
+
+
+def test_dask_cluster_gives_identical_tables(serial, corpus, dask_cluster, tmp_path):
+    out, reference = serial
+    run = run_corpus(jaw_task, dataset_items(corpus), tmp_path,
+                     scheduler=dask_cluster.scheduler_address, progress=False)
+    assert run.workers == 2
+    write_table(run.rows(), jaw_corpus_path(tmp_path))
+    assert _outputs(tmp_path) == _outputs(out)
+
+
+# --------------------------------------------------------- resuming (in-process tasks)
+CALLS: list[tuple[str, str]] = []
+FINISHED: list[tuple[str, str]] = []
+STOP_AT: list[tuple[str, str]] = []  # the item at which the "user" presses Ctrl-C
+
+
+def counting_task(item: CorpusItem, out_dir: str, *, scale: float = 1.0, delay: float = 0.0,
+                  overwrite: bool = False) -> TaskResult:
+    """Writes one small file per item; raises KeyboardInterrupt at ``STOP_AT`` (an
+    interruption), ValueError for subject S02 task tp106 (a failure). ``delay``: seconds
+    to wait, longer for items that sort first, so they finish last on a pool."""
+    import time
+
+    from cassi_fit._io import atomic_write
+
+    CALLS.append((item.subject, item.task))
+    time.sleep(delay * (1 + (item.subject < "S02") + (item.task > "tp100")))
+    if (item.subject, item.task) in STOP_AT:
+        raise KeyboardInterrupt
+    if (item.subject, item.task) == ("S02", "tp106"):
+        raise ValueError("no jaw here\nsecond line")
+    value = float(item_rng(item).normal()) * scale
+    out = atomic_write(Path(out_dir) / f"{item.subject}_{item.task}.txt", f"{value!r}\n",
+                       overwrite=overwrite)
+    FINISHED.append((item.subject, item.task))
+    return TaskResult({"value": value}, (str(out),))
+
+
+ITEMS = [CorpusItem(s, t, "") for s in ("S02", "S01", "S10") for t in ("tp106", "tp040")]
+
+
+def test_interrupted_run_resumes_with_only_the_rest(tmp_path):
+    whole = run_corpus(counting_task, ITEMS, tmp_path / "whole", jobs=1, progress=False)
+    CALLS.clear()
+    STOP_AT[:] = [("S02", "tp040")]
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run_corpus(counting_task, ITEMS, tmp_path / "part", jobs=1, progress=False)
+    finally:
+        STOP_AT.clear()
+    done = [("S01", "tp040"), ("S01", "tp106")]  # natural (subject, task) order
+    assert CALLS == [*done, ("S02", "tp040")]
+    with pytest.raises(OutputExistsError, match="resume"):
+        run_corpus(counting_task, ITEMS, tmp_path / "part", jobs=1, progress=False)
+    CALLS.clear()
+    rest = run_corpus(counting_task, ITEMS, tmp_path / "part", jobs=1, progress=False,
+                      resume=True)
+    assert sorted(CALLS) == sorted({(i.subject, i.task) for i in ITEMS} - set(done))
+    assert rest.resumed == 2
+    assert csv_text(rest.rows()) == csv_text(whole.rows())
+
+
+def test_resume_skips_done_items_and_redoes_missing_outputs(tmp_path):
+    CALLS.clear()
+    first = run_corpus(counting_task, ITEMS, tmp_path, jobs=1, progress=False)
+    assert len(CALLS) == 6 and [r.status for r in first.failed] == [Status.FAILED]
+    assert first.failed[0].error == "ValueError: no jaw here second line"
+    CALLS.clear()
+    (tmp_path / "S10_tp040.txt").unlink()  # an output lost after its marker was written
+    (tmp_path / "S01_tp106.txt").write_text("0.0\n")  # an output changed
+    again = run_corpus(counting_task, ITEMS, tmp_path, jobs=1, progress=False, resume=True)
+    assert sorted(CALLS) == [("S01", "tp106"), ("S02", "tp106"), ("S10", "tp040")]
+    assert again.resumed == 3
+    assert csv_text(again.rows()) == csv_text(first.rows())
+    CALLS.clear()
+    run_corpus(counting_task, ITEMS, tmp_path, jobs=1, progress=False, resume=True,
+               options={"scale": 2.0})  # other settings: nothing counts as done
+    assert len(CALLS) == 6
+
+
+def test_any_executor_and_completion_order_give_the_same_table(tmp_path):
+    from concurrent.futures import ThreadPoolExecutor
+
+    serial = run_corpus(counting_task, ITEMS, tmp_path / "serial", jobs=1, progress=False)
+    FINISHED.clear()
+    with ThreadPoolExecutor(max_workers=3) as pool:
+        threaded = run_corpus(counting_task, ITEMS, tmp_path / "threads", executor=pool,
+                              progress=False, options={"delay": 0.05})
+    assert threaded.workers == 3
+    in_order = sorted(FINISHED, key=lambda st: (st[0], st[1]))
+    assert len(FINISHED) == 5 and FINISHED != in_order  # they finished in another order
+    assert csv_text(threaded.rows()) == csv_text(serial.rows())
+
+
+def test_item_rng_depends_only_on_seed_subject_task():
+    a, b = CorpusItem("S01", "tp040", "x"), CorpusItem("S01", "tp040", "y")
+    assert item_rng(a).normal() == item_rng(b).normal()
+    assert item_rng(a).normal() != item_rng(a, seed=1).normal()
+    assert item_rng(a).normal() != item_rng(CorpusItem("S01", "tp106", "x")).normal()
+    assert np.isfinite(item_rng(a).normal())
