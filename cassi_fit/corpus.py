@@ -553,12 +553,18 @@ def jaw_summary_row(fit, *, label_file: str = "") -> dict:
     return row
 
 
+#: frames per padding bucket of the jaw fits: one compilation covers every recording up to
+#: 7 s; the padding's cost is nothing for the closed form, and up to 3x a short recording's
+#: fitting time for "frame-fit" (still far below one compilation)
+JAW_FRAME_BUCKET = 1024
+
+
 def fit_jaw_bucketed(track, *, method: str = "closed-form", solver: str = "optimistix-lm",
                      smoothness: float = 1.0):
-    """``jaw_fit.jaw_from_track`` with the frames padded to a size bucket
-    (``animate.frame_bucket``: 512, 768, 1024, ... frames), so that a worker compiles the
-    fit once per bucket instead of once per recording length (the XRMB lengths all
-    differ). The padding is untracked frames after the last: the per-frame methods give
+    """``jaw_fit.jaw_from_track`` with the frames padded to a multiple of
+    :data:`JAW_FRAME_BUCKET` (1024 frames, 7 s), so that a worker compiles the fit once per
+    bucket instead of once per recording length (the XRMB lengths all differ; compiling
+    costs about 2-3 s a length, fitting a recording tens of ms). The padding is untracked frames after the last: the per-frame methods give
     the real frames the values of an unpadded fit (they are fitted frame by frame and
     the noise is pooled over usable frames only), and "fixed-pivot" gets zero weight for
     them. "smooth-pivot" is not padded: its pivot-path knots depend on the length."""
@@ -566,14 +572,13 @@ def fit_jaw_bucketed(track, *, method: str = "closed-form", solver: str = "optim
 
     import numpy as np
 
-    from .animate import frame_bucket
     from .jaw_fit import jaw_from_track
     from .txy import FRAME_STEP_US, PelletTrack
 
     if method == "smooth-pivot":
         return jaw_from_track(track, method=method, solver=solver, smoothness=float(smoothness))
     n = track.n_frames
-    extra = frame_bucket(n) - n
+    extra = -n % JAW_FRAME_BUCKET
     step = FRAME_STEP_US * 1e-6
     padded = PelletTrack(
         times=np.concatenate([track.times, track.times[-1] + step * np.arange(1, extra + 1)]),

@@ -88,6 +88,20 @@ def test_jaw_csv_per_recording_with_labels(serial, corpus):
     assert not no_labels.endswith(",label")
 
 
+def test_padding_to_a_frame_bucket_leaves_the_fit_unchanged(corpus):
+    from cassi_fit.corpus import JAW_FRAME_BUCKET, fit_jaw_bucketed
+    from cassi_fit.jaw_fit import jaw_from_track
+    from cassi_fit.txy import read_txy
+
+    track = read_txy(dataset_items(corpus)[0].path)
+    assert track.n_frames % JAW_FRAME_BUCKET  # so there is padding
+    plain, padded = jaw_from_track(track), fit_jaw_bucketed(track)
+    for name in ("theta", "translation", "pivot", "pivot_defined", "residual", "status",
+                 "covariance", "pivot_covariance"):
+        np.testing.assert_array_equal(getattr(padded, name), getattr(plain, name))
+    assert (padded.noise_mm, padded.converged) == (plain.noise_mm, plain.converged)
+
+
 def test_tables_are_written_as_csv_and_parquet(serial):
     import pyarrow.parquet as pq
 
