@@ -59,11 +59,23 @@ FLOAT_DIGITS = 6  # decimals written for floats: um, micro-degrees, us
 @dataclass(frozen=True, order=False)
 class CorpusItem:
     """One unit of work: ``subject`` (upper case), ``task`` (lower case; ``""`` for
-    per-subject work) and ``path``: the pellet file (or, per subject, the dataset folder)."""
+    per-subject work), ``path``: the pellet file (or, per subject, the dataset folder),
+    and ``root``: the dataset folder it came from (``""`` for a lone file)."""
 
     subject: str
     task: str
     path: str
+    root: str = ""
+
+
+def load_item(item: CorpusItem):
+    """The item's ``dataset.Recording`` (pellets with the subject's palate, pharynx, head
+    measures and audio), found as ``Dataset(root).load`` does, or beside a lone file."""
+    from .dataset import Dataset, load_recording
+
+    if item.root:
+        return Dataset(item.root).load(item.subject, item.task)
+    return load_recording(item.path)
 
 
 @dataclass(frozen=True)
@@ -110,9 +122,10 @@ def dataset_items(dataset, *, subjects: Iterable[str] | None = None,
     for subject in names:
         chosen = [t for t in ds.tasks(subject) if wanted is None or t in wanted]
         if per_subject and chosen:
-            items.append(CorpusItem(subject, "", str(ds.root)))
+            items.append(CorpusItem(subject, "", str(ds.root), str(ds.root)))
         elif not per_subject:
-            items += [CorpusItem(subject, t, str(ds.pellet_path(subject, t))) for t in chosen]
+            items += [CorpusItem(subject, t, str(ds.pellet_path(subject, t)), str(ds.root))
+                      for t in chosen]
     return items
 
 
@@ -598,23 +611,37 @@ def jaw_output_path(out_dir: str | os.PathLike, item: CorpusItem) -> Path:
     return Path(out_dir) / item.subject / f"{item.task}.jaw.csv"
 
 
+def segments_output_path(out_dir: str | os.PathLike, item: CorpusItem) -> Path:
+    """``out_dir/SUBJECT/TASK.segments.csv``."""
+    return Path(out_dir) / item.subject / f"{item.task}.segments.csv"
+
+
 def jaw_task(item: CorpusItem, out_dir: str, *, method: str = "closed-form",
              solver: str = "optimistix-lm", smoothness: float = 1.0,
              labels: bool = True, overwrite: bool = False) -> TaskResult:
     """``cassi jaw DATASET``'s task: fit the jaw of one pellet file
-    (``jaw_fit.jaw_from_track``), write ``out_dir/SUBJECT/TASK.jaw.csv`` (one row per
-    frame, with a ``label`` column when ``labels`` and a label file lies beside the
-    pellet file) and return the summary row (:func:`jaw_summary_row`)."""
-    from .labels import labels_for
+    (:func:`fit_jaw_bucketed`), write ``out_dir/SUBJECT/TASK.jaw.csv`` (one row per frame)
+    and return the summary row (:func:`jaw_summary_row`). When ``labels`` and a label
+    file lies beside the pellet file (``labels.labels_for``), the frame table gets a
+    ``label`` column and ``TASK.segments.csv`` holds one row per labelled segment
+    (``labels.segment_summary``: peak jaw opening, lip aperture range, ...)."""
+    from .labels import SEGMENT_COLUMNS, labels_for, segment_summary
     from .txy import read_txy
 
     track = read_txy(item.path)
     fit = fit_jaw_bucketed(track, method=method, solver=solver, smoothness=smoothness)
     found = labels_for(item.path) if labels else None
     out = jaw_output_path(out_dir, item)
-    atomic_write(out, jaw_frame_csv(track.times, fit, found), overwrite=overwrite)
-    label_file = found.path.name if found is not None and found.path is not None else ""
-    return TaskResult(jaw_summary_row(fit, label_file=label_file), (str(out),))
+    outputs = [atomic_write(out, jaw_frame_csv(track.times, fit, found), overwrite=overwrite)]
+    label_file = ""
+    if found is not None:
+        label_file = found.path.name if found.path is not None else ""
+        rows = segment_summary(track.times, fit.theta, track.positions, found,
+                               usable=fit.status == int(Status.OK))
+        outputs.append(atomic_write(segments_output_path(out_dir, item),
+                                    csv_text(rows, SEGMENT_COLUMNS), overwrite=overwrite))
+    return TaskResult(jaw_summary_row(fit, label_file=label_file),
+                      tuple(str(p) for p in outputs))
 
 
 def jaw_corpus_path(out_dir: str | os.PathLike) -> Path:

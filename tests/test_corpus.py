@@ -2,6 +2,7 @@
 Dask cluster; a broken file becomes one FAILED row; an interrupted run resumes with only
 the rest; markers check their outputs; the jaw task's per-recording and corpus tables."""
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -16,8 +17,11 @@ from cassi_fit.corpus import (
     jaw_corpus_path,
     jaw_output_path,
     jaw_task,
+    load_item,
     marker_path,
     run_corpus,
+    segments_output_path,
+    worker_model,
     write_table,
 )
 from cassi_fit.errors import OutputExistsError
@@ -86,6 +90,14 @@ def test_jaw_csv_per_recording_with_labels(serial, corpus):
     assert {r[-1] for r in rows if float(r[0]) >= 1.5} == {""}
     no_labels = jaw_output_path(out, run.results[1].item).read_text().splitlines()[0]
     assert not no_labels.endswith(",label")
+    # per-segment summaries from the same fit: the peak is the largest angle in the segment
+    segments = segments_output_path(out, item).read_text().splitlines()
+    assert segments[0].startswith("label,start_s,end_s,frames,status,jaw_peak_opening_deg")
+    pa = dict(zip(segments[0].split(","), segments[1].split(","), strict=True))
+    assert pa["label"] == "pa" and pa["status"] == "ok" and len(segments) == 3
+    in_pa = [float(r[1]) for r in rows if 0.5 <= float(r[0]) < 1.0 and r[7] == "ok"]
+    assert float(pa["jaw_peak_opening_deg"]) == pytest.approx(max(in_pa), abs=1e-6)
+    assert not segments_output_path(out, run.results[1].item).exists()
 
 
 def test_padding_to_a_frame_bucket_leaves_the_fit_unchanged(corpus):
@@ -222,6 +234,28 @@ def test_any_executor_and_completion_order_give_the_same_table(tmp_path):
     in_order = sorted(FINISHED, key=lambda st: (st[0], st[1]))
     assert len(FINISHED) == 5 and FINISHED != in_order  # they finished in another order
     assert csv_text(threaded.rows()) == csv_text(serial.rows())
+
+
+def test_one_progress_bar_with_the_worker_count(tmp_path, capsys):
+    run_corpus(counting_task, ITEMS, tmp_path, jobs=1, progress=True, desc="jaw")
+    err = capsys.readouterr().err
+    assert "jaw (1 worker)" in err and "1 failed" in err
+    assert err.count("\n") <= 1  # one bar, redrawn in place, not one per item
+
+
+def test_worker_model_is_loaded_once_per_content(tmp_path):
+    from cassi_fit.face_model import default_model_dir
+
+    model = worker_model()
+    assert worker_model() is model
+    copy = shutil.copytree(default_model_dir(), tmp_path / "model")
+    assert worker_model(copy) is model  # same files, same digest: no second load
+
+
+def test_load_item_finds_the_subject_data(corpus):
+    recording = load_item(dataset_items(corpus)[0])
+    assert (recording.subject, recording.task) == ("S01", "tp040")
+    assert recording.palate is not None and not recording.head_is_default
 
 
 def test_item_rng_depends_only_on_seed_subject_task():
