@@ -115,16 +115,18 @@ def dataset_items(dataset, *, subjects: Iterable[str] | None = None,
     dataset folder). ``subjects``/``tasks`` restrict the choice (names, any case)."""
     from .dataset import Dataset
 
-    ds = dataset if isinstance(dataset, Dataset) else Dataset(dataset)
+    # absolute paths: a Dask worker may run in another folder (or on another machine
+    # that mounts the same file system)
+    ds = dataset if isinstance(dataset, Dataset) else Dataset(os.path.abspath(dataset))
     names = ds.subjects() if subjects is None else [str(s).upper() for s in subjects]
     wanted = None if tasks is None else {str(t).lower() for t in tasks}
-    items = []
+    items, root = [], os.path.abspath(ds.root)
     for subject in names:
         chosen = [t for t in ds.tasks(subject) if wanted is None or t in wanted]
         if per_subject and chosen:
-            items.append(CorpusItem(subject, "", str(ds.root), str(ds.root)))
+            items.append(CorpusItem(subject, "", root, root))
         elif not per_subject:
-            items += [CorpusItem(subject, t, str(ds.pellet_path(subject, t)), str(ds.root))
+            items += [CorpusItem(subject, t, os.path.abspath(ds.pellet_path(subject, t)), root)
                       for t in chosen]
     return items
 
@@ -170,8 +172,15 @@ def _write_marker(out_dir: str, item: CorpusItem, fingerprint: str, result: Task
         outputs[rel] = _file_digest(root / rel)
     doc = {"subject": item.subject, "task": item.task, "fingerprint": fingerprint,
            "row": result.row, "outputs": outputs}
-    atomic_write(marker_path(out_dir, item), json.dumps(doc, indent=1, sort_keys=True) + "\n",
-                 overwrite=True)
+    text = json.dumps(doc, indent=1, sort_keys=True, default=_json_scalar) + "\n"
+    atomic_write(marker_path(out_dir, item), text, overwrite=True)
+
+
+def _json_scalar(value):
+    """numpy scalars in rows (``np.int64``, ``np.bool_``) as Python numbers."""
+    if hasattr(value, "item"):
+        return value.item()
+    raise TypeError(f"a row value of type {type(value).__name__} cannot be stored")
 
 
 def completed_row(out_dir: str | os.PathLike, item: CorpusItem, fingerprint: str) -> dict | None:
@@ -215,6 +224,8 @@ def run_item(task: Callable[..., TaskResult], item: CorpusItem, out_dir: str,
     marker is written, or FAILED with the one-line error. KeyboardInterrupt and SystemExit
     pass through: an interrupted run stops, and its finished items stay marked."""
     try:
+        # a marker says the latest attempt succeeded: an attempt that fails leaves none
+        marker_path(out_dir, item).unlink(missing_ok=True)
         _set_x64(x64)  # a Dask worker is shared and long-lived: set it for every task
         result = task(item, out_dir, **options)
         if not isinstance(result, TaskResult):
@@ -273,7 +284,7 @@ def _open_pool(executor, jobs, scheduler, n_items: int, x64) -> _Pool:
 
     pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context(
         "spawn"), initializer=_init_worker, initargs=(x64,))
-    return _Pool(pool, jobs, lambda: pool.shutdown(wait=True))
+    return _Pool(pool, jobs, lambda: pool.shutdown(wait=True, cancel_futures=True))
 
 
 def _current_x64() -> bool | None:
@@ -301,9 +312,15 @@ class CorpusRun:
         return sum(r.resumed for r in self.results)
 
     def rows(self) -> list[dict]:
-        """The corpus table: ``subject, task, status, error`` then the task's columns."""
-        return [{"subject": r.item.subject, "task": r.item.task, "status": r.status.label,
-                 "error": r.error, **r.row} for r in self.results]
+        """The corpus table: ``subject, task, status, error`` (the runner's, whatever the
+        task's row says under those names) then the task's columns."""
+        out = []
+        for r in self.results:
+            row = {"subject": r.item.subject, "task": r.item.task, "status": r.status.label,
+                   "error": r.error}
+            row.update((k, v) for k, v in r.row.items() if k not in ID_COLUMNS)
+            out.append(row)
+        return out
 
     def failure_summary(self) -> str:
         """``"k of n failed:"`` and one line per failed item; ``""`` if none failed."""
@@ -338,7 +355,7 @@ def run_corpus(
     Returns every item's result, failed ones included; raises only for the run itself
     (bad arguments, an interruption).
     """
-    out = Path(out_dir)
+    out = Path(out_dir).absolute()  # workers may run in another folder
     markers = out / MARKER_DIR
     if not (resume or overwrite) and markers.is_dir() and any(markers.iterdir()):
         raise OutputExistsError(f"{out}: holds an earlier corpus run (pass resume=True / "

@@ -156,6 +156,7 @@ def test_dask_cluster_gives_identical_tables(serial, corpus, dask_cluster, tmp_p
 CALLS: list[tuple[str, str]] = []
 FINISHED: list[tuple[str, str]] = []
 STOP_AT: list[tuple[str, str]] = []  # the item at which the "user" presses Ctrl-C
+FAIL_AT: list[tuple[str, str]] = []  # items that fail besides S02 tp106
 
 
 def counting_task(item: CorpusItem, out_dir: str, *, scale: float = 1.0, delay: float = 0.0,
@@ -171,7 +172,7 @@ def counting_task(item: CorpusItem, out_dir: str, *, scale: float = 1.0, delay: 
     time.sleep(delay * (1 + (item.subject < "S02") + (item.task > "tp100")))
     if (item.subject, item.task) in STOP_AT:
         raise KeyboardInterrupt
-    if (item.subject, item.task) == ("S02", "tp106"):
+    if (item.subject, item.task) in [("S02", "tp106"), *FAIL_AT]:
         raise ValueError("no jaw here\nsecond line")
     value = float(item_rng(item).normal()) * scale
     out = atomic_write(Path(out_dir) / f"{item.subject}_{item.task}.txt", f"{value!r}\n",
@@ -216,6 +217,16 @@ def test_resume_skips_done_items_and_redoes_missing_outputs(tmp_path):
     assert sorted(CALLS) == [("S01", "tp106"), ("S02", "tp106"), ("S10", "tp040")]
     assert again.resumed == 3
     assert csv_text(again.rows()) == csv_text(first.rows())
+    FAIL_AT[:] = [("S10", "tp040")]  # done before, fails now: its old marker must go
+    try:
+        failing = run_corpus(counting_task, ITEMS, tmp_path, jobs=1, progress=False,
+                             overwrite=True)
+    finally:
+        FAIL_AT.clear()
+    assert len(failing.failed) == 2 and not marker_path(tmp_path, ITEMS[5]).exists()
+    CALLS.clear()
+    run_corpus(counting_task, ITEMS, tmp_path, jobs=1, progress=False, resume=True)
+    assert sorted(CALLS) == [("S02", "tp106"), ("S10", "tp040")]
     CALLS.clear()
     run_corpus(counting_task, ITEMS, tmp_path, jobs=1, progress=False, resume=True,
                options={"scale": 2.0})  # other settings: nothing counts as done
