@@ -31,7 +31,7 @@ def _load() -> str:
     return "load average " + ", ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
-def child(jobs: int, method: str, solver: str, out: str) -> None:
+def child(jobs: int, method: str, solver: str, out: str, cache: str | None) -> None:
     """One setting, in this fresh process: print {"cold": s, "warm": s, ...} as JSON."""
     import concurrent.futures as cf
     import multiprocessing
@@ -49,7 +49,7 @@ def child(jobs: int, method: str, solver: str, out: str) -> None:
     for k in range(2):
         run = run_corpus(jaw_task, items, os.path.join(out, str(k)), executor=pool,
                          jobs=1, options={"method": method, "solver": solver}, x64=True,
-                         progress=False)
+                         compilation_cache=cache, progress=False)
         walls.append(time.perf_counter() - started)
         if run.failed:
             raise SystemExit(run.failure_summary())
@@ -64,7 +64,9 @@ def measure(jobs, args) -> dict:
     with tempfile.TemporaryDirectory() as out:
         done = subprocess.run(
             [sys.executable, __file__, "--child", str(jobs), "--method", args.method,
-             "--solver", args.solver, "--out", out],
+             "--solver", args.solver, "--out", out]
+            + ([] if args.compilation_cache is None else
+               ["--compilation-cache", args.compilation_cache]),
             check=True, capture_output=True, text=True)
     return json.loads(done.stdout.strip().splitlines()[-1])
 
@@ -75,15 +77,20 @@ def main(argv=None) -> None:
     parser.add_argument("--solver", default="optimistix-lm")
     parser.add_argument("--jobs", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--database", type=int, default=5000, metavar="RECORDINGS")
+    parser.add_argument("--compilation-cache", metavar="DIR",
+                        help="JAX's persistent compilation cache for the workers (a second "
+                        "benchmark run then shows the cold cost with compiled code on disk)")
     parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--out", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
-        return child(args.child, args.method, args.solver, args.out)
+        return child(args.child, args.method, args.solver, args.out, args.compilation_cache)
     from cassi_fit.synth import ensure_default_corpus
 
     ensure_default_corpus()  # generated outside the timing
-    print(f"jaw method {args.method}; cores: {os.cpu_count()}; {_load()}")
+    cache = f"compilation cache {args.compilation_cache}" if args.compilation_cache else (
+        "no compilation cache")
+    print(f"jaw method {args.method}; {cache}; cores: {os.cpu_count()}; {_load()}")
     results = {}
     for jobs in args.jobs:
         r = results[jobs] = measure(jobs, args)

@@ -10,7 +10,8 @@ subject for per-subject work such as calibration) and collects one summary row p
   takes any Executor (or a Dask ``Client``), and ``jobs=1`` runs in this process with no
   pool. Workers live for the whole run, so what JAX compiles (cached by ``jax.jit`` /
   ``eqx.filter_jit`` in the worker process) and the face model (:func:`worker_model`) are
-  paid once per worker, not once per recording.
+  paid once per worker, not once per recording; ``compilation_cache=DIR`` lets workers
+  and later runs load compiled code from JAX's persistent cache instead.
 * **Task functions** are module-level (picklable) functions
   ``task(item, out_dir, *, overwrite, **options) -> TaskResult`` taking plain arguments:
   they read the item's files, write their outputs under ``out_dir`` atomically, and return
@@ -209,24 +210,41 @@ def _one_line(exc: BaseException) -> str:
     return text if len(text) <= 300 else text[:297] + "..."
 
 
-def _set_x64(x64: bool | None) -> None:
-    if x64 is None:
+@dataclass(frozen=True)
+class JaxSettings:
+    """What every worker sets before a task: ``x64`` (float64; None leaves JAX's
+    default) and ``compilation_cache`` (a folder for JAX's persistent compilation cache,
+    shared by the workers and by later runs, so that a worker loads what another one or
+    an earlier run compiled; None: no cache)."""
+
+    x64: bool | None = None
+    compilation_cache: str | None = None
+
+
+def _configure_jax(settings: JaxSettings) -> None:
+    if settings.x64 is None and settings.compilation_cache is None:
         return
     import jax
 
-    if bool(jax.config.jax_enable_x64) != x64:
-        jax.config.update("jax_enable_x64", x64)
+    if settings.x64 is not None and bool(jax.config.jax_enable_x64) != settings.x64:
+        jax.config.update("jax_enable_x64", settings.x64)
+    cache = settings.compilation_cache
+    if cache is not None and jax.config.jax_compilation_cache_dir != cache:
+        jax.config.update("jax_compilation_cache_dir", cache)
+        # the jaw fits compile in seconds: keep every entry, not only slow ones
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
 
 def run_item(task: Callable[..., TaskResult], item: CorpusItem, out_dir: str,
-             options: Mapping[str, Any], fingerprint: str, x64: bool | None) -> ItemResult:
+             options: Mapping[str, Any], fingerprint: str, jax_settings: JaxSettings
+             ) -> ItemResult:
     """Run ``task`` on one item (in a worker): ``ItemResult`` OK with the row after the
     marker is written, or FAILED with the one-line error. KeyboardInterrupt and SystemExit
     pass through: an interrupted run stops, and its finished items stay marked."""
     try:
         # a marker says the latest attempt succeeded: an attempt that fails leaves none
         marker_path(out_dir, item).unlink(missing_ok=True)
-        _set_x64(x64)  # a Dask worker is shared and long-lived: set it for every task
+        _configure_jax(jax_settings)  # a Dask worker is long-lived and shared: every task
         result = task(item, out_dir, **options)
         if not isinstance(result, TaskResult):
             raise TypeError(f"{task.__qualname__} returned {type(result).__name__}, "
@@ -237,8 +255,8 @@ def run_item(task: Callable[..., TaskResult], item: CorpusItem, out_dir: str,
     return ItemResult(item, Status.OK, "", result.row)
 
 
-def _init_worker(x64: bool | None) -> None:
-    _set_x64(x64)
+def _init_worker(jax_settings: JaxSettings) -> None:
+    _configure_jax(jax_settings)
 
 
 # ---------------------------------------------------------------- the executor
@@ -263,7 +281,7 @@ def _dask_pool(client, close) -> _Pool:
     return _Pool(client.get_executor(pure=False), threads, close)
 
 
-def _open_pool(executor, jobs, scheduler, n_items: int, x64) -> _Pool:
+def _open_pool(executor, jobs, scheduler, n_items: int, jax_settings) -> _Pool:
     if executor is not None:
         if hasattr(executor, "get_executor"):  # a dask.distributed.Client
             return _dask_pool(executor, lambda: None)
@@ -283,7 +301,7 @@ def _open_pool(executor, jobs, scheduler, n_items: int, x64) -> _Pool:
     import multiprocessing
 
     pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context(
-        "spawn"), initializer=_init_worker, initargs=(x64,))
+        "spawn"), initializer=_init_worker, initargs=(jax_settings,))
     return _Pool(pool, jobs, lambda: pool.shutdown(wait=True, cancel_futures=True))
 
 
@@ -343,6 +361,7 @@ def run_corpus(
     resume: bool = False,
     overwrite: bool = False,
     x64: bool | None = None,
+    compilation_cache: str | os.PathLike | None = None,
     progress: bool = True,
     desc: str = "corpus",
 ) -> CorpusRun:
@@ -351,7 +370,9 @@ def run_corpus(
     (a Dask scheduler address), else ``jobs`` processes (default: all cores; 1 = this
     process). ``resume`` skips items already done with the same task and options;
     without ``resume`` or ``overwrite`` a folder holding markers of an earlier run is
-    refused (OutputExistsError). ``x64``: float64 in the workers (default: as here).
+    refused (OutputExistsError). ``x64``: float64 in the workers (default: as in this
+    process); ``compilation_cache``: a folder for JAX's persistent compilation cache in
+    every worker (see :class:`JaxSettings`).
     Returns every item's result, failed ones included; raises only for the run itself
     (bad arguments, an interruption).
     """
@@ -370,10 +391,13 @@ def run_corpus(
             todo.append(item)
         else:
             done.append(ItemResult(item, Status.OK, "", row, resumed=True))
-    x64 = _current_x64() if x64 is None else x64
-    pool = _open_pool(executor, jobs, scheduler, len(todo), x64) if todo else _Pool(None, 1)
+    jax_settings = JaxSettings(
+        _current_x64() if x64 is None else bool(x64),
+        None if compilation_cache is None else os.path.abspath(compilation_cache))
+    pool = (_open_pool(executor, jobs, scheduler, len(todo), jax_settings) if todo
+            else _Pool(None, 1))
     try:
-        results = _collect(pool, task, todo, str(out), options, fingerprint, x64,
+        results = _collect(pool, task, todo, str(out), options, fingerprint, jax_settings,
                            progress, desc, len(items), len(done))
     finally:
         pool.close()
@@ -387,7 +411,8 @@ def _progress_bar(progress, desc, workers, total, initial):
                 desc=f"{desc} ({workers} worker{'s' if workers != 1 else ''})")
 
 
-def _collect(pool, task, todo, out, options, fingerprint, x64, progress, desc, total, initial):
+def _collect(pool, task, todo, out, options, fingerprint, jax_settings, progress, desc, total,
+             initial):
     bar = _progress_bar(progress, desc, pool.workers, total, initial)
     results, failed = [], 0
 
@@ -402,10 +427,10 @@ def _collect(pool, task, todo, out, options, fingerprint, x64, progress, desc, t
     try:
         if pool.executor is None:
             for item in todo:
-                record(run_item(task, item, out, options, fingerprint, x64))
+                record(run_item(task, item, out, options, fingerprint, jax_settings))
             return results
-        futures = {pool.executor.submit(run_item, task, item, out, options, fingerprint, x64):
-                   item for item in todo}
+        futures = {pool.executor.submit(run_item, task, item, out, options, fingerprint,
+                                        jax_settings): item for item in todo}
         try:
             for future in cf.as_completed(futures):
                 try:

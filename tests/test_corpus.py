@@ -128,8 +128,12 @@ def test_tables_are_written_as_csv_and_parquet(serial):
 
 def test_process_pool_gives_identical_tables(serial, corpus, tmp_path):
     out, reference = serial
-    run = run_corpus(jaw_task, dataset_items(corpus), tmp_path, jobs=2, progress=False)
+    cache = tmp_path / "jax-cache"
+    run = run_corpus(jaw_task, dataset_items(corpus), tmp_path / "out", jobs=2,
+                     progress=False, compilation_cache=cache)
     assert run.workers == 2
+    assert any(cache.iterdir())  # the workers stored what they compiled
+    tmp_path = tmp_path / "out"
     write_table(run.rows(), jaw_corpus_path(tmp_path))
     assert _outputs(tmp_path) == _outputs(out)
 
