@@ -33,6 +33,8 @@ subject for per-subject work such as calibration) and collects one summary row p
 table as CSV, and as Parquet when pyarrow is importable.
 """
 
+# jaxtyping's shape strings (" n") are not Python expressions:
+# ruff: noqa: F722
 from __future__ import annotations
 
 import concurrent.futures as cf
@@ -45,11 +47,21 @@ import re
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ._io import atomic_write
 from .errors import CassiError, OutputExistsError
 from .status import Status
+
+if TYPE_CHECKING:
+    import numpy as np
+    from jaxtyping import Float
+
+    from .dataset import Dataset, Recording
+    from .face_model import FaceModel
+    from .jaw_fit import JawFit
+    from .labels import Labels
+    from .txy import PelletTrack
 
 MARKER_DIR = ".cassi-corpus"
 ID_COLUMNS = ("subject", "task", "status", "error")
@@ -69,7 +81,7 @@ class CorpusItem:
     root: str = ""
 
 
-def load_item(item: CorpusItem):
+def load_item(item: CorpusItem) -> Recording:
     """The item's ``dataset.Recording`` (pellets with the subject's palate, pharynx, head
     measures and audio), found as ``Dataset(root).load`` does, or beside a lone file."""
     from .dataset import Dataset, load_recording
@@ -108,7 +120,7 @@ def _order(item: CorpusItem) -> tuple:
     return (_natural(item.subject), _natural(item.task))
 
 
-def dataset_items(dataset, *, subjects: Iterable[str] | None = None,
+def dataset_items(dataset: Dataset | str | os.PathLike, *, subjects: Iterable[str] | None = None,
                   tasks: Iterable[str] | None = None,
                   per_subject: bool = False) -> list[CorpusItem]:
     """The items of a ``dataset.Dataset`` (or its folder), in natural order: one per
@@ -132,7 +144,7 @@ def dataset_items(dataset, *, subjects: Iterable[str] | None = None,
     return items
 
 
-def item_rng(item: CorpusItem, seed: int = 0):
+def item_rng(item: CorpusItem, seed: int = 0) -> np.random.Generator:
     """A numpy Generator that depends only on ``(seed, subject, task)``, for tasks that
     draw random numbers: the same on every worker and in every order."""
     import numpy as np
@@ -527,7 +539,7 @@ def model_digest(model_dir: str | os.PathLike | None = None) -> str:
     return h.hexdigest()
 
 
-def worker_model(model_dir: str | os.PathLike | None = None):
+def worker_model(model_dir: str | os.PathLike | None = None) -> FaceModel:
     """The face model, loaded once per worker process and kept by content digest, so
     that task functions can take a plain folder name and still reuse what the worker
     compiled for it (``eqx.filter_jit`` caches on the model's static topology)."""
@@ -547,7 +559,8 @@ JAW_STATUSES = (Status.OK, Status.PIVOT_UNDEFINED, Status.DEGENERATE, Status.NON
                 Status.INVALID_FRAME, Status.NOT_CONVERGED)
 
 
-def jaw_frame_csv(times, fit, labels=None) -> str:
+def jaw_frame_csv(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels | None = None
+                  ) -> str:
     """One recording's jaw table, as ``cassi jaw RECORDING`` writes it (one row per frame,
     :data:`JAW_FRAME_COLUMNS`), plus a ``label`` column when ``labels`` are given
     (``labels.Labels``; ``""`` between labelled intervals)."""
@@ -572,7 +585,7 @@ def _csv_field(text: str) -> str:
     return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n\r') else text
 
 
-def _iqr(x) -> float | None:
+def _iqr(x: np.ndarray) -> float | None:
     import numpy as np
 
     if x.size == 0:
@@ -581,7 +594,7 @@ def _iqr(x) -> float | None:
     return float(q3 - q1)
 
 
-def jaw_summary_row(fit, *, label_file: str = "") -> dict:
+def jaw_summary_row(fit: JawFit, *, label_file: str = "") -> dict:
     """The corpus-table row of one jaw fit: method, frames, angle range (deg) over the
     fitted frames, pivot spread (interquartile range of the pivot's a and b over frames
     with a defined pivot, mm), residuals (rms and max over fitted frames, mm), the noise
@@ -614,8 +627,8 @@ def jaw_summary_row(fit, *, label_file: str = "") -> dict:
 JAW_FRAME_BUCKET = 1024
 
 
-def fit_jaw_bucketed(track, *, method: str = "closed-form", solver: str = "optimistix-lm",
-                     smoothness: float = 1.0):
+def fit_jaw_bucketed(track: PelletTrack, *, method: str = "closed-form",
+                     solver: str = "optimistix-lm", smoothness: float = 1.0) -> JawFit:
     """``jaw_fit.jaw_from_track`` with the frames padded to a multiple of
     :data:`JAW_FRAME_BUCKET` (1024 frames, 7 s), so that a worker compiles the fit once per
     bucket instead of once per recording length (the XRMB lengths all differ; compiling
