@@ -3,6 +3,7 @@ Dask cluster; a broken file becomes one FAILED row; an interrupted run resumes w
 the rest; markers check their outputs; the jaw task's per-recording and corpus tables."""
 
 import shutil
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -163,17 +164,28 @@ STOP_AT: list[tuple[str, str]] = []  # the item at which the "user" presses Ctrl
 FAIL_AT: list[tuple[str, str]] = []  # items that fail besides S02 tp106
 
 
-def counting_task(item: CorpusItem, out_dir: str, *, scale: float = 1.0, delay: float = 0.0,
-                  overwrite: bool = False) -> TaskResult:
+def counting_task(item: CorpusItem, out_dir: str, *, scale: float = 1.0,
+                  reverse: bool = False, overwrite: bool = False) -> TaskResult:
     """Writes one small file per item; raises KeyboardInterrupt at ``STOP_AT`` (an
-    interruption), ValueError for subject S02 task tp106 (a failure). ``delay``: seconds
-    to wait, longer for items that sort first, so they finish last on a pool."""
-    import time
+    interruption), ValueError for subject S02 task tp106 and ``FAIL_AT`` (failures).
+    ``reverse``: on a pool running every item at once, each item waits for the one after
+    it in (subject, task) order to finish, so they finish in reverse order."""
+    key = (item.subject, item.task)
+    if reverse:
+        later = ORDER[ORDER.index(key) + 1:]
+        if later:
+            assert DONE[later[0]].wait(timeout=30)
+    try:
+        return _count(item, out_dir, scale, overwrite)
+    finally:
+        if reverse:
+            DONE[key].set()
 
+
+def _count(item, out_dir, scale, overwrite):
     from cassi_fit._io import atomic_write
 
     CALLS.append((item.subject, item.task))
-    time.sleep(delay * (1 + (item.subject < "S02") + (item.task > "tp100")))
     if (item.subject, item.task) in STOP_AT:
         raise KeyboardInterrupt
     if (item.subject, item.task) in [("S02", "tp106"), *FAIL_AT]:
@@ -186,6 +198,8 @@ def counting_task(item: CorpusItem, out_dir: str, *, scale: float = 1.0, delay: 
 
 
 ITEMS = [CorpusItem(s, t, "") for s in ("S02", "S01", "S10") for t in ("tp106", "tp040")]
+ORDER = sorted((i.subject, i.task) for i in ITEMS)  # the table's order
+DONE: dict = {}
 
 
 def test_interrupted_run_resumes_with_only_the_rest(tmp_path):
@@ -242,12 +256,12 @@ def test_any_executor_and_completion_order_give_the_same_table(tmp_path):
 
     serial = run_corpus(counting_task, ITEMS, tmp_path / "serial", jobs=1, progress=False)
     FINISHED.clear()
-    with ThreadPoolExecutor(max_workers=3) as pool:
+    DONE.update({key: threading.Event() for key in ORDER})
+    with ThreadPoolExecutor(max_workers=len(ITEMS)) as pool:
         threaded = run_corpus(counting_task, ITEMS, tmp_path / "threads", executor=pool,
-                              progress=False, options={"delay": 0.05})
-    assert threaded.workers == 3
-    in_order = sorted(FINISHED, key=lambda st: (st[0], st[1]))
-    assert len(FINISHED) == 5 and FINISHED != in_order  # they finished in another order
+                              progress=False, options={"reverse": True})
+    assert threaded.workers == len(ITEMS)
+    assert FINISHED == [k for k in reversed(ORDER) if k != ("S02", "tp106")]
     assert csv_text(threaded.rows()) == csv_text(serial.rows())
 
 
