@@ -702,3 +702,36 @@ def jaw_task(item: CorpusItem, out_dir: str, *, method: str = "closed-form",
 def jaw_corpus_path(out_dir: str | os.PathLike) -> Path:
     """``out_dir/jaw_corpus.csv`` (and ``.parquet`` beside it)."""
     return Path(out_dir) / "jaw_corpus.csv"
+
+
+def jaw_corpus(
+    dataset: Dataset | str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    method: str = "closed-form",
+    solver: str = "optimistix-lm",
+    smoothness: float = 1.0,
+    labels: bool = True,
+    subjects: Iterable[str] | None = None,
+    tasks: Iterable[str] | None = None,
+    **run_options: Any,
+) -> tuple[CorpusRun, list[Path]]:
+    """``cassi jaw DATASET --out DIR``: :func:`jaw_task` on every recording (float64, as
+    the single-recording command), then the corpus table ``DIR/jaw_corpus.csv`` (and
+    ``.parquet``). ``run_options`` go to :func:`run_corpus` (``jobs``, ``scheduler``,
+    ``executor``, ``resume``, ``overwrite``, ``progress``, ``compilation_cache``).
+    Returns the run (``run.failed``: exit non-zero) and the table files written."""
+    replace = bool(run_options.get("overwrite") or run_options.get("resume"))
+    table = jaw_corpus_path(out_dir)
+    if table.exists() and not replace:  # refuse before the run, not after it
+        raise OutputExistsError(f"{table}: file exists (pass overwrite=True / --force, or "
+                                "resume=True / --resume)")
+    run_options.setdefault("x64", True)  # pivots to a micrometre need float64 (cassi jaw)
+    run_options.setdefault("desc", "jaw")
+    options = {"method": method, "solver": solver, "labels": bool(labels)}
+    if method == "smooth-pivot":
+        options["smoothness"] = float(smoothness)
+    run = run_corpus(jaw_task, dataset_items(dataset, subjects=subjects, tasks=tasks),
+                     out_dir, options=options, **run_options)
+    written = write_table(run.rows(), table, overwrite=replace)
+    return run, written

@@ -15,15 +15,14 @@ from cassi_fit.corpus import (
     csv_text,
     dataset_items,
     item_rng,
+    jaw_corpus,
     jaw_corpus_path,
     jaw_output_path,
-    jaw_task,
     load_item,
     marker_path,
     run_corpus,
     segments_output_path,
     worker_model,
-    write_table,
 )
 from cassi_fit.errors import OutputExistsError
 from cassi_fit.labels import Labels, write_lab
@@ -47,8 +46,8 @@ def corpus(tmp_path_factory):
 def serial(corpus, tmp_path_factory):
     """The reference run: in this process (jobs=1)."""
     out = tmp_path_factory.mktemp("serial")
-    run = run_corpus(jaw_task, dataset_items(corpus), out, jobs=1, progress=False)
-    write_table(run.rows(), jaw_corpus_path(out))
+    run, written = jaw_corpus(corpus, out, jobs=1, progress=False)
+    assert written == [jaw_corpus_path(out), jaw_corpus_path(out).with_suffix(".parquet")]
     return out, run
 
 
@@ -115,6 +114,12 @@ def test_padding_to_a_frame_bucket_leaves_the_fit_unchanged(corpus):
     assert (padded.noise_mm, padded.converged) == (plain.noise_mm, plain.converged)
 
 
+def test_jaw_corpus_refuses_to_replace_a_table_before_running(serial, corpus):
+    out, _ = serial
+    with pytest.raises(OutputExistsError, match="jaw_corpus.csv"):
+        jaw_corpus(corpus, out, jobs=1, progress=False)
+
+
 def test_tables_are_written_as_csv_and_parquet(serial):
     import pyarrow.parquet as pq
 
@@ -130,13 +135,11 @@ def test_tables_are_written_as_csv_and_parquet(serial):
 def test_process_pool_gives_identical_tables(serial, corpus, tmp_path):
     out, reference = serial
     cache = tmp_path / "jax-cache"
-    run = run_corpus(jaw_task, dataset_items(corpus), tmp_path / "out", jobs=2,
-                     progress=False, compilation_cache=cache)
+    run, _ = jaw_corpus(corpus, tmp_path / "out", jobs=2, progress=False,
+                        compilation_cache=cache)
     assert run.workers == 2
     assert any(cache.iterdir())  # the workers stored what they compiled
-    tmp_path = tmp_path / "out"
-    write_table(run.rows(), jaw_corpus_path(tmp_path))
-    assert _outputs(tmp_path) == _outputs(out)
+    assert _outputs(tmp_path / "out") == _outputs(out)
 
 
 @pytest.fixture(scope="module")
@@ -150,11 +153,16 @@ def dask_cluster():
 
 def test_dask_cluster_gives_identical_tables(serial, corpus, dask_cluster, tmp_path):
     out, reference = serial
-    run = run_corpus(jaw_task, dataset_items(corpus), tmp_path,
-                     scheduler=dask_cluster.scheduler_address, progress=False)
+    from distributed import Client
+
+    run, _ = jaw_corpus(corpus, tmp_path / "address", progress=False,
+                        scheduler=dask_cluster.scheduler_address)
     assert run.workers == 2
-    write_table(run.rows(), jaw_corpus_path(tmp_path))
-    assert _outputs(tmp_path) == _outputs(out)
+    assert _outputs(tmp_path / "address") == _outputs(out)
+    with Client(dask_cluster) as client:  # a Client passed as the executor
+        again, _ = jaw_corpus(corpus, tmp_path / "client", progress=False, executor=client)
+    assert again.workers == 2
+    assert _outputs(tmp_path / "client") == _outputs(out)
 
 
 # --------------------------------------------------------- resuming (in-process tasks)
