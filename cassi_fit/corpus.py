@@ -383,7 +383,7 @@ def run_corpus(
     process). ``resume`` skips items already done with the same task and options;
     without ``resume`` or ``overwrite`` a folder holding markers of an earlier run is
     refused (OutputExistsError). ``x64``: float64 in the workers (default: as in this
-    process); ``compilation_cache``: a folder for JAX's persistent compilation cache in
+    process; with ``jobs=1`` the setting is made in this process); ``compilation_cache``: a folder for JAX's persistent compilation cache in
     every worker (see :class:`JaxSettings`).
     Returns every item's result, failed ones included; raises only for the run itself
     (bad arguments, an interruption).
