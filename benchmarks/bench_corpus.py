@@ -36,9 +36,8 @@ def child(jobs: int, method: str, solver: str, out: str, cache: str | None) -> N
     import concurrent.futures as cf
     import multiprocessing
 
-    import jax
-
-    jax.config.update("jax_enable_x64", True)  # as `cassi jaw` computes
+    # JAX is imported by whoever computes: this process for --jobs 1, only the workers
+    # otherwise (run_corpus(x64=True) sets float64 there, as `cassi jaw` computes)
     from cassi_fit.corpus import csv_text, dataset_items, jaw_task, run_corpus
     from cassi_fit.synth import ensure_default_corpus
 
