@@ -289,6 +289,16 @@ def test_worker_model_is_loaded_once_per_content(tmp_path):
     assert worker_model(copy) is model  # same files, same digest: no second load
 
 
+def test_dataset_items_choices_and_per_subject(corpus):
+    items = dataset_items(corpus, subjects=["s02"], tasks=["TP106", "tp040"])
+    assert [(i.subject, i.task) for i in items] == [("S02", "tp040"), ("S02", "tp106")]
+    assert all(Path(i.path).is_absolute() and Path(i.path).is_file() for i in items)
+    subjects = dataset_items(corpus, per_subject=True, tasks=["tp106"])
+    assert [(i.subject, i.task, i.path) for i in subjects] == [
+        ("S01", "", str(corpus)), ("S02", "", str(corpus))]
+    assert marker_path("out", subjects[0]) == Path("out/.cassi-corpus/S01/_subject.json")
+
+
 def test_load_item_finds_the_subject_data(corpus):
     recording = load_item(dataset_items(corpus)[0])
     assert (recording.subject, recording.task) == ("S01", "tp040")
