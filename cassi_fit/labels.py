@@ -268,17 +268,28 @@ class _Located(Exception):
         self.line, self.problem = line, problem
 
 
+def _praat_text(path: Path) -> str:
+    """The file's text: Praat writes UTF-8 or, for some characters, UTF-16 with a BOM."""
+    import codecs
+
+    raw = path.read_bytes()
+    if raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        return raw.decode("utf-16", errors="replace")
+    return raw.decode("utf-8-sig", errors="replace")
+
+
 def _open_textgrid(path: Path):
+    """praatio's grid; DataFormatError with the line for what the token walk locates
+    (checked also when praatio accepts the file: it drops blank intervals unchecked)."""
     from praatio import textgrid
 
+    located = _locate_textgrid_error(path, _praat_text(path))
+    if located is not None:
+        raise DataFormatError(path, located[0], located[1])
     try:
         return textgrid.openTextgrid(str(path), includeEmptyIntervals=False,
                                      reportingMode="silence")
     except Exception as exc:  # praatio raises many types; one clear error instead
-        text = path.read_bytes().decode("utf-8", errors="replace")
-        located = _locate_textgrid_error(path, text)
-        if located is not None:
-            raise DataFormatError(path, located[0], located[1]) from None
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise DataFormatError(path, None, f"not a readable TextGrid ({first})") from None
 

@@ -117,6 +117,20 @@ def test_malformed_textgrid_names_file_and_line(tmp_path):
     with pytest.raises(DataFormatError, match="expected a number, got '0,4'") as info:
         read_textgrid(comma)
     assert info.value.line == _line_of(text, "xmax = 0.4")
+    # a reversed blank interval, in the short format: praatio alone would drop it unchecked
+    from praatio import textgrid
+
+    textgrid.openTextgrid(str(tmp_path / "good.TextGrid"), False).save(
+        str(tmp_path / "short.TextGrid"), format="short_textgrid", includeBlankSpaces=True)
+    short = (tmp_path / "short.TextGrid").read_text()
+    assert "\n0.4\n0.5\n\"\"\n" in short
+    reversed_blank = tmp_path / "reversed.TextGrid"
+    reversed_blank.write_text(short.replace("\n0.4\n0.5\n", "\n0.4\n0.3\n"))
+    with pytest.raises(DataFormatError, match="before its start") as info:
+        read_textgrid(reversed_blank)
+    lines = reversed_blank.read_text().splitlines()  # the interval's start line, 1-based
+    assert info.value.line == next(k for k in range(1, len(lines))
+                                   if lines[k - 1:k + 1] == ["0.4", "0.3"])
     garbage = tmp_path / "garbage.TextGrid"
     garbage.write_text("this is not a TextGrid\n")
     with pytest.raises(DataFormatError, match="not a readable TextGrid") as info:
