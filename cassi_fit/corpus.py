@@ -282,39 +282,54 @@ def default_jobs() -> int:
 
 @dataclass
 class _Pool:
-    executor: cf.Executor | None  # None: run in this process
+    """Where items run: ``executor`` (None: in this process), ``workers`` for the bar;
+    ``settings`` set when the pool is our own local process pool (then shut down at the
+    end, and rebuilt after a worker dies); ``client``: a Dask client we opened."""
+
+    executor: cf.Executor | None
     workers: int
-    close: Callable[[], None] = lambda: None
+    settings: JaxSettings | None = None
+    client: Any = None
+
+    def new_executor(self, n: int) -> cf.ProcessPoolExecutor:
+        import multiprocessing
+
+        return cf.ProcessPoolExecutor(
+            max_workers=n, mp_context=multiprocessing.get_context("spawn"),
+            initializer=_init_worker, initargs=(self.settings,))
+
+    def close(self) -> None:
+        if self.settings is not None and self.executor is not None:
+            self.executor.shutdown(wait=True, cancel_futures=True)
+        if self.client is not None:
+            self.client.close()
 
 
-def _dask_pool(client, close) -> _Pool:
+def _dask_pool(client, own: bool) -> _Pool:
     workers = client.scheduler_info().get("workers", {})
     threads = sum(int(w.get("nthreads", 1)) for w in workers.values()) or 1
-    return _Pool(client.get_executor(pure=False), threads, close)
+    return _Pool(client.get_executor(pure=False), threads, client=client if own else None)
 
 
 def _open_pool(executor, jobs, scheduler, n_items: int, jax_settings) -> _Pool:
     if executor is not None:
         if hasattr(executor, "get_executor"):  # a dask.distributed.Client
-            return _dask_pool(executor, lambda: None)
+            return _dask_pool(executor, own=False)
         workers = getattr(executor, "_max_workers", None) or 0
         return _Pool(executor, int(workers))
     if scheduler is not None:
         from distributed import Client
 
-        client = Client(scheduler)
-        return _dask_pool(client, client.close)
+        return _dask_pool(Client(scheduler), own=True)
     jobs = default_jobs() if jobs is None else int(jobs)
     if jobs < 1:
         raise CassiError(f"jobs must be at least 1, got {jobs}")
     jobs = min(jobs, max(n_items, 1))
     if jobs == 1:
         return _Pool(None, 1)
-    import multiprocessing
-
-    pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context(
-        "spawn"), initializer=_init_worker, initargs=(jax_settings,))
-    return _Pool(pool, jobs, lambda: pool.shutdown(wait=True, cancel_futures=True))
+    pool = _Pool(None, jobs, settings=jax_settings)
+    pool.executor = pool.new_executor(jobs)
+    return pool
 
 
 def _current_x64() -> bool | None:
@@ -436,26 +451,86 @@ def _collect(pool, task, todo, out, options, fingerprint, jax_settings, progress
         if failed:
             bar.set_postfix_str(f"{failed} failed")
 
+    def submit(executor, item):
+        return executor.submit(run_item, task, item, out, options, fingerprint, jax_settings)
+
     try:
         if pool.executor is None:
             for item in todo:
                 record(run_item(task, item, out, options, fingerprint, jax_settings))
-            return results
-        futures = {pool.executor.submit(run_item, task, item, out, options, fingerprint,
-                                        jax_settings): item for item in todo}
-        try:
-            for future in cf.as_completed(futures):
-                try:
-                    record(future.result())
-                except Exception as exc:  # noqa: BLE001 -- the worker died, or pickling
-                    record(ItemResult(futures[future], Status.FAILED, _one_line(exc)))
-        except BaseException:
-            for future in futures:
-                future.cancel()
-            raise
+        else:
+            _run_on_pool(pool, submit, todo, record)
         return results
     finally:
         bar.close()
+
+
+WORKER_DIED = "its worker process died while running it (killed, out of memory or crashed)"
+
+
+def _run_on_pool(pool, submit, todo, record) -> None:
+    """Submit ``todo`` keeping at most two items per worker in flight (so a dying worker
+    takes down only those, and Ctrl-C has little to cancel). When a worker of our own
+    pool dies, the items in flight are rerun one by one, each in a fresh one-worker
+    pool, so the item that kills its worker is found and FAILED, and the rest of the run
+    goes on in a new pool."""
+    from concurrent.futures.process import BrokenProcessPool
+
+    queue, in_flight = list(reversed(todo)), {}
+    limit = 2 * max(pool.workers, 1) + 2
+    try:
+        while queue or in_flight:
+            while queue and len(in_flight) < limit:
+                item = queue.pop()
+                try:
+                    in_flight[submit(pool.executor, item)] = item
+                except Exception as exc:  # noqa: BLE001 -- a broken pool we cannot rebuild
+                    record(ItemResult(item, Status.FAILED, _one_line(exc)))
+            if not in_flight:
+                continue
+            done, _ = cf.wait(in_flight, return_when=cf.FIRST_COMPLETED)
+            crashed = _settle(done, in_flight, record, BrokenProcessPool)
+            if crashed and pool.settings is not None:
+                done, _ = cf.wait(in_flight)  # a broken pool fails all it holds at once
+                crashed += _settle(done, in_flight, record, BrokenProcessPool)
+                pool.executor.shutdown(wait=True)
+                for item in crashed:
+                    record(_alone(pool, submit, item, BrokenProcessPool))
+                pool.executor = pool.new_executor(pool.workers)
+            else:
+                for item in crashed:
+                    record(ItemResult(item, Status.FAILED, WORKER_DIED))
+    except BaseException:
+        for future in in_flight:
+            future.cancel()
+        raise
+
+
+def _settle(done, in_flight, record, broken) -> list[CorpusItem]:
+    """Record finished futures; return the items whose worker died."""
+    crashed = []
+    for future in done:
+        item = in_flight.pop(future)
+        try:
+            record(future.result())
+        except broken:
+            crashed.append(item)
+        except Exception as exc:  # noqa: BLE001 -- e.g. a Dask worker lost, an unpicklable row
+            record(ItemResult(item, Status.FAILED, _one_line(exc)))
+    return crashed
+
+
+def _alone(pool, submit, item, broken) -> ItemResult:
+    """Run one item in a fresh one-worker pool: its result, or FAILED if it kills it."""
+    single = pool.new_executor(1)
+    try:
+        return submit(single, item).result()
+    except broken:
+        return ItemResult(item, Status.FAILED, WORKER_DIED)
+    except Exception as exc:  # noqa: BLE001
+        return ItemResult(item, Status.FAILED, _one_line(exc))
+    finally:
+        single.shutdown(wait=True)
 
 
 # ----------------------------------------------------------------------- tables

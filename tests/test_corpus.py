@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from cassi_fit.corpus import (
+    WORKER_DIED,
     CorpusItem,
     TaskResult,
     csv_text,
@@ -273,6 +274,23 @@ def test_any_executor_and_completion_order_give_the_same_table(tmp_path):
     assert threaded.workers == len(ITEMS)
     assert FINISHED == [k for k in reversed(ORDER) if k != ("S02", "tp106")]
     assert csv_text(threaded.rows()) == csv_text(serial.rows())
+
+
+def crashing_task(item: CorpusItem, out_dir: str, *, overwrite: bool = False) -> TaskResult:
+    """Kills its worker process for S01 tp106 (as a segfault or the OOM killer would)."""
+    import os
+
+    if (item.subject, item.task) == ("S01", "tp106"):
+        os._exit(3)
+    return TaskResult({"pid": 0})
+
+
+def test_a_recording_that_kills_its_worker_is_one_failed_row(tmp_path):
+    run = run_corpus(crashing_task, ITEMS, tmp_path, jobs=2, progress=False)
+    assert [(r.item.subject, r.item.task) for r in run.failed] == [("S01", "tp106")]
+    assert run.failed[0].error == WORKER_DIED
+    assert len(run.results) == 6 and all(marker_path(tmp_path, r.item).exists()
+                                         for r in run.results if r.status == Status.OK)
 
 
 def test_one_progress_bar_with_the_worker_count(tmp_path, capsys):
