@@ -16,9 +16,12 @@ subject for per-subject work such as calibration) and collects one summary row p
   ``task(item, out_dir, *, overwrite, **options) -> TaskResult`` taking plain arguments:
   they read the item's files, write their outputs under ``out_dir`` atomically, and return
   the summary row (a flat dict of numbers and strings) and the outputs' paths.
-* **Failure isolation.** An item whose task raises (or whose worker dies) becomes a row
-  with status ``FAILED`` and its one-line error; the run goes on. ``CorpusRun.failed``
-  lists them, ``CorpusRun.failure_summary()`` describes them; callers exit non-zero.
+* **Failure isolation.** An item whose task raises becomes a row with status ``FAILED``
+  and its one-line error; the run goes on. An item that kills its worker process (a
+  crash, the OOM killer) is found by rerunning the items that were in flight one by one,
+  and is FAILED alone (on a Dask cluster the nanny restarts workers and Dask reports the
+  item as lost). ``CorpusRun.failed`` lists the failures, ``failure_summary()`` describes
+  them; callers exit non-zero.
 * **Resumable.** After an item's outputs are written, a completion marker
   ``out_dir/.cassi-corpus/SUBJECT/TASK.json`` is written last, atomically; it holds the
   row, a fingerprint of the task and its options, and each output's size and SHA-256.
@@ -398,8 +401,8 @@ def run_corpus(
     process). ``resume`` skips items already done with the same task and options;
     without ``resume`` or ``overwrite`` a folder holding markers of an earlier run is
     refused (OutputExistsError). ``x64``: float64 in the workers (default: as in this
-    process; with ``jobs=1`` the setting is made in this process); ``compilation_cache``: a folder for JAX's persistent compilation cache in
-    every worker (see :class:`JaxSettings`).
+    process; with ``jobs=1`` the setting is made in this process); ``compilation_cache``:
+    a folder for JAX's persistent compilation cache in every worker (:class:`JaxSettings`).
     Returns every item's result, failed ones included; raises only for the run itself
     (bad arguments, an interruption).
     """
