@@ -1,0 +1,815 @@
+"""Whole corpora: one runner for every per-recording command, on any Executor.
+
+A corpus run applies one **task function** to many :class:`CorpusItem` s (a recording, or a
+subject for per-subject work such as calibration) and collects one summary row per item.
+
+* **Where it runs.** Items are independent tasks submitted to a
+  :class:`concurrent.futures.Executor`: ``jobs=N`` starts a local process pool ('spawn'
+  start method: JAX is not fork-safe), ``scheduler=ADDRESS`` sends the same tasks to a
+  running ``dask.distributed`` cluster (through ``Client.get_executor()``), ``executor=``
+  takes any Executor (or a Dask ``Client``), and ``jobs=1`` runs in this process with no
+  pool. Workers live for the whole run, so what JAX compiles (cached by ``jax.jit`` /
+  ``eqx.filter_jit`` in the worker process) and the face model (:func:`worker_model`) are
+  paid once per worker, not once per recording; ``compilation_cache=DIR`` lets workers
+  and later runs load compiled code from JAX's persistent cache instead.
+* **Task functions** are module-level (picklable) functions
+  ``task(item, out_dir, *, overwrite, **options) -> TaskResult`` taking plain arguments:
+  they read the item's files, write their outputs under ``out_dir`` atomically, and return
+  the summary row (a flat dict of numbers and strings) and the outputs' paths.
+* **Failure isolation.** An item whose task raises becomes a row with status ``FAILED``
+  and its one-line error; the run goes on. An item that kills its worker process (a
+  crash, the OOM killer) is found by rerunning the items that were in flight one by one,
+  and is FAILED alone (on a Dask cluster the nanny restarts workers and Dask reports the
+  item as lost). ``CorpusRun.failed`` lists the failures, ``failure_summary()`` describes
+  them; callers exit non-zero.
+* **Resumable.** After an item's outputs are written, a completion marker
+  ``out_dir/.cassi-corpus/SUBJECT/TASK.json`` is written last, atomically; it holds the
+  row, a fingerprint of the task and its options, and each output's size and SHA-256.
+  ``resume=True`` skips items whose marker matches and whose outputs are all present and
+  unchanged, and takes their rows from the markers. Failed items get no marker.
+* **Deterministic.** Results are sorted by (subject, task) in natural order; floats are
+  written with fixed precision; workers compute with the calling process's float64
+  setting; :func:`item_rng` seeds per item. Tables are byte-identical whatever the number
+  of workers, the scheduler or the completion order.
+
+:func:`jaw_task` is ``cassi jaw DATASET``'s task; :func:`write_table` writes a corpus
+table as CSV, and as Parquet when pyarrow is importable.
+"""
+
+# jaxtyping's shape strings (" n") are not Python expressions:
+# ruff: noqa: F722
+from __future__ import annotations
+
+import concurrent.futures as cf
+import hashlib
+import io
+import json
+import math
+import os
+import re
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ._io import atomic_write
+from .errors import CassiError, OutputExistsError
+from .status import Status
+
+if TYPE_CHECKING:
+    import numpy as np
+    from jaxtyping import Float
+
+    from .dataset import Dataset, Recording
+    from .face_model import FaceModel
+    from .jaw_fit import JawFit
+    from .labels import Labels
+    from .txy import PelletTrack
+
+MARKER_DIR = ".cassi-corpus"
+ID_COLUMNS = ("subject", "task", "status", "error")
+FLOAT_DIGITS = 6  # decimals written for floats: um, micro-degrees, us
+
+
+# ------------------------------------------------------------------------ items
+@dataclass(frozen=True, order=False)
+class CorpusItem:
+    """One unit of work: ``subject`` (upper case), ``task`` (lower case; ``""`` for
+    per-subject work), ``path``: the pellet file (or, per subject, the dataset folder),
+    and ``root``: the dataset folder it came from (``""`` for a lone file)."""
+
+    subject: str
+    task: str
+    path: str
+    root: str = ""
+
+
+def load_item(item: CorpusItem) -> Recording:
+    """The item's ``dataset.Recording`` (pellets with the subject's palate, pharynx, head
+    measures and audio), found as ``Dataset(root).load`` does, or beside a lone file."""
+    from .dataset import Dataset, load_recording
+
+    if item.root:
+        return Dataset(item.root).load(item.subject, item.task)
+    return load_recording(item.path)
+
+
+@dataclass(frozen=True)
+class TaskResult:
+    """What a task function returns: its summary ``row`` (flat dict: str, int, float,
+    bool, None) and the ``outputs`` it wrote (paths)."""
+
+    row: dict
+    outputs: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class ItemResult:
+    """One item's outcome: ``status`` OK or FAILED, ``error`` (one line, ``""`` if OK),
+    the task's ``row`` (empty if failed), ``resumed`` if taken from a completion marker."""
+
+    item: CorpusItem
+    status: Status
+    error: str = ""
+    row: dict = field(default_factory=dict)
+    resumed: bool = False
+
+
+def _natural(text: str) -> list:
+    return [int(s) if s.isdigit() else s for s in re.split(r"([0-9]+)", text)]
+
+
+def _order(item: CorpusItem) -> tuple:
+    return (_natural(item.subject), _natural(item.task))
+
+
+def dataset_items(dataset: Dataset | str | os.PathLike, *, subjects: Iterable[str] | None = None,
+                  tasks: Iterable[str] | None = None,
+                  per_subject: bool = False) -> list[CorpusItem]:
+    """The items of a ``dataset.Dataset`` (or its folder), in natural order: one per
+    recording, or with ``per_subject`` one per subject (``task=""``, ``path`` = the
+    dataset folder). ``subjects``/``tasks`` restrict the choice (names, any case)."""
+    from .dataset import Dataset
+
+    # absolute paths: a Dask worker may run in another folder (or on another machine
+    # that mounts the same file system)
+    ds = dataset if isinstance(dataset, Dataset) else Dataset(os.path.abspath(dataset))
+    names = ds.subjects() if subjects is None else [str(s).upper() for s in subjects]
+    wanted = None if tasks is None else {str(t).lower() for t in tasks}
+    items, root = [], os.path.abspath(ds.root)
+    for subject in names:
+        chosen = [t for t in ds.tasks(subject) if wanted is None or t in wanted]
+        if per_subject and chosen:
+            items.append(CorpusItem(subject, "", root, root))
+        elif not per_subject:
+            items += [CorpusItem(subject, t, os.path.abspath(ds.pellet_path(subject, t)), root)
+                      for t in chosen]
+    return items
+
+
+def item_rng(item: CorpusItem, seed: int = 0) -> np.random.Generator:
+    """A numpy Generator that depends only on ``(seed, subject, task)``, for tasks that
+    draw random numbers: the same on every worker and in every order."""
+    import numpy as np
+
+    digest = hashlib.sha256(f"{item.subject}\0{item.task}".encode()).digest()
+    return np.random.default_rng([int(seed), *(int.from_bytes(digest[i:i + 4], "little")
+                                               for i in range(0, 16, 4))])
+
+
+# --------------------------------------------------------- markers and resuming
+def marker_path(out_dir: str | os.PathLike, item: CorpusItem) -> Path:
+    """Where ``item``'s completion marker lives."""
+    return Path(out_dir) / MARKER_DIR / item.subject / f"{item.task or '_subject'}.json"
+
+
+def task_fingerprint(task: Callable, options: Mapping[str, Any]) -> str:
+    """SHA-256 of the task's qualified name and its options: a marker written with other
+    settings does not count as done."""
+    text = json.dumps([task.__module__, task.__qualname__, dict(sorted(options.items()))],
+                      sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _file_digest(path: Path) -> dict:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return {"bytes": path.stat().st_size, "sha256": h.hexdigest()}
+
+
+def _write_marker(out_dir: str, item: CorpusItem, fingerprint: str, result: TaskResult):
+    root = Path(out_dir)
+    outputs = {}
+    for p in result.outputs:
+        p = Path(p)
+        rel = os.path.relpath(p, root) if p.is_absolute() else str(p)
+        outputs[rel] = _file_digest(root / rel)
+    doc = {"subject": item.subject, "task": item.task, "fingerprint": fingerprint,
+           "row": result.row, "outputs": outputs}
+    text = json.dumps(doc, indent=1, sort_keys=True, default=_json_scalar) + "\n"
+    atomic_write(marker_path(out_dir, item), text, overwrite=True)
+
+
+def _json_scalar(value):
+    """numpy scalars in rows (``np.int64``, ``np.bool_``) as Python numbers."""
+    if hasattr(value, "item"):
+        return value.item()
+    raise TypeError(f"a row value of type {type(value).__name__} cannot be stored")
+
+
+def completed_row(out_dir: str | os.PathLike, item: CorpusItem, fingerprint: str) -> dict | None:
+    """The row stored for ``item`` if its marker exists, was written with ``fingerprint``
+    and every output it lists is present with the recorded size and SHA-256; else None."""
+    path = marker_path(out_dir, item)
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if doc.get("fingerprint") != fingerprint:
+        return None
+    for rel, want in doc.get("outputs", {}).items():
+        out = Path(out_dir) / rel
+        if not out.is_file() or out.stat().st_size != want["bytes"] or _file_digest(out) != want:
+            return None
+    return doc["row"]
+
+
+# ------------------------------------------------------------ running one item
+def _one_line(exc: BaseException) -> str:
+    """The error as one line: the message of a CassiError, else ``Type: message``."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    if not isinstance(exc, CassiError):
+        text = f"{type(exc).__name__}: {text}"
+    return text if len(text) <= 300 else text[:297] + "..."
+
+
+@dataclass(frozen=True)
+class JaxSettings:
+    """What every worker sets before a task: ``x64`` (float64; None leaves JAX's
+    default) and ``compilation_cache`` (a folder for JAX's persistent compilation cache,
+    shared by the workers and by later runs, so that a worker loads what another one or
+    an earlier run compiled; None: no cache)."""
+
+    x64: bool | None = None
+    compilation_cache: str | None = None
+
+
+def _configure_jax(settings: JaxSettings) -> None:
+    if settings.x64 is None and settings.compilation_cache is None:
+        return
+    import jax
+
+    if settings.x64 is not None and bool(jax.config.jax_enable_x64) != settings.x64:
+        jax.config.update("jax_enable_x64", settings.x64)
+    cache = settings.compilation_cache
+    if cache is not None and jax.config.jax_compilation_cache_dir != cache:
+        jax.config.update("jax_compilation_cache_dir", cache)
+        # the jaw fits compile in seconds: keep every entry, not only slow ones
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+
+
+def run_item(task: Callable[..., TaskResult], item: CorpusItem, out_dir: str,
+             options: Mapping[str, Any], fingerprint: str, jax_settings: JaxSettings
+             ) -> ItemResult:
+    """Run ``task`` on one item (in a worker): ``ItemResult`` OK with the row after the
+    marker is written, or FAILED with the one-line error. KeyboardInterrupt and SystemExit
+    pass through: an interrupted run stops, and its finished items stay marked."""
+    try:
+        # a marker says the latest attempt succeeded: an attempt that fails leaves none
+        marker_path(out_dir, item).unlink(missing_ok=True)
+        _configure_jax(jax_settings)  # a Dask worker is long-lived and shared: every task
+        result = task(item, out_dir, **options)
+        if not isinstance(result, TaskResult):
+            raise TypeError(f"{task.__qualname__} returned {type(result).__name__}, "
+                            "not a TaskResult")
+        _write_marker(out_dir, item, fingerprint, result)
+    except Exception as exc:  # noqa: BLE001 -- isolation: one bad recording, one FAILED row
+        return ItemResult(item, Status.FAILED, _one_line(exc))
+    return ItemResult(item, Status.OK, "", result.row)
+
+
+def _init_worker(jax_settings: JaxSettings) -> None:
+    _configure_jax(jax_settings)
+
+
+# ---------------------------------------------------------------- the executor
+def default_jobs() -> int:
+    """The cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+@dataclass
+class _Pool:
+    """Where items run: ``executor`` (None: in this process), ``workers`` for the bar;
+    ``settings`` set when the pool is our own local process pool (then shut down at the
+    end, and rebuilt after a worker dies); ``client``: a Dask client we opened."""
+
+    executor: cf.Executor | None
+    workers: int
+    settings: JaxSettings | None = None
+    client: Any = None
+
+    def new_executor(self, n: int) -> cf.ProcessPoolExecutor:
+        import multiprocessing
+
+        return cf.ProcessPoolExecutor(
+            max_workers=n, mp_context=multiprocessing.get_context("spawn"),
+            initializer=_init_worker, initargs=(self.settings,))
+
+    def close(self) -> None:
+        if self.settings is not None and self.executor is not None:
+            self.executor.shutdown(wait=True, cancel_futures=True)
+        if self.client is not None:
+            self.client.close()
+
+
+def _dask_pool(client, own: bool) -> _Pool:
+    workers = client.scheduler_info().get("workers", {})
+    threads = sum(int(w.get("nthreads", 1)) for w in workers.values()) or 1
+    return _Pool(client.get_executor(pure=False), threads, client=client if own else None)
+
+
+def _open_pool(executor, jobs, scheduler, n_items: int, jax_settings) -> _Pool:
+    if executor is not None:
+        if hasattr(executor, "get_executor"):  # a dask.distributed.Client
+            return _dask_pool(executor, own=False)
+        workers = getattr(executor, "_max_workers", None) or 0
+        return _Pool(executor, int(workers))
+    if scheduler is not None:
+        from distributed import Client
+
+        return _dask_pool(Client(scheduler), own=True)
+    jobs = default_jobs() if jobs is None else int(jobs)
+    if jobs < 1:
+        raise CassiError(f"jobs must be at least 1, got {jobs}")
+    jobs = min(jobs, max(n_items, 1))
+    if jobs == 1:
+        return _Pool(None, 1)
+    pool = _Pool(None, jobs, settings=jax_settings)
+    pool.executor = pool.new_executor(jobs)
+    return pool
+
+
+def _current_x64() -> bool | None:
+    import sys
+
+    if "jax" not in sys.modules:
+        return None
+    return bool(sys.modules["jax"].config.jax_enable_x64)
+
+
+# ------------------------------------------------------------------- the runner
+@dataclass
+class CorpusRun:
+    """A finished run: ``results`` sorted by (subject, task), ``workers`` used."""
+
+    results: list[ItemResult]
+    workers: int
+
+    @property
+    def failed(self) -> list[ItemResult]:
+        return [r for r in self.results if r.status == Status.FAILED]
+
+    @property
+    def resumed(self) -> int:
+        return sum(r.resumed for r in self.results)
+
+    def rows(self) -> list[dict]:
+        """The corpus table: ``subject, task, status, error`` (the runner's, whatever the
+        task's row says under those names) then the task's columns."""
+        out = []
+        for r in self.results:
+            row = {"subject": r.item.subject, "task": r.item.task, "status": r.status.label,
+                   "error": r.error}
+            row.update((k, v) for k, v in r.row.items() if k not in ID_COLUMNS)
+            out.append(row)
+        return out
+
+    def failure_summary(self) -> str:
+        """``"k of n failed:"`` and one line per failed item; ``""`` if none failed."""
+        if not self.failed:
+            return ""
+        lines = [f"{len(self.failed)} of {len(self.results)} failed:"]
+        lines += [f"  {r.item.subject} {r.item.task}: {r.error}".rstrip() for r in self.failed]
+        return "\n".join(lines)
+
+
+def run_corpus(
+    task: Callable[..., TaskResult],
+    items: Sequence[CorpusItem],
+    out_dir: str | os.PathLike,
+    *,
+    options: Mapping[str, Any] | None = None,
+    executor: cf.Executor | Any | None = None,
+    jobs: int | None = None,
+    scheduler: str | None = None,
+    resume: bool = False,
+    overwrite: bool = False,
+    x64: bool | None = None,
+    compilation_cache: str | os.PathLike | None = None,
+    progress: bool = True,
+    desc: str = "corpus",
+) -> CorpusRun:
+    """Run ``task(item, out_dir, overwrite=..., **options)`` on every item; see the
+    module doc. Where: ``executor`` (any Executor or a Dask Client), else ``scheduler``
+    (a Dask scheduler address), else ``jobs`` processes (default: all cores; 1 = this
+    process). ``resume`` skips items already done with the same task and options;
+    without ``resume`` or ``overwrite`` a folder holding markers of an earlier run is
+    refused (OutputExistsError). ``x64``: float64 in the workers (default: as in this
+    process; with ``jobs=1`` the setting is made in this process); ``compilation_cache``:
+    a folder for JAX's persistent compilation cache in every worker (:class:`JaxSettings`).
+    Returns every item's result, failed ones included; raises only for the run itself
+    (bad arguments, an interruption).
+    """
+    out = Path(out_dir).absolute()  # workers may run in another folder
+    markers = out / MARKER_DIR
+    if not (resume or overwrite) and markers.is_dir() and any(markers.iterdir()):
+        raise OutputExistsError(f"{out}: holds an earlier corpus run (pass resume=True / "
+                                "--resume to continue it, or overwrite=True / --force)")
+    options = {**(options or {}), "overwrite": bool(overwrite or resume)}
+    fingerprint = task_fingerprint(task, {k: v for k, v in options.items() if k != "overwrite"})
+    items = sorted(dict.fromkeys(items), key=_order)
+    done, todo = [], []
+    for item in items:
+        row = completed_row(out, item, fingerprint) if resume else None
+        if row is None:
+            todo.append(item)
+        else:
+            done.append(ItemResult(item, Status.OK, "", row, resumed=True))
+    jax_settings = JaxSettings(
+        _current_x64() if x64 is None else bool(x64),
+        None if compilation_cache is None else os.path.abspath(compilation_cache))
+    pool = (_open_pool(executor, jobs, scheduler, len(todo), jax_settings) if todo
+            else _Pool(None, 1))
+    try:
+        results = _collect(pool, task, todo, str(out), options, fingerprint, jax_settings,
+                           progress, desc, len(items), len(done))
+    finally:
+        pool.close()
+    return CorpusRun(sorted(done + results, key=lambda r: _order(r.item)), pool.workers)
+
+
+def _progress_bar(progress, desc, workers, total, initial):
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=initial, disable=not progress, unit="rec",
+                desc=f"{desc} ({workers} worker{'s' if workers != 1 else ''})")
+
+
+def _collect(pool, task, todo, out, options, fingerprint, jax_settings, progress, desc, total,
+             initial):
+    bar = _progress_bar(progress, desc, pool.workers, total, initial)
+    results, failed = [], 0
+
+    def record(result):
+        nonlocal failed
+        results.append(result)
+        failed += result.status == Status.FAILED
+        bar.update(1)
+        if failed:
+            bar.set_postfix_str(f"{failed} failed")
+
+    def submit(executor, item):
+        return executor.submit(run_item, task, item, out, options, fingerprint, jax_settings)
+
+    try:
+        if pool.executor is None:
+            for item in todo:
+                record(run_item(task, item, out, options, fingerprint, jax_settings))
+        else:
+            _run_on_pool(pool, submit, todo, record)
+        return results
+    finally:
+        bar.close()
+
+
+WORKER_DIED = "its worker process died while running it (killed, out of memory or crashed)"
+
+
+def _run_on_pool(pool, submit, todo, record) -> None:
+    """Submit ``todo`` keeping at most two items per worker in flight (so a dying worker
+    takes down only those, and Ctrl-C has little to cancel). When a worker of our own
+    pool dies, the items in flight are rerun one by one, each in a fresh one-worker
+    pool, so the item that kills its worker is found and FAILED, and the rest of the run
+    goes on in a new pool."""
+    from concurrent.futures.process import BrokenProcessPool
+
+    queue, in_flight = list(reversed(todo)), {}
+    limit = 2 * max(pool.workers, 1) + 2
+    try:
+        while queue or in_flight:
+            while queue and len(in_flight) < limit:
+                item = queue.pop()
+                try:
+                    in_flight[submit(pool.executor, item)] = item
+                except Exception as exc:  # noqa: BLE001 -- a broken pool we cannot rebuild
+                    record(ItemResult(item, Status.FAILED, _one_line(exc)))
+            if not in_flight:
+                continue
+            done, _ = cf.wait(in_flight, return_when=cf.FIRST_COMPLETED)
+            crashed = _settle(done, in_flight, record, BrokenProcessPool)
+            if crashed and pool.settings is not None:
+                done, _ = cf.wait(in_flight)  # a broken pool fails all it holds at once
+                crashed += _settle(done, in_flight, record, BrokenProcessPool)
+                pool.executor.shutdown(wait=True)
+                for item in crashed:
+                    record(_alone(pool, submit, item, BrokenProcessPool))
+                pool.executor = pool.new_executor(pool.workers)
+            else:
+                for item in crashed:
+                    record(ItemResult(item, Status.FAILED, WORKER_DIED))
+    except BaseException:
+        for future in in_flight:
+            future.cancel()
+        raise
+
+
+def _settle(done, in_flight, record, broken) -> list[CorpusItem]:
+    """Record finished futures; return the items whose worker died."""
+    crashed = []
+    for future in done:
+        item = in_flight.pop(future)
+        try:
+            record(future.result())
+        except broken:
+            crashed.append(item)
+        except Exception as exc:  # noqa: BLE001 -- e.g. a Dask worker lost, an unpicklable row
+            record(ItemResult(item, Status.FAILED, _one_line(exc)))
+    return crashed
+
+
+def _alone(pool, submit, item, broken) -> ItemResult:
+    """Run one item in a fresh one-worker pool: its result, or FAILED if it kills it."""
+    single = pool.new_executor(1)
+    try:
+        return submit(single, item).result()
+    except broken:
+        return ItemResult(item, Status.FAILED, WORKER_DIED)
+    except Exception as exc:  # noqa: BLE001
+        return ItemResult(item, Status.FAILED, _one_line(exc))
+    finally:
+        single.shutdown(wait=True)
+
+
+# ----------------------------------------------------------------------- tables
+def _cell(value) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "nan"
+        return f"{value:.{FLOAT_DIGITS}f}"
+    return str(value)
+
+
+def table_columns(rows: Sequence[Mapping]) -> list[str]:
+    """``ID_COLUMNS`` first (those present), then the others in first-seen order."""
+    seen = dict.fromkeys(c for c in ID_COLUMNS if any(c in r for r in rows))
+    for row in rows:
+        seen.update(dict.fromkeys(row))
+    return list(seen)
+
+
+def csv_text(rows: Sequence[Mapping], columns: Sequence[str] | None = None) -> str:
+    """The rows as CSV text: floats with ``FLOAT_DIGITS`` decimals, None as empty."""
+    import csv
+
+    columns = table_columns(rows) if columns is None else list(columns)
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(columns)
+    for row in rows:
+        writer.writerow([_cell(row.get(c)) for c in columns])
+    return buffer.getvalue()
+
+
+def _parquet_bytes(rows, columns) -> bytes:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pa.Table.from_pylist([{c: r.get(c) for c in columns} for r in rows])
+    buffer = io.BytesIO()
+    pq.write_table(table, buffer)
+    return buffer.getvalue()
+
+
+def parquet_available() -> bool:
+    try:
+        import pyarrow.parquet  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def write_table(rows: Sequence[Mapping], path: str | os.PathLike, *,
+                columns: Sequence[str] | None = None, parquet: bool | None = None,
+                overwrite: bool = False) -> list[Path]:
+    """Write ``rows`` to ``path`` (``.csv``) and, when pyarrow is importable (or
+    ``parquet=True``), beside it with the suffix ``.parquet``. Atomic. Returns the paths."""
+    path = Path(path)
+    columns = table_columns(rows) if columns is None else list(columns)
+    written = [atomic_write(path, csv_text(rows, columns), overwrite=overwrite)]
+    if parquet_available() if parquet is None else parquet:
+        written.append(atomic_write(path.with_suffix(".parquet"), _parquet_bytes(rows, columns),
+                                    overwrite=overwrite))
+    return written
+
+
+# ------------------------------------------------------------- per-worker model
+_MODELS: dict[str, Any] = {}
+
+
+def model_digest(model_dir: str | os.PathLike | None = None) -> str:
+    """SHA-256 over the files of a model folder (default: the package's model)."""
+    from .face_model import default_model_dir
+
+    folder = Path(model_dir) if model_dir is not None else default_model_dir()
+    h = hashlib.sha256()
+    for p in sorted(q for q in folder.iterdir() if q.is_file()):
+        h.update(p.name.encode() + b"\0" + p.read_bytes())
+    return h.hexdigest()
+
+
+def worker_model(model_dir: str | os.PathLike | None = None) -> FaceModel:
+    """The face model, loaded once per worker process and kept by content digest, so
+    that task functions can take a plain folder name and still reuse what the worker
+    compiled for it (``eqx.filter_jit`` caches on the model's static topology)."""
+    from .face_model import load_model
+
+    key = model_digest(model_dir)
+    if key not in _MODELS:
+        _MODELS[key] = load_model(model_dir)
+    return _MODELS[key]
+
+
+# ----------------------------------------------------------- `cassi jaw DATASET`
+JAW_FRAME_COLUMNS = ("time_s", "theta_deg", "pivot_a_mm", "pivot_b_mm", "tx_mm", "ty_mm",
+                     "residual_mm", "status")
+#: the jaw statuses counted per recording (Status values 0-5)
+JAW_STATUSES = (Status.OK, Status.PIVOT_UNDEFINED, Status.DEGENERATE, Status.NON_FINITE,
+                Status.INVALID_FRAME, Status.NOT_CONVERGED)
+
+
+def jaw_frame_csv(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels | None = None
+                  ) -> str:
+    """One recording's jaw table, as ``cassi jaw RECORDING`` writes it (one row per frame,
+    :data:`JAW_FRAME_COLUMNS`), plus a ``label`` column when ``labels`` are given
+    (``labels.Labels``; ``""`` between labelled intervals)."""
+    import numpy as np
+
+    columns = list(JAW_FRAME_COLUMNS) + (["label"] if labels is not None else [])
+    theta_deg = np.rad2deg(fit.theta)
+    names = [Status(int(c)).label for c in fit.status]
+    current = labels.at(times) if labels is not None else None
+    lines = [",".join(columns)]
+    for k in range(len(times)):
+        values = (times[k], theta_deg[k], fit.pivot[k, 0], fit.pivot[k, 1],
+                  fit.translation[k, 0], fit.translation[k, 1], fit.residual[k])
+        line = ",".join(f"{v:.6f}" for v in values) + f",{names[k]}"
+        if current is not None:
+            line += "," + _csv_field(str(current[k]))
+        lines.append(line)
+    return "\n".join(lines) + "\n"
+
+
+def _csv_field(text: str) -> str:
+    return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n\r') else text
+
+
+def _iqr(x: np.ndarray) -> float | None:
+    import numpy as np
+
+    if x.size == 0:
+        return None
+    q1, q3 = np.percentile(x, [25, 75])
+    return float(q3 - q1)
+
+
+def jaw_summary_row(fit: JawFit, *, label_file: str = "") -> dict:
+    """The corpus-table row of one jaw fit: method, frames, angle range (deg) over the
+    fitted frames, pivot spread (interquartile range of the pivot's a and b over frames
+    with a defined pivot, mm), residuals (rms and max over fitted frames, mm), the noise
+    estimate, convergence and the number of frames per status."""
+    import numpy as np
+
+    fitted = fit.status == int(Status.OK)
+    theta_deg = np.rad2deg(fit.theta[fitted])
+    pivots = fit.pivot[fitted & fit.pivot_defined]
+    residual = fit.residual[fitted]
+    row = {
+        "method": fit.method, "solver": fit.solver, "frames": int(fit.status.size),
+        "theta_min_deg": float(theta_deg.min()) if theta_deg.size else None,
+        "theta_max_deg": float(theta_deg.max()) if theta_deg.size else None,
+        "theta_range_deg": float(np.ptp(theta_deg)) if theta_deg.size else None,
+        "pivot_iqr_a_mm": _iqr(pivots[:, 0]), "pivot_iqr_b_mm": _iqr(pivots[:, 1]),
+        "residual_rms_mm": float(np.sqrt(np.mean(residual**2))) if residual.size else None,
+        "residual_max_mm": float(residual.max()) if residual.size else None,
+        "noise_mm": float(fit.noise_mm), "converged": bool(fit.converged),
+    }
+    for s in JAW_STATUSES:
+        row[f"frames_{s.label.replace('-', '_')}"] = int(np.sum(fit.status == int(s)))
+    row["label_file"] = label_file
+    return row
+
+
+#: frames per padding bucket of the jaw fits: one compilation covers every recording up to
+#: 7 s; the padding's cost is nothing for the closed form, and up to 3x a short recording's
+#: fitting time for "frame-fit" (still far below one compilation)
+JAW_FRAME_BUCKET = 1024
+
+
+def fit_jaw_bucketed(track: PelletTrack, *, method: str = "closed-form",
+                     solver: str = "optimistix-lm", smoothness: float = 1.0) -> JawFit:
+    """``jaw_fit.jaw_from_track`` with the frames padded to a multiple of
+    :data:`JAW_FRAME_BUCKET` (1024 frames, 7 s), so that a worker compiles the fit once per
+    bucket instead of once per recording length (the XRMB lengths all differ; compiling
+    costs about 2-3 s a length, fitting a recording tens of ms). The padding is untracked frames after the last: the per-frame methods give
+    the real frames the values of an unpadded fit (they are fitted frame by frame and
+    the noise is pooled over usable frames only), and "fixed-pivot" gets zero weight for
+    them. "smooth-pivot" is not padded: its pivot-path knots depend on the length."""
+    import dataclasses
+
+    import numpy as np
+
+    from .jaw_fit import jaw_from_track
+    from .txy import FRAME_STEP_US, PelletTrack
+
+    if method == "smooth-pivot":
+        return jaw_from_track(track, method=method, solver=solver, smoothness=float(smoothness))
+    n = track.n_frames
+    extra = -n % JAW_FRAME_BUCKET
+    step = FRAME_STEP_US * 1e-6
+    padded = PelletTrack(
+        times=np.concatenate([track.times, track.times[-1] + step * np.arange(1, extra + 1)]),
+        positions=np.concatenate([track.positions, np.full((extra, 8, 2), np.nan)]),
+        valid=np.concatenate([track.valid, np.zeros((extra, 8, 2), bool)]),
+        path=track.path,
+    )
+    fit = jaw_from_track(padded, method=method, solver=solver)
+    per_frame = {f.name: getattr(fit, f.name)[:n] for f in dataclasses.fields(fit)
+                 if isinstance(getattr(fit, f.name), np.ndarray)
+                 and getattr(fit, f.name).shape[:1] == (n + extra,)}
+    return dataclasses.replace(fit, **per_frame)
+
+
+def jaw_output_path(out_dir: str | os.PathLike, item: CorpusItem) -> Path:
+    """``out_dir/SUBJECT/TASK.jaw.csv``."""
+    return Path(out_dir) / item.subject / f"{item.task}.jaw.csv"
+
+
+def segments_output_path(out_dir: str | os.PathLike, item: CorpusItem) -> Path:
+    """``out_dir/SUBJECT/TASK.segments.csv``."""
+    return Path(out_dir) / item.subject / f"{item.task}.segments.csv"
+
+
+def jaw_task(item: CorpusItem, out_dir: str, *, method: str = "closed-form",
+             solver: str = "optimistix-lm", smoothness: float = 1.0,
+             labels: bool = True, overwrite: bool = False) -> TaskResult:
+    """``cassi jaw DATASET``'s task: fit the jaw of one pellet file
+    (:func:`fit_jaw_bucketed`), write ``out_dir/SUBJECT/TASK.jaw.csv`` (one row per frame)
+    and return the summary row (:func:`jaw_summary_row`). When ``labels`` and a label
+    file lies beside the pellet file (``labels.labels_for``), the frame table gets a
+    ``label`` column and ``TASK.segments.csv`` holds one row per labelled segment
+    (``labels.segment_summary``: peak jaw opening, lip aperture range, ...)."""
+    from .labels import SEGMENT_COLUMNS, labels_for, segment_summary
+    from .txy import read_txy
+
+    track = read_txy(item.path)
+    fit = fit_jaw_bucketed(track, method=method, solver=solver, smoothness=smoothness)
+    found = labels_for(item.path) if labels else None
+    out = jaw_output_path(out_dir, item)
+    outputs = [atomic_write(out, jaw_frame_csv(track.times, fit, found), overwrite=overwrite)]
+    label_file = ""
+    if found is not None:
+        label_file = found.path.name if found.path is not None else ""
+        rows = segment_summary(track.times, fit.theta, track.positions, found,
+                               usable=fit.status == int(Status.OK))
+        outputs.append(atomic_write(segments_output_path(out_dir, item),
+                                    csv_text(rows, SEGMENT_COLUMNS), overwrite=overwrite))
+    return TaskResult(jaw_summary_row(fit, label_file=label_file),
+                      tuple(str(p) for p in outputs))
+
+
+def jaw_corpus_path(out_dir: str | os.PathLike) -> Path:
+    """``out_dir/jaw_corpus.csv`` (and ``.parquet`` beside it)."""
+    return Path(out_dir) / "jaw_corpus.csv"
+
+
+def jaw_corpus(
+    dataset: Dataset | str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    method: str = "closed-form",
+    solver: str = "optimistix-lm",
+    smoothness: float = 1.0,
+    labels: bool = True,
+    subjects: Iterable[str] | None = None,
+    tasks: Iterable[str] | None = None,
+    **run_options: Any,
+) -> tuple[CorpusRun, list[Path]]:
+    """``cassi jaw DATASET --out DIR``: :func:`jaw_task` on every recording (float64, as
+    the single-recording command), then the corpus table ``DIR/jaw_corpus.csv`` (and
+    ``.parquet``). ``run_options`` go to :func:`run_corpus` (``jobs``, ``scheduler``,
+    ``executor``, ``resume``, ``overwrite``, ``progress``, ``compilation_cache``).
+    Returns the run (``run.failed``: exit non-zero) and the table files written."""
+    replace = bool(run_options.get("overwrite") or run_options.get("resume"))
+    table = jaw_corpus_path(out_dir)
+    if table.exists() and not replace:  # refuse before the run, not after it
+        raise OutputExistsError(f"{table}: file exists (pass overwrite=True / --force, or "
+                                "resume=True / --resume)")
+    run_options.setdefault("x64", True)  # pivots to a micrometre need float64 (cassi jaw)
+    run_options.setdefault("desc", "jaw")
+    options = {"method": method, "solver": solver, "labels": bool(labels)}
+    if method == "smooth-pivot":
+        options["smoothness"] = float(smoothness)
+    run = run_corpus(jaw_task, dataset_items(dataset, subjects=subjects, tasks=tasks),
+                     out_dir, options=options, **run_options)
+    written = write_table(run.rows(), table, overwrite=replace)
+    return run, written

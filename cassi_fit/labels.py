@@ -1,0 +1,444 @@
+"""Phone and word labels beside a pellet file: HTK ``.lab`` and Praat TextGrid.
+
+A :class:`Labels` record holds one tier of time intervals (seconds, half-open
+``[start, end)``, sorted, not overlapping) with their labels; :meth:`Labels.at` gives the
+label at given times (``""`` where no interval covers the time) and :func:`segment_summary`
+measures the jaw and the lips per labelled segment.
+
+Formats (both written atomically, and read back identically by the readers):
+
+* **HTK label file** ``X.lab``: one interval per line, ``start end label`` separated by white
+  space; further fields on a line (HTK scores, auxiliary labels) are ignored, blank lines
+  skipped. Times are either seconds or HTK's integer units of 100 ns. ``units="auto"``
+  (the default) decides per file: HTK units when every time in the file is written as an
+  integer and the largest is at least ``HTK_UNITS_THRESHOLD`` (1000); seconds otherwise
+  (any decimal point or exponent, or only small integers such as ``0 1 a``). A recording
+  of 1000 s or more labelled in whole seconds is the case this rule gets wrong: pass
+  ``units="seconds"`` for it.
+* **Praat TextGrid** ``X.TextGrid`` (long or short text format), read through praatio;
+  interval tiers only. Empty intervals (silence left blank) are not segments.
+
+:func:`labels_for` finds ``X.lab`` / ``X.TextGrid`` beside ``X.txy`` (case-insensitive).
+Every malformation (a non-numeric time, ``end < start``, unsorted or overlapping
+intervals, a TextGrid praatio cannot read) raises one :class:`DataFormatError` naming the
+file and, where one can be found, the line.
+"""
+
+# jaxtyping's shape strings ("n 8 2") are not Python expressions:
+# ruff: noqa: F722
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+from jaxtyping import Bool, Float, Shaped
+
+from ._io import atomic_output_path, atomic_write, commit_output, register_input
+from .errors import DataFormatError, MissingDataError
+
+LAB_SUFFIX = ".lab"
+TEXTGRID_SUFFIX = ".textgrid"
+HTK_UNITS_PER_S = 10_000_000  # HTK time unit: 100 ns
+HTK_UNITS_THRESHOLD = 1000  # all-integer times reaching this are HTK units (see above)
+DEFAULT_TIERS = ("phones", "words")  # tried in this order when no tier is named
+UNITS = ("auto", "seconds", "htk")
+
+
+class Segment(NamedTuple):
+    """One labelled interval, seconds."""
+
+    start: float
+    end: float
+    label: str
+
+
+@dataclass(frozen=True, eq=False)
+class Labels:
+    """One tier of labelled intervals.
+
+    starts, ends: ``(n,)`` float64 seconds, ``starts[k] <= ends[k] <= starts[k+1]``;
+    labels: n strings; tier: the tier's name (``"labels"`` for a ``.lab`` file);
+    path: the file read, or None.
+    """
+
+    starts: Float[np.ndarray, " n"]
+    ends: Float[np.ndarray, " n"]
+    labels: tuple[str, ...]
+    tier: str = "labels"
+    path: Path | None = None
+
+    def __post_init__(self):
+        starts = np.asarray(self.starts, dtype=np.float64).reshape(-1)
+        ends = np.asarray(self.ends, dtype=np.float64).reshape(-1)
+        labels = tuple(str(s) for s in self.labels)
+        if not starts.shape == ends.shape == (len(labels),):
+            raise ValueError(f"Labels: {starts.shape[0]} starts, {ends.shape[0]} ends and "
+                             f"{len(labels)} labels")
+        _check_intervals(self.path, starts, ends, None)
+        object.__setattr__(self, "starts", starts)
+        object.__setattr__(self, "ends", ends)
+        object.__setattr__(self, "labels", labels)
+        if self.path is not None:
+            object.__setattr__(self, "path", Path(self.path))
+
+    def __len__(self) -> int:
+        return len(self.labels)
+
+    def segments(self) -> list[Segment]:
+        """The intervals in time order."""
+        return [Segment(float(s), float(e), lab)
+                for s, e, lab in zip(self.starts, self.ends, self.labels, strict=True)]
+
+    def at(self, times: Float[np.ndarray, " m"]) -> Shaped[np.ndarray, " m"]:
+        """The label at each time (seconds): a ``(m,)`` str array, ``""`` where no
+        interval ``[start, end)`` covers the time."""
+        times = np.asarray(times, dtype=np.float64)
+        if not len(self):
+            return np.full(times.shape, "", dtype=str)
+        k = np.searchsorted(self.starts, times, side="right") - 1
+        kk = np.clip(k, 0, len(self) - 1)
+        inside = (k >= 0) & (times < self.ends[kk])
+        return np.where(inside, np.asarray(self.labels, dtype=str)[kk], "")
+
+
+def _check_intervals(path, starts, ends, lines) -> None:
+    """DataFormatError for the first non-finite, negative, reversed, unsorted or
+    overlapping interval; ``lines[k]`` is interval k's line in the file (or None)."""
+    line = (lambda k: None) if lines is None else (lambda k: lines[k])
+    for k in range(len(starts)):
+        s, e = starts[k], ends[k]
+        if not (math.isfinite(s) and math.isfinite(e)):
+            raise DataFormatError(path, line(k), f"interval {k + 1}: non-finite time")
+        if s < 0:
+            raise DataFormatError(path, line(k), f"interval {k + 1}: negative start {s:g} s")
+        if e < s:
+            raise DataFormatError(path, line(k), f"interval {k + 1}: end {e:g} s is before "
+                                  f"start {s:g} s")
+        if k and s < starts[k - 1]:
+            raise DataFormatError(path, line(k), f"interval {k + 1}: not sorted (starts at "
+                                  f"{s:g} s, the previous one at {starts[k - 1]:g} s)")
+        if k and s < ends[k - 1]:
+            raise DataFormatError(path, line(k), f"interval {k + 1}: overlaps the previous "
+                                  f"interval (starts at {s:g} s, the previous ends at "
+                                  f"{ends[k - 1]:g} s)")
+
+
+# ------------------------------------------------------------------------ HTK .lab
+_INTEGER = re.compile(r"[+-]?[0-9]+")
+
+
+def _lab_rows(path: Path) -> list[tuple[int, str, str, str]]:
+    from .txy import read_lines  # BOM, CRLF, encodings: as for pellet files
+
+    _, lines = read_lines(path)
+    rows = []
+    for lineno, text in lines:
+        fields = text.split()
+        if len(fields) < 3:
+            raise DataFormatError(path, lineno, f"expected 'start end label', got {text!r}")
+        rows.append((lineno, *fields[:3]))
+    return rows
+
+
+def _lab_time(path: Path, lineno: int, token: str) -> float:
+    try:
+        return float(token)
+    except ValueError:
+        raise DataFormatError(path, lineno, f"time {token!r} is not a number") from None
+
+
+def read_lab(path: str | os.PathLike, *, units: str = "auto") -> Labels:
+    """Read an HTK label file (see the module doc for ``units``: "auto", "seconds",
+    "htk"). An empty file gives an empty :class:`Labels`."""
+    if units not in UNITS:
+        raise ValueError(f"units must be one of {', '.join(UNITS)}, got {units!r}")
+    path = Path(path)
+    rows = _lab_rows(path)
+    register_input(path)
+    times = np.array([[_lab_time(path, n, a), _lab_time(path, n, b)] for n, a, b, _ in rows],
+                     dtype=np.float64).reshape(-1, 2)
+    if units == "auto":
+        integers = all(_INTEGER.fullmatch(t) for _, a, b, _ in rows for t in (a, b))
+        units = "htk" if rows and integers and times.max() >= HTK_UNITS_THRESHOLD else "seconds"
+    if units == "htk":
+        times = times / HTK_UNITS_PER_S  # a division: 1000000 units read back as 0.1 s
+    lines = [n for n, *_ in rows]
+    _check_intervals(path, times[:, 0], times[:, 1], lines)
+    return Labels(times[:, 0], times[:, 1], tuple(r[3] for r in rows), "labels", path)
+
+
+def write_lab(path: str | os.PathLike, labels: Labels, *, units: str = "seconds",
+              overwrite: bool = False) -> Path:
+    """Write an HTK label file: seconds (shortest exact decimal, read back identically)
+    or ``units="htk"`` (integer 100 ns units, rounded). Labels must be non-empty words
+    without white space."""
+    if units not in ("seconds", "htk"):
+        raise ValueError(f"units must be 'seconds' or 'htk', got {units!r}")
+    path = Path(path)
+    out = []
+    for k, (s, e, lab) in enumerate(labels.segments()):
+        if not lab or any(c.isspace() for c in lab):
+            raise DataFormatError(path, None, f"cannot write interval {k + 1}: label {lab!r} "
+                                  "is empty or holds white space")
+        if units == "htk":
+            out.append(f"{round(s * HTK_UNITS_PER_S)} {round(e * HTK_UNITS_PER_S)} {lab}\n")
+        else:
+            out.append(f"{s!r} {e!r} {lab}\n")
+    return atomic_write(path, "".join(out), overwrite=overwrite)
+
+
+# ---------------------------------------------------------------------- TextGrid
+_PRAAT_TOKEN = re.compile(r'"((?:[^"]|"")*)"|(!.*)|([^\s"]+)')
+# the long format's words around the values ("xmin =", "intervals [3]:", "tiers?")
+_PRAAT_WORD = re.compile(r"[A-Za-z_]+\??|=|\[[0-9]*\]:?|.*:")
+
+
+def _praat_tokens(text: str) -> list[tuple[int, str, bool]]:
+    """Praat's text-file tokens ``(line, token, is_string)``. Praat reads a text file as
+    a stream of numbers and quoted strings (``""`` inside a string is a quote; ``!``
+    starts a comment), which is why the long and short formats are one stream."""
+    out = []
+    for m in _PRAAT_TOKEN.finditer(text):
+        if m.group(2) is not None:
+            continue
+        line = text.count("\n", 0, m.start()) + 1
+        if m.group(1) is not None:
+            out.append((line, m.group(1).replace('""', '"'), True))
+        else:
+            out.append((line, m.group(3), False))
+    return out
+
+
+def _locate_textgrid_error(path: Path, text: str) -> tuple[int | None, str] | None:
+    """Walk the token stream of a text TextGrid and return ``(line, problem)`` for the
+    first bad number or bad interval, or None if the stream looks sound."""
+    values = [(ln, tok, s) for ln, tok, s in _praat_tokens(text)
+              if s or not _PRAAT_WORD.fullmatch(tok)]
+    if [tok for _, tok, _ in values[:2]] != ["ooTextFile", "TextGrid"]:
+        return None  # not the text format: leave the diagnosis to praatio
+    pos = 2
+
+    def number():
+        nonlocal pos
+        while pos < len(values) and not values[pos][2] and values[pos][1].startswith("<"):
+            pos += 1  # <exists>
+        if pos >= len(values):
+            raise _Located(values[-1][0] if values else None, "file ends early")
+        ln, tok, is_string = values[pos]
+        pos += 1
+        try:
+            return ln, float(tok) if not is_string else float("x")
+        except ValueError:
+            raise _Located(ln, f"expected a number, got {tok!r}") from None
+
+    try:
+        number(), number()  # xmin, xmax
+        _, n_tiers = number()
+        for _ in range(int(n_tiers)):
+            kind, name = values[pos][1], values[pos + 1][1]
+            pos += 2
+            number(), number()
+            _, n = number()
+            last_end, width = -math.inf, 3 if kind == "IntervalTier" else 2
+            for _ in range(int(n)):
+                ln, start = number()
+                end = number()[1] if width == 3 else start
+                pos += 1  # the label
+                if width == 3 and end < start:
+                    raise _Located(ln, f"tier {name!r}: interval end {end:g} s is before "
+                                   f"its start {start:g} s")
+                if width == 3 and start < last_end:
+                    raise _Located(ln, f"tier {name!r}: interval at {start:g} s overlaps the "
+                                   f"previous one (ends at {last_end:g} s) or is not sorted")
+                last_end = end
+    except _Located as exc:
+        return exc.line, exc.problem
+    except (IndexError, ValueError):
+        return None
+    return None
+
+
+class _Located(Exception):
+    def __init__(self, line, problem):
+        self.line, self.problem = line, problem
+
+
+def _praat_text(path: Path) -> str:
+    """The file's text: Praat writes UTF-8 or, for some characters, UTF-16 with a BOM."""
+    import codecs
+
+    raw = path.read_bytes()
+    if raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        return raw.decode("utf-16", errors="replace")
+    return raw.decode("utf-8-sig", errors="replace")
+
+
+def _open_textgrid(path: Path):
+    """praatio's grid; DataFormatError with the line for what the token walk locates
+    (checked also when praatio accepts the file: it drops blank intervals unchecked)."""
+    from praatio import textgrid
+
+    located = _locate_textgrid_error(path, _praat_text(path))
+    if located is not None:
+        raise DataFormatError(path, located[0], located[1])
+    try:
+        return textgrid.openTextgrid(str(path), includeEmptyIntervals=False,
+                                     reportingMode="silence")
+    except Exception as exc:  # praatio raises many types; one clear error instead
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise DataFormatError(path, None, f"not a readable TextGrid ({first})") from None
+
+
+def _choose_tier(path: Path, grid, tier: str | None):
+    from praatio import textgrid
+
+    names = [n for n in grid.tierNames if isinstance(grid.getTier(n), textgrid.IntervalTier)]
+    if not names:
+        raise DataFormatError(path, None, "no interval tier")
+    by_lower = {n.lower(): n for n in names}
+    if tier is None:
+        chosen = next((by_lower[t] for t in DEFAULT_TIERS if t in by_lower), names[0])
+    elif tier.lower() in by_lower:
+        chosen = by_lower[tier.lower()]
+    else:
+        raise MissingDataError(f"{path}: no interval tier {tier!r} (tiers: {', '.join(names)})")
+    return grid.getTier(chosen)
+
+
+def read_textgrid(path: str | os.PathLike, *, tier: str | None = None) -> Labels:
+    """One interval tier of a Praat TextGrid: ``tier`` by name (case-insensitive), or by
+    default the tier called "phones", else "words", else the first interval tier."""
+    path = Path(path)
+    if not path.is_file():
+        raise MissingDataError(f"{path}: no such label file")
+    grid = _open_textgrid(path)
+    register_input(path)
+    chosen = _choose_tier(path, grid, tier)
+    entries = [e for e in chosen.entries if e.label.strip()]
+    starts = np.array([e.start for e in entries], dtype=np.float64)
+    ends = np.array([e.end for e in entries], dtype=np.float64)
+    return Labels(starts, ends, tuple(e.label for e in entries), chosen.name, path)
+
+
+def write_textgrid(path: str | os.PathLike, labels: Labels, *, overwrite: bool = False,
+                   duration: float | None = None) -> Path:
+    """Write ``labels`` as a one-tier TextGrid (long text format, tier ``labels.tier``)
+    spanning 0 to ``duration`` seconds (default: the last end). Gaps become empty
+    intervals, which :func:`read_textgrid` skips, so the round trip is exact."""
+    from praatio import textgrid
+    from praatio.utilities.constants import Interval
+
+    end = float(labels.ends[-1]) if len(labels) else 0.0
+    duration = end if duration is None else float(duration)
+    entries = [Interval(s, e, lab) for s, e, lab in labels.segments()]
+    grid = textgrid.Textgrid(0.0, duration)
+    grid.addTier(textgrid.IntervalTier(labels.tier, entries, 0.0, duration))
+    tmp, final = atomic_output_path(path, overwrite=overwrite)
+    try:
+        grid.save(str(tmp), format="long_textgrid", includeBlankSpaces=True,
+                  reportingMode="silence")
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return commit_output(tmp, final)
+
+
+# --------------------------------------------------------------------- discovery
+def read_labels(path: str | os.PathLike, *, tier: str | None = None,
+                units: str = "auto") -> Labels:
+    """Read ``.lab`` (``units``) or ``.TextGrid`` (``tier``), chosen by the suffix."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == LAB_SUFFIX:
+        if not path.is_file():
+            raise MissingDataError(f"{path}: no such label file")
+        return read_lab(path, units=units)
+    if suffix == TEXTGRID_SUFFIX:
+        return read_textgrid(path, tier=tier)
+    raise DataFormatError(path, None, "label files end in .lab or .TextGrid")
+
+
+def label_path_for(pellet_path: str | os.PathLike) -> Path | None:
+    """``X.TextGrid`` or else ``X.lab`` beside ``X.txy`` (any case), or None."""
+    pellet_path = Path(pellet_path)
+    stem = pellet_path.stem.lower()
+    try:
+        found = {p.name.lower(): p for p in pellet_path.parent.iterdir() if p.is_file()}
+    except OSError:
+        return None
+    for suffix in (TEXTGRID_SUFFIX, LAB_SUFFIX):
+        if stem + suffix in found:
+            return found[stem + suffix]
+    return None
+
+
+def labels_for(pellet_path: str | os.PathLike, *, tier: str | None = None,
+               units: str = "auto") -> Labels | None:
+    """The labels beside a pellet file (see :func:`label_path_for`), or None if there
+    are none. A TextGrid is preferred to a ``.lab`` when both exist."""
+    found = label_path_for(pellet_path)
+    return None if found is None else read_labels(found, tier=tier, units=units)
+
+
+# ----------------------------------------------------------- per-segment summaries
+SEGMENT_COLUMNS = ("label", "start_s", "end_s", "frames", "status", "jaw_peak_opening_deg",
+                   "jaw_peak_time_s", "jaw_min_opening_deg", "lip_aperture_max_mm",
+                   "lip_aperture_min_mm", "lip_aperture_min_time_s")
+
+
+def segment_summary(
+    times: Float[np.ndarray, " n"],
+    theta: Float[np.ndarray, " n"],
+    pellets: Float[np.ndarray, "n 8 2"],
+    labels: Labels,
+    *,
+    usable: Bool[np.ndarray, " n"] | None = None,
+) -> list[dict]:
+    """One row per labelled segment (:data:`SEGMENT_COLUMNS`).
+
+    times (n,) s; theta (n,) rad, jaw opening from the reference frame (``JawFit.theta``);
+    pellets (n, 8, 2) mm in ``txy.PELLET_NAMES`` order (NaN where untracked); lip
+    aperture = ``|UL - LL|`` mm. ``usable`` (n,) marks frames whose jaw angle counts
+    (e.g. ``JawFit.status == 0``; default all). A segment's frames are those with
+    ``start <= t < end``. ``status`` says why values are missing (None in the row):
+    "no-frames" (shorter than a frame step), "jaw-untracked", "lips-untracked".
+    """
+    from .txy import pellet_index
+
+    times = np.asarray(times, dtype=np.float64)
+    theta_deg = np.rad2deg(np.asarray(theta, dtype=np.float64))
+    usable = np.ones(times.shape, bool) if usable is None else np.asarray(usable, bool)
+    pellets = np.asarray(pellets, dtype=np.float64)
+    gap = pellets[:, pellet_index("UL")] - pellets[:, pellet_index("LL")]
+    aperture = np.hypot(gap[:, 0], gap[:, 1])  # NaN where either lip pellet is untracked
+    rows = []
+    for seg in labels.segments():
+        inside = (times >= seg.start) & (times < seg.end)
+        row = dict.fromkeys(SEGMENT_COLUMNS)
+        row.update(label=seg.label, start_s=seg.start, end_s=seg.end,
+                   frames=int(inside.sum()), status="ok")
+        jaw_k = np.flatnonzero(inside & usable & np.isfinite(theta_deg))
+        lip_k = np.flatnonzero(inside & np.isfinite(aperture))
+        if jaw_k.size:
+            peak = jaw_k[np.argmax(theta_deg[jaw_k])]
+            row.update(jaw_peak_opening_deg=float(theta_deg[peak]),
+                       jaw_peak_time_s=float(times[peak]),
+                       jaw_min_opening_deg=float(theta_deg[jaw_k].min()))
+        if lip_k.size:
+            low = lip_k[np.argmin(aperture[lip_k])]
+            row.update(lip_aperture_max_mm=float(aperture[lip_k].max()),
+                       lip_aperture_min_mm=float(aperture[low]),
+                       lip_aperture_min_time_s=float(times[low]))
+        if not inside.any():
+            row["status"] = "no-frames"
+        elif not jaw_k.size:
+            row["status"] = "jaw-untracked"
+        elif not lip_k.size:
+            row["status"] = "lips-untracked"
+        rows.append(row)
+    return rows
