@@ -37,7 +37,6 @@ table as CSV, and as Parquet when pyarrow is importable.
 """
 
 # jaxtyping's shape strings (" n") are not Python expressions:
-# ruff: noqa: F722
 from __future__ import annotations
 
 import concurrent.futures as cf

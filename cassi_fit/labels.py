@@ -25,7 +25,6 @@ file and, where one can be found, the line.
 """
 
 # jaxtyping's shape strings ("n 8 2") are not Python expressions:
-# ruff: noqa: F722
 from __future__ import annotations
 
 import math
