@@ -184,16 +184,16 @@ def _drawn(rng: np.random.Generator, mean: float, sd: float) -> float:
 # Anthropometric norms the subjects are drawn from (mean, SD; mm or degrees), with their
 # sources in docs/SYNTHETIC.md ("Anatomy"). None of them is read from the face model.
 NORMS = {
-    "overjet": (3.0, 0.5),  # upper ahead of lower incisal edge (Proffit: ideal 2-3 mm)
-    "overbite": (1.2, 0.4),  # upper incisal edge below lower's (kept small: speaking rest)
+    "overjet": (3.0, 0.5),  # upper ahead of the lower incisal edge (Proffit: 2-3 mm)
+    "rest_gap": (1.2, 0.4),  # lower incisal edge below the upper's at speech rest
     "mni_depth": (3.5, 0.8),  # MNI centre below the incisal edge along the crown (9 mm long)
     "mni_labial": (3.2, 0.5),  # MNI centre ahead of the edge line (crown convexity + pellet)
     "incisor_tilt_deg": (22.0, 6.0),  # lower incisor crown forward of the vertical
-    "upper_lip_thickness": (14.0, 1.5),  # UL pellet ahead of the upper incisor tip
-    "lower_lip_thickness": (14.5, 1.5),  # LL pellet ahead of the lower tip, along the jaw
-    "face_width": (134.0, 6.0),  # bizygomatic breadth (Farkas: men 139, women 130)
-    "jaw_width": (100.0, 6.0),  # bigonial breadth
-    "mouth_width": (50.0, 3.5),  # cheilion to cheilion
+    "upper_lip_thickness": (13.9, 2.1),  # UL pellet ahead of the upper incisor tip
+    "lower_lip_thickness": (14.9, 1.9),  # LL pellet ahead of the lower tip, along the jaw
+    "face_width": (134.0, 6.0),  # bizygomatic breadth
+    "jaw_width": (96.0, 6.0),  # bigonial breadth
+    "mouth_width": (51.0, 3.5),  # cheilion to cheilion
     "nose_protrusion": (20.0, 2.0),  # subnasale to pronasale
 }
 
@@ -226,7 +226,7 @@ def _incisor_and_mni(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     edge along the crown (tilted ``incisor_tilt_deg`` forward of vertical, so going down
     the crown goes back) and ``mni_labial`` ahead of it, across the crown.
     """
-    tip = np.array([-_drawn(rng, *NORMS["overjet"]), -_drawn(rng, *NORMS["overbite"])])
+    tip = np.array([-_drawn(rng, *NORMS["overjet"]), -_drawn(rng, *NORMS["rest_gap"])])
     tilt = np.deg2rad(_drawn(rng, *NORMS["incisor_tilt_deg"]))
     down = np.array([-np.sin(tilt), -np.cos(tilt)])  # along the crown, toward the root
     labial = np.array([np.cos(tilt), -np.sin(tilt)])
