@@ -61,7 +61,8 @@ def test_the_errors_are_measured_against_the_true_motion():
                                          dropouts=False, mistracks=False)  # fmt: skip
     fixed = jaw_comparison.frame_errors(track, truth, anatomy, "fixed-pivot")
     assert fixed["theta_deg"].max() > 8.0
-    assert np.median(fixed["pivot_err_mm"]) < 0.05
+    pivot_err = fixed["pivot_err_mm"]  # NaN where the true motion has no pivot (theta 0)
+    assert np.isfinite(pivot_err).sum() > 100 and np.nanmax(pivot_err) < 0.05
     assert fixed["chin_err_mm"].max() < 0.05 and fixed["angle_err_deg"].max() < 0.01
     closed = jaw_comparison.frame_errors(track, truth, anatomy, "closed-form")
     assert closed["angle_err_deg"].max() < 0.01 and closed["incisor_err_mm"].max() < 0.05
@@ -113,9 +114,9 @@ def test_the_docs_table_is_the_one_make_experiments_writes(small_run):
     text = GENERATED.read_text()
     assert text.splitlines()[0] == jaw_comparison.markdown([], MAKE_COMMAND).splitlines()[0]
     assert _skeleton(text) == _skeleton((small_run / "jaw_comparison.md").read_text())
-    for doc in (ROOT / "README.md", ROOT / "docs" / "JAW.md"):
+    for doc, titles in ((ROOT / "README.md", QUOTED[:2]), (ROOT / "docs" / "JAW.md", QUOTED)):
         quoted = doc.read_text()
-        for title in QUOTED[:3]:
+        for title in titles:
             assert jaw_comparison.section(text, title) in quoted, (doc.name, title)
 
 
