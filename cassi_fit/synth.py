@@ -202,9 +202,8 @@ def _head_measures(rng, gonion, gnathion, ul_thick, ll_thick):
     from .headmeasures import HeadMeasures
 
     um = functools.partial(round, ndigits=3)  # as Headmeasures.txt holds them
-    face, jaw, mouth, nose = (
-        _drawn(rng, *NORMS[k]) for k in ("face_width", "jaw_width", "mouth_width", "nose_protrusion")
-    )
+    widths = ("face_width", "jaw_width", "mouth_width", "nose_protrusion")
+    face, jaw, mouth, nose = (_drawn(rng, *NORMS[k]) for k in widths)
     return HeadMeasures(
         gonion_x=um(float(gonion[0])),
         gonion_y=um(float(gonion[1])),
