@@ -27,10 +27,12 @@ import functools
 import json
 import os
 import zlib
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import numpy as np
+from jaxtyping import Bool, Float
 
 from .errors import CassiError, DataFormatError, MissingDataError, OutputExistsError
 from .synth_tasks import (
@@ -62,9 +64,16 @@ __all__ = [
     "load_truth",
     "load_anatomy",
     "JAW_KINEMATICS",
+    "DEFAULT_JAW_KINEMATICS_CYCLE",
     "NOISE_FAMILIES",
+    "MAX_NOISE_SCALE",
     "NORMS",
+    "COMPLETE_LINE",
     "default_jaw_kinematics",
+    "eminence_path",
+    "condyle_slide_mm",
+    "thrust_protrusion_mm",
+    "condyle_offset",
     "corpus_status",
     "default_corpus_dir",
     "ensure_default_corpus",
@@ -342,7 +351,9 @@ def _rotate(theta: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.stack([c * x + s * y, -s * x + c * y], axis=-1)
 
 
-def eminence_path(s_mm: np.ndarray, angle_deg: float, radius_mm: float) -> np.ndarray:
+def eminence_path(
+    s_mm: Float[np.ndarray, " n"], angle_deg: float, radius_mm: float
+) -> Float[np.ndarray, "n 2"]:
     """``(n, 2)`` mm: the condyle's displacement after gliding ``s_mm`` (n,) along the
     articular eminence: an arc leaving the rest position ``angle_deg`` below the forward
     horizontal and turning up (flattening toward the eminence's crest) with
@@ -355,14 +366,18 @@ def eminence_path(s_mm: np.ndarray, angle_deg: float, radius_mm: float) -> np.nd
     return np.stack([x + beyond, y], axis=-1)
 
 
-def condyle_slide_mm(anatomy: SubjectAnatomy, theta: np.ndarray) -> np.ndarray:
+def condyle_slide_mm(
+    anatomy: SubjectAnatomy, theta: Float[np.ndarray, " n"]
+) -> Float[np.ndarray, " n"]:
     """``(n,)`` mm: the physiological family's glide along the eminence at ``theta`` (rad):
     ``k1 deg + k2 deg^2``, rotation first and translation growing with the opening."""
     deg = np.rad2deg(np.maximum(theta, 0.0))
     return deg * anatomy.condyle_slide_mm_per_deg + deg**2 * anatomy.condyle_slide_mm_per_deg2
 
 
-def thrust_protrusion_mm(anatomy: SubjectAnatomy, n: int, n_lead: int, rng) -> np.ndarray:
+def thrust_protrusion_mm(
+    anatomy: SubjectAnatomy, n: int, n_lead: int, rng: np.random.Generator
+) -> Float[np.ndarray, " n"]:
     """``(n,)`` mm: the thrust family's protrusion, independent of the rotation and not
     smooth: it holds a level and jumps to a new one (uniform in -0.5 .. ``thrust_max_mm``)
     within one frame, ``thrust_rate_hz`` times a second on average; 0 before the first."""
@@ -374,7 +389,11 @@ def thrust_protrusion_mm(anatomy: SubjectAnatomy, n: int, n_lead: int, rng) -> n
     return level
 
 
-def condyle_offset(anatomy: SubjectAnatomy, theta: np.ndarray, protrusion: np.ndarray):
+def condyle_offset(
+    anatomy: SubjectAnatomy,
+    theta: Float[np.ndarray, " n"],
+    protrusion: Float[np.ndarray, " n"],
+) -> Float[np.ndarray, "n 2"]:
     """``(n, 2)`` mm: where the condyle is, relative to its rest, in each frame."""
     family = anatomy.jaw_kinematics
     if family == "fixed-condyle":
@@ -386,7 +405,15 @@ def condyle_offset(anatomy: SubjectAnatomy, theta: np.ndarray, protrusion: np.nd
     return protrusion[:, None] * np.array([np.cos(angle), -np.sin(angle)])
 
 
-def _jaw_motion(anatomy: SubjectAnatomy, theta: np.ndarray, offset: np.ndarray, points):
+def _jaw_motion(
+    anatomy: SubjectAnatomy,
+    theta: Float[np.ndarray, " n"],
+    offset: Float[np.ndarray, "n 2"],
+    points: Float[np.ndarray, "k 2"],
+) -> tuple[
+    Float[np.ndarray, "n 2"], Float[np.ndarray, "n 2"], Bool[np.ndarray, " n"],
+    Float[np.ndarray, "n k 2"],
+]:
     """The mandible's motion from rest: rotation ``theta`` (n,) about the rest condyle, then
     the condyle moved by ``offset`` (n, 2) mm; ``p' = R p + t`` (Eqs 4-5).
 
@@ -896,15 +923,15 @@ def _families(n_subjects: int, jaw_kinematics) -> list[str]:
 
 
 def generate_corpus(
-    out_dir,
+    out_dir: str | os.PathLike,
     *,
     n_subjects: int = 15,
     seed: int = 0,
-    tasks=None,
+    tasks: str | Sequence[str] | None = None,
     noise_scale: float = 1.0,
     audio: bool = True,
     overwrite: bool = False,
-    jaw_kinematics=None,
+    jaw_kinematics: str | Sequence[str] | None = None,
     noise_family: str = "realistic",
 ) -> Path:
     """Write a synthetic corpus to ``out_dir`` and return its path.
@@ -1062,7 +1089,7 @@ def default_corpus_dir() -> Path:
     return Path(cache).expanduser() / "cassi_fit" / f"synthetic-v{GENERATOR_VERSION}"
 
 
-def corpus_status(folder) -> str:
+def corpus_status(folder: str | os.PathLike) -> str:
     """``"complete"`` (README.txt of this generator version ending in the completion line),
     ``"stale"`` (complete, another generator version), ``"incomplete"`` (a README without
     the completion line: generation was interrupted) or ``"absent"`` (no README.txt)."""
