@@ -4,15 +4,17 @@ The real X-ray microbeam database is distributed on request only; this module ma
 stand-in whose truth is known. Four stages, each a plain function:
 
 1. anatomy (:func:`make_subject`): a subject's palate, jaw pellet spacing, condyle, lips,
-   tongue rest positions, head measures, all in the pellet frame (mm);
+   tongue rest positions, head measures, all in the pellet frame (mm), drawn from
+   anthropometric norms (``NORMS``), never from the face model's numbers;
 2. kinematics (:func:`_kinematics`): the task's control curves (:mod:`cassi_fit.synth_tasks`)
-   move a rigid mandible (rotation ``theta`` about the condyle plus a slide of the condyle
-   forward and down along the articular eminence, so that the rotation centre moves: the
-   motion is composed with :mod:`cassi_fit.rigid`, paper convention ``p' = R p + t``,
-   Eqs 4-5), the lower lip and tongue partly carried by it and partly on their own, the
-   tongue kept below the palate;
-3. measurement (:func:`_measure`): white plus slowly drifting noise per pellet, all-untracked
-   leading rows, dropouts (1000000) and a few unmarked mistracks, all recorded in the truth;
+   move a rigid mandible, ``p' = R p + t`` (paper Eqs 4-5), as the subject's jaw-kinematics
+   family says (:data:`JAW_KINEMATICS`: rotation about a fixed condyle; the physiological
+   glide of the condyle along a curved eminence, coupled to the rotation; rotation plus an
+   independent, jumping protrusion); the lower lip and tongue partly carried by it and
+   partly on their own, the tongue kept below the palate;
+3. measurement (:func:`_simulate`): noise of one of :data:`NOISE_FAMILIES` per pellet,
+   all-untracked leading rows, dropouts (1000000) and a few unmarked mistracks, all
+   recorded in the truth;
 4. files (:func:`generate_corpus`): the real formats through the toolkit's writers, plus a
    ground-truth sidecar per recording and an ``anatomy.json`` per subject.
 
@@ -25,10 +27,12 @@ import functools
 import json
 import os
 import zlib
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import numpy as np
+from jaxtyping import Bool, Float
 
 from .errors import CassiError, DataFormatError, MissingDataError, OutputExistsError
 from .synth_tasks import (
@@ -59,11 +63,23 @@ __all__ = [
     "generate_corpus",
     "load_truth",
     "load_anatomy",
+    "JAW_KINEMATICS",
+    "DEFAULT_JAW_KINEMATICS_CYCLE",
+    "NOISE_FAMILIES",
+    "MAX_NOISE_SCALE",
+    "NORMS",
+    "COMPLETE_LINE",
+    "default_jaw_kinematics",
+    "eminence_path",
+    "condyle_slide_mm",
+    "thrust_protrusion_mm",
+    "condyle_offset",
+    "corpus_status",
     "default_corpus_dir",
     "ensure_default_corpus",
 ]
 
-GENERATOR_VERSION = 3  # bump when the generated numbers change (invalidates the cache)
+GENERATOR_VERSION = 4  # bump when the generated numbers change (invalidates the cache)
 PELLETS = ("UL", "LL", "T1", "T2", "T3", "T4", "MNI", "MNM")  # = cassi_fit.txy.PELLET_NAMES
 _UL, _LL, _T1, _T2, _T3, _T4, _MNI, _MNM = range(8)
 _TONGUE = slice(_T1, _T4 + 1)
@@ -77,12 +93,38 @@ _TONGUE_JAW_SHARE = np.array([0.75, 0.65, 0.55, 0.45])
 _PALATE_MARGIN_MM = 1.0  # the tongue pellets stay at least this far below the palate ...
 _PALATE_SOFTNESS_MM = 0.7  # ... approached smoothly (a soft minimum of this width)
 AUDIO_RATE_HZ = 16000
-# The toolkit's face model (model/model.json; checked by tests/test_synth.py): how far its
-# MNI site sits ahead of its lower incisor tip along the jaw line MNM -> MNI, and its
-# MNI-MNM distance (mm).
-MODEL_TIP_TO_MNI_ALONG = 3.125
-MODEL_JAW_PELLET_DISTANCE = 43.2897
-MNI_BELOW_TIP_MM = 4.7  # MNI below the lower incisor tip, across the jaw line
+
+#: How the mandible moves (docs/SYNTHETIC.md, "Jaw kinematics", with sources):
+#: ``fixed-condyle`` pure rotation about a fixed condyle (Parke's assumption);
+#: ``physiological`` the condyle glides down and forward along a curved articular-eminence
+#: path, by an amount coupled to the rotation (little at speech angles, 10-20 mm at wide
+#: opening); ``thrust`` rotation about the condyle plus an independent, piecewise
+#: constant protrusion (jumps within one frame): a translation no smooth prior expects.
+JAW_KINEMATICS = ("fixed-condyle", "physiological", "thrust")
+#: The default corpus's families, cycled over subjects S01, S02, S03, S04, ...
+DEFAULT_JAW_KINEMATICS_CYCLE = ("physiological", "fixed-condyle", "thrust")
+#: Measurement noise per coordinate: ``realistic`` white plus drift of equal variance (the
+#: default: the jaw pellet distance then varies by 0.3 mm SD as in real files); ``white``;
+#: ``drift`` (white noise low-pass filtered over ``_DRIFT_S``, rescaled to the same SD).
+NOISE_FAMILIES = ("realistic", "white", "drift")
+MAX_NOISE_SCALE = 10.0  # noise_scale above this (> 2 mm per coordinate) is refused
+
+
+def default_jaw_kinematics(name: str) -> str:
+    """The default corpus's family for subject ``name``: ``S01`` physiological, ``S02``
+    fixed-condyle, ``S03`` thrust, ``S04`` physiological ... (any other name:
+    physiological)."""
+    digits = name[1:] if name[:1].upper() == "S" else ""
+    if digits.isdigit() and int(digits) >= 1:
+        cycle = DEFAULT_JAW_KINEMATICS_CYCLE
+        return cycle[(int(digits) - 1) % len(cycle)]
+    return "physiological"
+
+
+def _check_family(value, choices, what: str) -> str:
+    from .options import check_choice
+
+    return check_choice(what, value, choices)
 
 
 # --------------------------------------------------------------------------- anatomy
@@ -92,10 +134,13 @@ class SubjectAnatomy:
 
     Attributes beyond the obvious ones: ``pellets_rest`` ``(8, 2)`` all pellets at rest
     (jaw closed, tongue and lips neutral; rows 6-7 equal ``mni_rest``/``mnm_rest``);
-    the condyle slides ``s = k1 deg + k2 deg^2`` mm (``condyle_slide_mm_per_deg`` = k1,
-    ``condyle_slide_mm_per_deg2`` = k2; little in speech, 10-20 mm at wide opening) along
-    ``eminence_angle_deg`` below the forward horizontal, so the rotation centre of the
-    motion from rest moves back and down as the jaw opens; ``f0_hz`` the synthetic voice pitch.
+    ``jaw_kinematics`` one of :data:`JAW_KINEMATICS`. For ``physiological`` the condyle
+    glides ``s = k1 deg + k2 deg^2`` mm (``condyle_slide_mm_per_deg`` = k1,
+    ``condyle_slide_mm_per_deg2`` = k2) along an arc that leaves the rest position
+    ``eminence_angle_deg`` below the forward horizontal and flattens with radius
+    ``eminence_radius_mm``; for ``thrust`` the condyle protrudes along that initial
+    direction by independent steps (``thrust_rate_hz`` of them per second, levels up to
+    ``thrust_max_mm``). ``f0_hz`` the synthetic voice pitch.
     """
 
     name: str
@@ -115,6 +160,10 @@ class SubjectAnatomy:
     condyle_slide_mm_per_deg2: float
     eminence_angle_deg: float
     f0_hz: float
+    jaw_kinematics: str = "physiological"
+    eminence_radius_mm: float = 20.0
+    thrust_rate_hz: float = 0.8
+    thrust_max_mm: float = 3.0
 
     @property
     def jaw_pellet_distance(self) -> float:
@@ -135,57 +184,99 @@ def _palate_outline(rng: np.random.Generator) -> np.ndarray:
     return np.round(np.stack([x, y], axis=1), 3)  # um, as PAL.DAT holds it
 
 
-def _head_measures(rng, gonion, gnathion, ul_thick, ll_thick, face_width):
+def _drawn(rng: np.random.Generator, mean: float, sd: float) -> float:
+    """One draw from N(mean, sd^2) cut at +-2.5 sd (anthropometric norms are given as
+    mean and SD; the cut keeps a synthetic subject inside the range of real ones)."""
+    return float(mean + sd * np.clip(rng.normal(), -2.5, 2.5))
+
+
+# Anthropometric norms the subjects are drawn from (mean, SD; mm or degrees), with their
+# sources in docs/SYNTHETIC.md ("Anatomy"). None of them is read from the face model.
+NORMS = {
+    "overjet": (3.0, 0.5),  # upper ahead of the lower incisal edge (Proffit: 2-3 mm)
+    "rest_gap": (1.2, 0.4),  # lower incisal edge below the upper's at speech rest
+    "mni_depth": (3.5, 0.8),  # MNI centre below the incisal edge along the crown (9 mm long)
+    "mni_labial": (3.2, 0.5),  # MNI centre ahead of the edge line (crown convexity + pellet)
+    "incisor_tilt_deg": (22.0, 6.0),  # lower incisor crown forward of the vertical
+    "upper_lip_thickness": (13.9, 2.1),  # UL pellet ahead of the upper incisor tip
+    "lower_lip_thickness": (14.9, 1.9),  # LL pellet ahead of the lower tip, along the jaw
+    "face_width": (134.0, 6.0),  # bizygomatic breadth
+    "jaw_width": (96.0, 6.0),  # bigonial breadth
+    "mouth_width": (51.0, 3.5),  # cheilion to cheilion
+    "nose_protrusion": (20.0, 2.0),  # subnasale to pronasale
+}
+
+
+def _head_measures(rng, gonion, gnathion, ul_thick, ll_thick):
     from .headmeasures import HeadMeasures
 
     um = functools.partial(round, ndigits=3)  # as Headmeasures.txt holds them
+    widths = ("face_width", "jaw_width", "mouth_width", "nose_protrusion")
+    face, jaw, mouth, nose = (_drawn(rng, *NORMS[k]) for k in widths)
     return HeadMeasures(
         gonion_x=um(float(gonion[0])),
         gonion_y=um(float(gonion[1])),
         gnathion_x=um(float(gnathion[0])),
         gnathion_y=um(float(gnathion[1])),
-        face_width=um(float(face_width)),
-        jaw_width=um(float(rng.uniform(90.0, 110.0))),
-        mouth_width=um(float(rng.uniform(45.0, 56.0))),
+        face_width=um(face),
+        jaw_width=um(jaw),
+        mouth_width=um(mouth),
         upper_lip_thickness=um(float(ul_thick)),
         lower_lip_thickness=um(float(ll_thick)),
-        nose_protrusion=um(float(rng.uniform(17.0, 24.0))),
+        nose_protrusion=um(nose),
     )
 
 
-def make_subject(name: str, rng: np.random.Generator) -> SubjectAnatomy:
-    """Draw one subject's anatomy (see the class for units and frames)."""
+def _incisor_and_mni(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Lower incisor tip and MNI (mm, pellet frame) from the dental norms in ``NORMS``.
+
+    MNI is glued to the labial face of the lower incisor: ``mni_depth`` below the incisal
+    edge along the crown (tilted ``incisor_tilt_deg`` forward of vertical, so going down
+    the crown goes back) and ``mni_labial`` ahead of it, across the crown.
+    """
+    tip = np.array([-_drawn(rng, *NORMS["overjet"]), -_drawn(rng, *NORMS["rest_gap"])])
+    tilt = np.deg2rad(_drawn(rng, *NORMS["incisor_tilt_deg"]))
+    down = np.array([-np.sin(tilt), -np.cos(tilt)])  # along the crown, toward the root
+    labial = np.array([np.cos(tilt), -np.sin(tilt)])
+    mni = tip + _drawn(rng, *NORMS["mni_depth"]) * down + _drawn(rng, *NORMS["mni_labial"]) * labial
+    return tip, mni
+
+
+def make_subject(
+    name: str, rng: np.random.Generator, *, jaw_kinematics: str | None = None
+) -> SubjectAnatomy:
+    """Draw one subject's anatomy (see the class for units and frames).
+
+    ``jaw_kinematics`` one of :data:`JAW_KINEMATICS`, or None for the default corpus's
+    choice for this name (:func:`default_jaw_kinematics`). The family does not change any
+    other draw: the same rng gives the same geometry whatever the family.
+    """
+    family = default_jaw_kinematics(name) if jaw_kinematics is None else jaw_kinematics
+    family = _check_family(family, JAW_KINEMATICS, "jaw kinematics")
     r = rng.uniform
-    tip = np.array([-r(2.5, 4.0), -r(0.5, 1.8)])  # lower incisor tip: 2.5-4 mm overjet
+    tip, mni = _incisor_and_mni(rng)
     spacing, slope = r(37.0, 44.5), np.deg2rad(r(4.0, 9.0))
-    # MNI on the labial face below the tip: along the jaw line (MNM -> MNI) as far ahead
-    # of the tip as on the toolkit's model scaled to this jaw (so that the lower lip's
-    # thickness, measured along that line, is what the model can see), give or take
-    # 0.25 mm; across it, MNI_BELOW_TIP_MM lower, give or take 0.5 mm
-    forward = np.array([np.cos(slope), -np.sin(slope)])
-    up = np.array([np.sin(slope), np.cos(slope)])
-    along = spacing / MODEL_JAW_PELLET_DISTANCE * MODEL_TIP_TO_MNI_ALONG + r(-0.25, 0.25)
-    mni = tip + along * forward - (MNI_BELOW_TIP_MM + r(-0.5, 0.5)) * up
     mnm = mni + spacing * np.array([-np.cos(slope), np.sin(slope)])
     condyle = tip + np.array([-r(90.0, 100.0), r(20.0, 30.0)])
     gnathion = tip + np.array([r(-1.0, 4.0), -r(38.0, 46.0)])
     gonion = condyle + np.array([r(2.0, 10.0), -r(50.0, 60.0)])
-    ul_thick, ll_thick, face_width = r(12.0, 16.0), r(12.5, 16.5), r(125.0, 150.0)
+    ul_thick = _drawn(rng, *NORMS["upper_lip_thickness"])
+    ll_thick = _drawn(rng, *NORMS["lower_lip_thickness"])
     scale = r(0.95, 1.05)  # vocal tract size
     tongue = scale * np.array([[-16.5, 1.5], [-28.0, 8.0], [-39.5, 15.0], [-53.0, 17.0]])
     tongue = tongue + rng.normal(0.0, 0.8, size=(4, 2))
     palate = _palate_outline(rng)
     tongue[:, 1] = np.minimum(tongue[:, 1], _palate_height(palate, tongue[:, 0]) - 4.0)
-    # Lip thickness as Headmeasures defines it: how far the lip pellet (on the vermilion)
-    # sits ahead of the incisor tip, at rest (upper: from the origin; lower: from ``tip``).
-    # (lower: along the mandible's forward direction, MNM -> MNI, so that it does not
-    # change as the jaw turns)
+    # Lip thickness as Headmeasures defines it (docs/FORMATS.md): how far the lip pellet
+    # (on the vermilion) sits ahead of the incisor tip, at rest (upper: from the origin;
+    # lower: from ``tip``, along the mandible's forward direction MNM -> MNI, so that it
+    # does not change as the jaw turns).
     ul = np.array([ul_thick, r(16.5, 19.5)])
     forward = (mni - mnm) / np.linalg.norm(mni - mnm)
     ll_y = r(-18.0, -15.5)
     ll = np.array([tip[0] + (ll_thick - (ll_y - tip[1]) * forward[1]) / forward[0], ll_y])
     pellets = np.concatenate([ul[None], ll[None], tongue, mni[None], mnm[None]])
-    head = _head_measures(rng, gonion, gnathion, ul_thick, ll_thick, face_width)
+    head = _head_measures(rng, gonion, gnathion, ul_thick, ll_thick)
     return SubjectAnatomy(
         name=str(name),
         palate=palate,
@@ -200,10 +291,14 @@ def make_subject(name: str, rng: np.random.Generator) -> SubjectAnatomy:
         lower_lip_thickness=head.lower_lip_thickness,
         face_width=head.face_width,
         pellets_rest=pellets,
-        condyle_slide_mm_per_deg=float(r(0.12, 0.28)),
-        condyle_slide_mm_per_deg2=float(r(0.010, 0.018)),
-        eminence_angle_deg=float(r(25.0, 40.0)),
+        condyle_slide_mm_per_deg=float(r(0.05, 0.15)),
+        condyle_slide_mm_per_deg2=float(r(0.010, 0.016)),
+        eminence_angle_deg=float(r(35.0, 50.0)),
         f0_hz=float(r(100.0, 220.0)),
+        jaw_kinematics=family,
+        eminence_radius_mm=float(r(15.0, 25.0)),
+        thrust_rate_hz=float(r(0.6, 1.2)),
+        thrust_max_mm=float(r(2.0, 4.0)),
     )
 
 
@@ -248,44 +343,94 @@ class JawTruth:
         return int(self.times.shape[0])
 
 
-def _jaw_pose(theta, slide, condyle_rest, eminence, jaw_points):
-    """One frame: rotate by ``theta`` (rad) about the rest condyle, then slide it.
+def _rotate(theta: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``R(theta) p`` for ``theta`` (n,) rad and ``points`` (k, 2): (n, k, 2) mm; the paper's
+    ``R = [[cos, sin], [-sin, cos]]`` (Eqs 4-5, as :func:`cassi_fit.rigid.apply`)."""
+    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
+    x, y = points[None, :, 0], points[None, :, 1]
+    return np.stack([c * x + s * y, -s * x + c * y], axis=-1)
 
-    ``slide`` mm along the unit vector ``eminence``; ``jaw_points`` ``(k, 2)`` mm at rest.
-    Returns ``(translation (2,), pivot (2,), pivot defined, moved points (k, 2))``.
+
+def eminence_path(
+    s_mm: Float[np.ndarray, " n"], angle_deg: float, radius_mm: float
+) -> Float[np.ndarray, "n 2"]:
+    """``(n, 2)`` mm: the condyle's displacement after gliding ``s_mm`` (n,) along the
+    articular eminence: an arc leaving the rest position ``angle_deg`` below the forward
+    horizontal and turning up (flattening toward the eminence's crest) with
+    ``radius_mm``; its heading never passes the horizontal."""
+    phi0 = np.deg2rad(angle_deg)
+    turned = np.minimum(np.asarray(s_mm, float) / radius_mm, phi0)  # heading change, rad
+    x = radius_mm * (np.sin(phi0) - np.sin(phi0 - turned))
+    y = -radius_mm * (np.cos(phi0 - turned) - np.cos(phi0))
+    beyond = np.asarray(s_mm, float) - turned * radius_mm  # straight on at the crest
+    return np.stack([x + beyond, y], axis=-1)
+
+
+def condyle_slide_mm(
+    anatomy: SubjectAnatomy, theta: Float[np.ndarray, " n"]
+) -> Float[np.ndarray, " n"]:
+    """``(n,)`` mm: the physiological family's glide along the eminence at ``theta`` (rad):
+    ``k1 deg + k2 deg^2``, rotation first and translation growing with the opening."""
+    deg = np.rad2deg(np.maximum(theta, 0.0))
+    return deg * anatomy.condyle_slide_mm_per_deg + deg**2 * anatomy.condyle_slide_mm_per_deg2
+
+
+def thrust_protrusion_mm(
+    anatomy: SubjectAnatomy, n: int, n_lead: int, rng: np.random.Generator
+) -> Float[np.ndarray, " n"]:
+    """``(n,)`` mm: the thrust family's protrusion, independent of the rotation and not
+    smooth: it holds a level and jumps to a new one (uniform in -0.5 .. ``thrust_max_mm``)
+    within one frame, ``thrust_rate_hz`` times a second on average; 0 before the first."""
+    level = np.zeros(n)
+    n_jumps = rng.poisson(anatomy.thrust_rate_hz * n * FRAME_STEP_S)
+    starts = np.sort(rng.integers(n_lead, max(n, n_lead + 1), size=n_jumps))
+    for start in starts:
+        level[start:] = rng.uniform(-0.5, anatomy.thrust_max_mm)
+    return level
+
+
+def condyle_offset(
+    anatomy: SubjectAnatomy,
+    theta: Float[np.ndarray, " n"],
+    protrusion: Float[np.ndarray, " n"],
+) -> Float[np.ndarray, "n 2"]:
+    """``(n, 2)`` mm: where the condyle is, relative to its rest, in each frame."""
+    family = anatomy.jaw_kinematics
+    if family == "fixed-condyle":
+        return np.zeros((theta.shape[0], 2))
+    if family == "physiological":
+        slide = condyle_slide_mm(anatomy, theta)
+        return eminence_path(slide, anatomy.eminence_angle_deg, anatomy.eminence_radius_mm)
+    angle = np.deg2rad(anatomy.eminence_angle_deg)  # thrust: along the eminence's slope
+    return protrusion[:, None] * np.array([np.cos(angle), -np.sin(angle)])
+
+
+def _jaw_motion(
+    anatomy: SubjectAnatomy,
+    theta: Float[np.ndarray, " n"],
+    offset: Float[np.ndarray, "n 2"],
+    points: Float[np.ndarray, "k 2"],
+) -> tuple[
+    Float[np.ndarray, "n 2"], Float[np.ndarray, "n 2"], Bool[np.ndarray, " n"],
+    Float[np.ndarray, "n k 2"],
+]:
+    """The mandible's motion from rest: rotation ``theta`` (n,) about the rest condyle, then
+    the condyle moved by ``offset`` (n, 2) mm; ``p' = R p + t`` (Eqs 4-5).
+
+    Returns ``(translation (n, 2), pivot (n, 2), pivot defined (n,), moved points (n, k, 2))``;
+    the pivot is the motion's fixed point, ``(I - R)^-1 t`` (Eqs 6-7), 0 where theta = 0.
     """
-    from . import rigid
-
-    rotation = rigid.from_pivot(theta, condyle_rest)
-    motion = rigid.compose((0.0 * theta, slide * eminence), rotation)
-    pivot, defined = rigid.pivot(motion)
-    return motion[1], pivot, defined, rigid.apply(*motion, jaw_points)
-
-
-@functools.cache
-def _jaw_poses_compiled():
-    import jax
-
-    return jax.jit(jax.vmap(_jaw_pose, in_axes=(0, 0, None, None, None)))
-
-
-def _jaw_motion(anatomy: SubjectAnatomy, theta: np.ndarray, points: np.ndarray):
-    """Vectorised :func:`_jaw_pose` in float64; frames padded to a multiple of 1024 so the
-    compiled function is reused across recordings."""
-    import jax
-
-    n = theta.shape[0]
-    n_pad = -(-n // 1024) * 1024
-    theta_pad = np.zeros(n_pad)
-    theta_pad[:n] = theta
-    deg = np.rad2deg(theta_pad)
-    slide = deg * anatomy.condyle_slide_mm_per_deg + deg**2 * anatomy.condyle_slide_mm_per_deg2
-    angle = np.deg2rad(anatomy.eminence_angle_deg)
-    eminence = np.array([np.cos(angle), -np.sin(angle)])
-    with jax.enable_x64(True):
-        out = _jaw_poses_compiled()(theta_pad, slide, anatomy.condyle_rest, eminence, points)
-        out = [np.asarray(a, dtype=np.float64 if a.dtype != bool else bool)[:n] for a in out]
-    return out
+    condyle = anatomy.condyle_rest
+    translation = condyle + offset - _rotate(theta, condyle[None])[:, 0]
+    one_minus_c, s = 1.0 - np.cos(theta), np.sin(theta)
+    det = one_minus_c**2 + s**2  # det(I - R) = 2 - 2 cos theta
+    defined = det > 0.0
+    safe = np.where(defined, det, 1.0)
+    tx, ty = translation[:, 0], translation[:, 1]
+    pivot = np.stack([one_minus_c * tx + s * ty, -s * tx + one_minus_c * ty], axis=-1)
+    pivot = np.where(defined[:, None], pivot / safe[:, None], 0.0)
+    moved = _rotate(theta, points) + translation[:, None, :]
+    return translation, pivot, defined, moved
 
 
 def _soft_below(y: np.ndarray, ceiling: np.ndarray) -> np.ndarray:
@@ -320,14 +465,18 @@ def _own_motion(anatomy: SubjectAnatomy, c: dict, jaw_drop_ll: np.ndarray) -> np
     return d
 
 
-def _kinematics(anatomy: SubjectAnatomy, controls: np.ndarray, times: np.ndarray) -> JawTruth:
-    """Noise-free truth of one trial from its ``(n, len(CONTROLS))`` control curves."""
+def _kinematics(
+    anatomy: SubjectAnatomy, controls: np.ndarray, times: np.ndarray, protrusion: np.ndarray
+) -> JawTruth:
+    """Noise-free truth of one trial from its ``(n, len(CONTROLS))`` control curves and
+    the thrust family's protrusion ``(n,)`` mm (ignored by the other families)."""
     c = {name: controls[:, i] for i, name in enumerate(CONTROLS)}
     theta = np.deg2rad(np.maximum(c["jaw_deg"], 0.0))
     rest = anatomy.pellets_rest
     # Points carried by the mandible: LL, T1..T4 (their rest), MNI, MNM, the condyle.
     carried = np.concatenate([rest[_LL:], anatomy.condyle_rest[None]])
-    translation, pivot, defined, moved = _jaw_motion(anatomy, theta, carried)
+    offset = condyle_offset(anatomy, theta, protrusion)
+    translation, pivot, defined, moved = _jaw_motion(anatomy, theta, offset, carried)
     jaw_disp = moved - carried  # (n, 8, 2)
     pellets = np.broadcast_to(rest, (times.shape[0], 8, 2)).copy()
     pellets[:, _LL:] += jaw_disp[:, :7]
@@ -351,14 +500,24 @@ def _kinematics(anatomy: SubjectAnatomy, controls: np.ndarray, times: np.ndarray
 
 
 # ----------------------------------------------------------------------- measurement
-def _noise(rng: np.random.Generator, n: int, noise_mm: float) -> np.ndarray:
-    """``(n, 8, 2)`` mm: white plus slowly drifting noise, each of variance noise_mm^2 / 2."""
+def _noise(rng: np.random.Generator, n: int, noise_mm: float, family: str) -> np.ndarray:
+    """``(n, 8, 2)`` mm of measurement noise, each coordinate of SD ``noise_mm``.
+
+    ``family`` (:data:`NOISE_FAMILIES`): ``white`` independent per frame; ``drift`` white
+    noise smoothed by a Gaussian of ``_DRIFT_S`` (a slow wander, rescaled to unit SD);
+    ``realistic`` the two added with equal variance. The same rng draws the same numbers
+    for every family, so families differ only in how the numbers are combined.
+    """
     from scipy.ndimage import gaussian_filter1d
 
     white = rng.normal(size=(n, 8, 2))
     drift = gaussian_filter1d(rng.normal(size=(n, 8, 2)), _DRIFT_S / FRAME_STEP_S, axis=0)
     # The filtered unit white noise has SD 1/sqrt(2 sqrt(pi) sigma); restore unit SD.
     drift *= np.sqrt(2.0 * np.sqrt(np.pi) * _DRIFT_S / FRAME_STEP_S)
+    if family == "white":
+        return noise_mm * white
+    if family == "drift":
+        return noise_mm * drift
     return noise_mm / np.sqrt(2.0) * (white + drift)
 
 
@@ -403,6 +562,7 @@ def synth_recording(
     duration_s: float | None = None,
     dropouts: bool = True,
     mistracks: bool = True,
+    noise_family: str = "realistic",
 ):
     """One synthetic recording in memory: ``(PelletTrack, JawTruth)``.
 
@@ -412,20 +572,29 @@ def synth_recording(
     included). Positions are rounded to 1 um as in the files, so writing and reading the
     track gives it back exactly. The track holds 4-10 leading all-untracked rows from
     time 0 and, unless switched off, dropouts and 1-3 unmarked mistracks (see the truth's
-    ``dropped`` and ``mistracked``).
+    ``dropped`` and ``mistracked``). ``noise_family`` one of :data:`NOISE_FAMILIES`. The
+    jaw moves as ``anatomy.jaw_kinematics`` says.
     """
-    return _simulate(anatomy, task, seed, noise_mm, duration_s, dropouts, mistracks)[:2]
+    return _simulate(
+        anatomy, task, seed, noise_mm, duration_s, dropouts, mistracks, noise_family
+    )[:2]
 
 
-def _simulate(anatomy, task, seed, noise_mm, duration_s, dropouts, mistracks):
+def _simulate(anatomy, task, seed, noise_mm, duration_s, dropouts, mistracks, noise_family):
     """``(track, truth, controls)``; see :func:`synth_recording`."""
     from .txy import PelletTrack
 
     spec = get_task(task)
-    if not (np.isfinite(noise_mm) and noise_mm >= 0):
-        raise CassiError(f"noise_mm must be a finite number >= 0, got {noise_mm!r}")
-    task_rng, noise_rng, drop_rng, jump_rng, lead_rng = (
-        np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(5)
+    if not (np.isfinite(noise_mm) and 0 <= noise_mm <= MAX_NOISE_SCALE * DEFAULT_NOISE_MM):
+        raise CassiError(
+            f"noise_mm must be a number from 0 to {MAX_NOISE_SCALE * DEFAULT_NOISE_MM:.3g} mm,"
+            f" got {noise_mm!r}"
+        )
+    _check_family(noise_family, NOISE_FAMILIES, "noise family")
+    # A sixth stream for the thrust family: spawned children do not depend on how many
+    # are spawned, so the other five streams are those of generator version 3.
+    task_rng, noise_rng, drop_rng, jump_rng, lead_rng, thrust_rng = (
+        np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(6)
     )
     n_lead = int(lead_rng.integers(4, 11))
     natural_s, keyframes = task_duration(spec, task_rng)
@@ -436,8 +605,9 @@ def _simulate(anatomy, task, seed, noise_mm, duration_s, dropouts, mistracks):
     controls = control_trajectories(spec, keyframes, n - n_lead, FRAME_STEP_S, task_rng)
     controls = np.concatenate([np.repeat(controls[:1], n_lead, axis=0), controls])
     times = np.arange(n) * 6866 / 1e6  # as read_txy gives them (us / 1e6)
-    truth = _kinematics(anatomy, controls, times)
-    measured = truth.pellets_true + _noise(noise_rng, n, noise_mm)
+    protrusion = thrust_protrusion_mm(anatomy, n, n_lead, thrust_rng)
+    truth = _kinematics(anatomy, controls, times, protrusion)
+    measured = truth.pellets_true + _noise(noise_rng, n, noise_mm, noise_family)
     dropped = _dropouts(drop_rng, n, n_lead) if dropouts else np.zeros((n, 8, 2), bool)
     dropped[:n_lead] = True
     jumps, flags = _mistracks(jump_rng, n, n_lead) if mistracks else (0.0, np.zeros((n, 8), bool))
@@ -615,10 +785,12 @@ def load_truth(root, subject: str, task: str) -> JawTruth:
     """Read the ground truth of ``subject``'s ``task`` from a corpus folder ``root``.
 
     Reads ``root/<subject>/<task>.truth.csv`` (names case-insensitive). Raises
-    MissingDataError when absent, DataFormatError when malformed.
+    MissingDataError when absent or when the corpus is incomplete (its README.txt lacks
+    the completion line: an interrupted generation), DataFormatError when malformed.
     """
     from ._io import register_input
 
+    _check_corpus(Path(root))
     folder = _find_ci(Path(root), str(subject))
     path = _find_ci(folder, f"{task}.truth.csv") if folder is not None else None
     if path is None:
@@ -641,10 +813,12 @@ def _anatomy_json(anatomy: SubjectAnatomy) -> str:
 
 
 def load_anatomy(root, subject: str) -> SubjectAnatomy:
-    """Read ``root/<subject>/anatomy.json`` written by :func:`generate_corpus`."""
+    """Read ``root/<subject>/anatomy.json`` written by :func:`generate_corpus` (refused,
+    MissingDataError, when the corpus is incomplete, as :func:`load_truth`)."""
     from ._io import register_input
     from .headmeasures import HeadMeasures
 
+    _check_corpus(Path(root))
     folder = _find_ci(Path(root), str(subject))
     path = _find_ci(folder, "anatomy.json") if folder is not None else None
     if path is None:
@@ -704,94 +878,192 @@ def _corpus_plan(out_dir: Path, names, tasks, audio):
     return plan
 
 
-def _readme(n_subjects, seed, tasks, noise_scale, audio) -> str:
+COMPLETE_LINE = "complete: yes"  # the README's last line, written last of all files
+
+
+def _readme(n_subjects, seed, tasks, noise_scale, audio, families, noise_family) -> str:
+    names = subject_names(n_subjects)
     lines = [
         "cassi_fit synthetic XRMB corpus (NOT real data)",
         "",
         "Made by cassi_fit.synth.generate_corpus / `cassi synth`; see docs/SYNTHETIC.md.",
         f"generator_version: {GENERATOR_VERSION}",
         f"seed: {seed}",
-        f"subjects: {n_subjects} ({', '.join(subject_names(n_subjects))})",
+        f"subjects: {n_subjects} ({', '.join(names)})",
         f"tasks: {', '.join(tasks)}",
         f"noise_scale: {noise_scale}",
+        f"noise_family: {noise_family}",
+        "jaw_kinematics: " + ", ".join(f"{n} {f}" for n, f in zip(names, families, strict=True)),
         f"audio: {'yes' if audio else 'no'}",
         "",
         "Per subject folder: pellet files (.txy, real format), PAL.DAT, PHA.DAT, audio (.wav,",
         "16 kHz, speech tasks), <task>.truth.csv (per frame: true jaw angle, translation,",
         "pivot, condyle, noise-free pellets, dropout and mistrack flags) and anatomy.json.",
         "Headmeasures.txt holds every subject's head measures.",
+        "The last line below is written after every other file: without it the corpus is",
+        "incomplete (generation was interrupted) and the readers refuse it.",
+        COMPLETE_LINE,
     ]
     return "\n".join(lines) + "\n"
 
 
+def _families(n_subjects: int, jaw_kinematics) -> list[str]:
+    """Each subject's jaw-kinematics family: None or "mixed" for the default cycle
+    (:func:`default_jaw_kinematics`), one family for all, or a comma-separated string /
+    sequence of families cycled over the subjects."""
+    names = subject_names(n_subjects)
+    if jaw_kinematics is None or jaw_kinematics == "mixed":
+        return [default_jaw_kinematics(n) for n in names]
+    if isinstance(jaw_kinematics, str):
+        jaw_kinematics = [f.strip() for f in jaw_kinematics.split(",") if f.strip()]
+    cycle = [_check_family(f, JAW_KINEMATICS, "jaw kinematics") for f in jaw_kinematics]
+    if not cycle:
+        raise CassiError("no jaw kinematics family given")
+    return [cycle[i % len(cycle)] for i in range(n_subjects)]
+
+
 def generate_corpus(
-    out_dir,
+    out_dir: str | os.PathLike,
     *,
     n_subjects: int = 15,
     seed: int = 0,
-    tasks=None,
+    tasks: str | Sequence[str] | None = None,
     noise_scale: float = 1.0,
     audio: bool = True,
     overwrite: bool = False,
+    jaw_kinematics: str | Sequence[str] | None = None,
+    noise_family: str = "realistic",
 ) -> Path:
     """Write a synthetic corpus to ``out_dir`` and return its path.
 
-    ``tasks``: task names (default ``DEFAULT_TASKS``); ``noise_scale`` multiplies the
-    default measurement noise (0 = noise-free, dropouts and mistracks stay); ``audio``
-    writes a ``.wav`` for speech tasks. Refuses (OutputExistsError, before writing
-    anything) if a file it would write exists, unless ``overwrite``. Deterministic: the
-    same arguments give byte-identical files, and each recording depends only on
-    (seed, subject, task).
+    ``tasks``: task names (default ``DEFAULT_TASKS``); ``noise_scale`` (0 to
+    ``MAX_NOISE_SCALE``) multiplies the default measurement noise (0 = noise-free,
+    dropouts and mistracks stay); ``noise_family`` one of :data:`NOISE_FAMILIES`;
+    ``jaw_kinematics`` None / "mixed" (the default cycle over subjects: S01 physiological,
+    S02 fixed-condyle, S03 thrust, ...), one of :data:`JAW_KINEMATICS` for every subject,
+    or several (comma-separated or a sequence) cycled over the subjects; ``audio`` writes
+    a ``.wav`` for speech tasks. Every argument is checked, and existing files refused
+    (OutputExistsError, unless ``overwrite``), before anything is written. The corpus is
+    written into a temporary sibling folder and moved into place at the end, README.txt
+    (whose last line marks a complete corpus) last; an interrupted run leaves nothing.
+    Deterministic: the same arguments give byte-identical files, and each recording
+    depends only on (seed, subject, task, its family, the noise options).
     """
+    import shutil
+    import tempfile
+
+    out_dir = Path(out_dir)
+    tasks = _check_arguments(n_subjects, seed, tasks, noise_scale, audio)
+    families = _families(n_subjects, jaw_kinematics)
+    noise_family = _check_family(noise_family, NOISE_FAMILIES, "noise family")
+    names = subject_names(n_subjects)
+    relative = _corpus_plan(Path(), names, tasks, audio)
+    if not overwrite:
+        for rel in [Path("README.txt"), Path("Headmeasures.txt"),
+                    *(p for *_, files in relative for p in files.values())]:  # fmt: skip
+            if (out_dir / rel).exists():
+                raise OutputExistsError(
+                    f"{out_dir / rel}: file exists (pass overwrite=True / --force)"
+                )
+    if out_dir.exists() and not out_dir.is_dir():
+        raise OutputExistsError(f"{out_dir}: exists and is not a folder")
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
+    try:
+        _chmod_as_umask(tmp)
+        options = (seed, tasks, noise_scale, audio, families, noise_family)
+        _write_corpus(tmp, names, _corpus_plan(tmp, names, tasks, audio), options)
+        _move_into_place(tmp, out_dir)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return out_dir
+
+
+def _chmod_as_umask(folder: Path) -> None:
+    """``mkdtemp`` makes a 0700 folder; the corpus gets the user's normal folder mode."""
+    mask = os.umask(0)
+    os.umask(mask)
+    folder.chmod(0o777 & ~mask)
+
+
+def _write_corpus(root: Path, names, plan, options) -> None:
+    """Every file of the corpus into ``root`` (a fresh folder), README.txt last."""
     from ._io import atomic_write
     from .headmeasures import write_headmeasures
     from .outlines import write_outline
     from .txy import write_txy
 
-    out_dir = Path(out_dir)
-    tasks = _check_arguments(n_subjects, tasks, noise_scale)
-    names = subject_names(n_subjects)
-    plan = _corpus_plan(out_dir, names, tasks, audio)
-    top = {"readme": out_dir / "README.txt", "head": out_dir / "Headmeasures.txt"}
-    if not overwrite:
-        for path in [*top.values(), *(p for *_, files in plan for p in files.values())]:
-            if path.exists():
-                raise OutputExistsError(f"{path}: file exists (pass overwrite=True / --force)")
+    seed, tasks, noise_scale, audio, families, noise_family = options
     anatomies = {}
     for i, name, task, files in plan:
         if task is None:
-            anatomy = make_subject(name, np.random.default_rng([int(seed), 1, i]))
+            rng = np.random.default_rng([int(seed), 1, i])
+            anatomy = make_subject(name, rng, jaw_kinematics=families[i])
             anatomies[name] = anatomy
-            write_outline(files["pal"], anatomy.palate, overwrite=overwrite)
-            write_outline(files["pha"], anatomy.pharynx, overwrite=overwrite)
-            atomic_write(files["anatomy"], _anatomy_json(anatomy), overwrite=overwrite)
+            write_outline(files["pal"], anatomy.palate, overwrite=True)
+            write_outline(files["pha"], anatomy.pharynx, overwrite=True)
+            atomic_write(files["anatomy"], _anatomy_json(anatomy), overwrite=True)
             continue
         anatomy = anatomies[name]
         rec_seed = _recording_seed(seed, i, task)
+        noise_mm = noise_scale * DEFAULT_NOISE_MM
         track, truth, controls = _simulate(
-            anatomy, task, rec_seed, noise_scale * DEFAULT_NOISE_MM, None, True, True
+            anatomy, task, rec_seed, noise_mm, None, True, True, noise_family
         )
-        write_txy(files["txy"], track, overwrite=overwrite)
-        comment = f"cassi_fit synthetic ground truth; subject {name}; task {task}; seed {seed}"
-        atomic_write(files["truth"], _truth_text(truth, comment), overwrite=overwrite)
+        write_txy(files["txy"], track, overwrite=True)
+        comment = (f"cassi_fit synthetic ground truth; subject {name}; task {task}; seed {seed};"
+                   f" jaw kinematics {anatomy.jaw_kinematics}; noise {noise_family}")  # fmt: skip
+        atomic_write(files["truth"], _truth_text(truth, comment), overwrite=True)
         if "wav" in files:
             rng = np.random.default_rng([*rec_seed, 3])
             samples = synth_audio(controls, truth.times, anatomy.f0_hz, rng)
-            _write_wav(files["wav"], samples, overwrite=overwrite)
+            _write_wav(files["wav"], samples, overwrite=True)
     heads = {name: a.head for name, a in anatomies.items()}
-    write_headmeasures(top["head"], heads, overwrite=overwrite)
-    atomic_write(
-        top["readme"], _readme(n_subjects, seed, tasks, noise_scale, audio), overwrite=overwrite
-    )
-    return out_dir
+    write_headmeasures(root / "Headmeasures.txt", heads, overwrite=True)
+    readme = _readme(len(names), seed, tasks, noise_scale, audio, families, noise_family)
+    atomic_write(root / "README.txt", readme, overwrite=True)
 
 
-def _check_arguments(n_subjects, tasks, noise_scale) -> tuple[str, ...]:
-    """Validate :func:`generate_corpus`'s arguments; returns the task names (lower case)."""
+def _move_into_place(tmp: Path, out_dir: Path) -> None:
+    """Rename the finished ``tmp`` to ``out_dir`` (one atomic rename if ``out_dir`` is
+    absent or empty); else move file by file into it, its old README.txt removed first and
+    the new one moved last, so an interruption leaves a corpus marked incomplete."""
+    if out_dir.is_dir() and not any(out_dir.iterdir()):
+        out_dir.rmdir()
+    if not out_dir.exists():
+        os.replace(tmp, out_dir)
+        return
+    (out_dir / "README.txt").unlink(missing_ok=True)
+    for path in sorted(p for p in tmp.rglob("*") if p.is_file() and p.name != "README.txt"):
+        target = out_dir / path.relative_to(tmp)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(path, target)
+    os.replace(tmp / "README.txt", out_dir / "README.txt")
+
+
+def _check_arguments(n_subjects, seed, tasks, noise_scale, audio) -> tuple[str, ...]:
+    """Validate :func:`generate_corpus`'s arguments; returns the task names (lower case).
+
+    Every option out of range is refused here, before anything is written.
+    """
     if not isinstance(n_subjects, (int, np.integer)) or not 1 <= n_subjects <= 99:
         raise CassiError(f"n_subjects must be an integer from 1 to 99, got {n_subjects!r}")
-    if not (np.isfinite(noise_scale) and noise_scale >= 0):
-        raise CassiError(f"noise_scale must be a finite number >= 0, got {noise_scale!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not (
+        0 <= seed < 2**63
+    ):
+        raise CassiError(f"seed must be an integer from 0 to 2**63 - 1, got {seed!r}")
+    if not (
+        isinstance(noise_scale, (int, float, np.number))
+        and np.isfinite(noise_scale)
+        and 0 <= noise_scale <= MAX_NOISE_SCALE
+    ):
+        raise CassiError(
+            f"noise_scale must be a number from 0 to {MAX_NOISE_SCALE:g} (the default noise "
+            f"times at most {MAX_NOISE_SCALE:g}: > 2 mm per coordinate is not a pellet "
+            f"track), got {noise_scale!r}"
+        )
+    if not isinstance(audio, bool):
+        raise CassiError(f"audio must be True or False, got {audio!r}")
     if tasks is None:
         return DEFAULT_TASKS
     if isinstance(tasks, str):
@@ -817,42 +1089,54 @@ def default_corpus_dir() -> Path:
     return Path(cache).expanduser() / "cassi_fit" / f"synthetic-v{GENERATOR_VERSION}"
 
 
+def corpus_status(folder: str | os.PathLike) -> str:
+    """``"complete"`` (README.txt of this generator version ending in the completion line),
+    ``"stale"`` (complete, another generator version), ``"incomplete"`` (a README without
+    the completion line: generation was interrupted) or ``"absent"`` (no README.txt)."""
+    readme = Path(folder) / "README.txt"
+    if not readme.is_file():
+        return "absent"
+    text = readme.read_text(encoding="utf-8", errors="replace")
+    if not text.rstrip("\n").endswith(COMPLETE_LINE):
+        return "incomplete"
+    current = f"generator_version: {GENERATOR_VERSION}\n" in text
+    return "complete" if current else "stale"
+
+
 def _is_complete(folder: Path) -> bool:
-    readme = folder / "README.txt"
-    return readme.is_file() and f"generator_version: {GENERATOR_VERSION}" in readme.read_text(
-        encoding="utf-8", errors="replace"
-    )
+    return corpus_status(folder) == "complete"
+
+
+def _check_corpus(root: Path) -> None:
+    """Refuse to read ground truth from a corpus whose writing did not finish."""
+    status = corpus_status(root)
+    if status in ("absent", "incomplete"):
+        raise MissingDataError(
+            f"{root}: not a complete synthetic corpus (README.txt "
+            f"{'missing' if status == 'absent' else 'lacks its last line'}: its generation "
+            "was interrupted?); generate it again with `cassi synth --force`"
+        )
 
 
 def ensure_default_corpus() -> Path:
     """The default corpus (15 subjects, default tasks, seed 0), generated if absent.
 
-    Generated into a temporary sibling folder and renamed into place, so a crash or a
-    second process never leaves a half-written corpus behind. The README written last
-    marks a complete corpus.
+    :func:`generate_corpus` writes into a temporary sibling folder and renames it into
+    place, so a crash or a second process never leaves a half-written corpus behind; a
+    folder that is there but not complete (interrupted, or of another generator version)
+    is refused, not silently reused.
     """
-    import shutil
-    import tempfile
-
     target = default_corpus_dir()
     if _is_complete(target):
         return target
     if target.exists() and any(target.iterdir()):
         raise OutputExistsError(
-            f"{target}: exists but is not a complete synthetic corpus of this version; "
-            "remove it or point CASSI_SYNTH_DIR elsewhere"
+            f"{target}: exists but is not a complete synthetic corpus of this version "
+            f"({corpus_status(target)}); remove it or point CASSI_SYNTH_DIR elsewhere"
         )
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
     try:
-        generate_corpus(tmp, **_DEFAULT_CORPUS_ARGS, overwrite=True)
-        if target.exists():
-            target.rmdir()  # empty (checked above); fails if another process filled it
-        os.replace(tmp, target)
-    except OSError:
-        if not _is_complete(target):
+        generate_corpus(target, **_DEFAULT_CORPUS_ARGS, overwrite=False)
+    except (OSError, OutputExistsError):
+        if not _is_complete(target):  # another process may have finished it meanwhile
             raise
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
     return target

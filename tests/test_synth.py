@@ -59,14 +59,15 @@ def test_anatomy_is_plausible(index):
     assert y.min() > 4.0 and y.max() < 28.0
     assert 35.0 <= a.jaw_pellet_distance <= 45.0
     tip, mni = a.lower_incisor_tip_rest, a.mni_rest
-    assert -4.5 < tip[0] < -2 and -2 < tip[1] < 0  # behind the upper tip: overjet
-    assert mni[0] > tip[0] and mni[1] < tip[1] - 1.5  # MNI in front of and below the tip
+    assert -4.5 < tip[0] < -1.5 and -2.5 < tip[1] < 0  # behind the upper tip: overjet
+    assert abs(mni[0] - tip[0]) < 3.5 and mni[1] < tip[1] - 2.0  # MNI on the crown, below
     behind, above = tip - a.condyle_rest
     assert 90 <= behind <= 100 and -30 <= above <= -20
     np.testing.assert_array_equal(a.chin_rest, [a.head.gnathion_x, a.head.gnathion_y])
     np.testing.assert_array_equal(a.pellets_rest[6:], [a.mni_rest, a.mnm_rest])
     assert a.upper_lip_thickness == a.head.upper_lip_thickness
-    assert 120 < a.face_width == a.head.face_width < 155
+    assert 115 < a.face_width == a.head.face_width < 155
+    assert a.jaw_kinematics == synth.DEFAULT_JAW_KINEMATICS_CYCLE[index % 3]
 
 
 @pytest.mark.parametrize("index", range(4))
@@ -81,16 +82,37 @@ def test_lip_thickness_is_what_the_pellets_show(index):
     assert ahead == pytest.approx(a.lower_lip_thickness, abs=1e-3)  # um rounding
 
 
-def test_generator_constants_match_the_face_model():
-    from cassi_fit.face_model import load_model
+def test_the_truth_does_not_know_the_face_model():
+    """Issue 11: subject geometry is drawn from anthropometric norms, not from the model.
+    The generator neither imports the face model nor reads its files."""
+    import inspect
+    import subprocess
+    import sys
 
-    model = load_model()
-    v = np.asarray(model.vertices)[:, :2]
-    mni, mnm = v[model.landmarks["MNI"]], v[model.landmarks["MNM"]]
-    tip = v[model.landmarks["lower_incisor_tip"]]
-    forward = (mni - mnm) / np.linalg.norm(mni - mnm)
-    assert synth.MODEL_JAW_PELLET_DISTANCE == pytest.approx(np.linalg.norm(mni - mnm), abs=1e-3)
-    assert synth.MODEL_TIP_TO_MNI_ALONG == pytest.approx((mni - tip) @ forward, abs=1e-3)
+    source = inspect.getsource(synth)
+    assert "face_model" not in source and "model.json" not in source
+    assert "MODEL_" not in source
+    code = "import sys, cassi_fit.synth; print(sorted(m for m in sys.modules if 'face' in m))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_subject_geometry_follows_its_anthropometric_norms():
+    """Lip thickness and the MNI-to-incisor offset: mean and SD as NORMS says (400 draws)."""
+    subjects = [synth.make_subject("X", np.random.default_rng([9, k])) for k in range(400)]
+    for key, values in {
+        "upper_lip_thickness": [a.upper_lip_thickness for a in subjects],
+        "lower_lip_thickness": [a.lower_lip_thickness for a in subjects],
+        "face_width": [a.face_width for a in subjects],
+        "overjet": [-a.lower_incisor_tip_rest[0] for a in subjects],
+    }.items():
+        mean, sd = synth.NORMS[key]
+        assert np.mean(values) == pytest.approx(mean, abs=3 * sd / np.sqrt(400)), key
+        assert np.std(values) == pytest.approx(sd, rel=0.15), key
+    depth = [np.linalg.norm(a.mni_rest - a.lower_incisor_tip_rest) for a in subjects]
+    expected = np.hypot(synth.NORMS["mni_depth"][0], synth.NORMS["mni_labial"][0])
+    assert np.median(depth) == pytest.approx(expected, abs=0.3)
+    assert np.std(depth) > 0.5  # a spread, not one model-derived offset
 
 
 def test_subjects_differ():
@@ -115,17 +137,89 @@ def test_mandible_moves_exactly_rigidly(task):
     np.testing.assert_allclose(moved[:, 2], truth.condyle, atol=1e-9)
 
 
-def test_pivot_is_the_fixed_point_and_moves_as_the_jaw_opens():
-    _, truth = zoo.jaw_wagging(1)
+@pytest.mark.parametrize("index", [0, 1, 2])  # physiological, fixed-condyle, thrust
+def test_pivot_is_the_fixed_point(index):
+    _, truth = zoo.jaw_wagging(index)
     assert truth.pivot_defined.all()  # theta > 0 throughout this task
     with jax.enable_x64(True):
         image = jax.vmap(rigid.apply)(truth.theta, truth.translation, truth.pivot)
     np.testing.assert_allclose(np.asarray(image), truth.pivot, atol=1e-8)
-    closed = truth.pivot[np.argmin(truth.theta)]
-    opened = truth.pivot[np.argmax(truth.theta)]
-    assert np.linalg.norm(opened - closed) > 10.0  # not a fixed hinge
-    slide = np.linalg.norm(truth.condyle - zoo.subject(1).condyle_rest, axis=1)
-    assert 8.0 < slide.max() < 25.0  # the condyle slides forward/down on wide opening
+
+
+def _family_subject(family, index=0):
+    name = synth.subject_names(index + 1)[index]
+    return synth.make_subject(name, np.random.default_rng([0, 1, index]), jaw_kinematics=family)
+
+
+def _wagging(anatomy, index=0):
+    return synth.synth_recording(anatomy, "tp106", seed=[0, 2, index, 11], noise_mm=0.0,
+                                 dropouts=False, mistracks=False)[1]  # fmt: skip
+
+
+@pytest.mark.parametrize("index", range(4))
+def test_fixed_condyle_rotates_about_a_fixed_centre(index):
+    anatomy = _family_subject("fixed-condyle", index)
+    truth = _wagging(anatomy, index)
+    np.testing.assert_allclose(truth.condyle, np.broadcast_to(anatomy.condyle_rest,
+                                                              truth.condyle.shape), atol=1e-9)
+    np.testing.assert_allclose(truth.pivot, np.broadcast_to(anatomy.condyle_rest,
+                                                            truth.pivot.shape), atol=1e-6)
+
+
+@pytest.mark.parametrize("index", range(4))
+def test_physiological_condyle_glides_on_a_curved_path_coupled_to_rotation(index):
+    anatomy = _family_subject("physiological", index)
+    truth = _wagging(anatomy, index)
+    glide = truth.condyle - anatomy.condyle_rest
+    distance = np.linalg.norm(glide, axis=1)
+    deg = np.rad2deg(truth.theta)
+    # Coupled: the glide is a function of the angle, growing with it (rotation first).
+    order = np.argsort(deg)
+    assert np.all(np.diff(distance[order]) >= -1e-9)
+    assert distance[deg < 3.0].max() < 0.8 and distance.max() > 4.0
+    # Forward and down, and curved: the heading flattens as the condyle glides on.
+    assert np.all(glide[distance > 0.5, 0] > 0) and np.all(glide[distance > 0.5, 1] < 0)
+    early = glide[np.argmin(np.abs(distance - 1.0))]
+    late = glide[np.argmax(distance)]
+    heading = np.rad2deg(np.arctan2(-early[1], early[0])), np.rad2deg(
+        np.arctan2(-(late - early)[1], (late - early)[0]))
+    assert heading[0] - heading[1] > 5.0, heading
+    # The true rotation centre therefore moves as the jaw opens (not a hinge).
+    assert np.ptp(truth.pivot, axis=0).max() > 5.0
+
+
+def test_thrust_translates_independently_of_rotation():
+    anatomy = _family_subject("thrust", 2)
+    truth = _wagging(anatomy, 2)
+    glide = np.linalg.norm(truth.condyle - anatomy.condyle_rest, axis=1)
+    assert glide.max() > 0.5
+    steps = np.abs(np.diff(glide))
+    assert steps.max() > 0.3 and np.mean(steps > 1e-9) < 0.05  # held levels that jump
+    # Not a function of the angle: frames at nearly the same angle, glides far apart.
+    deg = np.rad2deg(truth.theta)
+    close = np.abs(deg[:, None] - deg[None, :]) < 0.05
+    assert (np.abs(glide[:, None] - glide[None, :])[close]).max() > 0.5
+    # With the jaw not turning at all, the motion is a pure translation: no pivot.
+    n = 400
+    protrusion = synth.thrust_protrusion_mm(anatomy, n, 4, np.random.default_rng(1))
+    assert np.ptp(protrusion) > 0.3
+    offset = synth.condyle_offset(anatomy, np.zeros(n), protrusion)
+    t, pivot, defined, moved = synth._jaw_motion(anatomy, np.zeros(n), offset,
+                                                 anatomy.pellets_rest[6:])  # fmt: skip
+    assert not defined.any() and np.abs(t).max() > 0.3
+    np.testing.assert_allclose(moved - anatomy.pellets_rest[6:], np.repeat(t[:, None], 2, 1))
+
+
+def test_the_family_changes_nothing_but_the_jaw_motion():
+    a = _family_subject("thrust", 3)
+    b = _family_subject("fixed-condyle", 3)
+    np.testing.assert_array_equal(a.pellets_rest, b.pellets_rest)
+    assert a.head == b.head
+    ta, tb = _wagging(a, 3), _wagging(b, 3)
+    np.testing.assert_array_equal(ta.theta, tb.theta)
+    assert not np.allclose(ta.translation, tb.translation)
+    with pytest.raises(CassiError, match="jaw kinematics"):
+        _family_subject("hinge")
 
 
 def test_jaw_angles_speech_versus_wagging():
@@ -203,6 +297,21 @@ def test_noise_size_and_mistracks_are_as_recorded():
     assert 0.2 < distance.std() < 0.4  # about 0.3 mm, as in real files
 
 
+@pytest.mark.parametrize("family", ["white", "drift", "realistic"])
+@pytest.mark.parametrize("sd", [0.1, 0.25, 0.5])
+def test_noise_families_have_the_stated_sd(family, sd):
+    track, truth = synth.synth_recording(zoo.subject(0), "tp040", seed=[5, 1], noise_mm=sd,
+                                         dropouts=False, mistracks=False, noise_family=family)
+    lead = int(np.argmax(track.valid.any(axis=(1, 2))))
+    noise = track.positions[lead:] - truth.pellets_true[lead:]  # (n, 8, 2)
+    assert noise.std() == pytest.approx(sd, rel=0.12 if family == "white" else 0.3)
+    lag1 = np.mean([np.corrcoef(noise[1:, k, a], noise[:-1, k, a])[0, 1]
+                    for k in range(8) for a in range(2)])  # fmt: skip
+    # white: independent frames; drift: a slow wander (0.4 s >> 6.9 ms); realistic: half
+    expected = {"white": (-0.1, 0.1), "drift": (0.99, 1.0), "realistic": (0.3, 0.65)}[family]
+    assert expected[0] < lag1 <= expected[1], lag1
+
+
 def test_noise_scales_and_clean_recordings_have_no_corruption():
     track, truth = zoo.recording("tp040", 0, noise_mm=0.0, clean=True)
     lead = int(np.argmax(track.valid.any(axis=(1, 2))))
@@ -273,6 +382,9 @@ def test_truth_and_anatomy_errors(corpus, tmp_path):
     bad.mkdir()
     good = (corpus / "S01" / "tp106.truth.csv").read_text().splitlines()
     (bad / "tp106.truth.csv").write_text("\n".join(good[:5] + ["1,2,3"]) + "\n")
+    with pytest.raises(MissingDataError, match="not a complete synthetic corpus"):
+        synth.load_truth(tmp_path, "s01", "TP106")  # no README.txt: an unfinished corpus
+    (tmp_path / "README.txt").write_text((corpus / "README.txt").read_text())
     with pytest.raises(DataFormatError, match=r"tp106.truth.csv:6:"):
         synth.load_truth(tmp_path, "s01", "TP106")
     (bad / "anatomy.json").write_text("{}")
@@ -297,12 +409,56 @@ def test_generation_is_byte_identical_and_refuses_to_overwrite(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "kwargs", [{"n_subjects": 0}, {"tasks": ["tp999"]}, {"noise_scale": -1.0}, {"tasks": []}]
-)
+    "kwargs",
+    [{"n_subjects": 0}, {"tasks": ["tp999"]}, {"noise_scale": -1.0}, {"tasks": []},
+     {"noise_scale": 1e6}, {"noise_scale": float("nan")}, {"seed": -1}, {"seed": 1.5},
+     {"jaw_kinematics": "hinge"}, {"jaw_kinematics": ""}, {"noise_family": "pink"}],
+)  # fmt: skip
 def test_bad_arguments_raise_the_toolkit_error(tmp_path, kwargs):
     with pytest.raises(CassiError):
-        synth.generate_corpus(tmp_path / "c", **kwargs)
-    assert not (tmp_path / "c").exists()
+        synth.generate_corpus(tmp_path / "c", n_subjects=kwargs.pop("n_subjects", 1), **kwargs)
+    assert list(tmp_path.iterdir()) == []  # refused before anything is written
+
+
+def _interrupt(*args, **kwargs):
+    raise KeyboardInterrupt
+
+
+def test_an_interrupted_generation_leaves_nothing_that_looks_complete(tmp_path, monkeypatch):
+    import cassi_fit.headmeasures
+
+    out = tmp_path / "corpus"
+    monkeypatch.setattr(cassi_fit.headmeasures, "write_headmeasures", _interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        synth.generate_corpus(out, n_subjects=2, tasks=["tp106"])
+    assert list(tmp_path.iterdir()) == []  # no corpus, no hidden temporary folder
+    monkeypatch.undo()
+    synth.generate_corpus(out, n_subjects=1, tasks=["tp106"], seed=1)
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    monkeypatch.setattr(cassi_fit.headmeasures, "write_headmeasures", _interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        synth.generate_corpus(out, n_subjects=1, tasks=["tp106"], seed=2, overwrite=True)
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before  # untouched
+    assert [p.name for p in tmp_path.iterdir()] == ["corpus"]
+    assert synth.corpus_status(out) == "complete"
+    # A README without its last line (moved half-way) is refused by the readers.
+    readme = out / "README.txt"
+    readme.write_text(readme.read_text().replace(synth.COMPLETE_LINE, ""))
+    assert synth.corpus_status(out) == "incomplete"
+    with pytest.raises(MissingDataError, match="not a complete synthetic corpus"):
+        synth.load_anatomy(out, "S01")
+
+
+def test_corpus_families_are_as_asked_and_recorded(tmp_path):
+    out = synth.generate_corpus(tmp_path / "m", n_subjects=4, tasks=["tp020"], audio=False)
+    families = [synth.load_anatomy(out, n).jaw_kinematics for n in ("S01", "S02", "S03", "S04")]
+    assert families == ["physiological", "fixed-condyle", "thrust", "physiological"]
+    assert "S02 fixed-condyle" in (out / "README.txt").read_text()
+    out = synth.generate_corpus(tmp_path / "t", n_subjects=2, tasks=["tp020"], audio=False,
+                                jaw_kinematics="thrust,fixed-condyle", noise_family="white")
+    assert [synth.load_anatomy(out, n).jaw_kinematics for n in ("S01", "S02")] == [
+        "thrust", "fixed-condyle"]
+    assert "noise_family: white" in (out / "README.txt").read_text()
 
 
 def test_default_corpus_location_and_ensure(tmp_path, monkeypatch):
@@ -335,3 +491,12 @@ def test_cassi_synth_in_process(tmp_path, capsys):
     assert "unknown task" in capsys.readouterr().err
     assert main(["synth", str(tmp_path / "x"), "--tasks", "list"]) == 0
     assert "tp106" in capsys.readouterr().out
+    for bad in (["--noise-scale", "1e6"], ["--jaw-kinematics", "hinge"], ["--seed", "-3"],
+                ["--noise-family", "pink"]):  # fmt: skip
+        assert main(["synth", str(tmp_path / "y"), "--subjects", "1", *bad]) == 2, bad
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1, err
+        assert not (tmp_path / "y").exists()
+    args = ["synth", str(tmp_path / "z"), "--subjects", "1", "--tasks", "tp020", "--no-audio"]
+    assert main([*args, "--jaw-kinematics", "fixed-condyle", "--noise-family", "drift"]) == 0
+    assert synth.load_anatomy(tmp_path / "z", "S01").jaw_kinematics == "fixed-condyle"

@@ -23,7 +23,22 @@ def register(subparsers) -> None:
         "--noise-scale",
         type=float,
         default=1.0,
-        help="multiplies the default measurement noise (0.3 mm SD of the jaw pellet distance)",
+        help="multiplies the default measurement noise (0.3 mm SD of the jaw pellet "
+        "distance); 0 to 10",
+    )
+    parser.add_argument(
+        "--noise-family",
+        default="realistic",
+        metavar="FAMILY",
+        help="realistic (white plus slow drift, the default), white, or drift",
+    )
+    parser.add_argument(
+        "--jaw-kinematics",
+        default="mixed",
+        metavar="FAMILIES",
+        help="how the jaw moves: mixed (the default: S01 physiological, S02 fixed-condyle, "
+        "S03 thrust, S04 physiological, ...), or fixed-condyle, physiological, thrust, or a "
+        "comma-separated list of them cycled over the subjects (docs/SYNTHETIC.md)",
     )
     parser.add_argument(
         "--tasks",
@@ -51,6 +66,8 @@ def run(args: argparse.Namespace) -> int:
         noise_scale=args.noise_scale,
         audio=not args.no_audio,
         overwrite=args.force,
+        jaw_kinematics=args.jaw_kinematics,
+        noise_family=args.noise_family,
     )
     print(f"wrote a synthetic corpus of {args.subjects} subjects to {out} (seed {args.seed})")
     return 0
