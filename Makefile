@@ -33,7 +33,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_animation.py
 
 experiments: $(STAMP)
-	$(BIN)/python experiments/jaw_comparison.py --out experiments/output --force
+	$(BIN)/python experiments/jaw_comparison.py --out experiments/output --docs docs/generated --force
 	$(BIN)/python experiments/subject_fitting.py --out experiments/output --force
 
 # ruff; the import-linter contracts (layers, no cycles; pyproject.toml); the public surface's
