@@ -36,6 +36,7 @@ the model's index chains are static.
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -68,7 +69,8 @@ def has_collision_data(model) -> bool:
     return all(f"{a}_{c}" in model.collision for a in ("upper", "lower") for c in _CHAINS)
 
 
-def _require(model):
+def require_collision_data(model) -> None:
+    """``CassiError`` if ``model`` has no collision chains (``has_collision_data``)."""
     if not has_collision_data(model):
         raise CassiError(
             "this face model has no collision chains (model.json 'collision'); rebuild it "
@@ -192,7 +194,7 @@ def depths(model, vertices) -> dict:
     ``tongue_lower`` (tongue vertices, the teeth of that arch), ``lips_upper`` and
     ``lips_lower`` (lip vertices); plus ``tongue_upper_front``/``tongue_lower_front``,
     the teeth depths counted only where the closest crown is a front tooth."""
-    _require(model)
+    require_collision_data(model)
     tongue, lips = _parts(model)
     vt, vl = vertices[tongue], vertices[lips]
     sheet = _palate_sheet(model, vertices)
@@ -230,6 +232,14 @@ def report(model, vertices) -> dict:
         "lips_lower_teeth": jnp.max(d["lips_lower"]),
         "lips_crossing": jnp.maximum(jnp.max(lips_crossing(model, vertices)), 0.0),
     }
+
+
+@eqx.filter_jit
+def report_frames(model, vertices):
+    """:func:`report` of every frame of ``vertices (m, V, 3)`` mm, one compiled call per
+    (model topology, ``m``): key -> ``(m,)`` mm. Pad ``m`` to a frame bucket
+    (``animate.frame_bucket``) to share the compilation between recordings."""
+    return jax.vmap(lambda v: report(model, v))(vertices)
 
 
 def _escape(q, arches, side, ceiling=None):
@@ -276,7 +286,7 @@ def project(model, vertices, passes: int = PROJECTION_PASSES):
     out of both arches, each point by its shortest way out of all of them at once
     (:func:`_escape`; ``passes`` rounds, for the few points whose way out of one leads
     into another). Vertices that are inside nothing do not move."""
-    _require(model)
+    require_collision_data(model)
     tongue, lips = _parts(model)
     sheet = _palate_sheet(model, vertices)
     arches = [(_arch(model, vertices, a)[0], a == "upper") for a in ("upper", "lower")]

@@ -25,9 +25,12 @@ import numpy as np
 from jax import Array
 
 from . import rigid
+from .options import JAW_WEIGHTS, TONGUE_ANCHORS, check_choice
+from .pellets import PELLET_NAMES
 from .tongue import tongue_displacement
 
-PELLET_SITES = ("UL", "LL", "T1", "T2", "T3", "T4", "MNI", "MNM")
+#: The model's pellet-site landmarks, in pellet order (``pellets.PELLET_NAMES``).
+PELLET_SITES = PELLET_NAMES
 # Lip rounding: relative narrowing of the mouth per mm of mean forward lip displacement.
 LIP_ROUNDING_PER_MM = 0.015
 # Smooth positive part used for the nose coupling: quadratic over the first 2 mm.
@@ -99,8 +102,7 @@ def conformation(model, v, p):
 
 def jaw(model, v, p, weights="cassi"):
     """Stage 2: jaw rotation with per-vertex fractions (``"cassi"`` or ``"parke"`` set)."""
-    if weights not in ("cassi", "parke"):
-        raise ValueError(f"jaw_weights must be 'cassi' or 'parke', got {weights!r}")
+    check_choice("jaw weights", weights, JAW_WEIGHTS)
     xy = _move_by_fraction((p.jaw_theta, p.jaw_translation), model.jaw_weights[weights], v[:, :2])
     return v.at[:, :2].set(xy)
 
@@ -120,10 +122,8 @@ def tongue(model, v, p, anchor="follow"):
     idx = model.regions["tongue"]
     s = model.fields["tongue_s"]
     site_s = jnp.stack([s[model.landmarks[k]] for k in ("T1", "T2", "T3", "T4")])
-    if anchor == "none" or anchor == "follow" or anchor == "fixed":
-        d = tongue_displacement(s[idx], site_s, p.tongue, model.measures["tongue_anchor_s"], anchor)
-    else:
-        raise ValueError(f"tongue_anchor must be 'fixed', 'follow' or 'none', got {anchor!r}")
+    check_choice("tongue anchor", anchor, TONGUE_ANCHORS)
+    d = tongue_displacement(s[idx], site_s, p.tongue, model.measures["tongue_anchor_s"], anchor)
     return v.at[idx, :2].add(d)
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-ANCHOR_MODES = ("fixed", "follow", "none")
+from .options import TONGUE_ANCHORS, check_choice
 
 
 def _blend(u):
@@ -30,10 +30,10 @@ def tongue_displacement(s, site_s, displacement, anchor_s, anchor="follow"):
 
     ``site_s`` (4,): arc lengths of T1..T4 (increasing); ``displacement`` (4, 2): params
     #55-#62 as rows (X, Z) of T1..T4; ``anchor_s``: arc length of the fixed anchors
-    (> site_s[3]); ``anchor``: one of ``ANCHOR_MODES`` (static).
+    (> site_s[3]); ``anchor``: one of ``options.TONGUE_ANCHORS`` (static;
+    ``InvalidChoiceError`` otherwise).
     """
-    if anchor not in ANCHOR_MODES:
-        raise ValueError(f"tongue_anchor must be one of {ANCHOR_MODES}, got {anchor!r}")
+    check_choice("tongue anchor", anchor, TONGUE_ANCHORS)
     s = s[:, None]
     d = jnp.broadcast_to(displacement[0], (s.shape[0], 2))
     for k in range(3):  # telescoping sum: segment k contributes fully once passed

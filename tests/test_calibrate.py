@@ -10,7 +10,8 @@ import pytest
 import zoo
 
 from cassi_fit import calibrate
-from cassi_fit.animate import animate, initialize
+from cassi_fit.animate import animate
+from cassi_fit.initialize import initialize
 from cassi_fit.cli import main as cli
 from cassi_fit.dataset import Dataset
 from cassi_fit.errors import CassiError, DataFormatError, MissingDataError
