@@ -40,6 +40,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, Float, Int
 
 from .errors import CassiError
 
@@ -78,7 +79,9 @@ def require_collision_data(model) -> None:
         )
 
 
-def _arch(model, vertices, arch):
+def arch_chains(
+    model, vertices: Float[Array, "V 3"], arch: str
+) -> tuple[list[Float[Array, "K 3"]], Int[np.ndarray, " K"]]:
     """Positions of the four chains of ``arch`` (each (K, 3)) and the tooth numbers (K,)."""
     chains = [vertices[np.asarray(model.collision[f"{arch}_{c}"])] for c in _CHAINS]
     return chains, np.asarray(model.collision[f"{arch}_tooth"])
@@ -139,7 +142,9 @@ def _walls(q, chains, upper: bool, side: str):
     return _wall_distance(q, lab, ling, ling - lab, ling_o[:, 1])
 
 
-def _teeth_depth(q, chains, upper: bool, side: str):
+def teeth_depth(
+    q: Float[Array, " 3"], chains: list, upper: bool, side: str
+) -> tuple[Float[Array, ""], Float[Array, " 3"]]:
     """Depth (mm, >= 0) of ``q`` inside one arch, and the displacement that takes it out
     (back across the face it came in by, or vertically to the occlusal level)."""
     sign = 1.0 if upper else -1.0
@@ -200,10 +205,10 @@ def depths(model, vertices) -> dict:
     sheet = _palate_sheet(model, vertices)
     out = {"tongue_palate": jax.vmap(lambda q: _palate_depth(q, sheet)[0])(vt)}
     for arch in ("upper", "lower"):
-        chains, teeth = _arch(model, vertices, arch)
+        chains, teeth = arch_chains(model, vertices, arch)
         upper = arch == "upper"
-        d_t = jax.vmap(lambda q, c=chains, u=upper: _teeth_depth(q, c, u, "lingual")[0])(vt)
-        d_l = jax.vmap(lambda q, c=chains, u=upper: _teeth_depth(q, c, u, "labial")[0])(vl)
+        d_t = jax.vmap(lambda q, c=chains, u=upper: teeth_depth(q, c, u, "lingual")[0])(vt)
+        d_l = jax.vmap(lambda q, c=chains, u=upper: teeth_depth(q, c, u, "labial")[0])(vl)
         front = _front_mask(vt, chains, teeth)
         out[f"tongue_{arch}"] = d_t
         out[f"tongue_{arch}_front"] = jnp.where(front, d_t, 0.0)
@@ -289,7 +294,7 @@ def project(model, vertices, passes: int = PROJECTION_PASSES):
     require_collision_data(model)
     tongue, lips = _parts(model)
     sheet = _palate_sheet(model, vertices)
-    arches = [(_arch(model, vertices, a)[0], a == "upper") for a in ("upper", "lower")]
+    arches = [(arch_chains(model, vertices, a)[0], a == "upper") for a in ("upper", "lower")]
 
     def until_out(step):
         # up to ``passes`` rounds, stopping as soon as a round moves nothing

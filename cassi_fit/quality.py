@@ -63,7 +63,7 @@ def _distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.where(none, np.nan, np.sqrt(np.nansum(d2, axis=-1)))
 
 
-def _running_median(values: np.ndarray) -> np.ndarray:
+def running_median(values: np.ndarray) -> np.ndarray:
     """NaN-aware median over ``MEDIAN_WINDOW`` frames centred on each frame (axis 0).
 
     NaN where a window holds no value. Sorting puts NaN last, so the median of the
@@ -91,10 +91,10 @@ def _jumps(track: PelletTrack, speed: float, step_s: float) -> np.ndarray:
     n = positions.shape[0]
     tracked = track.valid.any(axis=-1)  # (n, 8)
     times = np.where(tracked, track.times[:, None], np.nan)
-    median_time = _running_median(times)
+    median_time = running_median(times)
     allowed = speed * (step_s + np.abs(track.times[:, None] - median_time))
     with np.errstate(invalid="ignore"):
-        far = _distance(positions, _running_median(positions)) > allowed
+        far = _distance(positions, running_median(positions)) > allowed
         step = np.full((n + 1, 8), np.nan)
         step[1:n] = _distance(positions[1:], positions[:-1])
         spike = (step[:-1] > speed * step_s) & (step[1:] > speed * step_s)
