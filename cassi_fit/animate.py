@@ -22,15 +22,17 @@ bucket (:func:`frame_bucket`) reuses every compilation.
 
 from __future__ import annotations
 
+# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import math
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, Float
 
 from . import rigid
+from .dataset import Recording
 from .errors import CassiError, MissingDataError
 from .gaps import bad_values, frame_status, repair
 from .jaw import closed_form
@@ -128,11 +130,11 @@ def _batched_params(inputs, scaled, theta, translation):
 
 
 def frame_params(
-    state,
+    state: eqx.Module,
     scaled: Float[Array, "m 8 2"],
     theta: Float[Array, " m"],
     translation: Float[Array, "m 2"],
-):
+) -> eqx.Module:
     """FaceParams with a leading frame axis ``(m,)`` for the ``SubjectState`` ``state``:
     ``scaled (m, 8, 2)`` mm, the pellets times ``p / d``; ``theta (m,)`` rad and
     ``translation (m, 2)`` mm, the jaw motion since the first valid line. One compiled
@@ -164,9 +166,9 @@ def _geometry_kernel(model, params, jaw_weights, tongue_anchor, collisions, repo
 
 
 def batch_geometry(
-    model, params, *, jaw_weights: str = "cassi", tongue_anchor: str = "follow",
+    model: eqx.Module, params: eqx.Module, *, jaw_weights: str = "cassi", tongue_anchor: str = "follow",
     collisions: str = "off", report: bool = False,
-):
+) -> tuple:
     """All frames of ``params`` (FaceParams with a leading ``(m,)`` axis) in one compiled
     call: vertices ``(m, V, 3)`` and model pellet sites ``(m, 8, 2)`` mm; with ``report``,
     also the per-frame penetration depths before and after projection (two dicts of
@@ -183,7 +185,7 @@ def frame_bucket(m: int) -> int:
     return _FRAME_BUCKET * 2 ** max(math.ceil(math.log2(max(m, 1) / _FRAME_BUCKET)), 0)
 
 
-def pad_frames(x, size: int) -> Array:
+def pad_frames(x: Float[Array, "m ..."] | np.ndarray, size: int) -> Array:
     """``x (m, ...)`` with its last row repeated along axis 0 up to ``size`` rows.
 
     Concrete arrays are padded in numpy, so that different ``m`` compile nothing."""
@@ -199,7 +201,9 @@ def _unpad(tree, m: int):
     return jax.tree.map(lambda x: jax.device_put(np.asarray(x)[:m]), tree)
 
 
-def geometry(state, params, collisions: str = "off") -> tuple[Array, Array]:
+def geometry(
+    state: eqx.Module, params: eqx.Module, collisions: str = "off"
+) -> tuple[Float[Array, "m V 3"], Float[Array, "m 8 2"]]:
     """Vertices ``(m, V, 3)`` and model pellet sites ``(m, 8, 2)`` mm of a batch of params
     for the ``SubjectState`` ``state``, in one compiled call (frames padded to a size
     bucket so the compilation is reused); ``collisions="project"`` pushes the tongue and
@@ -235,11 +239,11 @@ def _jaw_since_first(state, jaw_pellets, method, solver, size):
 
 
 def animate(
-    state,
-    recording,
+    state: eqx.Module,
+    recording: Recording,
     *,
     jaw: str = "closed-form",
-    solver=None,
+    solver: object = None,
     stride: int = 1,
     gap_policy: str | None = None,
     collisions: str = "off",

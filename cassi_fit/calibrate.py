@@ -48,7 +48,9 @@ pytree :class:`Unknowns`.
 
 from __future__ import annotations
 
+# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import math
+from collections.abc import Iterable
 from pathlib import Path
 
 import equinox as eqx
@@ -59,8 +61,9 @@ from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
 from .conformation import FORMAT, Calibration, lips_ahead, plain, with_values
-from .dataset import recording_source
+from .dataset import Dataset, Recording, recording_source
 from .errors import CassiError, DataFormatError, DegenerateGeometryError, MissingDataError
+from .face_model import FaceModel
 from .options import CALIBRATION_METHODS, check_choice
 from .pellets import LL, MNI, MNM, PELLET_NAMES, UL, first_valid_line
 
@@ -288,7 +291,10 @@ def _solve_stage(model, data, measured, x, free, groups, collisions):
     return y, bool(converged)
 
 
-def calibrate_subject(recordings, model=None, *, method="separate", collisions=True):
+def calibrate_subject(
+    recordings: Iterable[Recording], model: FaceModel | None = None, *,
+    method: str = "separate", collisions: bool = True,
+) -> Calibration:
     """Calibrate the face model to one subject from its recordings (``dataset.Recording``
     objects, one or more, all of the same subject). Returns a :class:`Calibration`.
 
@@ -404,11 +410,14 @@ def _summarise(problem, x, method, collisions, converged, recordings, lines):
 # ------------------------------------------------------------------------- files
 
 
-def calibration_path(folder, subject: str) -> Path:
+def calibration_path(folder: str | Path, subject: str) -> Path:
+    """``folder/SUBJECT.calibration.json``."""
     return Path(folder) / f"{subject.upper()}.calibration.json"
 
 
-def write_calibration(path, calibration: Calibration, *, overwrite=False) -> Path:
+def write_calibration(
+    path: str | Path, calibration: Calibration, *, overwrite: bool = False
+) -> Path:
     """Write one subject's calibration as JSON (atomically; an existing file only with
     ``overwrite``)."""
     from ._io import atomic_write
@@ -420,7 +429,7 @@ _REQUIRED = ("subject", "method", "scale", "upper_lip_thickness", "lower_lip_thi
              "face_width", "params")
 
 
-def read_calibration(path) -> Calibration:
+def read_calibration(path: str | Path) -> Calibration:
     """Read a ``<SUBJECT>.calibration.json``; ``DataFormatError`` naming the file (and the
     line, for invalid JSON) if it is not one."""
     from ._io import read_json
@@ -473,7 +482,7 @@ def _numeric(v) -> bool:
     return True
 
 
-def load_calibrations(folder) -> dict:
+def load_calibrations(folder: str | Path) -> dict[str, Calibration]:
     """All ``*.calibration.json`` in ``folder``: subject (upper case) -> Calibration."""
     folder = Path(folder)
     if not folder.is_dir():
@@ -489,7 +498,9 @@ def load_calibrations(folder) -> dict:
     return out
 
 
-def calibration_choice(path=None, subject: str = "", *, cassi: bool = False):
+def calibration_choice(
+    path: str | Path | None = None, subject: str = "", *, cassi: bool = False
+) -> Calibration | str | None:
     """``initialize``'s ``calibration`` for the command line's ``--calibration PATH`` and
     ``--cassi``: ``"cassi"``, ``None`` (the default conformation), or the
     :class:`Calibration` read from ``PATH`` (a folder written by ``cassi calibrate``, whose
@@ -505,8 +516,11 @@ def calibration_choice(path=None, subject: str = "", *, cassi: bool = False):
     return read_calibration(calibration_path(path, subject) if path.is_dir() else path)
 
 
-def calibrate_dataset(dataset, *, subjects=None, tasks=None, method="separate",
-                      collisions=True, model=None, progress=False):
+def calibrate_dataset(
+    dataset: Dataset | str | Path, *, subjects: Iterable[str] | None = None,
+    tasks: Iterable[str] | None = None, method: str = "separate", collisions: bool = True,
+    model: FaceModel | None = None, progress: bool = False,
+) -> dict[str, Calibration]:
     """Calibrate every subject of a ``dataset.Dataset`` (or its folder): subject ->
     Calibration. ``tasks``: the tasks whose first valid lines are used (default: all the
     subject's tasks)."""
@@ -535,7 +549,9 @@ def calibrate_dataset(dataset, *, subjects=None, tasks=None, method="separate",
     return out
 
 
-def write_summary(path, calibrations: dict, *, overwrite=False) -> Path:
+def write_summary(
+    path: str | Path, calibrations: dict[str, Calibration], *, overwrite: bool = False
+) -> Path:
     """A CSV, one row per subject: scale, the calibrated measures and the residuals."""
     from ._io import atomic_write
 

@@ -36,6 +36,7 @@ the model's index chains are static.
 
 from __future__ import annotations
 
+# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -43,6 +44,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from .errors import CassiError
+from .face_model import FaceModel
 
 #: Crowns counted as "front teeth" (0 central incisor, 1 lateral incisor, 2 canine).
 FRONT_TEETH = 2
@@ -66,11 +68,12 @@ _CHAINS = ("lingual_occlusal", "lingual_cervical", "labial_occlusal", "labial_ce
 _PALATE_ACROSS = 7  # cassi_fit.palate.N_ACROSS (the palate region's oral sheet layout)
 
 
-def has_collision_data(model) -> bool:
+def has_collision_data(model: FaceModel) -> bool:
+    """True if ``model`` has the collision chains of both arches."""
     return all(f"{a}_{c}" in model.collision for a in ("upper", "lower") for c in _CHAINS)
 
 
-def require_collision_data(model) -> None:
+def require_collision_data(model: FaceModel) -> None:
     """``CassiError`` if ``model`` has no collision chains (``has_collision_data``)."""
     if not has_collision_data(model):
         raise CassiError(
@@ -80,7 +83,7 @@ def require_collision_data(model) -> None:
 
 
 def arch_chains(
-    model, vertices: Float[Array, "V 3"], arch: str
+    model: FaceModel, vertices: Float[Array, "V 3"], arch: str
 ) -> tuple[list[Float[Array, "K 3"]], Int[np.ndarray, " K"]]:
     """Positions of the four chains of ``arch`` (each (K, 3)) and the tooth numbers (K,)."""
     chains = [vertices[np.asarray(model.collision[f"{arch}_{c}"])] for c in _CHAINS]
@@ -194,7 +197,7 @@ def _parts(model):
     return tongue, np.asarray(lips)
 
 
-def depths(model, vertices) -> dict:
+def depths(model: FaceModel, vertices: Float[Array, "V 3"]) -> dict[str, Array]:
     """Per-vertex depths (mm) of one frame: ``tongue_palate``, ``tongue_upper`` and
     ``tongue_lower`` (tongue vertices, the teeth of that arch), ``lips_upper`` and
     ``lips_lower`` (lip vertices); plus ``tongue_upper_front``/``tongue_lower_front``,
@@ -224,7 +227,7 @@ def _front_mask(points, chains, teeth):
     return jnp.asarray(teeth <= FRONT_TEETH)[nearest]
 
 
-def report(model, vertices) -> dict:
+def report(model: FaceModel, vertices: Float[Array, "V 3"]) -> dict[str, Float[Array, ""]]:
     """The deepest point of each kind in one frame (mm): the keys of ``REPORT_KEYS``."""
     d = depths(model, vertices)
     return {
@@ -240,7 +243,9 @@ def report(model, vertices) -> dict:
 
 
 @eqx.filter_jit
-def report_frames(model, vertices):
+def report_frames(
+    model: FaceModel, vertices: Float[Array, "m V 3"]
+) -> dict[str, Float[Array, " m"]]:
     """:func:`report` of every frame of ``vertices (m, V, 3)`` mm, one compiled call per
     (model topology, ``m``): key -> ``(m,)`` mm. Pad ``m`` to a frame bucket
     (``animate.frame_bucket``) to share the compilation between recordings."""
@@ -286,7 +291,7 @@ def _palate_ceiling(q, sheet):
     return jnp.where(depth > 0, q[1] - depth, jnp.inf)
 
 
-def project(model, vertices, passes: int = PROJECTION_PASSES):
+def project(model: FaceModel, vertices: Float[Array, "V 3"], passes: int = PROJECTION_PASSES) -> Float[Array, "V 3"]:
     """One frame with the tongue pushed out of the palate and both arches, and the lips
     out of both arches, each point by its shortest way out of all of them at once
     (:func:`_escape`; ``passes`` rounds, for the few points whose way out of one leads
@@ -321,7 +326,7 @@ def project(model, vertices, passes: int = PROJECTION_PASSES):
     return vertices
 
 
-def lips_crossing(model, vertices):
+def lips_crossing(model: FaceModel, vertices: Float[Array, "V 3"]) -> Float[Array, " C"]:
     """Per lip column (C,), how far (mm) the lower lip's highest point is above the
     upper lip's lowest (> 0: the lips pass into each other). Zeros if the model has no
     lip columns."""
@@ -332,7 +337,7 @@ def lips_crossing(model, vertices):
     return jnp.max(lower, axis=1) - jnp.min(upper, axis=1)
 
 
-def lips_apart(model, vertices):
+def lips_apart(model: FaceModel, vertices: Float[Array, "V 3"]) -> Float[Array, "V 3"]:
     """The lips pressed together instead of passing into each other: in every column
     where they cross, both meet at the middle of the crossing (the upper lip's points
     below it raised to it, the lower lip's above it lowered), as lips compress in a
@@ -350,7 +355,9 @@ def lips_apart(model, vertices):
     return vertices.at[ui, 1].set(uy).at[li, 1].set(ly)
 
 
-def penalty_residuals(model, vertices, *, tongue=True, lips=True):
+def penalty_residuals(
+    model: FaceModel, vertices: Float[Array, "V 3"], *, tongue: bool = True, lips: bool = True
+) -> Float[Array, " r"]:
     """Residuals for a least-squares fit: every depth (mm) of the chosen parts, one per
     vertex and obstacle, flattened. Zero where nothing collides; the sum of their squares
     is the penalty. Differentiable almost everywhere (its gradient pushes points out)."""

@@ -16,6 +16,7 @@ the incisor tip at rest; :func:`lips_ahead` measures it on one data line.
 
 from __future__ import annotations
 
+# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import json
 from dataclasses import asdict, dataclass, field
 
@@ -26,7 +27,10 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from . import rigid
+from .dataset import Recording
 from .deform import FaceParams, default_params
+from .face_model import FaceModel
+from .headmeasures import HeadMeasures
 from .jaw import closed_form
 from .options import CONFORMATIONS, check_choice
 from .pellets import LL, MNI, MNM, UL
@@ -81,7 +85,7 @@ class Calibration:
         return json.dumps(plain(asdict(self)), indent=1) + "\n"
 
 
-def plain(x):
+def plain(x: object) -> object:
     """``x`` with numpy arrays and scalars turned into lists and Python numbers (for JSON)."""
     if isinstance(x, dict):
         return {k: plain(v) for k, v in x.items()}
@@ -105,7 +109,7 @@ def with_values(params: FaceParams, values: dict) -> FaceParams:
 
 @jax.jit
 def lips_ahead(
-    rest_jaw: Float[Array, "2 2"], tip: Float[Array, " 2"], pellets: Float[Array, "8 2"], s
+    rest_jaw: Float[Array, "2 2"], tip: Float[Array, " 2"], pellets: Float[Array, "8 2"], s: float | Float[Array, ""]
 ) -> tuple[Float[Array, ""], Float[Array, ""]]:
     """Lip thickness as Headmeasures defines it, seen on one data line, in model mm:
     ``(upper, lower)``, the UL pellet ahead of the upper incisor tip (x) and the LL pellet
@@ -127,7 +131,7 @@ def _xy(model, name) -> np.ndarray:
     return np.asarray(model.vertices)[model.landmarks[name], :2]
 
 
-def jaw_shape(model, head, scale: float) -> tuple[float, Float[np.ndarray, " 2"]]:
+def jaw_shape(model: FaceModel, head: HeadMeasures, scale: float) -> tuple[float, Float[np.ndarray, " 2"]]:
     """Paper step 5: the closed form from the model's [gnathion, gonion] to the subject's
     (Headmeasures ``head``, times ``scale``), as ``(theta rad, t (2,) mm)``; neutral if
     degenerate (jaw status DEGENERATE or worse)."""
@@ -140,7 +144,8 @@ def jaw_shape(model, head, scale: float) -> tuple[float, Float[np.ndarray, " 2"]
 
 
 def lip_thickness(
-    model, first: Float[np.ndarray, "8 2"], scale: float, head, head_is_default: bool
+    model: FaceModel, first: Float[np.ndarray, "8 2"], scale: float, head: HeadMeasures,
+    head_is_default: bool,
 ) -> Float[np.ndarray, " 2"]:
     """Millimetres added to the model's lip thickness parameters ``(upper, lower)``.
 
@@ -166,7 +171,7 @@ def lip_thickness(
 
 
 def default_conformation(
-    model, recording, first: Float[np.ndarray, "8 2"], scale: float, mode: str = "measures"
+    model: FaceModel, recording: Recording, first: Float[np.ndarray, "8 2"], scale: float, mode: str = "measures"
 ) -> FaceParams:
     """``FaceParams`` of the subject's shape (no animation) from its Headmeasures and
     first valid line ``first (8, 2)`` subject mm; ``mode``: ``"measures"`` (everything of

@@ -57,7 +57,7 @@ class Recording:
     path: Path
 
 
-def recording_source(recording) -> str:
+def recording_source(recording: Recording) -> str:
     """The name of a recording in messages: its pellet file, else ``SUBJECT/TASK`` (any
     object with ``subject``, ``task``, ``track`` and optionally ``path``)."""
     path = getattr(recording, "path", None) or getattr(recording.track, "path", None)

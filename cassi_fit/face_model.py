@@ -188,7 +188,7 @@ def _check_index(path, what, index, n):
     return index
 
 
-def load_model(path=None) -> FaceModel:
+def load_model(path: str | Path | None = None) -> FaceModel:
     """Load a model folder (default: the repository's ``model/``) as a :class:`FaceModel`."""
     folder = Path(path) if path is not None else default_model_dir()
     vpath, fpath, mpath = folder / "vertices.csv", folder / "faces.csv", folder / "model.json"

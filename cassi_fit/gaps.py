@@ -11,14 +11,16 @@ if an untracked value was, else ``OK``. This module is numpy only.
 
 from __future__ import annotations
 
+# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import numpy as np
 from jaxtyping import Bool, Float, Int
 
 from .options import GAP_POLICIES, check_choice
 from .status import Status
+from .txy import PelletTrack
 
 
-def bad_values(track) -> tuple[Bool[np.ndarray, "n 8"], Bool[np.ndarray, "n 8"]]:
+def bad_values(track: PelletTrack) -> tuple[Bool[np.ndarray, "n 8"], Bool[np.ndarray, "n 8"]]:
     """``(untracked, mistracked)``, each ``(n, 8)`` bool: a pellet untracked in x or y, and
     a tracked value that ``quality.detect_mistracks`` flags. ``track``: a ``PelletTrack``."""
     from .quality import detect_mistracks

@@ -23,6 +23,7 @@ the command line's options (``cassi animate``, ``cassi export``).
 
 from __future__ import annotations
 
+# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -30,9 +31,10 @@ import numpy as np
 from jaxtyping import Float
 
 from .animate import Animation, animate, batch_geometry, frame_bucket, frame_params
-from .dataset import recording_source
 from .conformation import Calibration, default_conformation
+from .dataset import Recording, recording_source
 from .errors import CassiError, DegenerateGeometryError
+from .face_model import FaceModel
 from .jaw import closed_form
 from .options import CONFORMATIONS, GAP_POLICIES, JAW_WEIGHTS, TONGUE_ANCHORS, check_choice
 from .pellets import LL, MNI, MNM, UL, first_valid_line
@@ -94,8 +96,8 @@ def _rest_pellets(model, conformation, size, jaw_weights, tongue_anchor, calibra
 
 
 def initialize(
-    recording,
-    model=None,
+    recording: Recording,
+    model: FaceModel | None = None,
     *,
     calibration: Calibration | str | None = None,
     jaw_weights: str = "cassi",
@@ -163,8 +165,8 @@ def initialize(
 
 
 def animate_recording(
-    recording,
-    model=None,
+    recording: Recording,
+    model: FaceModel | None = None,
     *,
     calibration: Calibration | str | None = None,
     jaw: str = "closed-form",

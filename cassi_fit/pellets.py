@@ -17,7 +17,7 @@ This module is numpy only.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
@@ -41,6 +41,12 @@ def pellet_index(name: str) -> int:
     return PELLET_NAMES.index(key)
 
 
+class PelletTrackLike(Protocol):
+    """What the rule reads of a track (``txy.PelletTrack`` has it)."""
+
+    valid: np.ndarray  # (n, 8, 2) bool
+
+
 class FirstLine(NamedTuple):
     """The first valid line of a recording: its 0-based ``index`` and the names of the
     pellets the file ever tracks (``tracked``, in ``PELLET_NAMES`` order)."""
@@ -49,7 +55,7 @@ class FirstLine(NamedTuple):
     tracked: tuple[str, ...]
 
 
-def source_of(track, source: str | None = None) -> str:
+def source_of(track: PelletTrackLike, source: str | None = None) -> str:
     """The name used in error messages: ``source``, else the track's file, else a stand-in."""
     if source is not None:
         return str(source)
@@ -62,7 +68,7 @@ def ever_tracked(valid: np.ndarray) -> np.ndarray:
     return np.asarray(valid, bool).all(axis=-1).any(axis=0)
 
 
-def first_valid_line(track, source: str | None = None) -> FirstLine:
+def first_valid_line(track: PelletTrackLike, source: str | None = None) -> FirstLine:
     """CASSI's first valid line by the rule of the module docstring.
 
     ``track``: anything with ``valid (n, 8, 2)`` bool (a ``txy.PelletTrack``); ``source``

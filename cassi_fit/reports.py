@@ -6,8 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .animate import Animation
 
-def penetration_summary(animation) -> str:
+
+def penetration_summary(animation: Animation) -> str:
     """One line per kind of penetration (``collide.REPORT_KEYS``): the 95th percentile and
     the maximum depth over the frames of ``animation`` (mm); after projection, the maximum
     left."""
@@ -24,7 +26,7 @@ def penetration_summary(animation) -> str:
     return "\n".join(lines)
 
 
-def write_penetration_csv(path: str | Path, animation, *, overwrite: bool = False) -> Path:
+def write_penetration_csv(path: str | Path, animation: Animation, *, overwrite: bool = False) -> Path:
     """A CSV, one row per frame: ``time_s``, ``line`` (1-based data line), then each depth
     (mm) before and after projection. Written atomically; an existing file only with
     ``overwrite``."""

@@ -15,7 +15,9 @@ sites); in front of T1 it equals T1's. Behind T4 the back anchor option decides:
 
 from __future__ import annotations
 
+# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import jax.numpy as jnp
+from jaxtyping import Array, Float
 
 from .options import TONGUE_ANCHORS, check_choice
 
@@ -25,7 +27,10 @@ def _blend(u):
     return 0.5 - 0.5 * jnp.cos(jnp.pi * jnp.clip(u, 0.0, 1.0))
 
 
-def tongue_displacement(s, site_s, displacement, anchor_s, anchor="follow"):
+def tongue_displacement(
+    s: Float[Array, " n"], site_s: Float[Array, " 4"], displacement: Float[Array, "4 2"],
+    anchor_s: float | Float[Array, ""], anchor: str = "follow",
+) -> Float[Array, "n 2"]:
     """Displacement (n, 2) mm of tongue points at arc lengths ``s`` (n,) mm.
 
     ``site_s`` (4,): arc lengths of T1..T4 (increasing); ``displacement`` (4, 2): params

@@ -11,11 +11,11 @@ import zoo
 
 from cassi_fit import calibrate
 from cassi_fit.animate import animate
-from cassi_fit.initialize import initialize
 from cassi_fit.cli import main as cli
 from cassi_fit.dataset import Dataset
 from cassi_fit.errors import CassiError, DataFormatError, MissingDataError
 from cassi_fit.face_model import load_model
+from cassi_fit.initialize import initialize
 from cassi_fit.synth import load_anatomy
 
 N_SUBJECTS = 3

@@ -161,9 +161,9 @@ def _stills(out: Path, renderer, recording, animation):
 def run(args) -> int:
     from cassi_fit import video
     from cassi_fit.animate import animate
-    from cassi_fit.initialize import initialize
     from cassi_fit.errors import CassiError
     from cassi_fit.export import export_glb
+    from cassi_fit.initialize import initialize
     from cassi_fit.render import Renderer
 
     from .animate import parse_size
