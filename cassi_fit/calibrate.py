@@ -40,100 +40,70 @@ Headmeasures keeps the model's jaw shape, face width, mouth and nose.
 
 The result, :class:`Calibration`, is written one JSON file per subject
 (``<SUBJECT>.calibration.json``) by ``cassi calibrate`` and read back by
-``cassi animate --calibration`` and ``animate.initialize(..., calibration=...)``.
+``cassi animate --calibration`` and ``initialize(..., calibration=...)``. The record
+itself, :class:`~cassi_fit.conformation.Calibration`, lives with the rest of the subject's
+conformation in :mod:`cassi_fit.conformation`; the unknowns of the fit are the named
+pytree :class:`Unknowns`.
 """
 
 from __future__ import annotations
 
-import json
+# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import math
-from dataclasses import asdict, dataclass, field
+from collections.abc import Iterable
 from pathlib import Path
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.flatten_util import ravel_pytree
+from jaxtyping import Array, Float
 
-from .animate import model_call
+from .conformation import FORMAT, Calibration, lips_ahead, plain, with_values
+from .dataset import Dataset, Recording, recording_source
 from .errors import CassiError, DataFormatError, DegenerateGeometryError, MissingDataError
+from .face_model import FaceModel
+from .options import CALIBRATION_METHODS, check_choice
+from .pellets import LL, MNI, MNM, PELLET_NAMES, UL, first_valid_line
 
-FORMAT = "cassi_fit calibration 1"
-METHODS = ("separate", "joint")
 #: Weight of the lips-in-teeth penalty residuals relative to a 1 mm lip residual.
 COLLISION_WEIGHT = 10.0
-UL, LL, MNI, MNM = 0, 1, 6, 7
-# The unknowns, in order (model units): log scale, upper and lower lip thickness change
-# (mm), face width change (mm), jaw shape rotation (rad) and log scales (x, y), the last
-# three about the model's lower incisor tip.
-_UNKNOWNS = ("log_scale", "upper_lip", "lower_lip", "face_width", "jaw_theta",
-             "log_jaw_scale_x", "log_jaw_scale_y")
 
 
-@dataclass(frozen=True)
-class Calibration:
-    """One subject's calibrated face. Lengths in the subject's mm unless named ``model``.
+class Unknowns(eqx.Module):
+    """The unknowns of the calibration (model units), a pytree with named fields.
 
-    ``scale``: model mm per subject mm (``p/d``). ``params``: the model's conformation
-    parameters (``deform.FaceParams`` names, model units). ``residuals``: what is left of
-    each residual group, subject mm (rms over recordings where there are several).
-    ``observed``: the per-recording first-line estimates of the lip thicknesses.
-    ``lip_rest_offset``: (upper, lower) model mm, how far above the model's UL and LL
-    sites the lip pellets sit on the first valid lines; animation measures the lips'
-    vertical displacement from there, so that the lips are together (at rest) where the
-    first valid line has them, as the report assumes, instead of being pushed into each
-    other or apart by a pellet placed higher or lower on the lip than the model's site.
+    ``log_scale``: log of ``p/d``; ``upper_lip``, ``lower_lip``: lip thickness change (mm);
+    ``face_width``: face width change (mm); ``jaw_theta``: jaw shape rotation (rad) and
+    ``log_jaw_scale (2,)``: the jaw's log scales along x and y, both about the model's
+    lower incisor tip. The solver sees them flattened in this order (``ravel_pytree``).
     """
 
-    subject: str
-    method: str
-    scale: float
-    upper_lip_thickness: float
-    lower_lip_thickness: float
-    face_width: float
-    mouth_width: float
-    nose_protrusion: float
-    gonion: tuple
-    gnathion: tuple
-    params: dict
-    lip_rest_offset: tuple
-    residuals: dict
-    observed: dict
-    recordings: tuple
-    first_lines: tuple
-    head_is_default: bool
-    collisions: bool
-    converged: bool
-    format: str = field(default=FORMAT)
+    log_scale: Float[Array, ""]
+    upper_lip: Float[Array, ""]
+    lower_lip: Float[Array, ""]
+    face_width: Float[Array, ""]
+    jaw_theta: Float[Array, ""]
+    log_jaw_scale: Float[Array, " 2"]
 
-    def face_params(self, dtype=float):
-        """The conformation as a ``deform.FaceParams`` (no animation)."""
-        from .deform import default_params
+    @classmethod
+    def zeros(cls, dtype=float) -> Unknowns:
+        """Every unknown 0 (scale 1, the model's own shape)."""
+        z = jnp.zeros((), dtype)
+        return cls(z, z, z, z, z, jnp.zeros(2, dtype))
 
-        p = default_params(dtype=dtype)
-        values = {k: jnp.asarray(v, dtype) for k, v in self.params.items()}
-        names = tuple(values)
-        return _set(p, names, tuple(values[k] for k in names))
-
-    def to_json(self) -> str:
-        return json.dumps(_plain(asdict(self)), indent=1) + "\n"
+    @classmethod
+    def mask(cls, free, dtype=float) -> Unknowns:
+        """1 for the fields named in ``free``, 0 elsewhere (which unknowns a stage fits)."""
+        zero = cls.zeros(dtype)
+        return cls(*(jnp.full(jnp.shape(getattr(zero, name)), float(name in free), dtype)
+                     for name in UNKNOWN_NAMES))
 
 
-def _plain(x):
-    if isinstance(x, dict):
-        return {k: _plain(v) for k, v in x.items()}
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, (list, tuple)):
-        return [_plain(v) for v in x]
-    if isinstance(x, (np.floating, np.integer, np.bool_)):
-        return x.item()
-    return x
-
-
-def _set(params, names, values):
-    import equinox as eqx
-
-    return eqx.tree_at(lambda p: tuple(getattr(p, k) for k in names), params, values)
+#: The unknowns' names, in order.
+UNKNOWN_NAMES = ("log_scale", "upper_lip", "lower_lip", "face_width", "jaw_theta",
+                 "log_jaw_scale")
 
 
 # ------------------------------------------------------------------ the observations
@@ -141,12 +111,10 @@ def _set(params, names, values):
 
 def _first_line(recording):
     """``(first index, pellets (8, 2) mm with NaN for pellets never tracked)``."""
-    from .animate import PELLETS, _source, first_valid_line
-
-    source = _source(recording)
+    source = recording_source(recording)
     first, tracked = first_valid_line(recording.track, source)
     pellets = np.array(recording.track.positions[first], np.float64)
-    for j, name in enumerate(PELLETS):
+    for j, name in enumerate(PELLET_NAMES):
         if name not in tracked:
             pellets[j] = np.nan
     d = float(np.linalg.norm(pellets[MNI] - pellets[MNM]))
@@ -155,24 +123,6 @@ def _first_line(recording):
             f"{source}: MNI and MNM coincide on the first valid line ({first + 1})"
         )
     return first, pellets
-
-
-@jax.jit
-def lips_ahead(rest_jaw, tip, pellets, s):
-    """Lip thickness as Headmeasures defines it, seen on one data line, in model mm:
-    ``(upper, lower)``, the UL pellet ahead of the upper incisor tip (x) and the LL pellet
-    ahead of the lower incisor tip along the jaw line (MNM -> MNI). ``pellets (8, 2)``
-    subject mm, ``s`` the scale; the lower tip is the model's (``tip (2,)``), placed on
-    the line's jaw pellets by the paper's closed form from the model's jaw sites
-    ``rest_jaw (2, 2)`` [MNI, MNM]."""
-    from . import rigid
-    from .jaw import closed_form
-
-    dtype = pellets.dtype
-    motion = closed_form(rest_jaw.astype(dtype), s * pellets[jnp.array([MNI, MNM])])
-    tip_here = rigid.apply(motion.theta, motion.translation, tip.astype(dtype))
-    forward = (pellets[MNI] - pellets[MNM]) / jnp.linalg.norm(pellets[MNI] - pellets[MNM])
-    return s * pellets[UL, 0], jnp.dot(s * pellets[LL] - tip_here, forward)
 
 
 _INDEX = ("UL", "LL", "MNI", "MNM", "upper_incisor_tip", "lower_incisor_tip", "gonion",
@@ -202,27 +152,28 @@ class _Problem:
         self.index = {k: model.landmarks[k] for k in _INDEX}
 
     def params(self, x):
-        """FaceParams of the unknowns ``x`` (``_UNKNOWNS``)."""
+        """FaceParams of the :class:`Unknowns` ``x``."""
         from .deform import default_params
 
         m, data = self.model.measures, self.data
-        s = jnp.exp(x[0])
+        dtype = x.log_scale.dtype
+        s = jnp.exp(x.log_scale)
         names = ["upper_lip_thickness", "lower_lip_thickness", "face_width"]
-        values = [x[1], x[2], 1.0 + x[3] / m["face_width"]]
+        values = [x.upper_lip, x.lower_lip, 1.0 + x.face_width / m["face_width"]]
         if self.measured:
             from .rigid import rotation_matrix
 
             # the jaw's proportions (x, y scale) and a turn, both about the lower incisor
             # tip, so that the skin over the teeth stays where the teeth are
             tip = jnp.asarray(self.model.vertices)[self.index["lower_incisor_tip"], :2]
-            tip = tip.astype(x.dtype)
-            turn = tip - rotation_matrix(x[4]) @ tip
+            tip = tip.astype(dtype)
+            turn = tip - rotation_matrix(x.jaw_theta) @ tip
             names += ["jaw_shape_theta", "jaw_shape_translation", "jaw_shape_scale",
                       "mouth_width", "nose_tip"]
-            values += [x[4], turn, jnp.exp(x[5:7]), s * data["mouth_width"] / m["mouth_width"],
+            values += [x.jaw_theta, turn, jnp.exp(x.log_jaw_scale), s * data["mouth_width"] / m["mouth_width"],
                        jnp.stack([s * data["nose"] - m["nose_protrusion"], jnp.zeros_like(s)])]
-        p = default_params(dtype=x.dtype)
-        return _set(p, tuple(names), tuple(jnp.asarray(v, x.dtype) for v in values))
+        p = default_params(dtype=dtype)
+        return with_values(p, {k: jnp.asarray(v, dtype) for k, v in zip(names, values, strict=True)})
 
     def vertices(self, x):
         from .deform import deform
@@ -271,11 +222,11 @@ class _Problem:
                 jnp.sum(ml * dl) / jnp.maximum(jnp.sum(ml), 1.0))
 
     def residual_groups(self, x, collisions):
-        """Dict of residual vectors (model mm) at the unknowns ``x``."""
+        """Dict of residual vectors (model mm) at the :class:`Unknowns` ``x``."""
         from .collide import penalty_residuals
 
         data = self.data
-        s = jnp.exp(x[0])
+        s = jnp.exp(x.log_scale)
         v = self.vertices(x)
         i = self.index
         upper, lower = self.lip_thickness_model(v)
@@ -301,44 +252,49 @@ class _Problem:
 _GROUPS = ("jaw_pellets", "upper_lip", "lower_lip", "jaw_shape", "face_width", "collision")
 _STAGES = {  # method -> [(free unknowns, residual groups)]
     "separate": [
-        ((4, 5, 6), ("jaw_shape",)),
-        ((3,), ("face_width",)),
-        ((1, 2), ("upper_lip", "lower_lip", "collision")),
+        (("jaw_theta", "log_jaw_scale"), ("jaw_shape",)),
+        (("face_width",), ("face_width",)),
+        (("upper_lip", "lower_lip"), ("upper_lip", "lower_lip", "collision")),
     ],
-    "joint": [((0, 1, 2, 3, 4, 5, 6), _GROUPS)],
+    "joint": [(UNKNOWN_NAMES, _GROUPS)],
 }
-# One compiled solver per (model content, head measured) (``animate.model_call``): which
-# unknowns are free and which residual groups count are arrays (a mask, weights), so
-# every stage of both methods, with or without the collision penalty, shares it.
+# Without Headmeasures only these unknowns are seen by any residual.
+_UNMEASURED = ("log_scale", "upper_lip", "lower_lip")
+
+
+@eqx.filter_jit
+def _stage_kernel(model, data, measured, x, mask, weights):
+    """One compiled solver per (model topology, head measured): which unknowns are free
+    (``mask``, an ``Unknowns`` of 0/1) and which residual groups count (``weights``) are
+    arrays, so every stage of both methods, with or without the penalty, shares it."""
+    from .jaw_fit import solve
+
+    problem = _Problem(model, data, measured)
+    flat, unravel = ravel_pytree(x)
+    free = ravel_pytree(mask)[0]
+
+    def residuals(y, base):
+        g = problem.residual_groups(unravel(base + free * (y - base)), True)
+        return jnp.concatenate([weights[k] * jnp.atleast_1d(g[k]) for k in _GROUPS if k in g])
+
+    y, converged = solve(residuals, flat, flat, "optimistix-lm")
+    return unravel(flat + free * (y - flat)), converged
 
 
 def _solve_stage(model, data, measured, x, free, groups, collisions):
-    """Least squares over the unknowns ``free`` (others held at ``x``) of the residual
-    ``groups``; returns ``(x, converged)``."""
-    mask = jnp.zeros(x.shape, x.dtype).at[jnp.asarray(free)].set(1.0)
-    weights = {g: jnp.asarray(float(g in groups), x.dtype) for g in _GROUPS}
+    """Least squares over the unknowns named in ``free`` (others held at ``x``) of the
+    residual ``groups``; returns ``(x, converged)``."""
+    dtype = x.log_scale.dtype
+    weights = {g: jnp.asarray(float(g in groups), dtype) for g in _GROUPS}
     weights["collision"] = weights["collision"] * float(bool(collisions))
-
-    def make(rebuilt):
-        def run(data, x, mask, weights):
-            from .jaw_fit import solve
-
-            problem = _Problem(rebuilt, data, measured)
-
-            def residuals(y, base):
-                g = problem.residual_groups(base + mask * (y - base), True)
-                return jnp.concatenate(
-                    [weights[k] * jnp.atleast_1d(g[k]) for k in _GROUPS if k in g])
-
-            return solve(residuals, x, x, "optimistix-lm")
-
-        return run
-
-    y, converged = model_call(model, ("calibrate-stage", measured), make, data, x, mask, weights)
-    return x + mask * (y - x), bool(converged)
+    y, converged = _stage_kernel(model, data, measured, x, Unknowns.mask(free, dtype), weights)
+    return y, bool(converged)
 
 
-def calibrate_subject(recordings, model=None, *, method="separate", collisions=True):
+def calibrate_subject(
+    recordings: Iterable[Recording], model: FaceModel | None = None, *,
+    method: str = "separate", collisions: bool = True,
+) -> Calibration:
     """Calibrate the face model to one subject from its recordings (``dataset.Recording``
     objects, one or more, all of the same subject). Returns a :class:`Calibration`.
 
@@ -348,8 +304,7 @@ def calibrate_subject(recordings, model=None, *, method="separate", collisions=T
     """
     from .face_model import load_model
 
-    if method not in METHODS:
-        raise CassiError(f"calibration method must be one of {', '.join(METHODS)}; got {method!r}")
+    check_choice("calibration method", method, CALIBRATION_METHODS)
     recordings = list(recordings)
     if not recordings:
         raise MissingDataError("calibration needs at least one recording of the subject")
@@ -364,11 +319,11 @@ def calibrate_subject(recordings, model=None, *, method="separate", collisions=T
     data = jax.tree.map(lambda a: jnp.asarray(a, dtype), _data(model, pellets, head))
     sites = np.asarray(model.vertices)[[model.landmarks["MNI"], model.landmarks["MNM"]], :2]
     s0 = float(np.linalg.norm(sites[0] - sites[1])) / float(np.median(np.asarray(data["d"])))
-    x = jnp.zeros(len(_UNKNOWNS), dtype).at[0].set(math.log(s0))
+    x = eqx.tree_at(lambda u: u.log_scale, Unknowns.zeros(dtype), jnp.asarray(math.log(s0), dtype))
     converged = True
     for free, groups in _STAGES[method]:
         if not measured:
-            free = tuple(k for k in free if k in (0, 1, 2))
+            free = tuple(k for k in free if k in _UNMEASURED)
             groups = tuple(g for g in groups if g not in ("jaw_shape", "face_width"))
         if not free:
             continue
@@ -382,26 +337,23 @@ def calibrate_subject(recordings, model=None, *, method="separate", collisions=T
     return result
 
 
+@eqx.filter_jit
 def _summary_arrays(model, data, measured, x):
+    """Everything :func:`_summarise` reports, in one compiled call per model topology."""
     from .collide import depths
 
-    def make(rebuilt):
-        def f(data, x):
-            problem = _Problem(rebuilt, data, measured)
-            v = problem.vertices(x)
-            d = depths(rebuilt, v)
-            lips = jnp.maximum(jnp.max(d["lips_upper"]), jnp.max(d["lips_lower"]))
-            return (v, problem.residual_groups(x, False), problem.lip_thickness_model(v),
-                    problem.lip_thickness_observed(jnp.exp(x[0])), lips, problem.params(x),
-                    problem.lip_rest_offset(v, jnp.exp(x[0])))
-
-        return f
-
-    return model_call(model, ("calibrate-summary", measured), make, data, x)
+    problem = _Problem(model, data, measured)
+    v = problem.vertices(x)
+    d = depths(model, v)
+    lips = jnp.maximum(jnp.max(d["lips_upper"]), jnp.max(d["lips_lower"]))
+    s = jnp.exp(x.log_scale)
+    return (v, problem.residual_groups(x, False), problem.lip_thickness_model(v),
+            problem.lip_thickness_observed(s), lips, problem.params(x),
+            problem.lip_rest_offset(v, s))
 
 
 def _summarise(problem, x, method, collisions, converged, recordings, lines):
-    s = float(np.exp(x[0]))
+    s = float(np.exp(x.log_scale))
     v, groups, model_t, obs, lips_depth, params, lip_rest = _summary_arrays(
         problem.model, problem.data, problem.measured, x)
     groups = {k: np.asarray(g) for k, g in groups.items()}
@@ -440,7 +392,7 @@ def _summarise(problem, x, method, collisions, converged, recordings, lines):
         else problem.model.measures["nose_protrusion"] / s,
         gonion=tuple(float(c) / s for c in vn[i["gonion"], :2]),
         gnathion=tuple(float(c) / s for c in vn[i["gnathion"], :2]),
-        params={k: _plain(np.asarray(getattr(params, k), float)) for k in names},
+        params={k: plain(np.asarray(getattr(params, k), float)) for k in names},
         lip_rest_offset=tuple(float(d) for d in lip_rest),
         residuals=residuals,
         observed={
@@ -458,11 +410,14 @@ def _summarise(problem, x, method, collisions, converged, recordings, lines):
 # ------------------------------------------------------------------------- files
 
 
-def calibration_path(folder, subject: str) -> Path:
+def calibration_path(folder: str | Path, subject: str) -> Path:
+    """``folder/SUBJECT.calibration.json``."""
     return Path(folder) / f"{subject.upper()}.calibration.json"
 
 
-def write_calibration(path, calibration: Calibration, *, overwrite=False) -> Path:
+def write_calibration(
+    path: str | Path, calibration: Calibration, *, overwrite: bool = False
+) -> Path:
     """Write one subject's calibration as JSON (atomically; an existing file only with
     ``overwrite``)."""
     from ._io import atomic_write
@@ -474,7 +429,7 @@ _REQUIRED = ("subject", "method", "scale", "upper_lip_thickness", "lower_lip_thi
              "face_width", "params")
 
 
-def read_calibration(path) -> Calibration:
+def read_calibration(path: str | Path) -> Calibration:
     """Read a ``<SUBJECT>.calibration.json``; ``DataFormatError`` naming the file (and the
     line, for invalid JSON) if it is not one."""
     from ._io import read_json
@@ -527,7 +482,7 @@ def _numeric(v) -> bool:
     return True
 
 
-def load_calibrations(folder) -> dict:
+def load_calibrations(folder: str | Path) -> dict[str, Calibration]:
     """All ``*.calibration.json`` in ``folder``: subject (upper case) -> Calibration."""
     folder = Path(folder)
     if not folder.is_dir():
@@ -543,8 +498,29 @@ def load_calibrations(folder) -> dict:
     return out
 
 
-def calibrate_dataset(dataset, *, subjects=None, tasks=None, method="separate",
-                      collisions=True, model=None, progress=False):
+def calibration_choice(
+    path: str | Path | None = None, subject: str = "", *, cassi: bool = False
+) -> Calibration | str | None:
+    """``initialize``'s ``calibration`` for the command line's ``--calibration PATH`` and
+    ``--cassi``: ``"cassi"``, ``None`` (the default conformation), or the
+    :class:`Calibration` read from ``PATH`` (a folder written by ``cassi calibrate``, whose
+    ``SUBJECT.calibration.json`` is used, or one such file). ``CassiError`` if both are
+    given."""
+    if path and cassi:
+        raise CassiError("--cassi and --calibration exclude each other")
+    if cassi:
+        return "cassi"
+    if not path:
+        return None
+    path = Path(path)
+    return read_calibration(calibration_path(path, subject) if path.is_dir() else path)
+
+
+def calibrate_dataset(
+    dataset: Dataset | str | Path, *, subjects: Iterable[str] | None = None,
+    tasks: Iterable[str] | None = None, method: str = "separate", collisions: bool = True,
+    model: FaceModel | None = None, progress: bool = False,
+) -> dict[str, Calibration]:
     """Calibrate every subject of a ``dataset.Dataset`` (or its folder): subject ->
     Calibration. ``tasks``: the tasks whose first valid lines are used (default: all the
     subject's tasks)."""
@@ -573,7 +549,9 @@ def calibrate_dataset(dataset, *, subjects=None, tasks=None, method="separate",
     return out
 
 
-def write_summary(path, calibrations: dict, *, overwrite=False) -> Path:
+def write_summary(
+    path: str | Path, calibrations: dict[str, Calibration], *, overwrite: bool = False
+) -> Path:
     """A CSV, one row per subject: scale, the calibrated measures and the residuals."""
     from ._io import atomic_write
 

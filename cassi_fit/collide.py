@@ -36,11 +36,15 @@ the model's index chains are static.
 
 from __future__ import annotations
 
+# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, Float, Int
 
 from .errors import CassiError
+from .face_model import FaceModel
 
 #: Crowns counted as "front teeth" (0 central incisor, 1 lateral incisor, 2 canine).
 FRONT_TEETH = 2
@@ -64,11 +68,13 @@ _CHAINS = ("lingual_occlusal", "lingual_cervical", "labial_occlusal", "labial_ce
 _PALATE_ACROSS = 7  # cassi_fit.palate.N_ACROSS (the palate region's oral sheet layout)
 
 
-def has_collision_data(model) -> bool:
+def has_collision_data(model: FaceModel) -> bool:
+    """True if ``model`` has the collision chains of both arches."""
     return all(f"{a}_{c}" in model.collision for a in ("upper", "lower") for c in _CHAINS)
 
 
-def _require(model):
+def require_collision_data(model: FaceModel) -> None:
+    """``CassiError`` if ``model`` has no collision chains (``has_collision_data``)."""
     if not has_collision_data(model):
         raise CassiError(
             "this face model has no collision chains (model.json 'collision'); rebuild it "
@@ -76,7 +82,9 @@ def _require(model):
         )
 
 
-def _arch(model, vertices, arch):
+def arch_chains(
+    model: FaceModel, vertices: Float[Array, "V 3"], arch: str
+) -> tuple[list[Float[Array, "K 3"]], Int[np.ndarray, " K"]]:
     """Positions of the four chains of ``arch`` (each (K, 3)) and the tooth numbers (K,)."""
     chains = [vertices[np.asarray(model.collision[f"{arch}_{c}"])] for c in _CHAINS]
     return chains, np.asarray(model.collision[f"{arch}_tooth"])
@@ -137,7 +145,9 @@ def _walls(q, chains, upper: bool, side: str):
     return _wall_distance(q, lab, ling, ling - lab, ling_o[:, 1])
 
 
-def _teeth_depth(q, chains, upper: bool, side: str):
+def teeth_depth(
+    q: Float[Array, " 3"], chains: list, upper: bool, side: str
+) -> tuple[Float[Array, ""], Float[Array, " 3"]]:
     """Depth (mm, >= 0) of ``q`` inside one arch, and the displacement that takes it out
     (back across the face it came in by, or vertically to the occlusal level)."""
     sign = 1.0 if upper else -1.0
@@ -187,21 +197,21 @@ def _parts(model):
     return tongue, np.asarray(lips)
 
 
-def depths(model, vertices) -> dict:
+def depths(model: FaceModel, vertices: Float[Array, "V 3"]) -> dict[str, Array]:
     """Per-vertex depths (mm) of one frame: ``tongue_palate``, ``tongue_upper`` and
     ``tongue_lower`` (tongue vertices, the teeth of that arch), ``lips_upper`` and
     ``lips_lower`` (lip vertices); plus ``tongue_upper_front``/``tongue_lower_front``,
     the teeth depths counted only where the closest crown is a front tooth."""
-    _require(model)
+    require_collision_data(model)
     tongue, lips = _parts(model)
     vt, vl = vertices[tongue], vertices[lips]
     sheet = _palate_sheet(model, vertices)
     out = {"tongue_palate": jax.vmap(lambda q: _palate_depth(q, sheet)[0])(vt)}
     for arch in ("upper", "lower"):
-        chains, teeth = _arch(model, vertices, arch)
+        chains, teeth = arch_chains(model, vertices, arch)
         upper = arch == "upper"
-        d_t = jax.vmap(lambda q, c=chains, u=upper: _teeth_depth(q, c, u, "lingual")[0])(vt)
-        d_l = jax.vmap(lambda q, c=chains, u=upper: _teeth_depth(q, c, u, "labial")[0])(vl)
+        d_t = jax.vmap(lambda q, c=chains, u=upper: teeth_depth(q, c, u, "lingual")[0])(vt)
+        d_l = jax.vmap(lambda q, c=chains, u=upper: teeth_depth(q, c, u, "labial")[0])(vl)
         front = _front_mask(vt, chains, teeth)
         out[f"tongue_{arch}"] = d_t
         out[f"tongue_{arch}_front"] = jnp.where(front, d_t, 0.0)
@@ -217,7 +227,7 @@ def _front_mask(points, chains, teeth):
     return jnp.asarray(teeth <= FRONT_TEETH)[nearest]
 
 
-def report(model, vertices) -> dict:
+def report(model: FaceModel, vertices: Float[Array, "V 3"]) -> dict[str, Float[Array, ""]]:
     """The deepest point of each kind in one frame (mm): the keys of ``REPORT_KEYS``."""
     d = depths(model, vertices)
     return {
@@ -230,6 +240,16 @@ def report(model, vertices) -> dict:
         "lips_lower_teeth": jnp.max(d["lips_lower"]),
         "lips_crossing": jnp.maximum(jnp.max(lips_crossing(model, vertices)), 0.0),
     }
+
+
+@eqx.filter_jit
+def report_frames(
+    model: FaceModel, vertices: Float[Array, "m V 3"]
+) -> dict[str, Float[Array, " m"]]:
+    """:func:`report` of every frame of ``vertices (m, V, 3)`` mm, one compiled call per
+    (model topology, ``m``): key -> ``(m,)`` mm. Pad ``m`` to a frame bucket
+    (``animate.frame_bucket``) to share the compilation between recordings."""
+    return jax.vmap(lambda v: report(model, v))(vertices)
 
 
 def _escape(q, arches, side, ceiling=None):
@@ -271,15 +291,15 @@ def _palate_ceiling(q, sheet):
     return jnp.where(depth > 0, q[1] - depth, jnp.inf)
 
 
-def project(model, vertices, passes: int = PROJECTION_PASSES):
+def project(model: FaceModel, vertices: Float[Array, "V 3"], passes: int = PROJECTION_PASSES) -> Float[Array, "V 3"]:
     """One frame with the tongue pushed out of the palate and both arches, and the lips
     out of both arches, each point by its shortest way out of all of them at once
     (:func:`_escape`; ``passes`` rounds, for the few points whose way out of one leads
     into another). Vertices that are inside nothing do not move."""
-    _require(model)
+    require_collision_data(model)
     tongue, lips = _parts(model)
     sheet = _palate_sheet(model, vertices)
-    arches = [(_arch(model, vertices, a)[0], a == "upper") for a in ("upper", "lower")]
+    arches = [(arch_chains(model, vertices, a)[0], a == "upper") for a in ("upper", "lower")]
 
     def until_out(step):
         # up to ``passes`` rounds, stopping as soon as a round moves nothing
@@ -306,7 +326,7 @@ def project(model, vertices, passes: int = PROJECTION_PASSES):
     return vertices
 
 
-def lips_crossing(model, vertices):
+def lips_crossing(model: FaceModel, vertices: Float[Array, "V 3"]) -> Float[Array, " C"]:
     """Per lip column (C,), how far (mm) the lower lip's highest point is above the
     upper lip's lowest (> 0: the lips pass into each other). Zeros if the model has no
     lip columns."""
@@ -317,7 +337,7 @@ def lips_crossing(model, vertices):
     return jnp.max(lower, axis=1) - jnp.min(upper, axis=1)
 
 
-def lips_apart(model, vertices):
+def lips_apart(model: FaceModel, vertices: Float[Array, "V 3"]) -> Float[Array, "V 3"]:
     """The lips pressed together instead of passing into each other: in every column
     where they cross, both meet at the middle of the crossing (the upper lip's points
     below it raised to it, the lower lip's above it lowered), as lips compress in a
@@ -335,7 +355,9 @@ def lips_apart(model, vertices):
     return vertices.at[ui, 1].set(uy).at[li, 1].set(ly)
 
 
-def penalty_residuals(model, vertices, *, tongue=True, lips=True):
+def penalty_residuals(
+    model: FaceModel, vertices: Float[Array, "V 3"], *, tongue: bool = True, lips: bool = True
+) -> Float[Array, " r"]:
     """Residuals for a least-squares fit: every depth (mm) of the chosen parts, one per
     vertex and obstacle, flattened. Zero where nothing collides; the sum of their squares
     is the penalty. Differentiable almost everywhere (its gradient pushes points out)."""

@@ -57,6 +57,13 @@ class Recording:
     path: Path
 
 
+def recording_source(recording: Recording) -> str:
+    """The name of a recording in messages: its pellet file, else ``SUBJECT/TASK`` (any
+    object with ``subject``, ``task``, ``track`` and optionally ``path``)."""
+    path = getattr(recording, "path", None) or getattr(recording.track, "path", None)
+    return str(path) if path is not None else f"{recording.subject}/{recording.task}"
+
+
 def _listing(folder: Path) -> dict[str, Path]:
     """Lower-case file name -> path for the regular files in ``folder``."""
     try:

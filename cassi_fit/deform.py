@@ -18,16 +18,22 @@ every stage is the identity to the last bit, so ``deform`` returns the stored re
 
 from __future__ import annotations
 
+# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
+from jaxtyping import Float, Int
 
 from . import rigid
+from .face_model import FaceModel
+from .options import JAW_WEIGHTS, TONGUE_ANCHORS, check_choice
+from .pellets import PELLET_NAMES
 from .tongue import tongue_displacement
 
-PELLET_SITES = ("UL", "LL", "T1", "T2", "T3", "T4", "MNI", "MNM")
+#: The model's pellet-site landmarks, in pellet order (``pellets.PELLET_NAMES``).
+PELLET_SITES = PELLET_NAMES
 # Lip rounding: relative narrowing of the mouth per mm of mean forward lip displacement.
 LIP_ROUNDING_PER_MM = 0.015
 # Smooth positive part used for the nose coupling: quadratic over the first 2 mm.
@@ -52,7 +58,7 @@ class FaceParams(eqx.Module):
     jaw_shape_scale: Array = None
 
 
-def default_params(model=None, dtype=float) -> FaceParams:
+def default_params(model: FaceModel | None = None, dtype: object = float) -> FaceParams:
     """Neutral parameters: ``deform(model, default_params())`` is the rest mesh exactly."""
     z = lambda *shape: jnp.zeros(shape, dtype)
     one = jnp.ones((), dtype)
@@ -82,7 +88,7 @@ def _mask(model, names) -> np.ndarray:
     return m
 
 
-def conformation(model, v, p):
+def conformation(model: FaceModel, v: Float[Array, "V 3"], p: FaceParams) -> Float[Array, "V 3"]:
     """Stage 1: the subject's face shape (all identities at the neutral values)."""
     f = model.fields
     z = v[:, 2] * (1.0 + (p.mouth_width - 1.0) * f["mouth"])
@@ -97,15 +103,14 @@ def conformation(model, v, p):
     return jnp.concatenate([xy, z[:, None]], -1)
 
 
-def jaw(model, v, p, weights="cassi"):
+def jaw(model: FaceModel, v: Float[Array, "V 3"], p: FaceParams, weights: str = "cassi") -> Float[Array, "V 3"]:
     """Stage 2: jaw rotation with per-vertex fractions (``"cassi"`` or ``"parke"`` set)."""
-    if weights not in ("cassi", "parke"):
-        raise ValueError(f"jaw_weights must be 'cassi' or 'parke', got {weights!r}")
+    check_choice("jaw weights", weights, JAW_WEIGHTS)
     xy = _move_by_fraction((p.jaw_theta, p.jaw_translation), model.jaw_weights[weights], v[:, :2])
     return v.at[:, :2].set(xy)
 
 
-def lips(model, v, p):
+def lips(model: FaceModel, v: Float[Array, "V 3"], p: FaceParams) -> Float[Array, "V 3"]:
     """Stage 3: lip displacements, lip rounding and the nose tip coupling."""
     f = model.fields
     xy = v[:, :2] + p.upper_lip * f["upper_lip"][:, None] + p.lower_lip * f["lower_lip"][:, None]
@@ -115,19 +120,20 @@ def lips(model, v, p):
     return jnp.concatenate([xy, z[:, None]], -1)
 
 
-def tongue(model, v, p, anchor="follow"):
+def tongue(model: FaceModel, v: Float[Array, "V 3"], p: FaceParams, anchor: str = "follow") -> Float[Array, "V 3"]:
     """Stage 4: tongue params #55-#62 spread along the tongue (``cassi_fit.tongue``)."""
     idx = model.regions["tongue"]
     s = model.fields["tongue_s"]
     site_s = jnp.stack([s[model.landmarks[k]] for k in ("T1", "T2", "T3", "T4")])
-    if anchor == "none" or anchor == "follow" or anchor == "fixed":
-        d = tongue_displacement(s[idx], site_s, p.tongue, model.measures["tongue_anchor_s"], anchor)
-    else:
-        raise ValueError(f"tongue_anchor must be 'fixed', 'follow' or 'none', got {anchor!r}")
+    check_choice("tongue anchor", anchor, TONGUE_ANCHORS)
+    d = tongue_displacement(s[idx], site_s, p.tongue, model.measures["tongue_anchor_s"], anchor)
     return v.at[idx, :2].add(d)
 
 
-def deform(model, params, *, jaw_weights="cassi", tongue_anchor="follow") -> Array:
+def deform(
+    model: FaceModel, params: FaceParams, *, jaw_weights: str = "cassi",
+    tongue_anchor: str = "follow",
+) -> Float[Array, "V 3"]:
     """Vertices (V, 3) mm of ``model`` posed by ``params`` (one frame; vmap for many).
 
     ``jaw_weights``: ``"cassi"`` (Parke's fractions x 1.11111, lower teeth 100 %) or
@@ -140,7 +146,7 @@ def deform(model, params, *, jaw_weights="cassi", tongue_anchor="follow") -> Arr
     return tongue(model, v, params, tongue_anchor)
 
 
-def vertex_normals(vertices, faces) -> Array:
+def vertex_normals(vertices: Float[Array, "V 3"], faces: Int[np.ndarray, "F 3"]) -> Float[Array, "V 3"]:
     """Unit vertex normals (V, 3): area-weighted sums of the incident face normals.
 
     Zero-area triangles contribute nothing. A vertex whose sum is zero (only degenerate
@@ -159,7 +165,7 @@ def vertex_normals(vertices, faces) -> Array:
     return jnp.where(ok, summed / norm, 0.0)
 
 
-def model_pellets(model, vertices) -> Array:
+def model_pellets(model: FaceModel, vertices: Float[Array, "V 3"]) -> Float[Array, "8 2"]:
     """(8, 2) x, y of the model's pellet sites, order UL, LL, T1, T2, T3, T4, MNI, MNM."""
     idx = np.array([model.landmarks[k] for k in PELLET_SITES])
     return vertices[idx, :2]

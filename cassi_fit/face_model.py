@@ -13,8 +13,9 @@ subject's left; z = 0 is the midsagittal plane, which is the XRMB pellet plane.
 from __future__ import annotations
 
 import csv
+import dataclasses
+import hashlib
 import importlib.resources
-import warnings
 from pathlib import Path
 
 import equinox as eqx
@@ -39,26 +40,112 @@ FIELDS = ("upper_lip", "lower_lip", "upper_vermilion", "lower_vermilion", "mouth
 VERTEX_COLUMNS = ("x", "y", "z", "w_cassi", "w_parke") + FIELDS
 
 
+def _digest(value, h) -> None:
+    """Feed ``value`` (numpy arrays, dicts, lists, numbers, strings) into the hash ``h``."""
+    if isinstance(value, np.ndarray):
+        h.update(f"{value.dtype}{value.shape}".encode())
+        h.update(np.ascontiguousarray(value).tobytes())
+    elif isinstance(value, dict):
+        for key in sorted(value, key=str):
+            h.update(repr(key).encode())
+            _digest(value[key], h)
+    elif isinstance(value, (list, tuple)):
+        h.update(f"[{len(value)}".encode())
+        for item in value:
+            _digest(item, h)
+    else:
+        h.update(repr(value).encode())
+
+
+def _frozen(value):
+    """``value`` with every numpy array made read-only (the digest must stay true)."""
+    if isinstance(value, np.ndarray):
+        value = np.array(value)
+        value.setflags(write=False)
+        return value
+    if isinstance(value, dict):
+        return {k: _frozen(v) for k, v in value.items()}
+    return value
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Topology:
+    """What a face model does not animate: triangles, materials, vertex sets, numbers.
+
+    ``faces`` (F, 3) int and ``face_material`` (F,) (indices into ``MATERIALS``);
+    ``regions`` name -> vertex indices; ``landmarks`` name -> vertex index; ``measures``
+    name -> mm (plus ``jaw_pivot_x/y``, ``tongue_anchor_s``); ``collision`` name -> vertex
+    chains along the dental arches (``cassi_fit.collide``; empty if the model has none).
+
+    Hashable: ``__hash__`` and ``__eq__`` use ``digest``, a SHA-1 of the content computed
+    once when the topology is made (its arrays are read-only). The face model keeps it as
+    a static field, so ``eqx.filter_jit`` compiles once per topology *content*: two
+    models loaded from the same files share every compiled function.
+    """
+
+    faces: np.ndarray
+    face_material: np.ndarray
+    regions: dict
+    landmarks: dict
+    measures: dict
+    collision: dict = dataclasses.field(default_factory=dict)
+    digest: str = dataclasses.field(default="", repr=False)
+
+    def __post_init__(self):
+        h = hashlib.sha1()
+        for f in dataclasses.fields(self):
+            if f.name != "digest":
+                value = _frozen(getattr(self, f.name))
+                object.__setattr__(self, f.name, value)
+                h.update(f.name.encode())
+                _digest(value, h)
+        object.__setattr__(self, "digest", h.hexdigest())
+
+    def __hash__(self) -> int:
+        return hash(self.digest)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Topology) and other.digest == self.digest
+
+
 class FaceModel(eqx.Module):
     """The rest mesh and everything needed to deform it.
 
-    ``vertices`` (V, 3) mm; ``faces`` (F, 3) int and ``face_material`` (F,) (indices into
-    ``MATERIALS``) static; ``regions`` name -> vertex indices; ``jaw_weights`` "cassi" and
-    "parke" -> (V,) fraction of the jaw rotation; ``landmarks`` name -> vertex index;
-    ``measures`` name -> mm (plus ``jaw_pivot_x/y``, ``tongue_anchor_s``);
-    ``fields`` name -> (V,) deformation weights (``FIELDS``); ``collision`` name -> vertex
-    chains along the dental arches (``cassi_fit.collide``; empty if the model has none).
+    Arrays (traced by ``jit``): ``vertices`` (V, 3) mm; ``jaw_weights`` "cassi" and
+    "parke" -> (V,) fraction of the jaw rotation; ``fields`` name -> (V,) deformation
+    weights (``FIELDS``). Static: ``topology``, a hashable :class:`Topology`, whose
+    parts read as attributes of the model (``faces``, ``face_material``, ``regions``,
+    ``landmarks``, ``measures``, ``collision``).
     """
 
     vertices: Array
-    faces: np.ndarray = eqx.field(static=True)
-    face_material: np.ndarray = eqx.field(static=True)
-    regions: dict = eqx.field(static=True)
     jaw_weights: dict
-    landmarks: dict = eqx.field(static=True)
-    measures: dict = eqx.field(static=True)
-    fields: dict = eqx.field(default_factory=dict)
-    collision: dict = eqx.field(static=True, default_factory=dict)
+    fields: dict
+    topology: Topology = eqx.field(static=True)
+
+    @property
+    def faces(self) -> np.ndarray:
+        return self.topology.faces
+
+    @property
+    def face_material(self) -> np.ndarray:
+        return self.topology.face_material
+
+    @property
+    def regions(self) -> dict:
+        return self.topology.regions
+
+    @property
+    def landmarks(self) -> dict:
+        return self.topology.landmarks
+
+    @property
+    def measures(self) -> dict:
+        return self.topology.measures
+
+    @property
+    def collision(self) -> dict:
+        return self.topology.collision
 
 
 def default_model_dir() -> Path:
@@ -116,7 +203,7 @@ def _check_index(path, what, index, n):
     return index
 
 
-def load_model(path=None) -> FaceModel:
+def load_model(path: str | Path | None = None) -> FaceModel:
     """Load a model folder (default: the repository's ``model/``) as a :class:`FaceModel`."""
     folder = Path(path) if path is not None else default_model_dir()
     vpath, fpath, mpath = folder / "vertices.csv", folder / "faces.csv", folder / "model.json"
@@ -152,22 +239,17 @@ def load_model(path=None) -> FaceModel:
     fields = {f: jnp.asarray(fields_table[:, k]) for k, f in enumerate(extra)}
     for f in FIELDS:
         fields.setdefault(f, jnp.zeros(n))
-    with warnings.catch_warnings():  # static index arrays are intended (hashed by identity)
-        warnings.simplefilter("ignore", UserWarning)
-        return _make_model(
-            vertices, faces, material, regions, table, landmarks, meta, fields, collision
-        )
-
-
-def _make_model(vertices, faces, material, regions, table, landmarks, meta, fields, collision):
-    return FaceModel(
-        vertices=vertices,
+    topology = Topology(
         faces=faces,
         face_material=material,
         regions=regions,
-        jaw_weights={"cassi": jnp.asarray(table[:, 3]), "parke": jnp.asarray(table[:, 4])},
         landmarks=landmarks,
         measures={k: float(v) for k, v in meta["measures"].items()},
-        fields=fields,
         collision=collision,
+    )
+    return FaceModel(
+        vertices=vertices,
+        jaw_weights={"cassi": jnp.asarray(table[:, 3]), "parke": jnp.asarray(table[:, 4])},
+        fields=fields,
+        topology=topology,
     )

@@ -53,7 +53,7 @@ def read_outline(path: str | os.PathLike, *, kind: str = "palate") -> np.ndarray
     return np.asarray(points, dtype=np.float64) / 1e3
 
 
-def write_outline(path: str | os.PathLike, points_mm, *, overwrite: bool = False) -> Path:
+def write_outline(path: str | os.PathLike, points_mm: np.ndarray, *, overwrite: bool = False) -> Path:
     """Write ``(n, 2)`` mm points as an outline file: integer um, leading spaces, CRLF.
 
     Rounded to the nearest um, so reading back is exact at that resolution. Written

@@ -14,11 +14,14 @@ the nasal sheet lies ``thickness`` mm above the oral one.
 
 from __future__ import annotations
 
+# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, Float, Int
 
 from .errors import DegenerateGeometryError
+from .face_model import FaceModel
 
 N_ALONG = 12
 N_ACROSS = 7
@@ -45,7 +48,7 @@ def _check_outline(outline):
         raise DegenerateGeometryError("palate outline has zero length (all points coincide)")
 
 
-def resample(outline, n=N_ALONG):
+def resample(outline: Float[Array, "k 2"], n: int = N_ALONG) -> Float[Array, "n 2"]:
     """``n`` points equally spaced in arc length along a polyline (k, 2) mm -> (n, 2)."""
     outline = jnp.asarray(outline)
     seg = jnp.linalg.norm(jnp.diff(outline, axis=0), axis=1)
@@ -54,7 +57,7 @@ def resample(outline, n=N_ALONG):
     return jnp.stack([jnp.interp(q, s, outline[:, 0]), jnp.interp(q, s, outline[:, 1])], -1)
 
 
-def palate_faces(n_along=N_ALONG, n_across=N_ACROSS) -> np.ndarray:
+def palate_faces(n_along: int = N_ALONG, n_across: int = N_ACROSS) -> Int[np.ndarray, "Q 3"]:
     """Triangles (Q, 3) of the closed palate slab; outward-facing winding."""
     def idx(sheet, i, k):
         return sheet * n_along * n_across + i * n_across + k
@@ -79,8 +82,11 @@ def palate_faces(n_along=N_ALONG, n_across=N_ACROSS) -> np.ndarray:
     return np.array(faces, dtype=np.int64)
 
 
-def build_palate(outline_mm, *, front_half_width=8.0, back_half_width=22.0,
-                 front_edge_drop=3.0, back_edge_drop=9.0, thickness=3.0, margin=1.0):
+def build_palate(
+    outline_mm: Float[np.ndarray, "n 2"] | Float[Array, "n 2"], *, front_half_width: float = 8.0,
+    back_half_width: float = 22.0, front_edge_drop: float = 3.0, back_edge_drop: float = 9.0,
+    thickness: float = 3.0, margin: float = 1.0,
+) -> tuple[Float[Array, "P 3"], Int[np.ndarray, "Q 3"]]:
     """Palate vertices ``(2 * N_ALONG * N_ACROSS, 3)`` mm and faces ``(Q, 3)``.
 
     ``outline_mm``: (n, 2) palatal centreline in the model frame (x front, y up), front to
@@ -107,7 +113,9 @@ def build_palate(outline_mm, *, front_half_width=8.0, back_half_width=22.0,
     return jnp.concatenate([oral, nasal]), palate_faces()
 
 
-def with_palate(model, outline_mm, **shape):
+def with_palate(
+    model: FaceModel, outline_mm: Float[np.ndarray, "n 2"] | Float[Array, "n 2"], **shape: float
+) -> FaceModel:
     """The model with its palate region rebuilt from ``outline_mm`` (same topology)."""
     verts, _ = build_palate(outline_mm, **shape)
     index = np.asarray(model.regions["palate"])

@@ -29,7 +29,8 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from .errors import MissingDataError
-from .txy import JAW_PELLETS, PELLET_NAMES, PelletTrack, first_valid_frame, pellet_index
+from .pellets import JAW_PELLETS, PELLET_NAMES, pellet_index
+from .txy import PelletTrack, first_valid_frame
 
 PLAUSIBLE_X_MM = (-120.0, 60.0)
 PLAUSIBLE_Y_MM = (-90.0, 60.0)
@@ -62,7 +63,7 @@ def _distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.where(none, np.nan, np.sqrt(np.nansum(d2, axis=-1)))
 
 
-def _running_median(values: np.ndarray) -> np.ndarray:
+def running_median(values: np.ndarray) -> np.ndarray:
     """NaN-aware median over ``MEDIAN_WINDOW`` frames centred on each frame (axis 0).
 
     NaN where a window holds no value. Sorting puts NaN last, so the median of the
@@ -90,10 +91,10 @@ def _jumps(track: PelletTrack, speed: float, step_s: float) -> np.ndarray:
     n = positions.shape[0]
     tracked = track.valid.any(axis=-1)  # (n, 8)
     times = np.where(tracked, track.times[:, None], np.nan)
-    median_time = _running_median(times)
+    median_time = running_median(times)
     allowed = speed * (step_s + np.abs(track.times[:, None] - median_time))
     with np.errstate(invalid="ignore"):
-        far = _distance(positions, _running_median(positions)) > allowed
+        far = _distance(positions, running_median(positions)) > allowed
         step = np.full((n + 1, 8), np.nan)
         step[1:n] = _distance(positions[1:], positions[:-1])
         spike = (step[:-1] > speed * step_s) & (step[1:] > speed * step_s)
@@ -142,7 +143,8 @@ class QualityReport:
     :func:`detect_mistracks`. ``all_valid_fraction`` is the fraction of frames with all
     eight pellets tracked. Jaw distances (MNI-MNM, mm) are over frames with both jaw
     pellets tracked and not flagged; None when there are none. ``first_valid_frame`` is
-    the first frame with all eight pellets tracked (None if there is none) and
+    CASSI's first valid line by the one rule of :func:`cassi_fit.pellets.first_valid_line`
+    (every pellet the file ever tracks is tracked; None if there is none) and
     ``first_jaw_frame`` the first with both jaw pellets tracked.
     """
 
@@ -161,7 +163,8 @@ class QualityReport:
         return asdict(self)
 
 
-def _first(track: PelletTrack, pellets) -> int | None:
+def _first(track: PelletTrack, pellets=None) -> int | None:
+    """``first_valid_frame`` (the pellets module's rule by default), None if there is none."""
     try:
         return first_valid_frame(track, pellets)
     except MissingDataError:
@@ -180,7 +183,7 @@ def quality_report(track: PelletTrack) -> QualityReport:
         path=None if track.path is None else str(track.path),
         n_frames=track.n_frames,
         duration_s=track.duration,
-        first_valid_frame=_first(track, PELLET_NAMES),
+        first_valid_frame=_first(track),
         first_jaw_frame=_first(track, JAW_PELLETS),
         valid_fraction={p: float(tracked[:, i].sum() / n) for i, p in enumerate(PELLET_NAMES)},
         all_valid_fraction=float(tracked.all(axis=-1).sum() / n),

@@ -15,9 +15,11 @@ sites); in front of T1 it equals T1's. Behind T4 the back anchor option decides:
 
 from __future__ import annotations
 
+# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import jax.numpy as jnp
+from jaxtyping import Array, Float
 
-ANCHOR_MODES = ("fixed", "follow", "none")
+from .options import TONGUE_ANCHORS, check_choice
 
 
 def _blend(u):
@@ -25,15 +27,18 @@ def _blend(u):
     return 0.5 - 0.5 * jnp.cos(jnp.pi * jnp.clip(u, 0.0, 1.0))
 
 
-def tongue_displacement(s, site_s, displacement, anchor_s, anchor="follow"):
+def tongue_displacement(
+    s: Float[Array, " n"], site_s: Float[Array, " 4"], displacement: Float[Array, "4 2"],
+    anchor_s: float | Float[Array, ""], anchor: str = "follow",
+) -> Float[Array, "n 2"]:
     """Displacement (n, 2) mm of tongue points at arc lengths ``s`` (n,) mm.
 
     ``site_s`` (4,): arc lengths of T1..T4 (increasing); ``displacement`` (4, 2): params
     #55-#62 as rows (X, Z) of T1..T4; ``anchor_s``: arc length of the fixed anchors
-    (> site_s[3]); ``anchor``: one of ``ANCHOR_MODES`` (static).
+    (> site_s[3]); ``anchor``: one of ``options.TONGUE_ANCHORS`` (static;
+    ``InvalidChoiceError`` otherwise).
     """
-    if anchor not in ANCHOR_MODES:
-        raise ValueError(f"tongue_anchor must be one of {ANCHOR_MODES}, got {anchor!r}")
+    check_choice("tongue anchor", anchor, TONGUE_ANCHORS)
     s = s[:, None]
     d = jnp.broadcast_to(displacement[0], (s.shape[0], 2))
     for k in range(3):  # telescoping sum: segment k contributes fully once passed

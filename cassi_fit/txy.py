@@ -23,24 +23,15 @@ import numpy as np
 
 from ._io import atomic_write, register_input
 from .errors import DataFormatError, MissingDataError
+from .pellets import JAW_PELLETS, PELLET_NAMES, first_valid_line, pellet_index
 
-PELLET_NAMES = ("UL", "LL", "T1", "T2", "T3", "T4", "MNI", "MNM")
 UNTRACKED = 1_000_000  # marker in files, per value (um)
 FRAME_STEP_US = 6866  # about 145.6 Hz
 N_FIELDS = 1 + 2 * len(PELLET_NAMES)  # 17
-JAW_PELLETS = ("MNI", "MNM")
 
 # Integers beyond this magnitude cannot be held exactly in float64 (and are no data).
 _MAX_ABS_INT = 2**53
 _INT_TOKEN = re.compile(r"[+-]?[0-9]+")
-
-
-def pellet_index(name: str) -> int:
-    """Index of a pellet in ``PELLET_NAMES`` (case-insensitive); ``ValueError`` if unknown."""
-    key = str(name).upper()
-    if key not in PELLET_NAMES:
-        raise ValueError(f"unknown pellet {name!r}; expected one of {', '.join(PELLET_NAMES)}")
-    return PELLET_NAMES.index(key)
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,12 +98,17 @@ def _where(track: PelletTrack) -> str:
     return str(track.path) if track.path is not None else "<pellet track>"
 
 
-def first_valid_frame(track: PelletTrack, pellets: Sequence[str] = PELLET_NAMES) -> int:
-    """Index of the first frame in which every pellet in ``pellets`` is tracked (x and y).
+def first_valid_frame(track: PelletTrack, pellets: Sequence[str] | None = None) -> int:
+    """Index of CASSI's first valid line (initialisation step 1).
 
-    This is CASSI's "first valid line" (initialisation step 1). Raises
+    Default: the one rule of :func:`cassi_fit.pellets.first_valid_line` (the first frame
+    in which every pellet the file ever tracks is tracked; ``MissingDataError`` if a jaw
+    pellet is never tracked). With ``pellets``: the first frame in which those pellets
+    are all tracked (x and y), e.g. ``JAW_PELLETS`` for the jaw alone. Raises
     :class:`MissingDataError` naming the file if there is no such frame.
     """
+    if pellets is None:
+        return first_valid_line(track, _where(track)).index
     ok = track.frame_valid(pellets)
     if not ok.any():
         raise MissingDataError(

@@ -10,25 +10,17 @@ import numpy as np
 import pytest
 
 from cassi_fit import synth
-from cassi_fit.animate import (
-    FRAME_HELD,
-    FRAME_INTERPOLATED,
-    FRAME_MISTRACKED,
-    FRAME_OK,
-    LL,
-    MNI,
-    MNM,
-    UL,
-    animate,
-    first_valid_line,
-    frame_status,
-    geometry,
-    initialize,
-    repair,
-)
+from cassi_fit.animate import animate, geometry
 from cassi_fit.dataset import Recording
-from cassi_fit.errors import CassiError, MissingDataError
+from cassi_fit.errors import CassiError, InvalidChoiceError, MissingDataError
+from cassi_fit.gaps import frame_status, repair
+from cassi_fit.initialize import initialize
+from cassi_fit.pellets import LL, MNI, MNM, UL, first_valid_line
+from cassi_fit.status import Status
 from cassi_fit.txy import PelletTrack
+
+FRAME_OK, FRAME_HELD = Status.OK, Status.HELD
+FRAME_INTERPOLATED, FRAME_MISTRACKED = Status.INTERPOLATED, Status.MISTRACKED
 
 
 def make_recording(seconds=1.0, seed=3, *, head_is_default=False, **synth_options):
@@ -91,7 +83,7 @@ def test_repair_hold_and_interpolate():
     interp = repair(np.where(bad[..., None], np.nan, x), bad, "interpolate")
     np.testing.assert_allclose(interp[:, 1, 0], np.arange(6.0))
     np.testing.assert_array_equal(interp[:, 0], x[:, 0])  # untouched pellets unchanged
-    with pytest.raises(CassiError, match="gap policy"):
+    with pytest.raises(InvalidChoiceError, match="gap policy"):
         repair(x, bad, "zero")
 
 
@@ -106,6 +98,8 @@ def test_frame_status_codes():
         [FRAME_OK, FRAME_HELD, FRAME_MISTRACKED, FRAME_MISTRACKED],
     )
     assert frame_status(untracked, mistracked, "interpolate")[1] == FRAME_INTERPOLATED
+    assert [Status(int(x)).label for x in frame_status(untracked, mistracked, "hold")] == [
+        "ok", "held", "mistracked", "mistracked"]
 
 
 def test_first_valid_line_ignores_pellets_never_tracked(recording):
@@ -227,7 +221,7 @@ def test_stride(state, recording, stride, animation):
 def test_jaw_fits_and_options(state, recording, model):
     fit = animate(state, recording, jaw="fixed-pivot", stride=5)
     assert fit.jaw_method == "fixed-pivot" and np.all(np.isfinite(np.asarray(fit.vertices)))
-    with pytest.raises(CassiError, match="jaw method"):
+    with pytest.raises(InvalidChoiceError, match="jaw method"):
         animate(state, recording, jaw="magic")
     with pytest.raises(CassiError, match="stride"):
         animate(state, recording, stride=0)
@@ -240,3 +234,60 @@ def test_default_head_measures_still_initialize(model):
     rec, _ = make_recording(seconds=0.6, seed=5, head_is_default=True)
     state = initialize(rec, model)
     assert np.all(np.isfinite(np.asarray(state.rest_pellets)))
+
+
+def test_a_bad_choice_raises_one_error_type_everywhere(state, recording, model):
+    """The same bad tongue anchor: the model layer (deform, tongue) and the pipeline
+    (initialize) raise the same type, and so does a bad collision mode in animate."""
+    from cassi_fit.deform import default_params, deform
+    from cassi_fit.tongue import tongue_displacement
+
+    calls = [
+        lambda: deform(model, default_params(model), tongue_anchor="glued"),
+        lambda: tongue_displacement(np.zeros(3), np.arange(4.0), np.zeros((4, 2)), 9.0, "glued"),
+        lambda: initialize(recording, model, tongue_anchor="glued"),
+        lambda: deform(model, default_params(model), jaw_weights="mine"),
+        lambda: initialize(recording, model, jaw_weights="mine"),
+        lambda: animate(state, recording, collisions="sometimes"),
+    ]
+    for call in calls:
+        with pytest.raises(InvalidChoiceError) as info:
+            call()
+        assert isinstance(info.value, CassiError) and isinstance(info.value, ValueError)
+
+
+def test_a_second_recording_of_the_same_shape_compiles_nothing(model):
+    """eqx.filter_jit on the model's hashable topology: after one recording, another one
+    of the same subject whose frames fall in the same bucket compiles nothing new (a
+    fresh load of the model included), for initialization and animation alike."""
+    from jax import monitoring
+
+    from cassi_fit.animate import frame_bucket
+    from cassi_fit.face_model import load_model
+
+    first, _ = make_recording(seconds=0.6, seed=21)
+    t = first.track  # the same subject, other values and 7 lines fewer, same frame bucket
+    second = dataclasses.replace(first, track=PelletTrack(
+        t.times[:-7], t.positions[:-7] + 0.05, t.valid[:-7], t.path))
+    n1 = len(first.track.times) - first_valid_line(first.track).index
+    n2 = len(second.track.times) - first_valid_line(second.track).index
+    assert n1 != n2 and frame_bucket(n1) == frame_bucket(n2)
+
+    compiles = []
+
+    def listener(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiles.append(duration)
+
+    animate(initialize(first, model), first)
+    monitoring.register_event_duration_secs_listener(listener)
+    try:
+        jax.jit(lambda x: x * 3.0 + 1.0)(np.ones(n1 + 1234))  # the listener does count
+        assert len(compiles) >= 1
+        compiles.clear()
+        state = initialize(second, load_model())  # another model object, same content
+        anim = animate(state, second)
+    finally:
+        monitoring.unregister_event_duration_listener(listener)
+    assert anim.n_frames == n2
+    assert len(compiles) == 0, f"{len(compiles)} new compilation(s)"

@@ -10,11 +10,12 @@ import pytest
 import zoo
 
 from cassi_fit import calibrate
-from cassi_fit.animate import animate, initialize
+from cassi_fit.animate import animate
 from cassi_fit.cli import main as cli
 from cassi_fit.dataset import Dataset
 from cassi_fit.errors import CassiError, DataFormatError, MissingDataError
 from cassi_fit.face_model import load_model
+from cassi_fit.initialize import initialize
 from cassi_fit.synth import load_anatomy
 
 N_SUBJECTS = 3
@@ -168,3 +169,28 @@ def test_cli_calibrate_writes_one_file_per_subject_and_animate_reads_them(
     assert max(float(table[n].max()) for n in after) < 0.01
     assert cli(args[:-4] + ["--cassi", "--out", str(png), "--force"]) == 2
     assert "exclude" in capsys.readouterr().err
+
+
+def test_calibration_choice_reads_a_folder_or_a_file_and_excludes_cassi(tmp_path, separate):
+    cal = separate["S01"]
+    path = calibrate.write_calibration(calibrate.calibration_path(tmp_path, "S01"), cal)
+    assert calibrate.calibration_choice(tmp_path, "s01") == cal
+    assert calibrate.calibration_choice(path, "S02") == cal  # a file is taken as it is
+    assert calibrate.calibration_choice(None, "S01") is None
+    assert calibrate.calibration_choice(None, "S01", cassi=True) == "cassi"
+    with pytest.raises(CassiError, match="exclude each other"):
+        calibrate.calibration_choice(tmp_path, "S01", cassi=True)
+
+
+def test_the_unknowns_are_named_and_flatten_in_their_documented_order():
+    from jax.flatten_util import ravel_pytree
+
+    x = calibrate.Unknowns(*map(np.float64, (1, 2, 3, 4, 5)), np.array([6.0, 7.0]))
+    np.testing.assert_array_equal(ravel_pytree(x)[0], np.arange(1.0, 8.0))
+    mask = calibrate.Unknowns.mask(("face_width", "log_jaw_scale"))
+    np.testing.assert_array_equal(ravel_pytree(mask)[0], [0, 0, 0, 1, 0, 1, 1])
+    assert calibrate.UNKNOWN_NAMES == tuple(f.name for f in dataclasses.fields(x))
+    from cassi_fit.errors import InvalidChoiceError
+
+    with pytest.raises(InvalidChoiceError, match="calibration method"):
+        calibrate.calibrate_subject([object()], method="both")

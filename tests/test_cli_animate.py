@@ -34,9 +34,9 @@ def sentence(corpus):
 
 
 def _expected_frames(recording, stride):
-    from cassi_fit.animate import first_valid_line
+    from cassi_fit.pellets import first_valid_line
 
-    first, _ = first_valid_line(recording.track, "x")
+    first, _ = first_valid_line(recording.track)
     return math.ceil((len(recording.track.times) - first) / stride)
 
 
@@ -129,7 +129,8 @@ def test_animate_pellet_file_to_gif_and_png(sentence, tmp_path, capsys):
 
 
 def test_every_view_is_non_blank(sentence):
-    from cassi_fit.animate import animate, initialize
+    from cassi_fit.animate import animate
+    from cassi_fit.initialize import initialize
     from cassi_fit.render import Renderer
 
     _, recording = sentence

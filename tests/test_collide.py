@@ -1,7 +1,6 @@
 """Collisions: depths measured as documented, zero after projection, a usable penalty."""
 
 import dataclasses
-import warnings
 
 import equinox as eqx
 import jax
@@ -41,20 +40,20 @@ def test_the_rest_model_touches_nothing_and_projection_leaves_it_alone():
 
 
 def test_depth_is_the_shortest_way_out_of_a_crown():
-    chains, teeth = collide._arch(MODEL, MODEL.vertices, "upper")
+    chains, teeth = collide.arch_chains(MODEL, MODEL.vertices, "upper")
     k = int(np.flatnonzero(teeth == 0)[-2])  # the left central incisor, mesial station
     lingual, labial = np.asarray(chains[0][k]), np.asarray(chains[2][k])
     assert 0.9 < np.linalg.norm((labial - lingual)[[0, 2]]) < 2.0  # a thin incisal edge
     # 0.3 mm above the biting edge, halfway between the lingual and the labial face:
     # 0.3 mm from the way out downward, more than 0.45 mm from either face
     mid = 0.5 * (lingual + labial)
-    depth, move = collide._teeth_depth(jnp.array([mid[0], 0.3, mid[2]]), chains, True, "lingual")
+    depth, move = collide.teeth_depth(jnp.array([mid[0], 0.3, mid[2]]), chains, True, "lingual")
     assert float(depth) == pytest.approx(0.3, abs=1e-6)
     np.testing.assert_allclose(np.asarray(move), [0.0, -0.3 - collide.PROJECTION_MARGIN_MM, 0.0])
     # between the open teeth (below the upper edge) the same point is inside nothing, and
     # neither is one 2 mm in front of the crown (a tongue out over the lower lip)
     for point in ([mid[0], -0.3, mid[2]], [labial[0] + 2.0, 3.0, labial[2]]):
-        assert float(collide._teeth_depth(jnp.array(point), chains, True, "lingual")[0]) == 0.0
+        assert float(collide.teeth_depth(jnp.array(point), chains, True, "lingual")[0]) == 0.0
 
 
 def test_a_tongue_pushed_through_the_front_teeth_is_measured_and_projected_out():
@@ -128,9 +127,9 @@ def test_penalty_is_zero_at_rest_and_its_gradient_pushes_the_tongue_back():
 
 
 def test_a_model_without_collision_chains_gets_a_clear_error():
-    with warnings.catch_warnings():  # the copy re-sets the model's static index arrays
-        warnings.simplefilter("ignore", UserWarning)
-        bare = dataclasses.replace(MODEL, collision={})
+    topology = dataclasses.replace(MODEL.topology, collision={})
+    assert topology != MODEL.topology  # its digest is recomputed
+    bare = dataclasses.replace(MODEL, topology=topology)
     assert not collide.has_collision_data(bare)
     with pytest.raises(CassiError, match="collision chains"):
         collide.report(bare, bare.vertices)

@@ -143,7 +143,9 @@ def test_vertex_normals_unit_and_safe_on_degenerate_triangles():
 
 
 def test_bad_options_raise():
-    with pytest.raises(ValueError):
+    from cassi_fit.errors import InvalidChoiceError
+
+    with pytest.raises(InvalidChoiceError, match="jaw weights"):
         deform(MODEL, default_params(MODEL), jaw_weights="nope")
-    with pytest.raises(ValueError):
+    with pytest.raises(InvalidChoiceError, match="tongue anchor"):
         deform(MODEL, default_params(MODEL), tongue_anchor="nope")

@@ -66,3 +66,16 @@ def test_missing_and_malformed_files_raise_toolkit_errors(tmp_path):
     (tmp_path / "vertices.csv").write_text("x,y,z,w_cassi,w_parke\n1,2,oops,0,0\n")
     with pytest.raises(DataFormatError, match="vertices.csv:2"):
         load_model(tmp_path)
+
+
+def test_topology_is_hashable_by_content_and_frozen():
+    import dataclasses
+
+    a, b = load_model().topology, load_model().topology
+    assert a is not b and a == b and hash(a) == hash(b) and len(a.digest) == 40
+    regions = dict(a.regions, tongue=a.regions["tongue"][:-1])
+    assert dataclasses.replace(a, regions=regions) != a
+    with pytest.raises(ValueError):  # read-only: the digest stays true
+        a.faces[0, 0] = 1
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        a.faces = a.faces[:1]

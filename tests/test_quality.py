@@ -117,7 +117,7 @@ def test_single_frame():
 def test_running_median_matches_nanmedian():
     from numpy.lib.stride_tricks import sliding_window_view
 
-    from cassi_fit.quality import MEDIAN_WINDOW, _running_median
+    from cassi_fit.quality import MEDIAN_WINDOW, running_median
 
     rng = np.random.default_rng(4)
     x = rng.normal(size=(60, 8, 2))
@@ -128,7 +128,7 @@ def test_running_median_matches_nanmedian():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN windows
         expected = np.nanmedian(windows, axis=-1)
-    np.testing.assert_array_equal(_running_median(x), expected)
+    np.testing.assert_array_equal(running_median(x), expected)
 
 
 def test_jaw_outlier_blamed_on_the_pellet_that_jumped():

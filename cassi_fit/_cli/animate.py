@@ -6,9 +6,15 @@ import argparse
 import sys
 from pathlib import Path
 
-JAW_METHODS = ("closed-form", "frame-fit", "fixed-pivot", "smooth-pivot")
-VIEWS = ("front", "side", "inside", "top")
-OUT_SUFFIXES = (".mp4", ".gif", ".png")
+from cassi_fit.options import (
+    ANIMATION_SUFFIXES,
+    COLLISION_MODES,
+    GAP_POLICIES,
+    JAW_METHODS,
+    JAW_WEIGHTS,
+    TONGUE_ANCHORS,
+    VIEWS,
+)
 
 
 def add_recording_argument(parser: argparse.ArgumentParser) -> None:
@@ -40,14 +46,14 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--tongue-anchor",
-        choices=("fixed", "follow", "none"),
+        choices=TONGUE_ANCHORS,
         default="follow",
         help="the tongue's back anchor points: fixed (CASSI: they never move, hence its V "
         "shape), follow (they move with T4; default) or none",
     )
     parser.add_argument(
         "--gap",
-        choices=("hold", "interpolate"),
+        choices=GAP_POLICIES,
         default="hold",
         help="untracked or mistracked pellet values: hold the last good value (default) or "
         "interpolate between good ones; repaired frames are flagged in the caption",
@@ -67,7 +73,7 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--collisions",
-        choices=("off", "project"),
+        choices=COLLISION_MODES,
         default="off",
         help="off (default; as CASSI: the tongue may pass through the teeth and palate) or "
         "project (every frame, the tongue is pushed out of the teeth and the palate and "
@@ -75,7 +81,7 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--jaw-weights",
-        choices=("cassi", "parke"),
+        choices=JAW_WEIGHTS,
         default="cassi",
         help="region weights of the jaw rotation: CASSI's (teeth 100%%; default) or Parke's "
         "(teeth 90%%)",
@@ -182,39 +188,18 @@ def load_recording_args(words):
 
 
 def animate_recording(recording, args):
-    """Initialize and animate with the options of ``add_model_arguments``."""
-    from cassi_fit.animate import animate, initialize
+    """``initialize.animate_recording`` with the options of ``add_model_arguments``."""
+    from cassi_fit.calibrate import calibration_choice
     from cassi_fit.errors import CassiError
+    from cassi_fit.initialize import animate_recording as run_pipeline
 
     if args.stride < 1:
         raise CassiError(f"--stride must be at least 1, got {args.stride}")
-    state = initialize(
-        recording,
-        calibration=calibration_choice(args, recording.subject),
-        jaw_weights=args.jaw_weights,
-        tongue_anchor=args.tongue_anchor,
-        gap_policy=args.gap,
-    )
-    return state, animate(
-        state, recording, jaw=args.jaw, stride=args.stride, collisions=args.collisions
-    )
-
-
-def calibration_choice(args, subject):
-    """``initialize``'s calibration for ``--calibration`` / ``--cassi``."""
-    from cassi_fit.errors import CassiError
-
-    path = getattr(args, "calibration", None)
-    if path and getattr(args, "cassi", False):
-        raise CassiError("--cassi and --calibration exclude each other")
-    if getattr(args, "cassi", False):
-        return "cassi"
-    if not path:
-        return None
-    from cassi_fit.calibrate import calibration_path, read_calibration
-
-    path = Path(path)
-    return read_calibration(calibration_path(path, subject) if path.is_dir() else path)
+    calibration = calibration_choice(getattr(args, "calibration", None), recording.subject,
+                                     cassi=getattr(args, "cassi", False))
+    return run_pipeline(recording, calibration=calibration, jaw=args.jaw, stride=args.stride,
+                        jaw_weights=args.jaw_weights, tongue_anchor=args.tongue_anchor,
+                        gap_policy=args.gap, collisions=args.collisions)
 
 
 def run(args) -> int:
@@ -222,8 +207,8 @@ def run(args) -> int:
 
     size, views = parse_size(args.size), parse_views(args.views)
     out = Path(args.out) if args.out else None
-    if out is not None and out.suffix.lower() not in OUT_SUFFIXES:
-        raise CassiError(f"--out {out}: must end in {', '.join(OUT_SUFFIXES)}")
+    if out is not None and out.suffix.lower() not in ANIMATION_SUFFIXES:
+        raise CassiError(f"--out {out}: must end in {', '.join(ANIMATION_SUFFIXES)}")
     recording = load_recording_args(args.recording)
     out = out or Path(f"{recording.subject}_{recording.task}.mp4")
     if out.exists() and not args.force:
@@ -233,6 +218,7 @@ def run(args) -> int:
         raise CassiError(f"{csv_out}: file exists (pass --force to replace it)")
     state, animation = animate_recording(recording, args)
     from cassi_fit.render import Renderer
+    from cassi_fit.reports import penetration_summary, write_penetration_csv
 
     renderer = Renderer(state.model, size=size, views=views, grid=len(views) > 1)
     written = write_output(out, animation, renderer, recording, args)
@@ -241,38 +227,6 @@ def run(args) -> int:
     if csv_out is not None:
         print(f"wrote {write_penetration_csv(csv_out, animation, overwrite=args.force)}")
     return 0
-
-
-def penetration_summary(animation) -> str:
-    """One line per kind: the 95th percentile and the maximum depth over the frames."""
-    import numpy as np
-
-    if not animation.penetration:
-        return "penetration: not measured (the model has no collision chains)"
-    lines = ["penetration depth, mm (95th percentile / max over frames)"
-             + ("; after projection" if animation.collisions == "project" else "")]
-    for key, before in animation.penetration.items():
-        after = animation.penetration_after[key]
-        text = f"  {key:20s} {np.percentile(before, 95):6.2f} / {before.max():6.2f}"
-        if animation.collisions == "project":
-            text += f"   -> {after.max():.3f}"
-        lines.append(text)
-    return "\n".join(lines)
-
-
-def write_penetration_csv(path: Path, animation, *, overwrite=False) -> Path:
-    """time_s, frame (1-based data line), then each depth before and after projection."""
-    from cassi_fit._io import atomic_write
-
-    keys = list(animation.penetration)
-    header = ["time_s", "line"] + [f"{k}_mm" for k in keys] + [f"{k}_after_mm" for k in keys]
-    rows = [",".join(header)]
-    for i in range(animation.n_frames):
-        values = [f"{animation.times[i]:.6f}", str(int(animation.frame_index[i]) + 1)]
-        values += [f"{animation.penetration[k][i]:.4f}" for k in keys]
-        values += [f"{animation.penetration_after[k][i]:.4f}" for k in keys]
-        rows.append(",".join(values))
-    return atomic_write(path, "\n".join(rows) + "\n", overwrite=overwrite)
 
 
 def write_output(out: Path, animation, renderer, recording, args) -> Path:

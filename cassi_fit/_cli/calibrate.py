@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from cassi_fit.options import CALIBRATION_METHODS
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
@@ -19,7 +21,7 @@ def register(subparsers) -> None:
     parser.add_argument("dataset", metavar="DATASET", help="a dataset folder")
     parser.add_argument("--out", default="calibration", metavar="DIR",
                         help="folder for the files (default: ./calibration)")
-    parser.add_argument("--method", choices=("separate", "joint"), default="separate",
+    parser.add_argument("--method", choices=CALIBRATION_METHODS, default="separate",
                         help="separate (default: scale = p/d, then each part on its own "
                         "residuals) or joint (everything, the scale included, at once)")
     parser.add_argument("--subjects", metavar="LIST",

@@ -108,7 +108,8 @@ def _comparison(path: Path, recording, animation, stride, size):
     teeth: CASSI-like (paper's conformation, no collisions) and calibrated + projected."""
     import numpy as np
 
-    from cassi_fit.animate import animate, initialize
+    from cassi_fit.animate import animate
+    from cassi_fit.initialize import initialize
     from cassi_fit.render import Renderer, save_png
 
     state = initialize(recording, calibration="cassi")
@@ -159,9 +160,10 @@ def _stills(out: Path, renderer, recording, animation):
 
 def run(args) -> int:
     from cassi_fit import video
-    from cassi_fit.animate import animate, initialize
+    from cassi_fit.animate import animate
     from cassi_fit.errors import CassiError
     from cassi_fit.export import export_glb
+    from cassi_fit.initialize import initialize
     from cassi_fit.render import Renderer
 
     from .animate import parse_size

@@ -1,0 +1,197 @@
+"""The subject's conformation: the face's shape before any animation, in one place.
+
+Three sources (``initialize(..., calibration=...)``, docs/PIPELINE.md):
+
+* the default (:func:`default_conformation`, ``mode="measures"``): paper step 5 (the jaw
+  shape from the subject's gonion and gnathion, :func:`jaw_shape`) and, beyond the paper
+  (its future work), face and mouth width and nose from Headmeasures and the lip
+  thickness (:func:`lip_thickness`) from Headmeasures or the first valid line;
+* ``mode="cassi"``: only what the paper did (the jaw shape);
+* a :class:`Calibration`: the subject's shape fitted through the model by
+  ``cassi_fit.calibrate`` (``cassi calibrate``), read back from its JSON file.
+
+Lip thickness is Headmeasures' (docs/FORMATS.md): how far the lip pellet sits ahead of
+the incisor tip at rest; :func:`lips_ahead` measures it on one data line.
+"""
+
+from __future__ import annotations
+
+# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
+import json
+from dataclasses import asdict, dataclass, field
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from . import rigid
+from .dataset import Recording
+from .deform import FaceParams, default_params
+from .face_model import FaceModel
+from .headmeasures import HeadMeasures
+from .jaw import closed_form
+from .options import CONFORMATIONS, check_choice
+from .pellets import LL, MNI, MNM, UL
+
+#: The ``format`` entry of a calibration file.
+FORMAT = "cassi_fit calibration 1"
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """One subject's calibrated face. Lengths in the subject's mm unless named ``model``.
+
+    ``scale``: model mm per subject mm (``p/d``). ``params``: the model's conformation
+    parameters (``deform.FaceParams`` names, model units). ``residuals``: what is left of
+    each residual group, subject mm (rms over recordings where there are several).
+    ``observed``: the per-recording first-line estimates of the lip thicknesses.
+    ``lip_rest_offset``: (upper, lower) model mm, how far above the model's UL and LL
+    sites the lip pellets sit on the first valid lines; animation measures the lips'
+    vertical displacement from there, so that the lips are together (at rest) where the
+    first valid line has them, as the report assumes, instead of being pushed into each
+    other or apart by a pellet placed higher or lower on the lip than the model's site.
+    """
+
+    subject: str
+    method: str
+    scale: float
+    upper_lip_thickness: float
+    lower_lip_thickness: float
+    face_width: float
+    mouth_width: float
+    nose_protrusion: float
+    gonion: tuple
+    gnathion: tuple
+    params: dict
+    lip_rest_offset: tuple
+    residuals: dict
+    observed: dict
+    recordings: tuple
+    first_lines: tuple
+    head_is_default: bool
+    collisions: bool
+    converged: bool
+    format: str = field(default=FORMAT)
+
+    def face_params(self, dtype=float) -> FaceParams:
+        """The conformation as a ``deform.FaceParams`` (no animation)."""
+        values = {k: jnp.asarray(v, dtype) for k, v in self.params.items()}
+        return with_values(default_params(dtype=dtype), values)
+
+    def to_json(self) -> str:
+        """The calibration file's text (JSON, one subject)."""
+        return json.dumps(plain(asdict(self)), indent=1) + "\n"
+
+
+def plain(x: object) -> object:
+    """``x`` with numpy arrays and scalars turned into lists and Python numbers (for JSON)."""
+    if isinstance(x, dict):
+        return {k: plain(v) for k, v in x.items()}
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, (list, tuple)):
+        return [plain(v) for v in x]
+    if isinstance(x, (np.floating, np.integer, np.bool_)):
+        return x.item()
+    return x
+
+
+def with_values(params: FaceParams, values: dict) -> FaceParams:
+    """``params`` with the fields named in ``values`` replaced (``FaceParams`` names)."""
+    if not values:
+        return params
+    names = tuple(values)
+    return eqx.tree_at(lambda p: tuple(getattr(p, k) for k in names), params,
+                       tuple(values[k] for k in names))
+
+
+@jax.jit
+def lips_ahead(
+    rest_jaw: Float[Array, "2 2"], tip: Float[Array, " 2"], pellets: Float[Array, "8 2"], s: float | Float[Array, ""]
+) -> tuple[Float[Array, ""], Float[Array, ""]]:
+    """Lip thickness as Headmeasures defines it, seen on one data line, in model mm:
+    ``(upper, lower)``, the UL pellet ahead of the upper incisor tip (x) and the LL pellet
+    ahead of the lower incisor tip along the jaw line (MNM -> MNI). ``pellets (8, 2)``
+    subject mm, ``s`` the scale; the lower tip is the model's (``tip (2,)``), placed on
+    the line's jaw pellets by the paper's closed form (Eqs 1-3, 6-7) from the model's jaw
+    sites ``rest_jaw (2, 2)`` [MNI, MNM]."""
+    dtype = pellets.dtype
+    motion = closed_form(rest_jaw.astype(dtype), s * pellets[jnp.array([MNI, MNM])])
+    tip_here = rigid.apply(motion.theta, motion.translation, tip.astype(dtype))
+    forward = (pellets[MNI] - pellets[MNM]) / jnp.linalg.norm(pellets[MNI] - pellets[MNM])
+    return s * pellets[UL, 0], jnp.dot(s * pellets[LL] - tip_here, forward)
+
+
+_closed_form_one = jax.jit(closed_form)  # one frame; eager dispatch of its small ops is slow
+
+
+def _xy(model, name) -> np.ndarray:
+    return np.asarray(model.vertices)[model.landmarks[name], :2]
+
+
+def jaw_shape(model: FaceModel, head: HeadMeasures, scale: float) -> tuple[float, Float[np.ndarray, " 2"]]:
+    """Paper step 5: the closed form from the model's [gnathion, gonion] to the subject's
+    (Headmeasures ``head``, times ``scale``), as ``(theta rad, t (2,) mm)``; neutral if
+    degenerate (jaw status DEGENERATE or worse)."""
+    reference = np.stack([_xy(model, "gnathion"), _xy(model, "gonion")])
+    current = scale * np.array([[head.gnathion_x, head.gnathion_y], [head.gonion_x, head.gonion_y]])
+    motion = _closed_form_one(jnp.asarray(reference), jnp.asarray(current))
+    if int(motion.status) >= 2:
+        return 0.0, np.zeros(2)
+    return float(motion.theta), np.asarray(motion.translation)
+
+
+def lip_thickness(
+    model: FaceModel, first: Float[np.ndarray, "8 2"], scale: float, head: HeadMeasures,
+    head_is_default: bool,
+) -> Float[np.ndarray, " 2"]:
+    """Millimetres added to the model's lip thickness parameters ``(upper, lower)``.
+
+    From the subject's Headmeasures ``head`` if it has them, else (the report's future
+    work) from the first valid line ``first (8, 2)`` subject mm, taken as a gently closed
+    mouth (:func:`lips_ahead`). Kept within [-1/2, +1] of the model's own thickness so
+    that a bad first line cannot turn a lip inside out.
+    """
+    own = np.array([model.measures["upper_lip_thickness"], model.measures["lower_lip_thickness"]])
+    forward = _xy(model, "MNI") - _xy(model, "MNM")
+    forward = forward / np.linalg.norm(forward)
+    if not head_is_default:
+        wanted = scale * np.array([head.upper_lip_thickness, head.lower_lip_thickness])
+    else:
+        rest_jaw = np.stack([_xy(model, "MNI"), _xy(model, "MNM")])
+        seen = lips_ahead(jnp.asarray(rest_jaw), jnp.asarray(_xy(model, "lower_incisor_tip")),
+                          jnp.asarray(first), scale)
+        wanted = np.where(np.isfinite(seen), np.asarray(seen, np.float64), own)
+    delta = np.clip(wanted - own, -0.5 * own, own)
+    # the thickness parameters move the vermilion along x: the lower one counts along
+    # the model's forward direction
+    return delta / np.array([1.0, forward[0]])
+
+
+def default_conformation(
+    model: FaceModel, recording: Recording, first: Float[np.ndarray, "8 2"], scale: float, mode: str = "measures"
+) -> FaceParams:
+    """``FaceParams`` of the subject's shape (no animation) from its Headmeasures and
+    first valid line ``first (8, 2)`` subject mm; ``mode``: ``"measures"`` (everything of
+    the module docstring) or ``"cassi"`` (the jaw shape only, as the paper)."""
+    check_choice("conformation", mode, CONFORMATIONS)
+    head, default = recording.head, bool(recording.head_is_default)
+    params = default_params(model)
+    changes = {}
+    if mode == "measures":
+        upper, lower = lip_thickness(model, first, scale, head, default)
+        changes.update(upper_lip_thickness=upper, lower_lip_thickness=lower)
+    if not default:
+        theta, t = jaw_shape(model, head, scale)
+        changes.update(jaw_shape_theta=theta, jaw_shape_translation=t)
+        if mode == "measures":
+            nose = scale * head.nose_protrusion - model.measures["nose_protrusion"]
+            changes.update(
+                face_width=scale * head.face_width / model.measures["face_width"],
+                mouth_width=scale * head.mouth_width / model.measures["mouth_width"],
+                nose_tip=np.array([nose, 0.0]),
+            )
+    return with_values(params, {k: jnp.asarray(v, jnp.asarray(getattr(params, k)).dtype)
+                                for k, v in changes.items()})

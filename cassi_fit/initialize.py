@@ -1,0 +1,183 @@
+"""CASSI's initialization: the face model fitted to one subject, once per recording.
+
+Paper section 2; :func:`initialize`:
+
+1. the first valid line (:func:`cassi_fit.pellets.first_valid_line`): the first frame in
+   which every pellet the file ever tracks is tracked (a pellet the file never tracks
+   stays at the model's rest site, flagged);
+2. pellets to model: every coordinate scaled by ``p / d``, ``d = |MNI - MNM|`` of the
+   subject in that frame, ``p`` the same distance between the model's jaw pellet sites.
+   Both frames have their origin at the upper incisor tip, so no translation is needed;
+3. the lower teeth and the jaw: the closed form (Eqs 1-3, 6-7, ``jaw.closed_form``) from
+   the model's jaw sites to the scaled first-frame jaw pellets;
+4. the palate from the scaled PAL.DAT (``palate.with_palate``; the model's own if absent);
+5. the jaw's shape from the scaled Headmeasures gonion and gnathion against the model's
+   gonion and gnathion, by the same closed form (``conformation.jaw_shape``);
+6. beyond the paper (its future work): face and mouth width from Headmeasures, lip
+   thickness per speaker, nose tip (``conformation.default_conformation``), or a fitted
+   ``conformation.Calibration``; tongue (#55-#62) and lips (#63-#66) from the first frame.
+
+:func:`animate_recording` runs initialization and :func:`cassi_fit.animate.animate` with
+the command line's options (``cassi animate``, ``cassi export``).
+"""
+
+from __future__ import annotations
+
+# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Float
+
+from .animate import Animation, animate, batch_geometry, frame_bucket, frame_params
+from .conformation import Calibration, default_conformation
+from .dataset import Recording, recording_source
+from .errors import CassiError, DegenerateGeometryError
+from .face_model import FaceModel
+from .jaw import closed_form
+from .options import CONFORMATIONS, GAP_POLICIES, JAW_WEIGHTS, TONGUE_ANCHORS, check_choice
+from .pellets import LL, MNI, MNM, UL, first_valid_line
+
+_closed_form_one = jax.jit(closed_form)  # one frame; eager dispatch of its small ops is slow
+
+
+class SubjectState(eqx.Module):
+    """The model fitted to one subject (the result of CASSI's initialization).
+
+    model: the face model with the subject's palate. scale: ``p / d`` (model mm per
+    subject mm). first_frame: index of the first valid data line. reference_jaw ``(2, 2)``
+    mm: the scaled jaw pellets [MNI, MNM] of that line. initial_jaw: ``(theta rad,
+    t (2,) mm)``, the closed-form motion from the model's jaw sites onto them.
+    conformation: ``FaceParams`` of the subject's shape (jaw shape, widths, lip thickness,
+    nose) with no animation; rest_pellets ``(8, 2)`` mm: the model's pellet sites in that
+    shape, from which the tongue and lip parameters are measured (with a calibration, UL
+    and LL raised by its ``lip_rest_offset``). initial_params: the parameters of the first
+    valid frame. tracked_pellets: the names of the pellets the file ever tracks.
+    """
+
+    model: eqx.Module
+    scale: float = eqx.field(static=True)
+    first_frame: int = eqx.field(static=True)
+    reference_jaw: jax.Array
+    initial_jaw: tuple
+    conformation: eqx.Module
+    rest_pellets: jax.Array
+    initial_params: eqx.Module
+    tracked_pellets: tuple = eqx.field(static=True)
+    jaw_weights: str = eqx.field(static=True)
+    tongue_anchor: str = eqx.field(static=True)
+    gap_policy: str = eqx.field(static=True)
+    source: str = eqx.field(static=True)
+
+
+def _scale(model, pellets: Float[np.ndarray, "8 2"], source: str, first: int) -> float:
+    """``p / d`` (step 2), or ``DegenerateGeometryError`` for coincident jaw pellets."""
+    from .deform import model_pellets
+
+    d = float(np.linalg.norm(pellets[MNI] - pellets[MNM]))
+    sites = np.asarray(model_pellets(model, model.vertices))
+    if not d > 0.0:
+        raise DegenerateGeometryError(
+            f"{source}: MNI and MNM coincide on the first valid line ({first + 1})"
+        )
+    return float(np.linalg.norm(sites[MNI] - sites[MNM])) / d
+
+
+def _rest_pellets(model, conformation, size, jaw_weights, tongue_anchor, calibration):
+    """The model's pellet sites ``(8, 2)`` mm in the subject's shape, computed by the same
+    compiled call (batch ``size``) that animate() will use for this recording."""
+    batch = jax.tree.map(lambda x: jnp.broadcast_to(x, (size, *jnp.shape(x))), conformation)
+    rest = batch_geometry(model, batch, jaw_weights=jaw_weights, tongue_anchor=tongue_anchor)[1][0]
+    if calibration is not None:  # the lips' vertical rest where the first valid lines have them
+        rest = rest.at[UL, 1].add(calibration.lip_rest_offset[0])
+        rest = rest.at[LL, 1].add(calibration.lip_rest_offset[1])
+    return rest
+
+
+def initialize(
+    recording: Recording,
+    model: FaceModel | None = None,
+    *,
+    calibration: Calibration | str | None = None,
+    jaw_weights: str = "cassi",
+    tongue_anchor: str = "follow",
+    gap_policy: str = "hold",
+) -> SubjectState:
+    """Fit the face model to the subject of ``recording`` (CASSI's initialization).
+
+    ``recording``: a ``dataset.Recording``. ``model``: a ``FaceModel`` (default
+    ``load_model()``). ``calibration``: ``None`` (the subject's shape from its
+    Headmeasures and first valid line, step 6 of the module docstring), ``"cassi"`` (only
+    what the paper did: the jaw shape from gonion and gnathion), or a
+    :class:`~cassi_fit.conformation.Calibration` of this subject (its scale and fitted
+    shape; ``cassi calibrate``). Returns a :class:`SubjectState`. Raises
+    ``MissingDataError`` (jaw pellets never tracked), ``DegenerateGeometryError``
+    (coincident jaw pellets on the first valid line), ``InvalidChoiceError`` (an unknown
+    option) or ``CassiError`` (a calibration of another subject).
+    """
+    from .face_model import load_model
+    from .palate import with_palate
+
+    check_choice("jaw weights", jaw_weights, JAW_WEIGHTS)
+    check_choice("tongue anchor", tongue_anchor, TONGUE_ANCHORS)
+    check_choice("gap policy", gap_policy, GAP_POLICIES)
+    fitted = calibration if isinstance(calibration, Calibration) else None
+    if calibration is not None and fitted is None:
+        check_choice("calibration", calibration, CONFORMATIONS)
+    source = recording_source(recording)
+    model = load_model() if model is None else model
+    track = recording.track
+    first, tracked = first_valid_line(track, source)
+    pellets = np.asarray(track.positions[first], np.float64)  # (8, 2) mm, subject
+    scale = _scale(model, pellets, source, first)
+    if fitted is not None:
+        if fitted.subject.upper() != str(recording.subject).upper():
+            raise CassiError(
+                f"{source}: the calibration is of subject {fitted.subject}, not {recording.subject}"
+            )
+        scale = float(fitted.scale)
+    if recording.palate is not None:
+        model = with_palate(model, scale * np.asarray(recording.palate, np.float64))
+    if fitted is not None:
+        conformation = fitted.face_params(jnp.asarray(model.vertices).dtype)
+    else:
+        conformation = default_conformation(model, recording, pellets, scale,
+                                            calibration or "measures")
+    # at the batch size animate() will use for every line of this recording, so that both
+    # share one compilation (the extra frames cost ~0.1 s)
+    size = frame_bucket(track.times.shape[0] - first)
+    rest = _rest_pellets(model, conformation, size, jaw_weights, tongue_anchor, fitted)
+    reference = jnp.asarray(scale * pellets[[MNI, MNM]])
+    initial = _closed_form_one(rest[jnp.array([MNI, MNM])], reference)
+    state = SubjectState(
+        model=model, scale=scale, first_frame=first, reference_jaw=reference,
+        initial_jaw=(initial.theta, initial.translation), conformation=conformation,
+        rest_pellets=rest, initial_params=conformation, tracked_pellets=tracked,
+        jaw_weights=jaw_weights, tongue_anchor=tongue_anchor, gap_policy=gap_policy,
+        source=source,
+    )  # fmt: skip
+    first_params = frame_params(
+        state, np.broadcast_to(scale * pellets, (size, 8, 2)), np.zeros(size), np.zeros((size, 2))
+    )
+    first_params = jax.tree.map(lambda x: x[0], first_params)
+    return eqx.tree_at(lambda s: s.initial_params, state, first_params)
+
+
+def animate_recording(
+    recording: Recording,
+    model: FaceModel | None = None,
+    *,
+    calibration: Calibration | str | None = None,
+    jaw: str = "closed-form",
+    stride: int = 1,
+    jaw_weights: str = "cassi",
+    tongue_anchor: str = "follow",
+    gap_policy: str = "hold",
+    collisions: str = "off",
+) -> tuple[SubjectState, Animation]:
+    """:func:`initialize`, then :func:`cassi_fit.animate.animate` (the options of ``cassi
+    animate``); returns ``(state, animation)``."""
+    state = initialize(recording, model, calibration=calibration, jaw_weights=jaw_weights,
+                       tongue_anchor=tongue_anchor, gap_policy=gap_policy)
+    return state, animate(state, recording, jaw=jaw, stride=stride, collisions=collisions)
