@@ -22,7 +22,6 @@ bucket (:func:`frame_bucket`) reuses every compilation.
 
 from __future__ import annotations
 
-# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import math
 
 import equinox as eqx

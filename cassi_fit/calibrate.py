@@ -48,7 +48,6 @@ pytree :class:`Unknowns`.
 
 from __future__ import annotations
 
-# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import math
 from collections.abc import Iterable
 from pathlib import Path

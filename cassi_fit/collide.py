@@ -36,7 +36,6 @@ the model's index chains are static.
 
 from __future__ import annotations
 
-# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import equinox as eqx
 import jax
 import jax.numpy as jnp

@@ -16,7 +16,6 @@ the incisor tip at rest; :func:`lips_ahead` measures it on one data line.
 
 from __future__ import annotations
 
-# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import json
 from dataclasses import asdict, dataclass, field
 

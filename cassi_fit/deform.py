@@ -18,7 +18,6 @@ every stage is the identity to the last bit, so ``deform`` returns the stored re
 
 from __future__ import annotations
 
-# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import equinox as eqx
 import jax
 import jax.numpy as jnp

@@ -11,7 +11,6 @@ if an untracked value was, else ``OK``. This module is numpy only.
 
 from __future__ import annotations
 
-# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import numpy as np
 from jaxtyping import Bool, Float, Int
 

@@ -23,7 +23,6 @@ the command line's options (``cassi animate``, ``cassi export``).
 
 from __future__ import annotations
 
-# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import equinox as eqx
 import jax
 import jax.numpy as jnp

@@ -14,7 +14,6 @@ the nasal sheet lies ``thickness`` mm above the oral one.
 
 from __future__ import annotations
 
-# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np

@@ -15,7 +15,6 @@ sites); in front of T1 it equals T1's. Behind T4 the back anchor option decides:
 
 from __future__ import annotations
 
-# ruff: noqa: F722  (jaxtyping shape strings, e.g. "m V 3", are not forward references)
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
