@@ -27,16 +27,19 @@ if TYPE_CHECKING:
     from . import deform as deform
     from . import rigid as rigid
     from . import synth as synth
-    from .animate import FRAME_STATUS_NAMES as FRAME_STATUS_NAMES
     from .animate import Animation as Animation
-    from .animate import SubjectState as SubjectState
-    from .animate import initialize as initialize
-    from .calibrate import Calibration as Calibration
     from .calibrate import calibrate_dataset as calibrate_dataset
     from .calibrate import calibrate_subject as calibrate_subject
+    from .calibrate import calibration_choice as calibration_choice
     from .calibrate import load_calibrations as load_calibrations
     from .calibrate import read_calibration as read_calibration
     from .calibrate import write_calibration as write_calibration
+    from .conformation import Calibration as Calibration
+    from .corpus import CorpusItem as CorpusItem
+    from .corpus import CorpusRun as CorpusRun
+    from .corpus import dataset_items as dataset_items
+    from .corpus import jaw_corpus as jaw_corpus
+    from .corpus import run_corpus as run_corpus
     from .dataset import Dataset as Dataset
     from .dataset import DefaultHeadMeasuresWarning as DefaultHeadMeasuresWarning
     from .dataset import Recording as Recording
@@ -59,24 +62,44 @@ if TYPE_CHECKING:
     from .evaluate import write_table as write_table
     from .face_model import MATERIALS as MATERIALS
     from .face_model import FaceModel as FaceModel
+    from .face_model import Topology as Topology
     from .face_model import load_model as load_model
+    from .gaps import repair as repair
     from .headmeasures import DEFAULT_HEAD_MEASURES as DEFAULT_HEAD_MEASURES
     from .headmeasures import HeadMeasures as HeadMeasures
     from .headmeasures import read_headmeasures as read_headmeasures
     from .headmeasures import write_headmeasures as write_headmeasures
+    from .initialize import SubjectState as SubjectState
+    from .initialize import animate_recording as animate_recording
+    from .initialize import initialize as initialize
     from .jaw import closed_form as closed_form
     from .jaw import closed_form_paper as closed_form_paper
     from .jaw_fit import JawFit as JawFit
     from .jaw_fit import fit_jaw as fit_jaw
     from .jaw_fit import jaw_from_track as jaw_from_track
+    from .labels import Labels as Labels
+    from .labels import labels_for as labels_for
+    from .labels import read_lab as read_lab
+    from .labels import read_labels as read_labels
+    from .labels import read_textgrid as read_textgrid
+    from .labels import segment_summary as segment_summary
+    from .labels import write_lab as write_lab
+    from .labels import write_textgrid as write_textgrid
+    from .options import JAW_METHODS as JAW_METHODS
+    from .options import SOLVERS as SOLVERS
     from .outlines import read_outline as read_outline
     from .outlines import write_outline as write_outline
     from .palate import build_palate as build_palate
     from .palate import with_palate as with_palate
+    from .pellets import JAW_PELLETS as JAW_PELLETS
+    from .pellets import PELLET_NAMES as PELLET_NAMES
+    from .pellets import first_valid_line as first_valid_line
+    from .pellets import pellet_index as pellet_index
     from .quality import QualityReport as QualityReport
     from .quality import detect_mistracks as detect_mistracks
     from .quality import quality_report as quality_report
     from .render import Renderer as Renderer
+    from .reports import write_penetration_csv as write_penetration_csv
     from .status import STATUS_LABELS as STATUS_LABELS
     from .status import Status as Status
     from .synth import TASKS as TASKS
@@ -88,7 +111,6 @@ if TYPE_CHECKING:
     from .synth import load_truth as load_truth
     from .synth import make_subject as make_subject
     from .synth import synth_recording as synth_recording
-    from .txy import PELLET_NAMES as PELLET_NAMES
     from .txy import PelletTrack as PelletTrack
     from .txy import first_valid_frame as first_valid_frame
     from .txy import read_txy as read_txy
@@ -108,8 +130,15 @@ _PUBLIC = {
     # status (base)
     "Status": "status",
     "STATUS_LABELS": "status",
+    # options (base)
+    "JAW_METHODS": "options",
+    "SOLVERS": "options",
+    # pellets (data)
+    "PELLET_NAMES": "pellets",
+    "JAW_PELLETS": "pellets",
+    "pellet_index": "pellets",
+    "first_valid_line": "pellets",
     # txy (data)
-    "PELLET_NAMES": "txy",
     "PelletTrack": "txy",
     "read_txy": "txy",
     "write_txy": "txy",
@@ -132,6 +161,17 @@ _PUBLIC = {
     "QualityReport": "quality",
     "quality_report": "quality",
     "detect_mistracks": "quality",
+    # gaps (data)
+    "repair": "gaps",
+    # labels (data)
+    "Labels": "labels",
+    "read_labels": "labels",
+    "read_lab": "labels",
+    "read_textgrid": "labels",
+    "write_lab": "labels",
+    "write_textgrid": "labels",
+    "labels_for": "labels",
+    "segment_summary": "labels",
     # synth (synthetic corpus)
     "generate_corpus": "synth",
     "load_truth": "synth",
@@ -144,6 +184,7 @@ _PUBLIC = {
     "TASKS": "synth",
     # face_model (model)
     "FaceModel": "face_model",
+    "Topology": "face_model",
     "load_model": "face_model",
     "MATERIALS": "face_model",
     # deform (model)
@@ -161,47 +202,62 @@ _PUBLIC = {
     "fit_jaw": "jaw_fit",
     "jaw_from_track": "jaw_fit",
     "JawFit": "jaw_fit",
+    # conformation (fitting)
+    "Calibration": "conformation",
     # calibrate (fitting)
-    "Calibration": "calibrate",
     "calibrate_subject": "calibrate",
     "calibrate_dataset": "calibrate",
     "read_calibration": "calibrate",
     "write_calibration": "calibrate",
     "load_calibrations": "calibrate",
+    "calibration_choice": "calibrate",
+    # initialize (pipeline)
+    "initialize": "initialize",
+    "SubjectState": "initialize",
+    "animate_recording": "initialize",
     # animate (pipeline)
-    "initialize": "animate",
-    "SubjectState": "animate",
     "Animation": "animate",
-    "FRAME_STATUS_NAMES": "animate",
     # render (outputs)
     "Renderer": "render",
     # video (outputs)
     "write_animation": "video",
+    # reports (outputs)
+    "write_penetration_csv": "reports",
     # evaluate (outputs)
     "evaluate_dataset": "evaluate",
     "evaluate_recording": "evaluate",
     "EvaluationResult": "evaluate",
     "write_table": "evaluate",
     "compare": "evaluate",
+    # corpus (runs)
+    "run_corpus": "corpus",
+    "jaw_corpus": "corpus",
+    "dataset_items": "corpus",
+    "CorpusItem": "corpus",
+    "CorpusRun": "corpus",
 }
 # Submodules offered as namespaces (their names are modules, never functions).
 _MODULES = ("animate", "deform", "rigid", "synth")
 
 __all__ = [
-    "Animation", "Calibration", "CassiError", "DEFAULT_HEAD_MEASURES", "DataFormatError",
-    "Dataset", "DefaultHeadMeasuresWarning", "DegenerateGeometryError", "EvaluationResult",
-    "FRAME_STATUS_NAMES", "FaceModel", "FaceParams", "HeadMeasures", "InvalidChoiceError",
-    "JawFit", "JawTruth", "MATERIALS", "MissingDataError", "OutputExistsError", "PELLET_NAMES",
-    "PelletTrack", "QualityReport", "Recording", "Renderer", "RenderingUnavailableError",
-    "STATUS_LABELS", "Status", "SubjectAnatomy", "SubjectState", "TASKS", "animate",
-    "build_palate", "calibrate_dataset", "calibrate_subject", "closed_form", "closed_form_paper",
-    "compare", "default_params", "deform", "detect_mistracks", "ensure_default_corpus",
-    "evaluate_dataset", "evaluate_recording", "first_valid_frame", "fit_jaw", "generate_corpus",
-    "initialize", "jaw_from_track", "load_anatomy", "load_calibrations", "load_model",
-    "load_recording", "load_truth", "make_subject", "model_pellets", "quality_report",
-    "read_calibration", "read_headmeasures", "read_outline", "read_txy", "require_tracked",
-    "rigid", "synth", "synth_recording", "vertex_normals", "with_palate", "write_animation",
-    "write_calibration", "write_headmeasures", "write_outline", "write_table", "write_txy",
+    "Animation", "Calibration", "CassiError", "CorpusItem", "CorpusRun", "DEFAULT_HEAD_MEASURES",
+    "DataFormatError", "Dataset", "DefaultHeadMeasuresWarning", "DegenerateGeometryError",
+    "EvaluationResult", "FaceModel", "FaceParams", "HeadMeasures", "InvalidChoiceError",
+    "JAW_METHODS", "JAW_PELLETS", "JawFit", "JawTruth", "Labels", "MATERIALS", "MissingDataError",
+    "OutputExistsError", "PELLET_NAMES", "PelletTrack", "QualityReport", "Recording", "Renderer",
+    "RenderingUnavailableError", "SOLVERS", "STATUS_LABELS", "Status", "SubjectAnatomy",
+    "SubjectState", "TASKS", "Topology", "animate", "animate_recording", "build_palate",
+    "calibrate_dataset", "calibrate_subject", "calibration_choice", "closed_form",
+    "closed_form_paper", "compare", "dataset_items", "default_params", "deform",
+    "detect_mistracks", "ensure_default_corpus", "evaluate_dataset", "evaluate_recording",
+    "first_valid_frame", "first_valid_line", "fit_jaw", "generate_corpus", "initialize",
+    "jaw_corpus", "jaw_from_track", "labels_for", "load_anatomy", "load_calibrations",
+    "load_model", "load_recording", "load_truth", "make_subject", "model_pellets", "pellet_index",
+    "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
+    "read_outline", "read_textgrid", "read_txy", "repair", "require_tracked", "rigid",
+    "run_corpus", "segment_summary", "synth", "synth_recording", "vertex_normals", "with_palate",
+    "write_animation", "write_calibration", "write_headmeasures", "write_lab", "write_outline",
+    "write_penetration_csv", "write_table", "write_textgrid", "write_txy",
 ]
 
 

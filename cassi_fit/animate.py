@@ -37,11 +37,9 @@ from .gaps import bad_values, frame_status, repair
 from .jaw import closed_form
 from .options import COLLISION_MODES, GAP_POLICIES, JAW_METHODS, check_choice
 from .pellets import JAW_INDEX, LL, PELLET_NAMES, T1, T4, UL
-from .status import STATUS_LABELS
 
 # Deprecated alias (video.py and the animate notebook read it until the merge): frame
 # statuses are ``cassi_fit.status.Status`` values now; print ``Status(x).label``.
-FRAME_STATUS_NAMES = STATUS_LABELS
 # Frames are padded (64, 128, 256, 512, then multiples of 256) before the batched calls,
 # so that recordings of similar length (and different strides) share compiled functions.
 _FRAME_BUCKET = 64
@@ -307,29 +305,3 @@ def animate(
         jaw_method=jaw if isinstance(jaw, str) else type(jaw).__name__,
         collisions=collisions,
     )
-
-
-# --------------------------------------------------------------------------- deprecated
-# Kept only until the merge of issue 10, for code on other branches; the lead removes them.
-# ``model_call``: evaluate's penetration report (use ``collide.report_frames`` instead).
-_MODEL_CALLS: dict = {}
-
-
-def model_call(model, tag, make, *args):
-    """Deprecated: ``make(model)(*args)`` compiled by ``eqx.filter_jit`` once per ``tag``
-    (and model topology, argument shapes)."""
-    fn = _MODEL_CALLS.get(tag)
-    if fn is None:
-        fn = _MODEL_CALLS[tag] = eqx.filter_jit(lambda model, *a: make(model)(*a))
-    return fn(model, *args)
-
-
-def __getattr__(name):
-    # ``from cassi_fit.animate import initialize`` (README, notebooks, evaluate, benchmarks
-    # on other branches): initialization lives in ``cassi_fit.initialize`` now. Imported
-    # lazily: a module-level import would make animate and initialize import each other.
-    if name in ("initialize", "SubjectState", "animate_recording"):
-        import importlib
-
-        return getattr(importlib.import_module("cassi_fit.initialize"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -393,7 +393,7 @@ def animation_frames(
 
     from tqdm import tqdm
 
-    from .animate import FRAME_STATUS_NAMES
+    from .status import STATUS_LABELS
 
     vertices = np.asarray(animation.vertices)
     measured = np.asarray(animation.pellets_measured)
@@ -409,7 +409,7 @@ def animation_frames(
                 "measured": _in_3d(measured[k][shown]),
                 "model": _in_3d(model_sites[k][shown]),
             }
-        status = FRAME_STATUS_NAMES[int(animation.frame_status[k])]
+        status = STATUS_LABELS[int(animation.frame_status[k])]
         caption = frame_caption(
             subject, task, float(animation.times[k]), int(animation.frame_index[k]), status
         )

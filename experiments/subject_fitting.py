@@ -250,7 +250,8 @@ def penetration_rows(root, calibrations: dict, model, tasks=None) -> list[dict]:
     animated gets a row with its error as ``status`` (as in the evaluation)."""
     import warnings
 
-    from cassi_fit.animate import animate, initialize
+    from cassi_fit.animate import animate
+    from cassi_fit.initialize import initialize
     from cassi_fit.dataset import Dataset
     from cassi_fit.errors import CassiError
 

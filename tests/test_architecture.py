@@ -132,10 +132,15 @@ def definition_problems(node: ast.AST) -> dict[str, list[str]]:
     return {}
 
 
+def _is_package(module: str) -> bool:
+    return (PACKAGE / module.replace(".", "/") / "__init__.py").exists()
+
+
 def _module_tree(module: str) -> ast.Module:
-    path = PACKAGE / f"{module}.py"
+    """The syntax tree of ``module`` (dotted below cassi_fit: ``evaluate._rows``)."""
+    path = PACKAGE / f"{module.replace('.', '/')}.py"
     if not path.exists():
-        path = PACKAGE / module / "__init__.py"
+        path = PACKAGE / module.replace(".", "/") / "__init__.py"
     return ast.parse(path.read_text(encoding="utf-8"))
 
 
@@ -158,9 +163,12 @@ def _home(module: str, name: str) -> tuple[str, str]:
     """Follow ``from .x import name`` re-exports to the module that defines ``name``."""
     for node in _module_tree(module).body:
         if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module:
+            # ``from .x import`` is relative to the package itself in an __init__, else to
+            # the module's parent package
+            base = module if _is_package(module) else module.rpartition(".")[0]
             for alias in node.names:
                 if (alias.asname or alias.name) == name:
-                    return _home(node.module, alias.name)
+                    return _home(f"{base}.{node.module}".lstrip("."), alias.name)
     return module, name
 
 

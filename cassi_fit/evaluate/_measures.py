@@ -22,7 +22,6 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from functools import partial
 from typing import TYPE_CHECKING
 
 import equinox as eqx
@@ -31,13 +30,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ..animate import frame_bucket, model_call, pad_frames
-from ..collide import FRONT_TEETH, REPORT_KEYS, has_collision_data, report
+from ..animate import frame_bucket, pad_frames
+from ..collide import FRONT_TEETH, REPORT_KEYS, has_collision_data, report_frames
 from ..errors import DegenerateGeometryError, MissingDataError
 from ..palate import N_ACROSS, N_ALONG
 
 if TYPE_CHECKING:
-    from ..animate import Animation, SubjectState
+    from ..animate import Animation
+    from ..initialize import SubjectState
     from ..face_model import FaceModel
 
 #: A problem "seen at times" must hold this long (s). 50 ms is 7 data lines at 145.6 Hz:
@@ -301,11 +301,6 @@ def sustained_min(x: Float[ArrayLike, " m"], window: int) -> float:
     return -sustained_max(-np.asarray(x, np.float64), window)
 
 
-def _report_frames(model: FaceModel, vertices: Float[Array, "m v 3"]) -> dict[str, Array]:
-    """``collide.report`` of every frame, vmapped."""
-    return jax.vmap(lambda v: report(model, v))(vertices)
-
-
 def penetration_of(
     model: FaceModel, vertices: Float[ArrayLike, "m v 3"]
 ) -> dict[str, Float[np.ndarray, " m"]]:
@@ -317,10 +312,7 @@ def penetration_of(
     vertices = jnp.asarray(vertices)
     m = vertices.shape[0]
     padded = pad_frames(vertices, frame_bucket(m))
-    # switch: decorate _report_frames with eqx.filter_jit and call it directly once the
-    # FaceModel topology is hashable (issue 10); until then animate.model_call compiles it.
-    out = model_call(model, "evaluate-report", lambda rebuilt: partial(_report_frames, rebuilt),
-                     padded)
+    out = report_frames(model, padded)
     return {k: np.asarray(v)[:m] for k, v in out.items()}
 
 

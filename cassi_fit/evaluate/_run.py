@@ -56,7 +56,8 @@ def evaluate_recording(
     or ``"project"`` (``options.COLLISION_MODES``); ``jaw`` (``options.JAW_METHODS``),
     ``stride``: as ``animate.animate``. Errors propagate (``CassiError``).
     """
-    from ..animate import animate, initialize
+    from ..animate import animate
+    from ..initialize import initialize
 
     _check_settings(collisions, jaw, stride)
     if isinstance(calibration, str):
