@@ -61,8 +61,8 @@ def main(argv=None) -> int:
 
     from cassi_fit import video
     from cassi_fit.animate import animate, geometry
-    from cassi_fit.initialize import initialize
     from cassi_fit.face_model import load_model
+    from cassi_fit.initialize import initialize
     from cassi_fit.render import Renderer
 
     results = {}

@@ -251,9 +251,9 @@ def penetration_rows(root, calibrations: dict, model, tasks=None) -> list[dict]:
     import warnings
 
     from cassi_fit.animate import animate
-    from cassi_fit.initialize import initialize
     from cassi_fit.dataset import Dataset
     from cassi_fit.errors import CassiError
+    from cassi_fit.initialize import initialize
 
     ds = Dataset(root)
     rows = []

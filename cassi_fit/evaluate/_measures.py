@@ -37,8 +37,8 @@ from ..palate import N_ACROSS, N_ALONG
 
 if TYPE_CHECKING:
     from ..animate import Animation
-    from ..initialize import SubjectState
     from ..face_model import FaceModel
+    from ..initialize import SubjectState
 
 #: A problem "seen at times" must hold this long (s). 50 ms is 7 data lines at 145.6 Hz:
 #: longer than a mistracked burst the quality check lets through (1-3 lines), shorter
