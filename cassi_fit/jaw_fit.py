@@ -74,7 +74,9 @@ class JawFit:
     converged: the solver reported success (all frames for "frame-fit");
     covariance (n, 3, 3) of ``(theta, tx, ty)`` (rad, mm) given the frame's data;
     pivot_covariance (n, 2, 2) mm^2 for the uncertainty ellipse (inf where undefined);
-    noise_mm: the pooled pellet-noise estimate ``s``; method, solver: their alias names.
+    noise_mm: the pooled pellet-noise estimate ``s``; method, solver: their alias names;
+    reference_frame: the frame used as the reference by :func:`jaw_from_track` (None when
+    the caller gave the reference to :func:`fit_jaw`).
     """
 
     theta: np.ndarray
@@ -89,6 +91,7 @@ class JawFit:
     noise_mm: float
     method: str
     solver: str
+    reference_frame: int | None = None
 
     @property
     def status_names(self) -> list[str]:
@@ -244,7 +247,12 @@ def solve(residuals, params0: Float[Array, " p"], args: Any, solver: Any = "opti
     res = residuals(params, args)
     jac = jax.jacfwd(residuals)(params, args)
     grad = jac.T @ res
-    decrement = grad @ jnp.linalg.pinv(jac.T @ jac) @ grad
+    normal = jac.T @ jac
+    # a rounding-level ridge instead of a pseudo-inverse (an SVD per frame costs more than
+    # the whole solve when vmapped); parameters without effect have zero gradient anyway
+    ridge = 1e-12 * jnp.trace(normal) + jnp.finfo(normal.dtype).tiny
+    eye = jnp.eye(normal.shape[0], dtype=normal.dtype)
+    decrement = grad @ jnp.linalg.solve(normal + ridge * eye, grad)
     floor = jnp.maximum(_tolerance(params0.dtype) ** 2, 100 * jnp.finfo(params.dtype).eps)
     stationary = decrement <= floor * (1.0 + jnp.sum(res**2))
     return params, converged | stationary
@@ -560,8 +568,10 @@ def _closed_form_kernel(reference, current):
 
 @eqx.filter_jit
 def _frame_fit_kernel(solver, reference, current, start):
-    """Per frame least squares from ``start`` (n, 3) motions: ``(params, residuals,
-    converged, unit covariance)``."""
+    """Per frame least squares from ``start`` (n, 3) motions (None: each frame's Procrustes
+    motion): ``(params, residuals, converged, unit covariance)``."""
+    if start is None:
+        start = jax.vmap(lambda c: _motion_params(jaw.procrustes(reference, c)))(current)
 
     def one(cur, y0):
         z, converged = solve(scaled_rigid_residuals, _scale(y0, reference), (reference, cur),
@@ -740,12 +750,10 @@ class FrameFit(JawMethod):
 
     def _estimate(self, reference, current, usable):
         n = current.shape[0]
-        if self.start is None:
-            start = np.asarray(_motion_params_frames(_procrustes_frames(reference, current)))
-        else:
-            start = np.broadcast_to(self.start, (n, 3))
+        start = None if self.start is None else jnp.asarray(
+            np.broadcast_to(self.start, (n, 3)), jnp.asarray(reference).dtype)
         params, res, converged, unit_cov = (np.asarray(a) for a in _frame_fit_kernel(
-            self.solver, reference, current, jnp.asarray(start, reference.dtype)))
+            self.solver, reference, current, start))
         return _Estimate(params, res, unit_cov, converged | ~usable, 3 * int(usable.sum()))
 
 
@@ -821,9 +829,6 @@ class SmoothPivot(JawMethod):
             jnp.asarray(np.tile(pivot0, (m, 1)), dtype))
         return _pivot_estimate(reference, current, usable, np.asarray(path), np.asarray(unit),
                                bool(converged), 2 * m)
-
-
-_motion_params_frames = jax.jit(jax.vmap(_motion_params))
 
 
 def _pivot_estimate(reference, current, usable, path, unit_pivot_cov, converged, n_extra):
@@ -956,7 +961,7 @@ def jaw_from_track(track, *, method: JawMethod | str = "closed-form",
     except (MissingDataError, DegenerateGeometryError) as exc:
         raise type(exc)(f"{where}: {exc}") from None
     return replace(fit, status=np.where(mistracked, Status.MISTRACKED, fit.status).astype(
-        np.int32))
+        np.int32), reference_frame=reference_frame)
 
 
 # ------------------------------------------------------------------- diagnostics

@@ -336,7 +336,7 @@ def test_mistracked_values_are_not_used(method):
 
 def test_a_mistracked_first_line_is_not_the_reference():
     fit = jaw_fit.jaw_from_track(_track(spike=3), method="closed-form")
-    assert fit.status[3] == Status.MISTRACKED
+    assert fit.status[3] == Status.MISTRACKED and fit.reference_frame == 4
     expected = fit_jaw(CURRENT[4], CURRENT[:40])
     np.testing.assert_allclose(fit.theta[5:17], expected.theta[5:17], atol=1e-12)
     # relative to line 4, not to the spike (which would add ~30 degrees to every frame)
