@@ -41,7 +41,7 @@ from __future__ import annotations
 import abc
 import functools
 from dataclasses import dataclass, replace
-from typing import Any, ClassVar, NamedTuple
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
@@ -54,6 +54,9 @@ from . import jaw, rigid
 from .errors import DegenerateGeometryError, InvalidChoiceError, MissingDataError
 from .options import JAW_METHODS, SOLVERS, check_choice
 from .status import STATUS_LABELS, Status
+
+if TYPE_CHECKING:
+    from .txy import PelletTrack
 
 DEFAULT_KNOT_SPACING = 16  # frames (about 0.11 s at 145.6 Hz) between pivot-path knots
 DEFAULT_MAX_STEPS = 100
@@ -920,7 +923,7 @@ def fit_jaw(
     )
 
 
-def jaw_from_track(track, *, method: JawMethod | str = "closed-form",
+def jaw_from_track(track: PelletTrack, *, method: JawMethod | str = "closed-form",
                    reference_frame: int | None = None, **options: Any) -> JawFit:
     """:func:`fit_jaw` on a :class:`cassi_fit.txy.PelletTrack`'s MNI and MNM pellets.
 
