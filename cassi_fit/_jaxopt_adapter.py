@@ -13,6 +13,7 @@ as the function :func:`least_squares` and as the solver objects
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 import warnings
 from typing import Any, ClassVar
 
@@ -33,9 +34,9 @@ def _jaxopt():
     return jaxopt
 
 
-def least_squares(residuals, params0: Float[Array, " p"], args: Any, *, method: str = "lm",
-                  tol: float = 1e-10, max_steps: int = DEFAULT_MAX_STEPS
-                  ) -> tuple[Float[Array, " p"], Bool[Array, ""]]:
+def least_squares(residuals: Callable[..., Float[Array, " m"]], params0: Float[Array, " p"],
+                  args: Any, *, method: str = "lm", tol: float = 1e-10,
+                  max_steps: int = DEFAULT_MAX_STEPS) -> tuple[Float[Array, " p"], Bool[Array, ""]]:
     """Minimise ``|residuals(params, args)|^2`` from ``params0`` with jaxopt.
 
     method: ``"lm"`` (LevenbergMarquardt) or ``"gn"`` (GaussNewton). Traceable (jit, vmap).
@@ -83,8 +84,8 @@ class _JaxoptSolver(eqx.Module):
         tol = 1e-8 if jnp.dtype(dtype) == jnp.float64 else 1e-4
         return (tol if self.rtol is None else self.rtol, tol if self.atol is None else self.atol)
 
-    def run(self, residuals, params0: Float[Array, " p"], args: Any,
-            gradient_stop: bool = False) -> tuple[Float[Array, " p"], Bool[Array, ""]]:
+    def run(self, residuals: Callable[..., Float[Array, " m"]], params0: Float[Array, " p"],
+            args: Any, gradient_stop: bool = False) -> tuple[Float[Array, " p"], Bool[Array, ""]]:
         """Minimise ``|residuals(params, args)|^2`` from ``params0``; ``gradient_stop`` is
         implied (jaxopt stops on its gradient-norm error measure)."""
         tol = self.tolerances(params0.dtype)[0]

@@ -41,6 +41,7 @@ from __future__ import annotations
 import abc
 import functools
 from dataclasses import dataclass, replace
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import equinox as eqx
@@ -166,7 +167,8 @@ class Solver(eqx.Module):
         return (tol if self.rtol is None else self.rtol, tol if self.atol is None else self.atol)
 
     @abc.abstractmethod
-    def run(self, residuals, params0: Float[Array, " p"], args: Any,
+    def run(self, residuals: Callable[..., Float[Array, " m"]], params0: Float[Array, " p"],
+            args: Any,
             gradient_stop: bool = False) -> tuple[Float[Array, " p"], Bool[Array, ""]]:
         """Minimise ``|residuals(params, args)|^2`` from ``params0``: ``(params, success)``."""
 
@@ -232,8 +234,9 @@ def _minimise(solver, residuals, params0, args, gradient_stop):
     return solver.run(residuals, params0, args, gradient_stop)
 
 
-def solve(residuals, params0: Float[Array, " p"], args: Any, solver: Any = "optimistix-lm",
-          gradient_stop: bool = False) -> tuple[Float[Array, " p"], Bool[Array, ""]]:
+def solve(residuals: Callable[..., Float[Array, " m"]], params0: Float[Array, " p"], args: Any,
+          solver: Any = "optimistix-lm", gradient_stop: bool = False
+          ) -> tuple[Float[Array, " p"], Bool[Array, ""]]:
     """Minimise ``|residuals(params, args)|^2`` from ``params0`` with ``solver`` (an object or
     an alias). Traceable (jit/vmap). Returns ``(params, converged)``; failure comes back as
     a value, never as an exception from traced code.
@@ -262,7 +265,7 @@ def solve(residuals, params0: Float[Array, " p"], args: Any, solver: Any = "opti
 
 
 # ------------------------------------------------------------- residual functions
-def rigid_residuals(params: Float[Array, "3"], args) -> Float[Array, "4"]:
+def rigid_residuals(params: Float[Array, "3"], args: Any) -> Float[Array, "4"]:
     """One frame, ``params = (theta, tx, ty)``: ``R p_i + t - p_i'`` for both pellets, (4,) mm."""
     reference, current = args
     return (rigid.apply(params[0], params[1:], reference) - current).ravel()
@@ -274,7 +277,7 @@ def _frame_scale(reference):
     return centre, jnp.sqrt(jnp.mean(jnp.sum((reference - centre) ** 2, axis=-1)))
 
 
-def scaled_rigid_residuals(z: Float[Array, "3"], args) -> Float[Array, "4"]:
+def scaled_rigid_residuals(z: Float[Array, "3"], args: Any) -> Float[Array, "4"]:
     """One frame in scaled, centred coordinates ``z = (ell theta, s)``, (4,) mm.
 
     ``p' = R(theta)(p - c) + c + s`` with ``c`` the reference centroid and ``ell`` its rms
@@ -327,7 +330,7 @@ _about_pivot_frames = jax.vmap(_about_pivot, in_axes=(None, None, 0, 0))
 _about_pivots_frames = jax.vmap(_about_pivot, in_axes=(0, None, 0, 0))
 
 
-def fixed_pivot_residuals(pivot: Float[Array, "2"], args) -> Float[Array, " 4n"]:
+def fixed_pivot_residuals(pivot: Float[Array, "2"], args: Any) -> Float[Array, " 4n"]:
     """Parke's fixed pivot, angles projected out: ``pivot`` (2,) mm -> residuals (4 n,) mm."""
     reference, current, weight = args
     return _about_pivot_frames(pivot, reference, current, weight).ravel()
@@ -341,7 +344,7 @@ def _spline(knots, n, spacing):
     return (1.0 - f) * knots[j] + f * knots[jnp.minimum(j + 1, knots.shape[0] - 1)]
 
 
-def smooth_pivot_residuals(knots: Float[Array, " 2m"], args) -> Float[Array, " r"]:
+def smooth_pivot_residuals(knots: Float[Array, " 2m"], args: Any) -> Float[Array, " r"]:
     """Moving pivot: knots (2 m,) mm, flattened (m, 2) -> data residuals (4 n,) and prior
     residuals (2 (m-1),). For reference and tests on small problems (the fit itself never
     forms this vector's Jacobian).
