@@ -950,8 +950,11 @@ def jaw_from_track(track: PelletTrack, *, method: JawMethod | str = "closed-form
     n = track.n_frames
     if reference_frame is None:
         if not usable.any():
+            hint = (f"; all {int(tracked.sum())} tracked lines look mistracked (jumps "
+                    f"faster than a jaw moves: check the file's times and units)"
+                    if tracked.any() else "")
             raise MissingDataError(f"{where}: no line where both jaw pellets (MNI, MNM) are "
-                                   f"tracked and not mistracked")
+                                   f"tracked and not mistracked{hint}")
         reference_frame = int(np.flatnonzero(usable)[0])
     elif (isinstance(reference_frame, bool) or not isinstance(reference_frame, (int, np.integer))
           or not 0 <= reference_frame < n):

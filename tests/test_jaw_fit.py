@@ -391,3 +391,12 @@ def test_far_start_tests_fail_when_the_solver_returns_its_start(monkeypatch, ref
     finally:
         monkeypatch.undo()
         jax.clear_caches()
+
+
+def test_a_file_whose_every_line_looks_mistracked_says_why():
+    from cassi_fit.txy import PelletTrack
+
+    track = _track()
+    fast = PelletTrack(times=np.arange(40) * 1e-6, positions=track.positions, valid=track.valid)
+    with pytest.raises(MissingDataError, match="look mistracked.*times and units"):
+        jaw_fit.jaw_from_track(fast)
