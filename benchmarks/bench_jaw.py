@@ -40,11 +40,12 @@ PIVOT = np.array([-88.0, -8.0])
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def frames(n, seed=0):
+def frames(n, seed=0, rate=0.02):
     """``n`` jaw frames (n, 2, 2) mm: the reference turned about PIVOT by speech-like angles
-    (0-11.5 degrees, the same rhythm at every length) plus 0.3 mm noise."""
+    (0-11.5 degrees; ``rate`` rad per frame: 0.02 = an opening per 157 frames, about 1 s,
+    at every length) plus 0.3 mm noise."""
     rng = np.random.default_rng(seed)
-    theta = 0.2 * np.sin(0.02 * np.arange(n)) ** 2  # a cycle per 157 frames (about 1 s)
+    theta = 0.2 * np.sin(rate * np.arange(n)) ** 2
     c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
     rel = REFERENCE - PIVOT  # (2, 2): [pellet, xy]
     moved = np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]], -1)
@@ -217,14 +218,14 @@ def _peak_rss_mb():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def smooth_child(n):
+def smooth_child(n, rate=0.02):
     """One smooth-pivot fit of ``n`` lines in this process: JSON of times and peak memory."""
     import jax
 
     jax.config.update("jax_enable_x64", True)
     from cassi_fit.jaw_fit import SmoothPivot, fit_jaw
 
-    cur = frames(n, seed=2)
+    cur = frames(n, seed=2, rate=rate)
     t0 = time.perf_counter()
     fit = fit_jaw(REFERENCE, cur, method=SmoothPivot())
     first = time.perf_counter() - t0
@@ -233,7 +234,16 @@ def smooth_child(n):
     second = time.perf_counter() - t0
     peak_mb = _peak_rss_mb()
     print(json.dumps(dict(n=n, first=first, second=second, peak_mb=peak_mb,
-                          converged=fit.converged)))
+                          converged=fit.converged, rate=rate)))
+
+
+def _smooth_run(n, rate=0.02):
+    proc = subprocess.run([sys.executable, __file__, "--smooth-child", str(n), "--rate",
+                           str(rate)], capture_output=True, text=True, timeout=1800,
+                          env=dict(os.environ, JAX_PLATFORMS="cpu"))
+    if proc.returncode != 0:
+        return proc.stderr.strip().splitlines()[-1]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
 def bench_smooth_scaling(out, sizes):
@@ -245,13 +255,10 @@ def bench_smooth_scaling(out, sizes):
     out("|---|---|---|---|---|")
     base = last = None
     for n in sizes:
-        proc = subprocess.run([sys.executable, __file__, "--smooth-child", str(n)],
-                              capture_output=True, text=True, timeout=1800,
-                              env=dict(os.environ, JAX_PLATFORMS="cpu"))
-        if proc.returncode != 0:
-            out(f"| {n:,} | failed: {proc.stderr.strip().splitlines()[-1]} | | | |")
+        r = _smooth_run(n)
+        if isinstance(r, str):
+            out(f"| {n:,} | failed: {r} | | | |")
             continue
-        r = json.loads(proc.stdout.strip().splitlines()[-1])
         base, last = base or r, r
         out(f"| {n:,} | {r['first']:.2f} s | {r['second']:.2f} s | {r['peak_mb']:.0f} MB | "
             f"{r['converged']} |")
@@ -266,6 +273,11 @@ def bench_smooth_scaling(out, sizes):
             f"above the 2,000-line process). Target 200,000 lines < 10 s after compilation: "
             f"{'MET' if met else 'NOT MET'}; compilation (once per recording length) comes "
             f"on top.")
+        slow = _smooth_run(sizes[-1], rate=0.02 / 5)
+        if not isinstance(slow, str):
+            out(f"Slow movement (an opening per 5 s, little pivot information per knot), "
+                f"{slow['n']:,} lines: {slow['second']:.2f} s after compilation, converged: "
+                f"{slow['converged']}.")
 
 
 def main(argv=None):
@@ -276,9 +288,10 @@ def main(argv=None):
     parser.add_argument("--sizes", default="2000,20000,50000,200000")
     parser.add_argument("--markdown", default=str(ROOT / "docs" / "generated" / "bench_jaw.md"))
     parser.add_argument("--smooth-child", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--rate", type=float, default=0.02, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.smooth_child:
-        return smooth_child(args.smooth_child)
+        return smooth_child(args.smooth_child, args.rate)
     if args.repeats < 5:
         parser.error("--repeats must be at least 5 (medians of fewer runs are not reported)")
     import jax
