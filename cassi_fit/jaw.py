@@ -23,24 +23,20 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 from jax import Array
+from jaxtyping import Float
 
 from . import rigid
+from .status import STATUS_LABELS, Status
 
-# Status codes of a jaw motion (``JawMotion.status``; also used per frame by ``JawFit``).
-STATUS_OK = 0
-STATUS_PIVOT_UNDEFINED = 1  # theta == 0 exactly: pure translation, the pivot is at infinity
-STATUS_DEGENERATE = 2  # the two jaw pellets coincide in the reference or the current frame
-STATUS_NON_FINITE = 3  # a NaN or infinite coordinate (e.g. an untracked pellet)
-STATUS_INVALID_FRAME = 4  # (fits) a frame excluded by ``valid``: values interpolated
-STATUS_NOT_CONVERGED = 5  # (fits) the solver did not report success for this frame
-STATUS_NAMES = {
-    STATUS_OK: "ok",
-    STATUS_PIVOT_UNDEFINED: "pivot-undefined",
-    STATUS_DEGENERATE: "degenerate",
-    STATUS_NON_FINITE: "non-finite",
-    STATUS_INVALID_FRAME: "invalid-frame",
-    STATUS_NOT_CONVERGED: "not-converged",
-}
+# Status codes of a jaw motion (``JawMotion.status``; also used per frame by ``JawFit``): the
+# first values of the toolkit's one status vocabulary, :class:`cassi_fit.status.Status`.
+STATUS_OK = int(Status.OK)
+STATUS_PIVOT_UNDEFINED = int(Status.PIVOT_UNDEFINED)  # theta == 0: the pivot is at infinity
+STATUS_DEGENERATE = int(Status.DEGENERATE)  # the two jaw pellets coincide
+STATUS_NON_FINITE = int(Status.NON_FINITE)  # a NaN or infinite coordinate (untracked pellet)
+STATUS_INVALID_FRAME = int(Status.INVALID_FRAME)  # (fits) excluded by ``valid``: interpolated
+STATUS_NOT_CONVERGED = int(Status.NOT_CONVERGED)  # (fits) the solver did not report success
+STATUS_NAMES = STATUS_LABELS  # int -> table word, every status
 
 
 class JawMotion(NamedTuple):
@@ -59,7 +55,9 @@ class JawMotion(NamedTuple):
     status: Array
 
 
-def closed_form_paper(reference, current):
+def closed_form_paper(
+    reference: Float[Array, "2 2"], current: Float[Array, "2 2"]
+) -> tuple[Float[Array, ""], Float[Array, ""], Float[Array, ""]]:
     """Eqs 1-3 and 6-7 exactly as published. Returns ``(theta, a, b)`` (rad, mm, mm).
 
     Eq 1: tan alpha = (y1 - y2)/(x1 - x2); Eq 2: the same for beta in the current frame;
@@ -127,7 +125,7 @@ def _finish(theta, t, ok, finite):
     return JawMotion(theta, t, jnp.where(defined, pivot, 0.0), defined, status)
 
 
-def closed_form(reference, current) -> JawMotion:
+def closed_form(reference: Float[Array, "2 2"], current: Float[Array, "2 2"]) -> JawMotion:
     """The paper's motion (Eqs 1-3, 6-7), numerically sound. One frame; vmap over frames.
 
     reference, current: (2, 2) mm, rows [MNI, MNM]. theta = alpha - beta from the jaw line
@@ -144,7 +142,7 @@ def closed_form(reference, current) -> JawMotion:
     return _finish(theta, t, ok, finite)
 
 
-def procrustes(reference, current) -> JawMotion:
+def procrustes(reference: Float[Array, "2 2"], current: Float[Array, "2 2"]) -> JawMotion:
     """The least-squares rigid motion of both jaw points (Kabsch), one frame.
 
     Minimises ``sum_i |R(theta) p_i + t - p_i'|^2`` over the two pellets: theta turns the
@@ -161,5 +159,6 @@ def procrustes(reference, current) -> JawMotion:
 
 
 def status_name(code: int) -> str:
-    """The word for a status code (``"ok"``, ``"pivot-undefined"``, ...)."""
-    return STATUS_NAMES.get(int(code), f"status-{int(code)}")
+    """The word for a status code (``"ok"``, ``"pivot-undefined"``, ...; see
+    :attr:`cassi_fit.status.Status.label`)."""
+    return STATUS_LABELS.get(int(code), f"status-{int(code)}")

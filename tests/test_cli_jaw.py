@@ -64,3 +64,82 @@ def test_refuses_to_overwrite_and_reports_bad_input(pellet_file, tmp_path, capsy
     err = capsys.readouterr().err
     assert str(bad) in err and err.count("\n") == 1
     assert cli.main(["jaw", "a", "b", "--csv", str(tmp_path / "y.csv")]) == 2
+
+
+def test_writes_diagnostics_beside_the_csv(pellet_file, tmp_path, capsys):
+    path, _ = pellet_file
+    out = tmp_path / "fit.csv"
+    assert cli.main(["jaw", str(path), "--method", "fixed-pivot", "--compare-methods",
+                     "--csv", str(out)]) == 0
+    rows = list(csv.DictReader((tmp_path / "fit.diagnostics.csv").read_text().splitlines()))
+    assert [r["method"] for r in rows] == ["fixed-pivot", "closed-form", "frame-fit",
+                                          "smooth-pivot"]
+    fixed = rows[0]
+    assert float(fixed["pivot_iqr_x_mm"]) == 0.0 and float(fixed["pivot_plausible_fraction"]) == 1
+    assert float(fixed["jaw_distance_sd_mm"]) < 0.01  # noise-free file: rigid up to 1 um rounding
+    printed = capsys.readouterr().out
+    assert "plausible" in printed and "closed-form" in printed
+
+
+def test_never_replaces_recording_data(pellet_file, tmp_path, capsys):
+    path, _ = pellet_file
+    folder = tmp_path / "JW99"
+    folder.mkdir()
+    txy = folder / "tp001.txy"
+    txy.write_bytes(path.read_bytes())
+    for name in ("PAL.DAT", "PHA.DAT", "Headmeasures.txt", "TP001.WAV", "tp002.txy"):
+        target = folder / name
+        target.write_text("precious")
+        assert cli.main(["jaw", str(txy), "--csv", str(target), "--force"]) == 2
+        err = capsys.readouterr().err
+        assert "refusing" in err and err.count("\n") == 1
+        assert target.read_text() == "precious"
+    assert cli.main(["jaw", str(txy), "--csv", str(folder), "--force"]) == 2
+    assert "folder" in capsys.readouterr().err
+    assert cli.main(["jaw", str(txy), "--csv", str(folder / "PAL.DAT" / "x.csv")]) == 2
+    assert "is a file" in capsys.readouterr().err
+
+
+def test_a_fifo_is_refused_not_read(tmp_path, capsys):
+    import os
+
+    fifo = tmp_path / "pipe.txy"
+    os.mkfifo(fifo)
+    assert cli.main(["jaw", str(fifo), "--csv", str(tmp_path / "out.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "not a regular file" in err and str(fifo) in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("value", ["-1", "nan", "inf", "0"])
+def test_bad_smoothness_is_one_clear_error(pellet_file, tmp_path, capsys, value):
+    path, _ = pellet_file
+    out = tmp_path / "s.csv"
+    assert cli.main(["jaw", str(path), "--method", "smooth-pivot", "--smoothness", value,
+                     "--csv", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "smoothness must be a finite number > 0" in err and err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_mistracked_rows_are_marked(tmp_path, capsys):
+    n = 60
+    theta = np.linspace(0.0, 0.2, n)
+    jaw = np.asarray(jax.vmap(lambda th: rigid.apply(*rigid.from_pivot(th, PIVOT), REFERENCE))(
+        theta))
+    positions = np.zeros((n, 8, 2))
+    positions[:, :6] = np.arange(12.0).reshape(6, 2)
+    positions[:, 6:] = jaw
+    positions[0, 6, 1] -= 30.0  # a mistrack in the first valid line
+    positions[40, 6, 1] -= 30.0  # and one later
+    track = PelletTrack(times=np.arange(n) * 0.006866, positions=positions,
+                        valid=np.ones((n, 8, 2), bool))
+    path = tmp_path / "jw98_tp001.txy"
+    write_txy(path, track)
+    out = tmp_path / "m.csv"
+    assert cli.main(["jaw", str(path), "--csv", str(out)]) == 0
+    rows = list(csv.DictReader(out.read_text().splitlines()))
+    assert rows[0]["status"] == rows[40]["status"] == "mistracked"
+    assert float(rows[1]["theta_deg"]) == pytest.approx(0.0, abs=0.01)  # line 1 is the reference
+    assert float(rows[30]["theta_deg"]) == pytest.approx(np.rad2deg(theta[30] - theta[1]),
+                                                         abs=0.01)
+    assert "2 mistracked" in capsys.readouterr().out

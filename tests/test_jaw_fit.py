@@ -1,11 +1,18 @@
-"""Least-squares jaw fits (cassi_fit.jaw_fit): exact recovery, Procrustes, noise, bad data."""
+"""Least-squares jaw fits (cassi_fit.jaw_fit): exact recovery, independent references from far
+starts, noise, bad data, mistracks, the method and solver objects."""
 
 import jax
 import numpy as np
 import pytest
+from scipy.optimize import least_squares
 
 from cassi_fit import jaw, jaw_fit, rigid
-from cassi_fit.errors import DegenerateGeometryError, MissingDataError
+from cassi_fit._jaxopt_adapter import JaxoptGaussNewton, JaxoptLevenbergMarquardt
+from cassi_fit.errors import DegenerateGeometryError, InvalidChoiceError, MissingDataError
+from cassi_fit.jaw_fit import (ClosedForm, Dogleg, FixedPivot, FrameFit, GaussNewton,
+                               LevenbergMarquardt, SmoothPivot, fit_jaw, jaw_method)
+from cassi_fit.options import JAW_METHODS
+from cassi_fit.status import Status
 
 REFERENCE = np.array([[-2.0, -18.0], [-35.0, -24.0]])
 PIVOT = np.array([-88.0, -8.0])  # near the condyle
@@ -15,15 +22,117 @@ _move = jax.jit(jax.vmap(lambda th, q, p: rigid.apply(*rigid.from_pivot(th, q), 
                          in_axes=(0, None, None)))
 CURRENT = np.asarray(_move(THETA, PIVOT, REFERENCE))
 TRANSLATION = np.asarray(jax.vmap(lambda th: rigid.from_pivot(th, PIVOT)[1])(THETA))
-# every solver on the cheap models; the smooth pivot (slower to compile) with two of them
-ALL_FITS = [(m, s) for m in ("frame-fit", "fixed-pivot") for s in jaw_fit.SOLVERS] + [
-    ("smooth-pivot", "optimistix-lm"), ("smooth-pivot", "jaxopt-gn")]
+SOLVERS = {"optimistix-lm": LevenbergMarquardt(), "optimistix-gn": GaussNewton(),
+           "optimistix-dogleg": Dogleg(), "jaxopt-lm": JaxoptLevenbergMarquardt(),
+           "jaxopt-gn": JaxoptGaussNewton()}
+# far starts: 10 degrees and 20 mm away from the answer
+FAR_MOTION = np.array([np.deg2rad(10.0), 14.0, -14.0])
+FAR_PIVOT = PIVOT + np.array([14.0, -14.0])
+SMOOTHNESS, SPACING = 1.0, 16
 
 
-@pytest.mark.parametrize("method, solver", [("closed-form", "optimistix-lm")] + ALL_FITS)
-def test_noise_free_motion_recovered_exactly(method, solver):
-    fit = jaw_fit.fit_jaw(REFERENCE, CURRENT, method=method, solver=solver)
-    assert fit.converged and fit.method == method
+def noisy(noise, seed=1):
+    return CURRENT + np.random.default_rng(seed).normal(0.0, noise, CURRENT.shape)
+
+
+def far_method(kind, solver):
+    if kind == "frame-fit":
+        return FrameFit(solver=solver, start=np.column_stack([THETA, TRANSLATION]) + FAR_MOTION)
+    if kind == "fixed-pivot":
+        return FixedPivot(solver=solver, start=FAR_PIVOT)
+    return SmoothPivot(smoothness=SMOOTHNESS, knot_spacing=SPACING, solver=solver,
+                       start=FAR_PIVOT)
+
+
+# ------------------------------------------------ independent references (numpy, scipy)
+def np_rotate(theta, p):
+    """``R(theta) p`` for theta (n,) and p (n, 2) or (2,), written out in numpy."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([c * p[..., 0] + s * p[..., 1], -s * p[..., 0] + c * p[..., 1]], -1)
+
+
+def np_procrustes(reference, current):
+    """Two-point least-squares rigid motion, analytic: (theta (n,), t (n, 2))."""
+    c_ref, c_cur = reference.mean(0), current.mean(1)
+    u, v = reference[0] - c_ref, current[:, 0] - c_cur
+    theta = np.arctan2(u[1] * v[:, 0] - u[0] * v[:, 1], u[0] * v[:, 0] + u[1] * v[:, 1])
+    return theta, c_cur - np_rotate(theta, np.broadcast_to(c_ref, c_cur.shape))
+
+
+def np_pivot_residuals(path, theta, current):
+    """Pellets turned by theta (n,) about path (n, 2): residuals (4 n,)."""
+    moved = np.stack([np_rotate(theta, REFERENCE[i] - path) + path for i in range(2)], 1)
+    return (moved - current).ravel()
+
+
+def scipy_fixed_pivot(current):
+    def res(x):
+        return np_pivot_residuals(np.broadcast_to(x[:2], (N, 2)), x[2:], current)
+
+    x = least_squares(res, np.concatenate([PIVOT, THETA]), xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                      jac="3-point").x
+    return x[:2], x[2:]
+
+
+def np_spline(knots, n, spacing):
+    k = np.arange(n)
+    j, f = k // spacing, (k % spacing / spacing)[:, None]
+    return (1 - f) * knots[j] + f * knots[j + 1]
+
+
+def scipy_smooth_pivot(current):
+    m = (N - 1) // SPACING + 2
+
+    def res(x):
+        knots = x[:2 * m].reshape(m, 2)
+        prior = np.sqrt(SMOOTHNESS / SPACING) * np.diff(knots, axis=0).ravel()
+        return np.concatenate([np_pivot_residuals(np_spline(knots, N, SPACING), x[2 * m:],
+                                                  current), prior])
+
+    x0 = np.concatenate([np.tile(PIVOT, m), THETA])
+    sol = least_squares(res, x0, xtol=1e-15, ftol=1e-15, gtol=1e-15, jac="3-point")
+    return np_spline(sol.x[:2 * m].reshape(m, 2), N, SPACING), sol.x[2 * m:], sol.jac
+
+
+FAR_CASES = [(kind, name) for kind in ("frame-fit", "fixed-pivot", "smooth-pivot")
+             for name in SOLVERS]
+
+
+@pytest.fixture(scope="module")
+def references():
+    current = noisy(0.3)
+    return current, np_procrustes(REFERENCE, current), scipy_fixed_pivot(current), \
+        scipy_smooth_pivot(current)
+
+
+def check_far_start(kind, name, refs):
+    """The fit from 10 degrees / 20 mm away converges to the independent reference."""
+    current, procrustes, fixed, smooth = refs
+    fit = fit_jaw(REFERENCE, current, method=far_method(kind, SOLVERS[name]))
+    assert fit.converged, (kind, name)
+    if kind == "frame-fit":
+        np.testing.assert_allclose(fit.theta, procrustes[0], atol=1e-9)
+        np.testing.assert_allclose(fit.translation, procrustes[1], atol=1e-7)
+    elif kind == "fixed-pivot":
+        np.testing.assert_allclose(fit.pivot, np.broadcast_to(fixed[0], (N, 2)), atol=1e-5)
+        np.testing.assert_allclose(fit.theta, fixed[1], atol=1e-8)
+    else:
+        np.testing.assert_allclose(fit.pivot, smooth[0], atol=1e-4)
+        np.testing.assert_allclose(fit.theta, smooth[1], atol=1e-7)
+
+
+@pytest.mark.parametrize("kind, name", FAR_CASES)
+def test_far_start_converges_to_independent_reference(kind, name, references):
+    check_far_start(kind, name, references)
+
+
+@pytest.mark.parametrize("method", [ClosedForm(), far_method("frame-fit", LevenbergMarquardt()),
+                                    far_method("fixed-pivot", LevenbergMarquardt()),
+                                    far_method("smooth-pivot", LevenbergMarquardt())],
+                         ids=JAW_METHODS)
+def test_noise_free_motion_recovered_exactly(method):
+    fit = fit_jaw(REFERENCE, CURRENT, method=method)
+    assert fit.converged and fit.method == method.name
     np.testing.assert_allclose(fit.theta, THETA, atol=1e-9)
     np.testing.assert_allclose(fit.translation, TRANSLATION, atol=1e-7)
     rotating = THETA > 1e-3
@@ -33,16 +142,11 @@ def test_noise_free_motion_recovered_exactly(method, solver):
     assert fit.covariance.shape == (N, 3, 3) and fit.pivot_covariance.shape == (N, 2, 2)
 
 
-def noisy(noise, seed=1):
-    return CURRENT + np.random.default_rng(seed).normal(0.0, noise, CURRENT.shape)
-
-
-def test_frame_fit_equals_procrustes():
-    current = noisy(0.3)
-    fit = jaw_fit.fit_jaw(REFERENCE, current, method="frame-fit")
-    ref = jax.vmap(jaw.procrustes, in_axes=(None, 0))(REFERENCE, current)
-    np.testing.assert_allclose(fit.theta, ref.theta, atol=1e-9)
-    np.testing.assert_allclose(fit.translation, ref.translation, atol=1e-8)
+def test_frame_fit_equals_procrustes(references):
+    current, (theta, t), _, _ = references
+    fit = fit_jaw(REFERENCE, current, method=FrameFit(start=FAR_MOTION))  # far from most frames
+    np.testing.assert_allclose(fit.theta, theta, atol=1e-9)
+    np.testing.assert_allclose(fit.translation, t, atol=1e-8)
 
 
 def _point_error(fit, point):
@@ -53,16 +157,20 @@ def _point_error(fit, point):
 
 def test_fits_beat_the_closed_form_under_noise():
     chin = np.array([5.0, -45.0])
-    errors = {m: [] for m in jaw_fit.METHODS}
-    pivot_errors = {m: [] for m in jaw_fit.METHODS}
-    for seed in range(4):
+    methods = {"closed-form": ClosedForm(), "frame-fit": FrameFit(start=FAR_MOTION),
+               "fixed-pivot": FixedPivot(start=FAR_PIVOT),
+               "smooth-pivot": SmoothPivot(smoothness=100.0, start=FAR_PIVOT)}
+    errors = {m: [] for m in methods}
+    pivot_errors = {m: [] for m in methods}
+    for seed in range(3):
         current = noisy(0.3, seed)
-        for m in jaw_fit.METHODS:
-            fit = jaw_fit.fit_jaw(REFERENCE, current, method=m, smoothness=100.0)
+        for m, method in methods.items():
+            fit = fit_jaw(REFERENCE, current, method=method)
+            assert fit.converged, m
             errors[m].append(np.mean(_point_error(fit, chin)))
             pivot_errors[m].append(np.median(np.linalg.norm(fit.pivot - PIVOT, axis=1)))
     closed = np.mean(errors["closed-form"])
-    for m in jaw_fit.METHODS[1:]:
+    for m in ("frame-fit", "fixed-pivot", "smooth-pivot"):
         assert np.mean(errors[m]) < closed, m
     for m in ("fixed-pivot", "smooth-pivot"):
         assert np.mean(pivot_errors[m]) < 0.2 * np.mean(pivot_errors["closed-form"]), m
@@ -70,11 +178,55 @@ def test_fits_beat_the_closed_form_under_noise():
     assert np.mean(pivot_errors["closed-form"]) > 5.0
 
 
+def test_frame_fit_lm_confirms_the_procrustes_start_at_once():
+    """From its default start (the minimum) LM must stop within 2 steps for every frame
+    (the vmapped loop runs until the slowest frame stops)."""
+    fit = fit_jaw(REFERENCE, noisy(0.3), method=FrameFit(solver=LevenbergMarquardt(max_steps=2)))
+    assert fit.converged
+
+
+def test_smooth_pivot_covariance_is_the_marginal_of_the_full_problem(references):
+    """s^2 (J^T J)^-1 of the knots (selected inversion, no dense matrix) mapped to the path
+    equals the knot block of the full (knots + angles) problem's covariance."""
+    current, _, _, (path, _, jac) = references
+    fit = fit_jaw(REFERENCE, current, method=SmoothPivot(smoothness=SMOOTHNESS,
+                                                         knot_spacing=SPACING))
+    m = (N - 1) // SPACING + 2
+    knot_cov = (fit.noise_mm**2 * np.linalg.inv(jac.T @ jac))[:2 * m, :2 * m]
+    knot_cov = knot_cov.reshape(m, 2, m, 2)
+    k = np.arange(N)
+    weights = np.zeros((N, m))
+    weights[k, k // SPACING] = 1 - k % SPACING / SPACING
+    weights[k, k // SPACING + 1] = k % SPACING / SPACING
+    dense = np.einsum("kj,kl,jalb->kab", weights, weights, knot_cov)
+    np.testing.assert_allclose(fit.pivot_covariance, dense, rtol=0.05)
+
+
+def test_block_tridiagonal_solve_and_selected_inverse_match_dense_numpy():
+    rng = np.random.default_rng(3)
+    m = 7
+    a = rng.normal(size=(2 * m, 2 * m))
+    band = np.abs(np.subtract.outer(np.arange(2 * m) // 2, np.arange(2 * m) // 2)) <= 1
+    dense = (a @ a.T + 2 * m * np.eye(2 * m)) * band
+    blocks = dense.reshape(m, 2, m, 2)
+    diag = blocks[np.arange(m), :, np.arange(m), :]
+    upper = blocks[np.arange(m - 1), :, np.arange(1, m), :]
+    rhs = rng.normal(size=(m, 2))
+    x = jaw_fit.block_tridiagonal_solve(diag, upper, rhs)
+    np.testing.assert_allclose(np.asarray(x).ravel(), np.linalg.solve(dense, rhs.ravel()),
+                               rtol=1e-10)
+    inv = np.linalg.inv(dense).reshape(m, 2, m, 2)
+    c_diag, c_up = jaw_fit.block_tridiagonal_inverse_blocks(diag, upper)
+    np.testing.assert_allclose(c_diag, inv[np.arange(m), :, np.arange(m), :], rtol=1e-10)
+    np.testing.assert_allclose(c_up, inv[np.arange(m - 1), :, np.arange(1, m), :], rtol=1e-9,
+                               atol=1e-14)
+
+
 def test_pivot_uncertainty_tracks_the_real_scatter():
-    fit = jaw_fit.fit_jaw(REFERENCE, noisy(0.3), method="fixed-pivot")
+    fit = fit_jaw(REFERENCE, noisy(0.3), method="fixed-pivot")
     sd = np.sqrt(np.diag(fit.pivot_covariance[0]))
     assert 0.05 < sd[0] < 5.0 and fit.noise_mm == pytest.approx(0.3, rel=0.3)
-    closed = jaw_fit.fit_jaw(REFERENCE, noisy(0.3), method="closed-form")
+    closed = fit_jaw(REFERENCE, noisy(0.3), method="closed-form")
     small = (THETA > 1e-3) & (THETA < 0.02)
     assert np.median(np.sqrt(closed.pivot_covariance[small, 0, 0])) > 10 * sd[0]
 
@@ -85,11 +237,11 @@ def test_invalid_and_untracked_frames_are_flagged_and_interpolated():
     current[20, 1] = current[20, 0]  # coincident pellets
     valid = np.ones(N, bool)
     valid[30] = False
-    for method in ("closed-form", "fixed-pivot"):
-        fit = jaw_fit.fit_jaw(REFERENCE, current, method=method, valid=valid)
-        assert fit.status[10] == jaw.STATUS_NON_FINITE
-        assert fit.status[20] == jaw.STATUS_DEGENERATE
-        assert fit.status[30] == jaw.STATUS_INVALID_FRAME
+    for method in (ClosedForm(), FixedPivot()):
+        fit = fit_jaw(REFERENCE, current, method=method, valid=valid)
+        assert fit.status[10] == Status.NON_FINITE
+        assert fit.status[20] == Status.DEGENERATE
+        assert fit.status[30] == Status.INVALID_FRAME
         assert fit.status_names[30] == "invalid-frame"
         for leaf in (fit.theta, fit.translation, fit.pivot, fit.residual, fit.covariance):
             assert np.all(np.isfinite(leaf))
@@ -99,100 +251,152 @@ def test_invalid_and_untracked_frames_are_flagged_and_interpolated():
 
 def test_unusable_recordings_raise_clear_errors():
     with pytest.raises(MissingDataError, match="reference"):
-        jaw_fit.fit_jaw(np.full((2, 2), np.nan), CURRENT)
+        fit_jaw(np.full((2, 2), np.nan), CURRENT)
     with pytest.raises(DegenerateGeometryError, match="coincide"):
-        jaw_fit.fit_jaw(np.zeros((2, 2)), CURRENT)
+        fit_jaw(np.zeros((2, 2)), CURRENT)
     with pytest.raises(MissingDataError, match="no frame"):
-        jaw_fit.fit_jaw(REFERENCE, CURRENT, valid=np.zeros(N, bool))
+        fit_jaw(REFERENCE, CURRENT, valid=np.zeros(N, bool))
     with pytest.raises(DegenerateGeometryError, match="never rotates"):
-        jaw_fit.fit_jaw(REFERENCE, np.broadcast_to(REFERENCE + 1.0, (5, 2, 2)),
-                        method="fixed-pivot")
-    with pytest.raises(ValueError, match="solver"):
-        jaw_fit.fit_jaw(REFERENCE, CURRENT, method="frame-fit", solver="scipy")
-    with pytest.raises(ValueError, match="method"):
-        jaw_fit.fit_jaw(REFERENCE, CURRENT, method="magic")
+        fit_jaw(REFERENCE, np.broadcast_to(REFERENCE + 1.0, (5, 2, 2)), method=FixedPivot())
+
+
+def test_options_are_objects_and_aliases_are_checked():
+    assert jaw_method("closed-form") == ClosedForm()
+    assert jaw_method("frame-fit", solver="optimistix-gn") == FrameFit(solver=GaussNewton())
+    smooth = jaw_method("smooth-pivot", solver="jaxopt-gn", smoothness=3.0)
+    assert smooth == SmoothPivot(smoothness=3.0, solver=JaxoptGaussNewton())
+    assert smooth.solver_name == "block-tridiagonal-gn"
+    with pytest.raises(InvalidChoiceError, match="solver"):
+        fit_jaw(REFERENCE, CURRENT, method="frame-fit", solver="scipy")
+    with pytest.raises(InvalidChoiceError, match="method"):
+        fit_jaw(REFERENCE, CURRENT, method="magic")
+    with pytest.raises(InvalidChoiceError, match="method object"):
+        fit_jaw(REFERENCE, CURRENT, method=FixedPivot(), solver="optimistix-gn")
+    for bad in (-1.0, 0.0, float("nan"), float("inf"), "x"):
+        with pytest.raises(InvalidChoiceError, match="smoothness"):
+            SmoothPivot(smoothness=bad)
+        with pytest.raises(InvalidChoiceError, match="smoothness"):
+            fit_jaw(REFERENCE, CURRENT, method="smooth-pivot", smoothness=bad)
+    with pytest.raises(InvalidChoiceError, match="knot_spacing"):
+        SmoothPivot(knot_spacing=0)
 
 
 def test_smoothness_interpolates_between_frame_fit_and_fixed_pivot():
     current = noisy(0.3)
-    fixed = jaw_fit.fit_jaw(REFERENCE, current, method="fixed-pivot")
-    stiff = jaw_fit.fit_jaw(REFERENCE, current, method="smooth-pivot", smoothness=1e8)
-    loose = jaw_fit.fit_jaw(REFERENCE, current, method="smooth-pivot", smoothness=1e-2)
+    fixed = fit_jaw(REFERENCE, current, method=FixedPivot())
+    stiff = fit_jaw(REFERENCE, current, method=SmoothPivot(smoothness=1e8))
+    loose = fit_jaw(REFERENCE, current, method=SmoothPivot(smoothness=1e-2))
     np.testing.assert_allclose(stiff.pivot, fixed.pivot, atol=0.05)
     assert np.ptp(loose.pivot[:, 0]) > 10 * np.ptp(stiff.pivot[:, 0])
     assert np.mean(loose.residual) <= np.mean(stiff.residual)
 
 
-def test_jaw_from_track_uses_first_valid_jaw_frame():
+@pytest.mark.parametrize("kind", ["fixed-pivot", "smooth-pivot"])
+def test_unconverged_recording_fit_flags_every_frame(kind):
+    """A whole-recording fit stopped before convergence: NOT_CONVERGED on its frames."""
+    current = noisy(0.3).copy()
+    current[5, 0] = np.nan
+    fit = fit_jaw(REFERENCE, current, method=far_method(kind, LevenbergMarquardt(max_steps=0)))
+    assert not fit.converged
+    assert fit.status[5] == Status.NON_FINITE
+    assert np.all(np.delete(fit.status, 5) == Status.NOT_CONVERGED)
+
+
+# ------------------------------------------------------------------ jaw_from_track
+def _track(n=40, spike=None):
     from cassi_fit.txy import PelletTrack
 
-    n = 40
     positions = np.zeros((n, 8, 2))
-    positions[:, :6] = np.arange(12).reshape(6, 2)
+    positions[:, :6] = np.arange(12).reshape(6, 2) - 20.0
     positions[:, 6:] = CURRENT[:n]
     valid = np.ones((n, 8, 2), bool)
     valid[:3] = False
     valid[17, 7] = False
-    track = PelletTrack(times=np.arange(n) * 0.006866, positions=positions, valid=valid)
-    fit = jaw_fit.jaw_from_track(track, method="frame-fit")
-    expected = jaw_fit.fit_jaw(CURRENT[3], CURRENT[:n], method="frame-fit")
+    if spike is not None:
+        positions[spike, 6] += np.array([0.0, -30.0])  # a 30 mm MNI mistrack
+    return PelletTrack(times=np.arange(n) * 0.006866, positions=positions, valid=valid)
+
+
+def test_jaw_from_track_uses_first_valid_jaw_frame():
+    fit = jaw_fit.jaw_from_track(_track(), method="frame-fit")
+    expected = fit_jaw(CURRENT[3], CURRENT[:40], method="frame-fit")
     np.testing.assert_allclose(fit.theta[3:17], expected.theta[3:17], atol=1e-12)
-    assert abs(fit.theta[3]) < 1e-12 and list(fit.status[:3]) == [jaw.STATUS_INVALID_FRAME] * 3
-    assert fit.status[17] == jaw.STATUS_INVALID_FRAME
+    assert abs(fit.theta[3]) < 1e-12 and list(fit.status[:3]) == [Status.INVALID_FRAME] * 3
+    assert fit.status[17] == Status.INVALID_FRAME
 
 
-def test_frame_fit_lm_stops_at_once_from_procrustes_start():
-    """The scaled per-frame problem starts at its minimum; LM must confirm it in one
-    evaluation for every frame (the vmapped loop runs until the slowest frame stops)."""
-    import optimistix as optx
+@pytest.mark.parametrize("method", JAW_METHODS)
+def test_mistracked_values_are_not_used(method):
+    fit = jaw_fit.jaw_from_track(_track(spike=25), method=method)
+    assert fit.status[25] == Status.MISTRACKED and fit.status_names[25] == "mistracked"
+    assert np.all(fit.status[20:30][np.arange(10) != 5] <= Status.PIVOT_UNDEFINED)
+    # the frame is interpolated from its neighbours, not fitted to the 30 mm spike
+    assert abs(np.rad2deg(fit.theta[25] - (THETA[25] - THETA[3]))) < 0.5
 
+
+def test_a_mistracked_first_line_is_not_the_reference():
+    fit = jaw_fit.jaw_from_track(_track(spike=3), method="closed-form")
+    assert fit.status[3] == Status.MISTRACKED and fit.reference_frame == 4
+    expected = fit_jaw(CURRENT[4], CURRENT[:40])
+    np.testing.assert_allclose(fit.theta[5:17], expected.theta[5:17], atol=1e-12)
+    # relative to line 4, not to the spike (which would add ~30 degrees to every frame)
+    np.testing.assert_allclose(fit.theta[4:17], THETA[4:17] - THETA[4], atol=1e-9)
+
+
+def test_reference_frame_must_be_a_usable_index():
+    track = _track(spike=25)
+    for bad in (-1, 40, 2.0, True):
+        with pytest.raises(InvalidChoiceError, match="reference_frame"):
+            jaw_fit.jaw_from_track(track, reference_frame=bad)
+    with pytest.raises(MissingDataError, match="untracked in reference frame 1"):
+        jaw_fit.jaw_from_track(track, reference_frame=1)
+    with pytest.raises(MissingDataError, match="mistracked in reference frame 25"):
+        jaw_fit.jaw_from_track(track, reference_frame=25)
+    fit = jaw_fit.jaw_from_track(track, reference_frame=10)
+    assert abs(fit.theta[10]) < 1e-12
+
+
+# --------------------------------------------------------------------- diagnostics
+def test_diagnostics_tell_a_rigid_fixed_pivot_from_a_scattered_closed_form():
     current = noisy(0.3)
-
-    def steps(c):
-        sol = optx.least_squares(
-            jaw_fit.scaled_rigid_residuals, jaw_fit._LevenbergMarquardt(rtol=1e-8, atol=1e-8),
-            jaw_fit._scaled_start(REFERENCE, c), (REFERENCE, c), max_steps=100, throw=False)
-        return sol.stats["num_steps"]
-
-    assert int(np.max(jax.vmap(steps)(current))) <= 2
-
-
-def test_smooth_pivot_equals_the_dense_least_squares_fit():
-    """The block-tridiagonal solver minimises the same objective as a dense LM on
-    :func:`smooth_pivot_residuals`, with the same covariance s^2 (J^T J)^-1."""
-    import optimistix as optx
-
-    current, spacing, smoothness = noisy(0.3), 16, 1.0
-    fit = jaw_fit.fit_jaw(REFERENCE, current, method="smooth-pivot", smoothness=smoothness,
-                          knot_spacing=spacing)
-    assert fit.converged and fit.solver == "block-tridiagonal-lm"
-    m = (N - 1) // spacing + 2
-    knots0 = np.tile(jaw_fit._initial_pivot(REFERENCE, current, np.ones(N, bool)), m)
-    args = (REFERENCE, current, np.ones(N), smoothness, spacing)
-    sol = optx.least_squares(jaw_fit.smooth_pivot_residuals,
-                             optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10), knots0, args)
-    weights = jaw_fit._spline_weights(N, spacing, m)
-    np.testing.assert_allclose(fit.pivot, weights @ np.asarray(sol.value).reshape(m, 2),
-                               atol=1e-5)
-    jac = np.asarray(jax.jacfwd(jaw_fit.smooth_pivot_residuals)(sol.value, args))
-    knot_cov = (fit.noise_mm**2 * np.linalg.inv(jac.T @ jac)).reshape(m, 2, m, 2)
-    dense = np.einsum("kj,kl,jalb->kab", weights, weights, knot_cov)
-    np.testing.assert_allclose(fit.pivot_covariance, dense, rtol=1e-5)
+    closed = jaw_fit.jaw_diagnostics(fit_jaw(REFERENCE, current), current)
+    fixed = jaw_fit.jaw_diagnostics(fit_jaw(REFERENCE, current, method=FixedPivot()), current)
+    # distance noise of two pellets each with 0.3 mm per coordinate: about 0.3 * sqrt(2)
+    assert closed.jaw_distance_sd_mm == pytest.approx(0.3 * np.sqrt(2), rel=0.25)
+    assert closed.jaw_distance_sd_mm == fixed.jaw_distance_sd_mm
+    assert fixed.pivot_iqr_x_mm == 0.0 and fixed.pivot_plausible_fraction == 1.0
+    assert closed.pivot_iqr_x_mm > 10.0 and closed.pivot_plausible_fraction < 0.8
+    assert fixed.frames_used == N and fixed.method == "fixed-pivot"
+    assert set(fixed.to_dict()) >= {"pivot_iqr_y_mm", "residual_median_mm"}
+    # a pivot in front of the face is implausible
+    ahead = jaw_fit.jaw_diagnostics(fit_jaw(REFERENCE, np.asarray(_move(
+        THETA + 0.05, np.array([40.0, -8.0]), REFERENCE)), method=FixedPivot()), CURRENT)
+    assert ahead.pivot_plausible_fraction == 0.0
 
 
-@pytest.mark.parametrize("method", ["fixed-pivot", "smooth-pivot"])
-def test_unconverged_recording_fit_flags_every_frame(method, monkeypatch):
-    """A whole-recording fit stopped before convergence: status 5 on its frames, not ok."""
-    monkeypatch.setattr(jaw_fit, "_MAX_STEPS", 0)
-    for kernel in (jaw_fit._fixed_pivot_kernel, jaw_fit._smooth_pivot_kernel):
-        kernel.cache_clear()
+# ------------------------------------------------------------------------ meta-test
+def test_far_start_tests_fail_when_the_solver_returns_its_start(monkeypatch, references):
+    """The far-start tests above can fail: with the solve step replaced by one that returns
+    its start, every one of them raises AssertionError."""
+    monkeypatch.setattr(jaw_fit, "_minimise",
+                        lambda solver, residuals, params0, args, gradient_stop:
+                        (params0, np.bool_(True)))
+    monkeypatch.setattr(jaw_fit, "_minimise_block_tridiagonal",
+                        lambda system, knots0, **kw: (knots0, np.bool_(True)))
+    jax.clear_caches()  # compiled kernels hold the real solver
     try:
-        current = noisy(0.3).copy()
-        current[5, 0] = np.nan
-        fit = jaw_fit.fit_jaw(REFERENCE, current, method=method)
+        for kind, name in FAR_CASES:
+            with pytest.raises(AssertionError):
+                check_far_start(kind, name, references)
     finally:
-        for kernel in (jaw_fit._fixed_pivot_kernel, jaw_fit._smooth_pivot_kernel):
-            kernel.cache_clear()
-    assert not fit.converged
-    assert fit.status[5] == jaw.STATUS_NON_FINITE
-    assert np.all(np.delete(fit.status, 5) == jaw.STATUS_NOT_CONVERGED)
+        monkeypatch.undo()
+        jax.clear_caches()
+
+
+def test_a_file_whose_every_line_looks_mistracked_says_why():
+    from cassi_fit.txy import PelletTrack
+
+    track = _track()
+    fast = PelletTrack(times=np.arange(40) * 1e-6, positions=track.positions, valid=track.valid)
+    with pytest.raises(MissingDataError, match="look mistracked.*times and units"):
+        jaw_fit.jaw_from_track(fast)

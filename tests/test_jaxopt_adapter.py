@@ -43,3 +43,15 @@ def test_import_warning_never_reaches_users():
 def test_unknown_method_is_refused():
     with pytest.raises(ValueError, match="lm"):
         _jaxopt_adapter.least_squares(rosenbrock, jnp.zeros(2), 1.0, method="bfgs")
+
+
+@pytest.mark.parametrize("solver", [_jaxopt_adapter.JaxoptLevenbergMarquardt(),
+                                    _jaxopt_adapter.JaxoptGaussNewton()])
+def test_solver_objects_solve_and_respect_their_step_budget(solver):
+    run = jax.vmap(lambda a: solver.run(rosenbrock, jnp.array([-1.2, 1.0]), a))
+    params, converged = run(jnp.array([1.0, 2.0]))
+    np.testing.assert_allclose(params, [[1.0, 1.0], [2.0, 4.0]], atol=1e-7)
+    assert bool(np.all(converged)) and solver.name.startswith("jaxopt-")
+    stopped = type(solver)(max_steps=1)
+    params, converged = stopped.run(rosenbrock, jnp.array([-1.2, 1.0]), 1.0)
+    assert not bool(converged) and np.linalg.norm(np.asarray(params) - 1.0) > 1e-3
