@@ -74,9 +74,22 @@ if TYPE_CHECKING:
     from .initialize import initialize as initialize
     from .jaw import closed_form as closed_form
     from .jaw import closed_form_paper as closed_form_paper
+    from .jaw_fit import ClosedForm as ClosedForm
+    from .jaw_fit import Dogleg as Dogleg
+    from .jaw_fit import FixedPivot as FixedPivot
+    from .jaw_fit import FrameFit as FrameFit
+    from .jaw_fit import GaussNewton as GaussNewton
+    from .jaw_fit import JawDiagnostics as JawDiagnostics
     from .jaw_fit import JawFit as JawFit
+    from .jaw_fit import JawMethod as JawMethod
+    from .jaw_fit import LevenbergMarquardt as LevenbergMarquardt
+    from .jaw_fit import SmoothPivot as SmoothPivot
+    from .jaw_fit import Solver as Solver
     from .jaw_fit import fit_jaw as fit_jaw
+    from .jaw_fit import jaw_diagnostics as jaw_diagnostics
     from .jaw_fit import jaw_from_track as jaw_from_track
+    from .jaw_fit import jaw_method as jaw_method
+    from .jaw_fit import jaw_solver as jaw_solver
     from .labels import Labels as Labels
     from .labels import labels_for as labels_for
     from .labels import read_lab as read_lab
@@ -202,6 +215,19 @@ _PUBLIC = {
     "fit_jaw": "jaw_fit",
     "jaw_from_track": "jaw_fit",
     "JawFit": "jaw_fit",
+    "ClosedForm": "jaw_fit",
+    "FrameFit": "jaw_fit",
+    "FixedPivot": "jaw_fit",
+    "SmoothPivot": "jaw_fit",
+    "JawMethod": "jaw_fit",
+    "jaw_method": "jaw_fit",
+    "jaw_solver": "jaw_fit",
+    "LevenbergMarquardt": "jaw_fit",
+    "GaussNewton": "jaw_fit",
+    "Dogleg": "jaw_fit",
+    "Solver": "jaw_fit",
+    "jaw_diagnostics": "jaw_fit",
+    "JawDiagnostics": "jaw_fit",
     # conformation (fitting)
     "Calibration": "conformation",
     # calibrate (fitting)
@@ -240,24 +266,27 @@ _PUBLIC = {
 _MODULES = ("animate", "deform", "rigid", "synth")
 
 __all__ = [
-    "Animation", "Calibration", "CassiError", "CorpusItem", "CorpusRun", "DEFAULT_HEAD_MEASURES",
-    "DataFormatError", "Dataset", "DefaultHeadMeasuresWarning", "DegenerateGeometryError",
-    "EvaluationResult", "FaceModel", "FaceParams", "HeadMeasures", "InvalidChoiceError",
-    "JAW_METHODS", "JAW_PELLETS", "JawFit", "JawTruth", "Labels", "MATERIALS", "MissingDataError",
-    "OutputExistsError", "PELLET_NAMES", "PelletTrack", "QualityReport", "Recording", "Renderer",
-    "RenderingUnavailableError", "SOLVERS", "STATUS_LABELS", "Status", "SubjectAnatomy",
+    "Animation", "Calibration", "CassiError", "ClosedForm", "CorpusItem", "CorpusRun",
+    "DEFAULT_HEAD_MEASURES", "DataFormatError", "Dataset", "DefaultHeadMeasuresWarning",
+    "DegenerateGeometryError", "Dogleg", "EvaluationResult", "FaceModel", "FaceParams",
+    "FixedPivot", "FrameFit", "GaussNewton", "HeadMeasures", "InvalidChoiceError", "JAW_METHODS",
+    "JAW_PELLETS", "JawDiagnostics", "JawFit", "JawMethod", "JawTruth", "Labels",
+    "LevenbergMarquardt", "MATERIALS", "MissingDataError", "OutputExistsError", "PELLET_NAMES",
+    "PelletTrack", "QualityReport", "Recording", "Renderer", "RenderingUnavailableError",
+    "SOLVERS", "STATUS_LABELS", "SmoothPivot", "Solver", "Status", "SubjectAnatomy",
     "SubjectState", "TASKS", "Topology", "animate", "animate_recording", "build_palate",
     "calibrate_dataset", "calibrate_subject", "calibration_choice", "closed_form",
     "closed_form_paper", "compare", "dataset_items", "default_params", "deform",
     "detect_mistracks", "ensure_default_corpus", "evaluate_dataset", "evaluate_recording",
     "first_valid_frame", "first_valid_line", "fit_jaw", "generate_corpus", "initialize",
-    "jaw_corpus", "jaw_from_track", "labels_for", "load_anatomy", "load_calibrations",
-    "load_model", "load_recording", "load_truth", "make_subject", "model_pellets", "pellet_index",
-    "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
-    "read_outline", "read_textgrid", "read_txy", "repair", "require_tracked", "rigid",
-    "run_corpus", "segment_summary", "synth", "synth_recording", "vertex_normals", "with_palate",
-    "write_animation", "write_calibration", "write_headmeasures", "write_lab", "write_outline",
-    "write_penetration_csv", "write_table", "write_textgrid", "write_txy",
+    "jaw_corpus", "jaw_diagnostics", "jaw_from_track", "jaw_method", "jaw_solver", "labels_for",
+    "load_anatomy", "load_calibrations", "load_model", "load_recording", "load_truth",
+    "make_subject", "model_pellets", "pellet_index", "quality_report", "read_calibration",
+    "read_headmeasures", "read_lab", "read_labels", "read_outline", "read_textgrid", "read_txy",
+    "repair", "require_tracked", "rigid", "run_corpus", "segment_summary", "synth",
+    "synth_recording", "vertex_normals", "with_palate", "write_animation", "write_calibration",
+    "write_headmeasures", "write_lab", "write_outline", "write_penetration_csv", "write_table",
+    "write_textgrid", "write_txy",
 ]
 
 
