@@ -13,8 +13,8 @@ as the function :func:`least_squares` and as the solver objects
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
 import warnings
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 import equinox as eqx

@@ -6,11 +6,20 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from cassi_fit import jaw, jaw_fit, rigid
+from cassi_fit import jaw_fit, rigid
 from cassi_fit._jaxopt_adapter import JaxoptGaussNewton, JaxoptLevenbergMarquardt
 from cassi_fit.errors import DegenerateGeometryError, InvalidChoiceError, MissingDataError
-from cassi_fit.jaw_fit import (ClosedForm, Dogleg, FixedPivot, FrameFit, GaussNewton,
-                               LevenbergMarquardt, SmoothPivot, fit_jaw, jaw_method)
+from cassi_fit.jaw_fit import (
+    ClosedForm,
+    Dogleg,
+    FixedPivot,
+    FrameFit,
+    GaussNewton,
+    LevenbergMarquardt,
+    SmoothPivot,
+    fit_jaw,
+    jaw_method,
+)
 from cassi_fit.options import JAW_METHODS
 from cassi_fit.status import Status
 

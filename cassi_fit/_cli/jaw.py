@@ -135,7 +135,8 @@ def format_diagnostics(rows) -> str:
 
 
 def print_diagnostics(rows) -> None:
-    from cassi_fit.jaw_fit import PLAUSIBLE_PIVOT_X_MM as X, PLAUSIBLE_PIVOT_Y_MM as Y
+    from cassi_fit.jaw_fit import PLAUSIBLE_PIVOT_X_MM as X
+    from cassi_fit.jaw_fit import PLAUSIBLE_PIVOT_Y_MM as Y
 
     print(f"diagnostics (jaw-pellet distance SD/range mm; median residual mm; pivot IQR x/y "
           f"mm; share of pivots in x {X[0]:.0f}..{X[1]:.0f}, y {Y[0]:.0f}..{Y[1]:.0f} mm):")
