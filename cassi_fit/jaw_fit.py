@@ -266,7 +266,7 @@ def solve(residuals: Callable[..., Float[Array, " m"]], params0: Float[Array, " 
 
 
 # ------------------------------------------------------------- residual functions
-def rigid_residuals(params: Float[Array, 3], args: Any) -> Float[Array, 4]:
+def rigid_residuals(params: Float[Array, "3"], args: Any) -> Float[Array, "4"]:
     """One frame, ``params = (theta, tx, ty)``: ``R p_i + t - p_i'`` for both pellets, (4,) mm."""
     reference, current = args
     return (rigid.apply(params[0], params[1:], reference) - current).ravel()
@@ -278,7 +278,7 @@ def _frame_scale(reference):
     return centre, jnp.sqrt(jnp.mean(jnp.sum((reference - centre) ** 2, axis=-1)))
 
 
-def scaled_rigid_residuals(z: Float[Array, 3], args: Any) -> Float[Array, 4]:
+def scaled_rigid_residuals(z: Float[Array, "3"], args: Any) -> Float[Array, "4"]:
     """One frame in scaled, centred coordinates ``z = (ell theta, s)``, (4,) mm.
 
     ``p' = R(theta)(p - c) + c + s`` with ``c`` the reference centroid and ``ell`` its rms
@@ -306,7 +306,7 @@ def _scale(y, reference):
     return jnp.concatenate([(ell * y[0])[None], s])
 
 
-def best_angle_about(pivot: Float[Array, 2], reference: Float[Array, "2 2"],
+def best_angle_about(pivot: Float[Array, "2"], reference: Float[Array, "2 2"],
                      current: Float[Array, "2 2"]) -> Float[Array, ""]:
     """The theta minimising ``sum_i |R(theta)(p_i - q) + q - p_i'|^2``, one frame, rad.
 
@@ -331,7 +331,7 @@ _about_pivot_frames = jax.vmap(_about_pivot, in_axes=(None, None, 0, 0))
 _about_pivots_frames = jax.vmap(_about_pivot, in_axes=(0, None, 0, 0))
 
 
-def fixed_pivot_residuals(pivot: Float[Array, 2], args: Any) -> Float[Array, " 4n"]:
+def fixed_pivot_residuals(pivot: Float[Array, "2"], args: Any) -> Float[Array, " 4n"]:
     """Parke's fixed pivot, angles projected out: ``pivot`` (2,) mm -> residuals (4 n,) mm."""
     reference, current, weight = args
     return _about_pivot_frames(pivot, reference, current, weight).ravel()
@@ -789,7 +789,7 @@ class FixedPivot(JawMethod):
     """
 
     solver: Any = eqx.field(default=LevenbergMarquardt(), converter=_as_solver)
-    start: Float[np.ndarray, 2] | None = eqx.field(
+    start: Float[np.ndarray, "2"] | None = eqx.field(
         default=None, converter=_optional_array("(2,) mm"))
 
     name: ClassVar[str] = "fixed-pivot"
@@ -820,7 +820,7 @@ class SmoothPivot(JawMethod):
     smoothness: float = 1.0
     knot_spacing: int = DEFAULT_KNOT_SPACING
     solver: Any = eqx.field(default=LevenbergMarquardt(), converter=_as_solver)
-    start: Float[np.ndarray, 2] | None = eqx.field(
+    start: Float[np.ndarray, "2"] | None = eqx.field(
         default=None, converter=_optional_array("(2,) mm"))
 
     name: ClassVar[str] = "smooth-pivot"

@@ -23,19 +23,25 @@ All functions are written for one motion; ``jax.vmap`` them over frames.
 from __future__ import annotations
 
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Bool, Float
+
+#: A rigid motion in the midsagittal plane: ``(theta rad, t (2,) mm)``, ``p' = R(theta) p + t``.
+Motion = tuple[Float[ArrayLike, ""], Float[ArrayLike, "2"]]
 
 # Below this |theta/2| the ratios sin(w x)/sin(x) and x/sin(x) are evaluated by their Taylor
 # series (error below 1e-18 relative), so that value and gradient are exact at theta = 0.
 _SMALL_HALF_ANGLE = 1e-3
 
 
-def rotation_matrix(theta):
+def rotation_matrix(theta: Float[ArrayLike, ""]) -> Float[Array, "2 2"]:
     """``R(theta)`` of Eqs 4-5, shape ``(2, 2)``; positive theta = jaw opening (clockwise)."""
     c, s = jnp.cos(theta), jnp.sin(theta)
     return jnp.array([[c, s], [-s, c]])
 
 
-def apply(theta, t, points):
+def apply(
+    theta: Float[ArrayLike, ""], t: Float[ArrayLike, "2"], points: Float[ArrayLike, "*n d"]
+) -> Float[Array, "*n d"]:
     """Move ``points`` (..., 2) or (..., 3) mm by the motion; a third (lateral) axis is kept."""
     points = jnp.asarray(points)
     c, s = jnp.cos(theta), jnp.sin(theta)
@@ -46,26 +52,26 @@ def apply(theta, t, points):
     return jnp.concatenate([moved, points[..., 2:]], axis=-1)
 
 
-def from_pivot(theta, pivot):
+def from_pivot(theta: Float[ArrayLike, ""], pivot: Float[ArrayLike, "2"]) -> Motion:
     """The motion that rotates by ``theta`` about ``pivot`` (a, b): ``t = (I - R) pivot``."""
     pivot = jnp.asarray(pivot)
     return theta, pivot - apply(theta, jnp.zeros(2, pivot.dtype), pivot)
 
 
-def compose(second, first):
+def compose(second: Motion, first: Motion) -> Motion:
     """The motion ``first`` followed by ``second``; each is ``(theta, t)``."""
     theta1, t1 = first
     theta2, t2 = second
     return theta1 + theta2, apply(theta2, t2, t1)
 
 
-def inverse(motion):
+def inverse(motion: Motion) -> Motion:
     """The motion that undoes ``motion``."""
     theta, t = motion
     return -theta, -apply(-theta, jnp.zeros_like(t), t)
 
 
-def relative(reference, current):
+def relative(reference: Motion, current: Motion) -> Motion:
     """The motion that takes the pose ``reference`` to the pose ``current``.
 
     Both are poses given as motions from a common rest pose; the result is
@@ -87,7 +93,7 @@ def _sin_ratio(w, x):
     return jnp.where(small, series, direct)
 
 
-def fractional(motion, weight):
+def fractional(motion: Motion, weight: Float[ArrayLike, ""]) -> Motion:
     """The motion that turns by ``weight * theta`` about the same pivot (Parke's region weights).
 
     Parke moves jaw regions by a percentage of the jaw rotation about its pivot; with the
@@ -103,7 +109,7 @@ def fractional(motion, weight):
     return weight * theta, gain * turned
 
 
-def pivot(motion):
+def pivot(motion: Motion) -> tuple[Float[Array, "2"], Bool[Array, ""]]:
     """The fixed point ``(a, b)`` of a motion and whether it exists.
 
     Returns ``(pivot (2,), defined)``. For ``theta = 0`` (pure translation, or no motion)
