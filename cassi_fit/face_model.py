@@ -22,6 +22,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
+from jaxtyping import Int
 
 from ._io import read_json, register_input
 from .errors import DataFormatError, MissingDataError
@@ -124,11 +125,11 @@ class FaceModel(eqx.Module):
     topology: Topology = eqx.field(static=True)
 
     @property
-    def faces(self) -> np.ndarray:
+    def faces(self) -> Int[np.ndarray, "f 3"]:
         return self.topology.faces
 
     @property
-    def face_material(self) -> np.ndarray:
+    def face_material(self) -> Int[np.ndarray, " f"]:
         return self.topology.face_material
 
     @property

@@ -162,7 +162,7 @@ class Solver(eqx.Module):
     name: ClassVar[str] = "custom"
     damped: ClassVar[bool] = True
 
-    def tolerances(self, dtype) -> tuple[float, float]:
+    def tolerances(self, dtype: np.dtype | type) -> tuple[float, float]:
         """``(rtol, atol)`` for parameters of ``dtype``."""
         tol = _tolerance(dtype)
         return (tol if self.rtol is None else self.rtol, tol if self.atol is None else self.atol)

@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import numpy as np
-from jaxtyping import Bool, Float
+from jaxtyping import Bool, Float, Int
 
 from .errors import CassiError, DataFormatError, MissingDataError, OutputExistsError
 from .synth_tasks import (
@@ -46,6 +46,7 @@ from .synth_tasks import (
     get_task,
     task_duration,
 )
+from .txy import PelletTrack
 
 __all__ = [
     "SubjectAnatomy",
@@ -557,13 +558,13 @@ def synth_recording(
     anatomy: SubjectAnatomy,
     task: str,
     *,
-    seed,
+    seed: int | Sequence[int] | np.random.SeedSequence,
     noise_mm: float = DEFAULT_NOISE_MM,
     duration_s: float | None = None,
     dropouts: bool = True,
     mistracks: bool = True,
     noise_family: str = "realistic",
-):
+) -> tuple[PelletTrack, JawTruth]:
     """One synthetic recording in memory: ``(PelletTrack, JawTruth)``.
 
     ``seed`` is anything ``numpy.random.SeedSequence`` accepts. ``noise_mm`` is each
@@ -582,7 +583,7 @@ def synth_recording(
 
 def _simulate(anatomy, task, seed, noise_mm, duration_s, dropouts, mistracks, noise_family):
     """``(track, truth, controls)``; see :func:`synth_recording`."""
-    from .txy import PelletTrack
+
 
     spec = get_task(task)
     if not (np.isfinite(noise_mm) and 0 <= noise_mm <= MAX_NOISE_SCALE * DEFAULT_NOISE_MM):
@@ -625,8 +626,9 @@ def _replace(truth: JawTruth, **changes) -> JawTruth:
 
 # ------------------------------------------------------------------------------ audio
 def synth_audio(
-    controls: np.ndarray, times: np.ndarray, f0_hz: float, rng: np.random.Generator
-) -> np.ndarray:
+    controls: Float[np.ndarray, "n c"], times: Float[np.ndarray, " n"], f0_hz: float,
+    rng: np.random.Generator,
+) -> Int[np.ndarray, " samples"]:
     """A voiced buzz that follows the articulators: ``(n_samples,)`` int16 at 16 kHz.
 
     ``controls`` ``(n, len(CONTROLS))`` on the frame times ``times`` (s). Sample ``k`` is at
@@ -781,7 +783,7 @@ def _find_ci(folder: Path, name: str) -> Path | None:
     return matches[0] if matches else None
 
 
-def load_truth(root, subject: str, task: str) -> JawTruth:
+def load_truth(root: str | os.PathLike, subject: str, task: str) -> JawTruth:
     """Read the ground truth of ``subject``'s ``task`` from a corpus folder ``root``.
 
     Reads ``root/<subject>/<task>.truth.csv`` (names case-insensitive). Raises
@@ -812,7 +814,7 @@ def _anatomy_json(anatomy: SubjectAnatomy) -> str:
     return json.dumps(out, indent=1) + "\n"
 
 
-def load_anatomy(root, subject: str) -> SubjectAnatomy:
+def load_anatomy(root: str | os.PathLike, subject: str) -> SubjectAnatomy:
     """Read ``root/<subject>/anatomy.json`` written by :func:`generate_corpus` (refused,
     MissingDataError, when the corpus is incomplete, as :func:`load_truth`)."""
     from ._io import register_input
