@@ -122,13 +122,14 @@ def choose_gl_platform(
     *,
     probe: Callable[[str], str | None] = probe_gl_platform,
     environ: Mapping[str, str] | None = None,
-    imported: object | None = None,
+    imported: object = ...,
 ) -> str:
     """The OpenGL platform offscreen rendering should use (no caching, nothing changed).
 
     A ``PYOPENGL_PLATFORM`` in ``environ`` (default ``os.environ``) is respected as is.
-    If PyOpenGL is imported already (``imported``: its ``OpenGL.platform.PLATFORM``,
-    found in ``sys.modules`` by default), its platform is the answer, or a
+    If PyOpenGL is imported already (``imported``: its ``OpenGL.platform.PLATFORM``, or
+    None for "not imported"; by default looked up in ``sys.modules``), its platform is the
+    answer, or a
     :class:`RenderingUnavailableError` if pyrender cannot use it. Otherwise the
     candidates are, in order: ``"native"`` (only with ``DISPLAY``/``WAYLAND_DISPLAY``),
     ``"egl"``, ``"osmesa"``, each tried with ``probe``; none working is one
@@ -137,7 +138,7 @@ def choose_gl_platform(
     environ = os.environ if environ is None else environ
     if environ.get("PYOPENGL_PLATFORM"):
         return environ["PYOPENGL_PLATFORM"]
-    imported = _opengl_platform_object() if imported is None else imported
+    imported = _opengl_platform_object() if imported is ... else imported
     if imported is not None:  # too late to choose: PyOpenGL has its platform
         return _imported_platform(imported, environ)
     candidates = ["native"] * _has_display(environ) + list(HEADLESS_PLATFORMS)
