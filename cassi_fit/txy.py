@@ -23,7 +23,7 @@ import numpy as np
 
 from ._io import atomic_write, register_input
 from .errors import DataFormatError, MissingDataError
-from .pellets import JAW_PELLETS, PELLET_NAMES, first_valid_line, pellet_index
+from .pellets import JAW_PELLETS, PELLET_NAMES, first_clean_line, first_valid_line, pellet_index
 
 UNTRACKED = 1_000_000  # marker in files, per value (um)
 FRAME_STEP_US = 6866  # about 145.6 Hz
@@ -102,19 +102,15 @@ def first_valid_frame(track: PelletTrack, pellets: Sequence[str] | None = None) 
     """Index of CASSI's first valid line (initialisation step 1).
 
     Default: the one rule of :func:`cassi_fit.pellets.first_valid_line` (the first frame
-    in which every pellet the file ever tracks is tracked; ``MissingDataError`` if a jaw
-    pellet is never tracked). With ``pellets``: the first frame in which those pellets
-    are all tracked (x and y), e.g. ``JAW_PELLETS`` for the jaw alone. Raises
-    :class:`MissingDataError` naming the file if there is no such frame.
+    in which every pellet the file ever tracks is tracked and none is mistracked;
+    ``MissingDataError`` if a jaw pellet is never tracked). With ``pellets``: the same
+    rule for those pellets only (:func:`cassi_fit.pellets.first_clean_line`), e.g.
+    ``JAW_PELLETS`` for the jaw fit's reference. Raises :class:`MissingDataError` naming
+    the file if there is no such frame.
     """
     if pellets is None:
         return first_valid_line(track, _where(track)).index
-    ok = track.frame_valid(pellets)
-    if not ok.any():
-        raise MissingDataError(
-            f"{_where(track)}: no frame in which {', '.join(pellets)} are all tracked"
-        )
-    return int(np.argmax(ok))
+    return first_clean_line(track, pellets, _where(track))
 
 
 def require_tracked(track: PelletTrack, pellets: Sequence[str] = JAW_PELLETS) -> None:
