@@ -272,3 +272,70 @@ def first_clean_line(
     index = int(np.argmax(clean))
     _say_moved(where, complete, index, f"first line with {', '.join(pellets)}")
     return index
+
+
+# ------------------------------------------------------------------ plausibility
+#: MNI-MNM distance (mm): lower incisor to lower molar pellet, 20-70 mm for any adult
+#: (docs/FORMATS.md, "Plausibility", for the sources).
+JAW_DISTANCE_RANGE_MM = (20.0, 70.0)
+
+
+def robust_positions(
+    track: PelletTrackLike, mistracked: Bool[np.ndarray, "n 8"] | None = None
+) -> Float[np.ndarray, "8 2"]:
+    """``(8, 2)`` mm: each pellet's median position over its tracked, non-mistracked
+    frames (over all its tracked frames when fewer than half are clean: a file in the
+    wrong units is flagged everywhere); NaN for a pellet never tracked."""
+    flags = detect_mistracks(track) if mistracked is None else np.asarray(mistracked, bool)
+    tracked = np.asarray(track.valid, bool).all(axis=-1)
+    positions = np.asarray(track.positions, np.float64)
+    out = np.full((len(PELLET_NAMES), 2), np.nan)
+    for p in range(len(PELLET_NAMES)):
+        clean = tracked[:, p] & ~flags[:, p]
+        use = clean if clean.sum() * 2 >= tracked[:, p].sum() and clean.any() else tracked[:, p]
+        if use.any():
+            out[p] = np.median(positions[use, p], axis=0)
+    return out
+
+
+def _units_hint(distance: float) -> str:
+    lo, hi = JAW_DISTANCE_RANGE_MM
+    if distance * 1000 >= lo and distance * 1000 <= hi:
+        return "values look like millimetres; XRMB files are in micrometres"
+    if distance > hi:
+        return f"coordinates look scaled (about x{distance / 42:.0f} of a real jaw)"
+    return "check the units (XRMB files are in micrometres)"
+
+
+#: Anatomical order that holds for every speaker, on median positions:
+#: (a, b, axis, what is wrong): a's median must exceed b's along axis (0 x forward, 1 y up).
+_ORDER = (
+    (UL, LL, 1, "upper lip UL below lower lip LL"),
+    (MNI, MNM, 0, "molar pellet MNM in front of incisor pellet MNI"),
+    (T1, T4, 0, "tongue back T4 in front of tongue tip T1"),
+    (UL, T1, 0, "tongue tip T1 in front of the upper lip UL"),
+)
+
+
+def plausibility_problem(
+    track: PelletTrackLike, mistracked: Bool[np.ndarray, "n 8"] | None = None
+) -> str | None:
+    """What makes a track's geometry implausible for any speaker, or None if nothing does.
+
+    On :func:`robust_positions`: the MNI-MNM distance must lie in
+    ``JAW_DISTANCE_RANGE_MM`` (with a units hint otherwise); UL above LL; MNM behind MNI;
+    T4 behind T1; T1 behind UL (each when both pellets are tracked). The message says
+    what is wrong, with the medians, and the likely cause (units, swapped x/y).
+    """
+    med = robust_positions(track, mistracked)
+    if np.isfinite(med[list(JAW_INDEX)]).all():
+        distance = float(np.linalg.norm(med[MNI] - med[MNM]))
+        lo, hi = JAW_DISTANCE_RANGE_MM
+        if not lo <= distance <= hi:
+            return (f"median jaw pellet distance MNI-MNM {distance:.4g} mm is outside "
+                    f"{lo:.0f}-{hi:.0f} mm: {_units_hint(distance)}")
+    for a, b, axis, what in _ORDER:
+        if np.isfinite(med[[a, b], axis]).all() and med[a, axis] <= med[b, axis]:
+            return (f"{what} (median {'xy'[axis]} {med[b, axis]:.1f} vs {med[a, axis]:.1f} mm):"
+                    " are x and y swapped or mirrored? (+x forward, +y up; docs/FORMATS.md)")
+    return None

@@ -10,8 +10,8 @@ import pytest
 
 from cassi_fit.errors import DataFormatError, MissingDataError
 from cassi_fit.pellets import MistrackedFirstLineWarning, first_valid_line
-from cassi_fit.txy import FRAME_STEP_US, PelletTrack, first_valid_frame, read_txy, write_txy
 from cassi_fit.quality import quality_report
+from cassi_fit.txy import FRAME_STEP_US, PelletTrack, TimeGapWarning, first_valid_frame, read_txy
 
 # A plausible rest posture (mm, pellet frame): UL, LL, T1..T4, MNI, MNM.
 REST = np.array([[15.0, 18.0], [9.0, -21.0], [-17.0, 0.6], [-28.0, 7.5], [-39.0, 14.5],
@@ -66,3 +66,118 @@ def test_no_clean_line_is_missing_data():
     pos[:, 6] += 200.0  # MNI far outside the plausible box on every line
     with pytest.raises(MissingDataError, match="mistracked"):
         first_valid_line(PelletTrack(track.times, pos, track.valid))
+
+
+# ---------------------------------------------------------------- 2. units and geometry
+def _written(tmp_path, track: PelletTrack, name="t.txy", times_us=None):
+    """The track as a pellet file, written by hand (no range limits, any times)."""
+    path = tmp_path / name
+    times_us = np.round(track.times * 1e6) if times_us is None else np.asarray(times_us)
+    um = np.round(track.positions.reshape(track.n_frames, 16) * 1e3)
+    rows = np.concatenate([times_us[:, None], um], axis=1).astype(np.int64)
+    path.write_text("".join("\t".join(map(str, r)) + "\r\n" for r in rows.tolist()))
+    return path
+
+
+def scaled(track: PelletTrack, factor: float) -> PelletTrack:
+    return PelletTrack(track.times, track.positions * factor, track.valid)
+
+
+def test_plausible_track_reads(tmp_path):
+    assert read_txy(_written(tmp_path, make_track())).n_frames == 200
+
+
+@pytest.mark.parametrize(
+    ("factor", "hint"), [(1e-3, "millimetres"), (50.0, "scaled"), (0.1, "units")]
+)
+def test_wrong_units_are_refused_naming_the_file(tmp_path, factor, hint):
+    path = _written(tmp_path, scaled(make_track(), factor))
+    with pytest.raises(DataFormatError, match=f"t.txy: median jaw pellet distance.*{hint}"):
+        read_txy(path)
+    assert read_txy(path, check=False).n_frames == 200  # the expert's way round
+
+
+def test_swapped_x_and_y_are_refused(tmp_path):
+    track = make_track()
+    path = _written(tmp_path, PelletTrack(track.times, track.positions[..., ::-1], track.valid))
+    with pytest.raises(DataFormatError, match="MNM in front of.*swapped"):
+        read_txy(path)
+
+
+def test_mirrored_front_to_back_is_refused(tmp_path):
+    track = make_track()
+    pos = track.positions * np.array([-1.0, 1.0])
+    with pytest.raises(DataFormatError, match="in front of"):
+        read_txy(_written(tmp_path, PelletTrack(track.times, pos, track.valid)))
+
+
+def test_lips_upside_down_are_refused(tmp_path):
+    track = make_track()
+    pos = track.positions.copy()
+    pos[:, [0, 1]] = pos[:, [1, 0]]
+    with pytest.raises(DataFormatError, match="UL below lower lip"):
+        read_txy(_written(tmp_path, PelletTrack(track.times, pos, track.valid)))
+
+
+# ---------------------------------------------------------------- 3. time
+def _times(n=200):
+    return np.arange(n) * FRAME_STEP_US
+
+
+@pytest.mark.parametrize(
+    ("times", "line", "match"),
+    [
+        (_times() - 10_000_000, 1, "negative"),
+        (np.r_[_times()[:-1], 9e15], 200, "beyond 600 s"),
+        (np.r_[_times()[:50], _times()[49], _times()[51:]], 51, "does not increase"),
+        (np.r_[_times()[:50], _times()[60], _times()[51:]], 52, "does not increase"),
+    ],
+)
+def test_bad_times_name_the_file_and_line(tmp_path, times, line, match):
+    path = _written(tmp_path, make_track(), times_us=times)
+    with pytest.raises(DataFormatError, match=f"t.txy:{line}: .*{match}"):
+        read_txy(path)
+
+
+def test_microsecond_frame_spacing_is_refused(tmp_path):
+    path = _written(tmp_path, make_track(), times_us=np.arange(200))
+    with pytest.raises(DataFormatError, match="frame spacing 1 us.*microseconds"):
+        read_txy(path)
+
+
+def test_a_one_hour_gap_is_refused_and_a_long_gap_warns(tmp_path):
+    hour = np.r_[_times()[:100], _times()[100:] + 3_600_000_000]
+    with pytest.raises(DataFormatError, match="t.txy:101: .*beyond 600 s"):
+        read_txy(_written(tmp_path, make_track(), times_us=hour))
+    gap = np.r_[_times()[:100], _times()[100:] + 5_000_000]
+    with pytest.warns(TimeGapWarning, match=r"t.txy:101: 5.0 s gap"):
+        read_txy(_written(tmp_path, make_track(), "t.txy", times_us=gap))
+
+
+@pytest.mark.parametrize("bad", ["nan", "unsorted", "repeated"])
+def test_pellet_track_refuses_bad_times(bad):
+    track = make_track(10)
+    times = track.times.copy()
+    if bad == "nan":
+        times[3] = np.nan
+    elif bad == "unsorted":
+        times[[3, 4]] = times[[4, 3]]
+    else:
+        times[4] = times[3]
+    with pytest.raises(DataFormatError, match="pellet track"):
+        PelletTrack(times, track.positions, track.valid)
+
+
+# ---------------------------------------------------------------- 4. non-regular files
+@pytest.mark.parametrize("reader", ["txy", "palate", "headmeasures"])
+def test_a_fifo_is_refused_without_blocking(tmp_path, reader):
+    import os
+
+    from cassi_fit.headmeasures import read_headmeasures
+    from cassi_fit.outlines import read_outline
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    read = {"txy": read_txy, "palate": read_outline, "headmeasures": read_headmeasures}[reader]
+    with pytest.raises(DataFormatError, match="pipe: not a regular file"):
+        read(fifo)  # without the check, opening blocks forever (pytest-timeout-free: hangs)
