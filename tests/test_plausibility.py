@@ -181,3 +181,107 @@ def test_a_fifo_is_refused_without_blocking(tmp_path, reader):
     read = {"txy": read_txy, "palate": read_outline, "headmeasures": read_headmeasures}[reader]
     with pytest.raises(DataFormatError, match="pipe: not a regular file"):
         read(fifo)  # without the check, opening blocks forever (pytest-timeout-free: hangs)
+
+
+# ---------------------------------------------------------------- 2b. outlines, head
+PALATE = np.array([[-4.1, 4.0], [-9.9, 10.0], [-15.5, 14.0], [-22.0, 18.1], [-29.0, 21.5],
+                   [-36.0, 24.0], [-43.1, 26.0], [-51.0, 26.8], [-60.0, 27.0]])
+
+
+def _outline_file(tmp_path, points_mm, name="PAL.DAT"):
+    path = tmp_path / name
+    um = np.round(np.asarray(points_mm) * 1e3).astype(int)
+    path.write_text("".join(f" {x:7d} {y:7d}\r\n" for x, y in um.tolist()))
+    return path
+
+
+def _zigzag():
+    z = PALATE.copy()
+    z[4, 0] = -5.0  # the fifth point jumps back to the front
+    return z
+
+
+@pytest.mark.parametrize(
+    ("points", "match"),
+    [
+        (PALATE[::-1], "PAL.DAT: the palate runs -55.9 mm.*reversed"),
+        (PALATE[[0, 3, 1, 2, 4, 5, 6, 7, 8]], r"PAL.DAT:3: point 3 is .* in front"),
+        (_zigzag(), r"PAL.DAT:5: point 5 is 17.0 mm in front"),
+        (PALATE * 99, "PAL.DAT: .*scaled"),
+        (PALATE / 1000, "PAL.DAT: .*millimetres"),
+        (PALATE + [70.0, 0.0], r"PAL.DAT:1: point \(65.9, 4.0\) mm is outside"),
+        (PALATE - [0.0, 40.0], r"PAL.DAT:1: .*is outside.*above"),
+    ],
+    ids=["reversed", "shuffled", "zigzag", "x100", "mm", "in-front", "below"],
+)
+def test_implausible_palates_are_refused(tmp_path, points, match):
+    from cassi_fit.outlines import read_outline
+
+    path = _outline_file(tmp_path, points)
+    with pytest.raises(DataFormatError, match=match):
+        read_outline(path)
+    assert read_outline(path, check=False).shape == (9, 2)
+
+
+def test_plausible_palate_and_pharynx_read(tmp_path):
+    from cassi_fit.outlines import read_outline
+
+    assert read_outline(_outline_file(tmp_path, PALATE)).shape == (9, 2)
+    pha = _outline_file(tmp_path, [[-74.0, 18.0], [-70.0, -30.0]], "PHA.DAT")
+    assert read_outline(pha, kind="pharynx").shape == (2, 2)
+    front = _outline_file(tmp_path, [[10.0, 18.0], [12.0, -30.0]], "x_pha.dat")
+    with pytest.raises(DataFormatError, match="x_pha.dat:1: .*behind the mouth"):
+        read_outline(front, kind="pharynx")
+
+
+HEADER = ("subject\tgonion_x\tgonion_y\tgnathion_x\tgnathion_y\tface_width\tjaw_width\t"
+          "mouth_width\tupper_lip_thickness\tlower_lip_thickness\tnose_protrusion\n")
+GOOD_ROW = ["-85", "-35", "0", "-43", "135", "100", "50", "15", "11.5", "20"]
+
+
+@pytest.mark.parametrize(
+    ("column", "value", "match"),
+    [
+        (4, "9999", "face_width: implausible value 9999 mm"),
+        (4, "13.5", "face_width: .*centimetres"),
+        (6, "0.05", "mouth_width: .*metres"),
+        (0, "40", "gonion_x: .*in front of the face"),
+        (2, "-90", "gnathion_x: implausible"),
+    ],
+)
+def test_implausible_head_measures_name_file_line_and_value(tmp_path, column, value, match):
+    from cassi_fit.headmeasures import read_headmeasures
+
+    row = list(GOOD_ROW)
+    row[column] = value
+    path = tmp_path / "Headmeasures.txt"
+    path.write_text(HEADER + "S01\t" + "\t".join(GOOD_ROW) + "\nS02\t" + "\t".join(row) + "\n")
+    with pytest.raises(DataFormatError, match=f"Headmeasures.txt:3: S02 {match}"):
+        read_headmeasures(path)
+    assert set(read_headmeasures(path, check=False)) == {"S01", "S02"}
+
+
+def test_fixtures_and_defaults_are_plausible():
+    from pathlib import Path
+
+    from cassi_fit.headmeasures import DEFAULT_HEAD_MEASURES, head_problem, read_headmeasures
+    from cassi_fit.outlines import read_outline
+
+    fixtures = Path(__file__).parent / "fixtures"
+    assert head_problem(DEFAULT_HEAD_MEASURES) is None
+    assert len(read_headmeasures(fixtures / "Headmeasures.txt")) == 2
+    assert read_outline(fixtures / "PAL.DAT").shape == (9, 2)
+    assert read_outline(fixtures / "PHA.DAT", kind="pharynx").shape == (2, 2)
+    assert read_txy(fixtures / "sample.txy").n_frames == 7
+
+
+def test_synthetic_corpus_passes_every_check(tmp_path):
+    from cassi_fit.dataset import Dataset
+    from cassi_fit.synth import generate_corpus
+
+    root = generate_corpus(tmp_path / "corpus", n_subjects=4, seed=7, audio=False)
+    ds = Dataset(root)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no gap, no moved first line either
+        loaded = [ds.load(s, t) for s in ds.subjects() for t in ds.tasks(s)]
+    assert len(loaded) == len(ds) > 0
