@@ -13,6 +13,8 @@ from cassi_fit.pellets import MistrackedFirstLineWarning, first_valid_line
 from cassi_fit.quality import quality_report
 from cassi_fit.txy import FRAME_STEP_US, PelletTrack, TimeGapWarning, first_valid_frame, read_txy
 
+pytestmark = pytest.mark.filterwarnings("ignore::cassi_fit.dataset.DefaultHeadMeasuresWarning")
+
 # A plausible rest posture (mm, pellet frame): UL, LL, T1..T4, MNI, MNM.
 REST = np.array([[15.0, 18.0], [9.0, -21.0], [-17.0, 0.6], [-28.0, 7.5], [-39.0, 14.5],
                  [-53.0, 17.4], [-1.2, -8.2], [-43.5, -3.1]])
@@ -285,3 +287,105 @@ def test_synthetic_corpus_passes_every_check(tmp_path):
         warnings.simplefilter("error")  # no gap, no moved first line either
         loaded = [ds.load(s, t) for s in ds.subjects() for t in ds.tasks(s)]
     assert len(loaded) == len(ds) > 0
+
+
+# ---------------------------------------------------------------- 4. commands
+def _subject_folder(tmp_path, name="t001.txy"):
+    folder = tmp_path / "S01"
+    folder.mkdir(exist_ok=True)
+    return _written(folder, make_track(), name)
+
+
+def _no_work(monkeypatch):
+    """Any animation work fails the test: refusals must come before it."""
+    import cassi_fit._cli.animate as cli_animate
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("the command started working before checking its outputs")
+
+    monkeypatch.setattr(cli_animate, "animate_recording", forbidden)
+    import cassi_fit._cli.export as cli_export
+
+    monkeypatch.setattr(cli_export, "animate_recording", forbidden)
+
+
+@pytest.mark.parametrize(
+    ("extra", "match"),
+    [
+        (["--out", "{d}/a.png", "--penetration", "{d}/a.png"], "given twice as an output"),
+        (["--out", "{d}/a.png", "--penetration", "{d}/PAL.DAT", "--force"],
+         "PAL.DAT: refusing to"),
+        (["--out", "{d}/link.png", "--force"], "refusing to overwrite an input file"),
+    ],
+    ids=["penetration-is-out", "penetration-is-palate", "out-links-to-input"],
+)
+def test_animate_refuses_colliding_outputs_before_work(tmp_path, monkeypatch, capsys, extra,
+                                                        match):
+    from cassi_fit import cli
+
+    _no_work(monkeypatch)
+    pellets = _subject_folder(tmp_path)
+    palate = _outline_file(pellets.parent, PALATE)
+    (pellets.parent / "link.png").symlink_to(pellets)
+    before = {p: p.read_bytes() for p in (pellets, palate)}
+    args = [a.format(d=pellets.parent) for a in extra]
+    assert cli.main(["animate", str(pellets), *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and match in err
+    assert {p: p.read_bytes() for p in before} == before
+
+
+def test_export_refuses_an_input_before_work(tmp_path, monkeypatch, capsys):
+    from cassi_fit import cli
+
+    _no_work(monkeypatch)
+    pellets = _subject_folder(tmp_path)
+    (pellets.parent / "link.glb").symlink_to(pellets)
+    assert cli.main(["export", str(pellets), "--out", str(pellets.parent / "link.glb"),
+                     "--force"]) == 2
+    assert "refusing to overwrite an input file" in capsys.readouterr().err
+
+
+def test_calibrate_without_recordings_fails_in_one_line(tmp_path, capsys):
+    from cassi_fit import cli
+    from cassi_fit.calibrate import calibrate_dataset
+
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(MissingDataError, match="no recordings"):
+        calibrate_dataset(tmp_path / "empty")
+    assert cli.main(["calibrate", str(tmp_path / "empty"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no recordings" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_names_differing_in_case_are_an_error_naming_both(tmp_path):
+    from cassi_fit.dataset import Dataset
+
+    _subject_folder(tmp_path, "TP101.TXY")
+    _subject_folder(tmp_path, "tp101.txy")
+    with pytest.raises(DataFormatError, match="S01: TP101.TXY and tp101.txy differ only in case"):
+        Dataset(tmp_path)
+
+
+def test_info_on_a_fifo_says_so(tmp_path, capsys):
+    import os
+
+    from cassi_fit import cli
+
+    fifo = tmp_path / "S01" / "t001.txy"
+    fifo.parent.mkdir()
+    os.mkfifo(fifo)
+    assert cli.main(["info", str(fifo)]) == 2
+    assert "t001.txy: not a regular file" in capsys.readouterr().err
+
+
+def test_info_reports_implausible_files_and_exits_non_zero(tmp_path, capsys):
+    from cassi_fit import cli
+
+    _subject_folder(tmp_path, "t001.txy")
+    _written(tmp_path / "S01", scaled(make_track(), 1e-3), "t002.txy")
+    assert cli.main(["info", str(tmp_path)]) == 2
+    out = capsys.readouterr().out
+    assert "t001" in out and "error:" not in out.split("t001")[1].split("\n")[0]
+    assert "t002  error:" in out and "millimetres" in out

@@ -64,7 +64,7 @@ def collect(path: Path, list_only: bool = False) -> dict:
     from cassi_fit.dataset import Dataset, load_recording
     from cassi_fit.errors import MissingDataError
 
-    if path.is_file():
+    if path.exists() and not path.is_dir():  # a file (load_recording refuses a FIFO)
         rec = _quietly(load_recording, path)
         info = _describe(rec)
         return {"path": str(path), "kind": "file", "subject": rec.subject, "task": rec.task, **info}
