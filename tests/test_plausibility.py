@@ -389,3 +389,54 @@ def test_info_reports_implausible_files_and_exits_non_zero(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "t001" in out and "error:" not in out.split("t001")[1].split("\n")[0]
     assert "t002  error:" in out and "millimetres" in out
+
+
+def _small_result():
+    import cassi_fit.evaluate as ev
+
+    settings = {"stride": 1, "jaw": "closed-form", "collisions": "off"}
+    recs = [ev.RecordingRow.not_evaluated("S01", "tp040", "S01/tp040: bad",
+                                          calibration="cassi", **settings)]
+    subjects = [ev.SubjectRow.of_recordings("S01", recs, **settings)]
+    return ev.EvaluationResult(recs, subjects, {**settings, "calibration": "cassi"})
+
+
+def _interrupt_on_call(monkeypatch, target, attribute, n):
+    """``target.attribute`` raises KeyboardInterrupt on its ``n``-th call (1-based)."""
+    real = getattr(target, attribute)
+    calls = []
+
+    def fake(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == n:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(target, attribute, fake)
+
+
+def test_evaluate_tables_are_all_or_nothing(tmp_path, monkeypatch):
+    import os
+
+    from cassi_fit.evaluate import write_table
+
+    _interrupt_on_call(monkeypatch, os, "fsync", 2)  # after the first file is complete
+    with pytest.raises(KeyboardInterrupt):
+        write_table(_small_result(), tmp_path)
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.undo()
+    assert len(write_table(_small_result(), tmp_path)) == 3
+
+
+def test_evaluate_report_is_all_or_nothing(tmp_path, monkeypatch):
+    from matplotlib.figure import Figure
+
+    from cassi_fit.evaluate._report import write_report
+
+    _interrupt_on_call(monkeypatch, Figure, "savefig", 1)  # the tables are done by then
+    with pytest.raises(KeyboardInterrupt):
+        write_report(_small_result(), tmp_path)
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.undo()
+    names = sorted(p.name for p in write_report(_small_result(), tmp_path))
+    assert names == sorted(p.name for p in tmp_path.iterdir()) and len(names) == 4
