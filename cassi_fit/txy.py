@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from jaxtyping import Bool, Float
 
 from ._io import atomic_write, register_input
 from .errors import DataFormatError, MissingDataError
@@ -90,11 +91,11 @@ class PelletTrack:
         """Seconds from the first to the last frame (0 for fewer than two frames)."""
         return float(self.times[-1] - self.times[0]) if self.n_frames > 1 else 0.0
 
-    def pellet(self, name: str) -> np.ndarray:
+    def pellet(self, name: str) -> Float[np.ndarray, "n 2"]:
         """``(n, 2)`` mm positions of one pellet (NaN where untracked)."""
         return self.positions[:, pellet_index(name), :]
 
-    def frame_valid(self, pellets: Sequence[str] = PELLET_NAMES) -> np.ndarray:
+    def frame_valid(self, pellets: Sequence[str] = PELLET_NAMES) -> Bool[np.ndarray, " n"]:
         """``(n,)`` bool: True where x and y of every pellet in ``pellets`` are tracked."""
         idx = [pellet_index(p) for p in pellets]
         return self.valid[:, idx, :].all(axis=(1, 2))
