@@ -336,6 +336,8 @@ def plausibility_problem(
                     f"{lo:.0f}-{hi:.0f} mm: {_units_hint(distance)}")
     for a, b, axis, what in _ORDER:
         if np.isfinite(med[[a, b], axis]).all() and med[a, axis] <= med[b, axis]:
-            return (f"{what} (median {'xy'[axis]} {med[b, axis]:.1f} vs {med[a, axis]:.1f} mm):"
-                    " are x and y swapped or mirrored? (+x forward, +y up; docs/FORMATS.md)")
+            c = "xy"[axis]
+            return (f"{what} (median {c}: {PELLET_NAMES[a]} {med[a, axis]:.1f} mm, "
+                    f"{PELLET_NAMES[b]} {med[b, axis]:.1f} mm): are x and y swapped or "
+                    "mirrored? (+x forward, +y up; docs/FORMATS.md)")
     return None
