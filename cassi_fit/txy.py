@@ -135,8 +135,12 @@ def require_tracked(track: PelletTrack, pellets: Sequence[str] = JAW_PELLETS) ->
         raise MissingDataError(f"{_where(track)}: pellet(s) {', '.join(never)} never tracked")
 
 
-#: Times: XRMB tasks last seconds to about a minute; ten minutes is beyond any of them.
-MAX_TIME_S = 600.0
+#: Times: XRMB tasks last seconds to about a minute; three hours (1.5 million frames) is
+#: beyond any recording, while long synthetic or concatenated files (200k lines = 23
+#: minutes) stay readable.
+MAX_TIME_S = 3 * 3600.0
+#: No recording pauses this long between two frames: an error naming the line.
+MAX_GAP_S = 60.0
 #: Frame spacing (median step) accepted: 1 to 100 ms (the files' is 6.866 ms).
 FRAME_STEP_RANGE_S = (1e-3, 0.1)
 #: A step longer than this between two frames is reported (TimeGapWarning).
@@ -149,8 +153,8 @@ class TimeGapWarning(UserWarning):
 
 def _check_times(path: Path | None, times: np.ndarray, lines: Sequence[int] | None = None,
                  *, warn_gaps: bool = True) -> None:
-    """Refuse times that are not finite, negative, beyond ``MAX_TIME_S`` or not strictly
-    increasing; warn about a gap longer than ``LONG_GAP_S``. ``times`` in s; ``lines``:
+    """Refuse times that are not finite, negative, beyond ``MAX_TIME_S``, not strictly
+    increasing or with a gap over ``MAX_GAP_S``; warn about a gap over ``LONG_GAP_S``. ``times`` in s; ``lines``:
     the file's line number of each frame (for messages), else frame numbers."""
     where = path if path is not None else "<pellet track>"
     line = (lambda k: lines[k]) if lines is not None else (lambda k: None)
@@ -171,6 +175,10 @@ def _check_times(path: Path | None, times: np.ndarray, lines: Sequence[int] | No
         k = int(np.argmax(steps <= 0)) + 1
         raise DataFormatError(where, line(k), f"time {times[k] * 1e6:.0f} us does not increase "
                               f"(previous {times[k - 1] * 1e6:.0f} us){at.format(k=k)}")
+    if (steps > MAX_GAP_S).any():
+        k = int(np.argmax(steps > MAX_GAP_S)) + 1
+        raise DataFormatError(where, line(k), f"{steps[k - 1]:.0f} s gap after the previous "
+                              f"frame (more than {MAX_GAP_S:.0f} s: a wrong time?){at.format(k=k)}")
     if warn_gaps and steps.size and (steps > LONG_GAP_S).any():
         k = int(np.argmax(steps > LONG_GAP_S)) + 1
         name = f"{where}:{line(k)}" if lines is not None else f"{where} (frame {k})"
@@ -263,8 +271,8 @@ def read_txy(path: str | os.PathLike, *, check: bool = True) -> PelletTrack:
 
     Accepts tabs or any white space, CRLF or LF, blank lines (skipped), a UTF-8 BOM.
     Raises :class:`DataFormatError` (file and line) for a wrong field count, a token that
-    is not an integer, an empty file, times that are negative, beyond ``MAX_TIME_S`` or
-    do not strictly increase, a frame spacing outside ``FRAME_STEP_RANGE_S``; with
+    is not an integer, an empty file, times that are negative, beyond ``MAX_TIME_S``,
+    that do not strictly increase or jump by more than ``MAX_GAP_S``, a frame spacing outside ``FRAME_STEP_RANGE_S``; with
     ``check`` (default), for implausible geometry or units
     (:func:`cassi_fit.pellets.plausibility_problem`); and :class:`MissingDataError` if no
     value in the file is tracked at all. A gap over ``LONG_GAP_S`` warns
