@@ -285,8 +285,9 @@ def robust_positions(
 ) -> Float[np.ndarray, "8 2"]:
     """``(8, 2)`` mm: each pellet's median position over its tracked, non-mistracked
     frames (over all its tracked frames when fewer than half are clean: a file in the
-    wrong units is flagged everywhere); NaN for a pellet never tracked."""
-    flags = detect_mistracks(track) if mistracked is None else np.asarray(mistracked, bool)
+    wrong units is flagged everywhere); NaN for a pellet never tracked. ``mistracked``
+    None: the detector's range and jaw-distance tests only (:func:`static_mistracks`)."""
+    flags = static_mistracks(track) if mistracked is None else np.asarray(mistracked, bool)
     tracked = np.asarray(track.valid, bool).all(axis=-1)
     positions = np.asarray(track.positions, np.float64)
     out = np.full((len(PELLET_NAMES), 2), np.nan)
@@ -296,6 +297,15 @@ def robust_positions(
         if use.any():
             out[p] = np.median(positions[use, p], axis=0)
     return out
+
+
+def static_mistracks(track: PelletTrackLike) -> Bool[np.ndarray, "n 8"]:
+    """``(n, 8)`` bool: :func:`detect_mistracks` without its jump test (range and jaw
+    distance only). Several times faster; enough for medians, which the jump test's
+    isolated excursions of at most five frames cannot move (used on reading a file)."""
+    flags = _out_of_range(np.asarray(track.positions, np.float64))
+    flags[:, list(JAW_INDEX)] |= _jaw_outliers(jaw_distance(track))[:, None]
+    return flags & np.asarray(track.valid, bool).any(axis=-1)
 
 
 def _units_hint(distance: float) -> str:
@@ -322,7 +332,8 @@ def plausibility_problem(
 ) -> str | None:
     """What makes a track's geometry implausible for any speaker, or None if nothing does.
 
-    On :func:`robust_positions`: the MNI-MNM distance must lie in
+    On :func:`robust_positions` (``mistracked``: a :func:`detect_mistracks` mask, or None
+    for :func:`static_mistracks`): the MNI-MNM distance must lie in
     ``JAW_DISTANCE_RANGE_MM`` (with a units hint otherwise); UL above LL; MNM behind MNI;
     T4 behind T1; T1 behind UL (each when both pellets are tracked). The message says
     what is wrong, with the medians, and the likely cause (units, swapped x/y).
