@@ -7,6 +7,8 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from cassi_fit.errors import DataFormatError, MissingDataError
 from cassi_fit.pellets import MistrackedFirstLineWarning, first_valid_line
@@ -446,3 +448,39 @@ def test_evaluate_report_is_all_or_nothing(tmp_path, monkeypatch):
     monkeypatch.undo()
     names = sorted(p.name for p in write_report(_small_result(), tmp_path))
     assert names == sorted(p.name for p in tmp_path.iterdir()) and len(names) == 4
+
+
+# ---------------------------------------------------------------- properties
+
+
+def _posture(scale: float, angle_deg: float, shift) -> PelletTrack:
+    """make_track's speaker resized, tilted and moved as real speakers differ."""
+    track = make_track(40)
+    a = np.deg2rad(angle_deg)
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    pos = track.positions @ rot.T * scale + np.asarray(shift)
+    return PelletTrack(track.times, pos, track.valid)
+
+
+speakers = dict(scale=st.floats(0.75, 1.3), angle_deg=st.floats(-12, 12),
+                shift=st.tuples(st.floats(-4, 4), st.floats(-4, 4)))
+
+
+@settings(max_examples=40, deadline=None)
+@given(**speakers)
+def test_property_every_plausible_speaker_passes(scale, angle_deg, shift):
+    from cassi_fit.pellets import plausibility_problem
+
+    assert plausibility_problem(_posture(scale, angle_deg, shift)) is None
+
+
+@settings(max_examples=40, deadline=None)
+@given(**speakers, error=st.sampled_from(["mm", "x10", "x50", "swap", "mirror"]))
+def test_property_unit_and_axis_errors_never_pass(scale, angle_deg, shift, error):
+    from cassi_fit.pellets import plausibility_problem
+
+    track = _posture(scale, angle_deg, shift)
+    pos = {"mm": track.positions / 1000, "x10": track.positions * 10,
+           "x50": track.positions * 50, "swap": track.positions[..., ::-1],
+           "mirror": track.positions * [-1.0, 1.0]}[error]
+    assert plausibility_problem(PelletTrack(track.times, pos, track.valid)) is not None
