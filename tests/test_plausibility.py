@@ -484,3 +484,12 @@ def test_property_unit_and_axis_errors_never_pass(scale, angle_deg, shift, error
            "x50": track.positions * 50, "swap": track.positions[..., ::-1],
            "mirror": track.positions * [-1.0, 1.0]}[error]
     assert plausibility_problem(PelletTrack(track.times, pos, track.valid)) is not None
+
+
+def test_info_says_when_mistracks_moved_the_first_line(tmp_path, capsys):
+    from cassi_fit import cli
+
+    (tmp_path / "S01").mkdir()
+    path = _written(tmp_path / "S01", with_first_line_spike(make_track()), "t001.txy")
+    assert cli.main(["info", str(path)]) == 0
+    assert "first valid frame 1 (moved from 0: mistracked)" in capsys.readouterr().out

@@ -98,8 +98,10 @@ def _print_file(report: dict, out) -> None:
     q = report["quality"]
     first = q["first_valid_frame"]
     print(f"{report['subject']} {report['task']}  {report['path']}", file=out)
+    paper = q.get("first_complete_frame")
+    moved = f" (moved from {paper}: mistracked)" if paper is not None and paper != first else ""
     print(f"  frames {q['n_frames']}  duration {q['duration_s']:.3f} s  first valid frame "
-          f"{'-' if first is None else first}  first jaw frame "
+          f"{'-' if first is None else first}{moved}  first jaw frame "
           f"{'-' if q['first_jaw_frame'] is None else q['first_jaw_frame']}", file=out)  # fmt: skip
     print(f"  palate {report['palate_points'] or '-'} points  pharynx "
           f"{report['pharynx_points'] or '-'} points  head measures "
