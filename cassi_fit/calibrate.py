@@ -531,6 +531,8 @@ def calibrate_dataset(
     ds = dataset if isinstance(dataset, Dataset) else Dataset(dataset)
     model = load_model() if model is None else model
     names = ds.subjects() if subjects is None else [s.upper() for s in subjects]
+    if not names or len(ds) == 0:
+        raise MissingDataError(f"{ds.root}: no recordings (pellet files .txy) to calibrate from")
     out = {}
     iterator = names
     if progress:

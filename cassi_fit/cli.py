@@ -6,7 +6,9 @@ Each subcommand lives in its own module under ``cassi_fit/_cli/`` and exposes
 
 Errors: a :class:`~cassi_fit.errors.CassiError` (and any other exception) is printed as one
 line, ``cassi: error: ...``, with exit code 2 (1 for unexpected exceptions); the
-traceback is shown only with ``--debug``.
+traceback is shown only with ``--debug``. Ctrl-C and SIGTERM (which the command turns into
+``KeyboardInterrupt``, so that every writer removes its temporary files) print
+``cassi: interrupted`` and exit 130; a closed output pipe exits 141 quietly.
 """
 
 from __future__ import annotations
@@ -67,11 +69,17 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    from ._io import terminate_as_interrupt
+
     try:
-        return int(args.func(args) or 0)
+        with terminate_as_interrupt():  # SIGTERM cleans up as Ctrl-C does
+            return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print("cassi: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # e.g. `cassi info DATA | head`: the reader left; say nothing
+        _silence_stdout()
+        return 141
     except Exception as exc:  # one line for the user; the traceback only under --debug
         if args.debug:
             raise
@@ -82,6 +90,15 @@ def main(argv: list[str] | None = None) -> int:
             message = f"{type(exc).__name__}: {message}"
         print(f"cassi: error: {message}", file=sys.stderr)
         return 2 if isinstance(exc, CassiError) else 1
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so that Python's flush at exit does not fail again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
 
 
 if __name__ == "__main__":  # pragma: no cover

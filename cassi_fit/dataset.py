@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import MissingDataError
+from .errors import DataFormatError, MissingDataError
 from .headmeasures import DEFAULT_HEAD_MEASURES, HeadMeasures, read_headmeasures
 from .outlines import read_outline
 from .txy import PelletTrack, read_txy
@@ -65,11 +65,25 @@ def recording_source(recording: Recording) -> str:
 
 
 def _listing(folder: Path) -> dict[str, Path]:
-    """Lower-case file name -> path for the regular files in ``folder``."""
+    """Lower-case file name -> path for the regular files in ``folder``.
+
+    Names are matched case-insensitively, so two files whose names differ only in case
+    (``TP101.TXY`` and ``tp101.txy``) would be one recording twice: a
+    :class:`DataFormatError` naming both, never a silent pick.
+    """
     try:
-        return {p.name.lower(): p for p in folder.iterdir() if p.is_file()}
+        files = sorted(p for p in folder.iterdir() if p.is_file())
     except OSError:
         return {}
+    listing: dict[str, Path] = {}
+    for path in files:
+        other = listing.setdefault(path.name.lower(), path)
+        if other is not path:
+            raise DataFormatError(
+                folder, None, f"{other.name} and {path.name} differ only in case: the same "
+                "file name twice (names are matched case-insensitively); remove or rename one"
+            )
+    return listing
 
 
 def _natural_key(name: str) -> list:
@@ -158,6 +172,8 @@ def load_recording(path: str | os.PathLike) -> Recording:
     the file's folder (``JW11/TP005.TXY``).
     """
     path = Path(path)
+    if path.exists() and not path.is_dir() and not path.is_file():
+        raise DataFormatError(path, None, "not a regular file (a pipe, device or socket)")
     if not path.is_file():
         raise MissingDataError(f"{path}: no such pellet file")
     folder = path.parent.resolve()

@@ -15,6 +15,7 @@ import numpy as np
 from jaxtyping import Bool, Float, Int
 
 from .options import GAP_POLICIES, check_choice
+from .pellets import detect_mistracks
 from .status import Status
 from .txy import PelletTrack
 
@@ -22,8 +23,6 @@ from .txy import PelletTrack
 def bad_values(track: PelletTrack) -> tuple[Bool[np.ndarray, "n 8"], Bool[np.ndarray, "n 8"]]:
     """``(untracked, mistracked)``, each ``(n, 8)`` bool: a pellet untracked in x or y, and
     a tracked value that ``quality.detect_mistracks`` flags. ``track``: a ``PelletTrack``."""
-    from .quality import detect_mistracks
-
     untracked = ~np.asarray(track.valid).all(axis=-1)
     mistracked = np.asarray(detect_mistracks(track), bool) & ~untracked
     return untracked, mistracked

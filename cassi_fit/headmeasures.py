@@ -69,6 +69,59 @@ DEFAULT_HEAD_MEASURES = HeadMeasures(
     nose_protrusion=20.0,
 )
 
+#: Plausible range (mm) of each measure for any adult (docs/FORMATS.md, "Plausibility",
+#: for the sources): the Farkas (1994) adult norms widened to about +-6 SD, and the
+#: landmark positions in the pellet frame (gonion behind and below the incisor tip,
+#: gnathion below it).
+PLAUSIBLE_RANGES: dict[str, tuple[float, float]] = {
+    "gonion_x": (-130.0, -50.0),
+    "gonion_y": (-80.0, 0.0),
+    "gnathion_x": (-40.0, 30.0),
+    "gnathion_y": (-75.0, -20.0),
+    "face_width": (100.0, 175.0),
+    "jaw_width": (70.0, 140.0),
+    "mouth_width": (30.0, 80.0),
+    "upper_lip_thickness": (2.0, 35.0),
+    "lower_lip_thickness": (2.0, 35.0),
+    "nose_protrusion": (8.0, 40.0),
+}
+
+
+def _in(column: str, value: float) -> bool:
+    lo, hi = PLAUSIBLE_RANGES[column]
+    return lo <= value <= hi
+
+
+def measure_problem(column: str, value: float) -> str | None:
+    """Why ``value`` (mm) is implausible for ``column``, with the likely unit, or None."""
+    if _in(column, value):
+        return None
+    lo, hi = PLAUSIBLE_RANGES[column]
+    hint = ""
+    for factor, unit in ((10.0, "centimetres"), (1000.0, "metres"), (0.001, "micrometres")):
+        if _in(column, value * factor):
+            hint = f": looks like {unit}; Headmeasures values are in mm"
+            break
+    else:
+        if column.startswith("gonion_x") and value > 0:
+            hint = ": the gonion (angle of the jaw) cannot be in front of the face"
+    return f"{column}: implausible value {value:g} mm (expected {lo:g} to {hi:g}){hint}"
+
+
+def head_problem(measures: HeadMeasures) -> str | None:
+    """The first implausible measure of ``measures`` (ranges, then the gonion behind the
+    gnathion and the jaw narrower than the face), or None."""
+    for column in FIELD_NAMES:
+        problem = measure_problem(column, float(getattr(measures, column)))
+        if problem is not None:
+            return problem
+    if measures.gonion_x >= measures.gnathion_x:
+        return "gonion_x: the gonion must lie behind the gnathion (gonion_x < gnathion_x)"
+    if measures.jaw_width >= measures.face_width:
+        return "jaw_width: the jaw (bigonial) must be narrower than the face (bizygomatic)"
+    return None
+
+
 _NUMBER = re.compile(r"[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?")
 _SUBJECT = re.compile(r"[A-Za-z0-9_.-]+")
 
@@ -105,12 +158,16 @@ def _parse_value(path: Path, lineno: int, column: str, token: str) -> float:
     return value
 
 
-def read_headmeasures(path: str | os.PathLike) -> dict[str, HeadMeasures]:
+def read_headmeasures(
+    path: str | os.PathLike, *, check: bool = True
+) -> dict[str, HeadMeasures]:
     """Read a ``Headmeasures.txt``: subject name (upper case) -> :class:`HeadMeasures`.
 
     Raises :class:`DataFormatError` naming file and line for an empty file, a header
     with unknown, duplicate or missing columns, a row with the wrong number of fields,
-    a value that is not a finite number, a non-positive distance, or a repeated subject.
+    a value that is not a finite number, a non-positive distance, or a repeated subject;
+    with ``check`` (default), for an implausible row (:func:`head_problem`: a value out
+    of ``PLAUSIBLE_RANGES``, with the likely unit; a gonion in front of the gnathion).
     """
     path, lines = read_lines(path)
     rows = [(n, _strip_comment(s).split()) for n, s in lines]
@@ -136,6 +193,9 @@ def read_headmeasures(path: str | os.PathLike) -> dict[str, HeadMeasures]:
             c: _parse_value(path, lineno, c, t) for c, t in zip(cols, tokens[1:], strict=True)
         }
         result[subject] = HeadMeasures(**values)
+        problem = head_problem(result[subject]) if check else None
+        if problem is not None:
+            raise DataFormatError(path, lineno, f"{subject} {problem}")
     return result
 
 

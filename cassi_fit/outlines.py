@@ -12,6 +12,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+from jaxtyping import Float
 
 from ._io import atomic_write
 from .errors import DataFormatError
@@ -21,13 +22,16 @@ from .txy import UNTRACKED, parse_int, read_lines
 OUTLINE_KINDS = {"palate": (2, "palate outline"), "pharynx": (2, "pharyngeal wall")}
 
 
-def read_outline(path: str | os.PathLike, *, kind: str = "palate") -> np.ndarray:
+def read_outline(
+    path: str | os.PathLike, *, kind: str = "palate", check: bool = True
+) -> Float[np.ndarray, "n 2"]:
     """Read a ``PAL.DAT`` / ``PHA.DAT`` file: ``(n, 2)`` float64 mm, file order.
 
     ``kind`` is ``"palate"`` or ``"pharynx"``; both need at least 2 points. Raises
     :class:`DataFormatError` naming file and line for a line without exactly two fields,
     a token that is not an integer, the untracked marker 1000000, an empty file, or too
-    few points.
+    few points; with ``check`` (default), for an implausible outline
+    (:func:`outline_problem`: units, order, position).
     """
     if kind not in OUTLINE_KINDS:
         raise ValueError(f"unknown outline kind {kind!r}; expected one of {sorted(OUTLINE_KINDS)}")
@@ -50,10 +54,88 @@ def read_outline(path: str | os.PathLike, *, kind: str = "palate") -> np.ndarray
         raise DataFormatError(
             path, None, f"{what} has {len(points)} point(s); at least {min_points} are needed"
         )
-    return np.asarray(points, dtype=np.float64) / 1e3
+    result = np.asarray(points, dtype=np.float64) / 1e3
+    if check:
+        problem = outline_problem(result, kind)
+        if problem is not None:
+            index, message = problem
+            raise DataFormatError(path, None if index is None else lines[index][0], message)
+    return result
 
 
-def write_outline(path: str | os.PathLike, points_mm: np.ndarray, *, overwrite: bool = False) -> Path:
+# ------------------------------------------------------------------ plausibility
+#: Palate and pharynx positions (mm, pellet frame) any speaker's trace lies within
+#: (docs/FORMATS.md, "Plausibility"): the palate starts at or behind the incisor tip and
+#: runs back 15-110 mm, above the tip; the pharyngeal wall is well behind the incisors.
+PALATE_X_RANGE_MM = (-110.0, 5.0)
+PALATE_Y_RANGE_MM = (-5.0, 45.0)
+PALATE_MIN_LENGTH_MM = 15.0
+#: A palate point may lie at most this far in front of the previous one (the trace
+#: climbs the alveolar ridge nearly vertically; anything more is a shuffled order).
+PALATE_MAX_FORWARD_STEP_MM = 2.0
+PHARYNX_X_RANGE_MM = (-130.0, -20.0)
+PHARYNX_Y_RANGE_MM = (-90.0, 60.0)
+
+
+def _units(points: np.ndarray, x_range: tuple[float, float], y_range: tuple[float, float]
+           ) -> str | None:
+    """A units hint when the whole outline is tiny (mm written as um) or far too large."""
+    size = float(np.max(np.abs(points)))
+    if size < 0.2:
+        return f"all points within {size:.3g} mm of the origin: values look like millimetres; " \
+            "the files are in micrometres"
+    limit = max(abs(v) for v in (*x_range, *y_range))
+    if size > 2 * limit:
+        return f"a point {size:.0f} mm from the origin: coordinates look scaled " \
+            f"(about x{size / limit:.0f}); the files are in micrometres"
+    return None
+
+
+def _outside(points: np.ndarray, x_range, y_range, where: str) -> tuple[int, str] | None:
+    bad = ((points[:, 0] < x_range[0]) | (points[:, 0] > x_range[1])
+           | (points[:, 1] < y_range[0]) | (points[:, 1] > y_range[1]))
+    if bad.any():
+        k = int(np.argmax(bad))
+        x, y = points[k]
+        return k, (f"point ({x:.1f}, {y:.1f}) mm is outside x {x_range[0]:.0f}..{x_range[1]:.0f},"
+                   f" y {y_range[0]:.0f}..{y_range[1]:.0f} mm ({where}; +x forward, +y up)")
+    return None
+
+
+def outline_problem(
+    points: Float[np.ndarray, "n 2"], kind: str = "palate"
+) -> tuple[int | None, str] | None:
+    """Why an outline (mm, pellet frame) is implausible, as ``(point index or None,
+    message)``, or None. Palate: the units, the position (``PALATE_*_RANGE_MM``: behind
+    the incisor tip and above it), the order (front to back, over at least
+    ``PALATE_MIN_LENGTH_MM``, no step forward beyond ``PALATE_MAX_FORWARD_STEP_MM``).
+    Pharynx: the units and the position (``PHARYNX_*_RANGE_MM``)."""
+    pts = np.asarray(points, dtype=np.float64)
+    if kind == "pharynx":
+        hint = _units(pts, PHARYNX_X_RANGE_MM, PHARYNX_Y_RANGE_MM)
+        return (None, hint) if hint else _outside(
+            pts, PHARYNX_X_RANGE_MM, PHARYNX_Y_RANGE_MM, "the pharyngeal wall lies behind the mouth")
+    hint = _units(pts, PALATE_X_RANGE_MM, PALATE_Y_RANGE_MM)
+    if hint:
+        return None, hint
+    run = pts[0, 0] - pts[-1, 0]
+    if run < PALATE_MIN_LENGTH_MM:
+        return None, (f"the palate runs {run:.1f} mm from front to back (x {pts[0, 0]:.1f} to "
+                      f"{pts[-1, 0]:.1f} mm), not at least {PALATE_MIN_LENGTH_MM:.0f} mm: "
+                      "reversed? PAL.DAT runs front to back")
+    forward = np.diff(pts[:, 0]) > PALATE_MAX_FORWARD_STEP_MM
+    if forward.any():
+        k = int(np.argmax(forward)) + 1
+        step = pts[k, 0] - pts[k - 1, 0]
+        return k, (f"point {k + 1} is {step:.1f} mm in front of the one before: the palate "
+                   "must run front to back (points shuffled or zig-zag?)")
+    return _outside(pts, PALATE_X_RANGE_MM, PALATE_Y_RANGE_MM,
+                    "the palate lies behind and above the upper incisor tip")
+
+
+def write_outline(
+    path: str | os.PathLike, points_mm: Float[np.ndarray, "n 2"], *, overwrite: bool = False
+) -> Path:
     """Write ``(n, 2)`` mm points as an outline file: integer um, leading spaces, CRLF.
 
     Rounded to the nearest um, so reading back is exact at that resolution. Written

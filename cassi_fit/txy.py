@@ -15,15 +15,25 @@ from __future__ import annotations
 
 import os
 import re
+import stat
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from jaxtyping import Bool, Float
 
 from ._io import atomic_write, register_input
 from .errors import DataFormatError, MissingDataError
-from .pellets import JAW_PELLETS, PELLET_NAMES, first_valid_line, pellet_index
+from .pellets import (
+    JAW_PELLETS,
+    PELLET_NAMES,
+    first_clean_line,
+    first_valid_line,
+    pellet_index,
+    plausibility_problem,
+)
 
 UNTRACKED = 1_000_000  # marker in files, per value (um)
 FRAME_STEP_US = 6866  # about 145.6 Hz
@@ -65,6 +75,7 @@ class PelletTrack:
             raise ValueError(
                 f"PelletTrack: valid has shape {valid.shape}, expected {positions.shape}"
             )
+        _check_times(self.path, times, warn_gaps=False)
         object.__setattr__(self, "times", times)
         object.__setattr__(self, "positions", positions)
         object.__setattr__(self, "valid", valid)
@@ -80,11 +91,11 @@ class PelletTrack:
         """Seconds from the first to the last frame (0 for fewer than two frames)."""
         return float(self.times[-1] - self.times[0]) if self.n_frames > 1 else 0.0
 
-    def pellet(self, name: str) -> np.ndarray:
+    def pellet(self, name: str) -> Float[np.ndarray, "n 2"]:
         """``(n, 2)`` mm positions of one pellet (NaN where untracked)."""
         return self.positions[:, pellet_index(name), :]
 
-    def frame_valid(self, pellets: Sequence[str] = PELLET_NAMES) -> np.ndarray:
+    def frame_valid(self, pellets: Sequence[str] = PELLET_NAMES) -> Bool[np.ndarray, " n"]:
         """``(n,)`` bool: True where x and y of every pellet in ``pellets`` are tracked."""
         idx = [pellet_index(p) for p in pellets]
         return self.valid[:, idx, :].all(axis=(1, 2))
@@ -102,19 +113,15 @@ def first_valid_frame(track: PelletTrack, pellets: Sequence[str] | None = None) 
     """Index of CASSI's first valid line (initialisation step 1).
 
     Default: the one rule of :func:`cassi_fit.pellets.first_valid_line` (the first frame
-    in which every pellet the file ever tracks is tracked; ``MissingDataError`` if a jaw
-    pellet is never tracked). With ``pellets``: the first frame in which those pellets
-    are all tracked (x and y), e.g. ``JAW_PELLETS`` for the jaw alone. Raises
-    :class:`MissingDataError` naming the file if there is no such frame.
+    in which every pellet the file ever tracks is tracked and none is mistracked;
+    ``MissingDataError`` if a jaw pellet is never tracked). With ``pellets``: the same
+    rule for those pellets only (:func:`cassi_fit.pellets.first_clean_line`), e.g.
+    ``JAW_PELLETS`` for the jaw fit's reference. Raises :class:`MissingDataError` naming
+    the file if there is no such frame.
     """
     if pellets is None:
         return first_valid_line(track, _where(track)).index
-    ok = track.frame_valid(pellets)
-    if not ok.any():
-        raise MissingDataError(
-            f"{_where(track)}: no frame in which {', '.join(pellets)} are all tracked"
-        )
-    return int(np.argmax(ok))
+    return first_clean_line(track, pellets, _where(track))
 
 
 def require_tracked(track: PelletTrack, pellets: Sequence[str] = JAW_PELLETS) -> None:
@@ -126,6 +133,69 @@ def require_tracked(track: PelletTrack, pellets: Sequence[str] = JAW_PELLETS) ->
     never = [p for p in pellets if not track.frame_valid((p,)).any()]
     if never:
         raise MissingDataError(f"{_where(track)}: pellet(s) {', '.join(never)} never tracked")
+
+
+#: Times: XRMB tasks last seconds to about a minute; three hours (1.5 million frames) is
+#: beyond any recording, while long synthetic or concatenated files (200k lines = 23
+#: minutes) stay readable.
+MAX_TIME_S = 3 * 3600.0
+#: No recording pauses this long between two frames: an error naming the line.
+MAX_GAP_S = 60.0
+#: Frame spacing (median step) accepted: 1 to 100 ms (the files' is 6.866 ms).
+FRAME_STEP_RANGE_S = (1e-3, 0.1)
+#: A step longer than this between two frames is reported (TimeGapWarning).
+LONG_GAP_S = 1.0
+
+
+class TimeGapWarning(UserWarning):
+    """Two consecutive frames of a pellet file are more than ``LONG_GAP_S`` apart."""
+
+
+def _check_times(path: Path | None, times: np.ndarray, lines: Sequence[int] | None = None,
+                 *, warn_gaps: bool = True) -> None:
+    """Refuse times that are not finite, negative, beyond ``MAX_TIME_S``, not strictly
+    increasing or with a gap over ``MAX_GAP_S``; warn about a gap over ``LONG_GAP_S``. ``times`` in s; ``lines``:
+    the file's line number of each frame (for messages), else frame numbers."""
+    where = path if path is not None else "<pellet track>"
+    line = (lambda k: lines[k]) if lines is not None else (lambda k: None)
+    at = "" if lines is not None else " (frame {k})"
+    checks = (
+        (~np.isfinite(times), "time is not a finite number"),
+        (times < 0, "time {t} us is negative (XRMB times start at 0)"),
+        (times > MAX_TIME_S, "time {t} us is beyond " + f"{MAX_TIME_S:.0f} s, longer than any "
+         "XRMB task (times must be in microseconds)"),
+    )
+    for bad, message in checks:
+        if bad.any():
+            k = int(np.argmax(bad))
+            t = f"{times[k] * 1e6:.0f}" if np.isfinite(times[k]) else str(times[k])
+            raise DataFormatError(where, line(k), message.format(t=t) + at.format(k=k))
+    steps = np.diff(times)
+    if (steps <= 0).any():
+        k = int(np.argmax(steps <= 0)) + 1
+        raise DataFormatError(where, line(k), f"time {times[k] * 1e6:.0f} us does not increase "
+                              f"(previous {times[k - 1] * 1e6:.0f} us){at.format(k=k)}")
+    if (steps > MAX_GAP_S).any():
+        k = int(np.argmax(steps > MAX_GAP_S)) + 1
+        raise DataFormatError(where, line(k), f"{steps[k - 1]:.0f} s gap after the previous "
+                              f"frame (more than {MAX_GAP_S:.0f} s: a wrong time?){at.format(k=k)}")
+    if warn_gaps and steps.size and (steps > LONG_GAP_S).any():
+        k = int(np.argmax(steps > LONG_GAP_S)) + 1
+        name = f"{where}:{line(k)}" if lines is not None else f"{where} (frame {k})"
+        warnings.warn(f"{name}: {steps[k - 1]:.1f} s gap after the previous frame "
+                      "(sound and pellets may not line up there)", TimeGapWarning, stacklevel=4)
+
+
+def _check_frame_step(path: Path, times: np.ndarray) -> None:
+    """The median frame spacing must be a plausible XRMB rate (``FRAME_STEP_RANGE_S``)."""
+    if times.size < 2:
+        return
+    step = float(np.median(np.diff(times)))
+    lo, hi = FRAME_STEP_RANGE_S
+    if not lo <= step <= hi:
+        raise DataFormatError(path, None, f"median frame spacing {step * 1e6:.0f} us is outside "
+                              f"{lo * 1e6:.0f}-{hi * 1e6:.0f} us (XRMB frames are {FRAME_STEP_US} "
+                              "us apart; are the times in microseconds?)")
 
 
 def _decode(path: Path, raw: bytes) -> str:
@@ -142,11 +212,16 @@ def _decode(path: Path, raw: bytes) -> str:
 def read_lines(path: str | os.PathLike) -> tuple[Path, list[tuple[int, str]]]:
     """Read a text data file: register it as input, decode, return ``(lineno, line)`` pairs.
 
-    Accepts a UTF-8 BOM, CRLF or LF. Blank (white-space only) lines are dropped; line
+    Refuses anything but a regular file (a FIFO would block). Accepts a UTF-8 BOM, CRLF or LF. Blank (white-space only) lines are dropped; line
     numbers are 1-based in the file as stored. Shared by the toolkit's text readers.
     """
     path = Path(path)
     try:
+        # a FIFO, device or socket would block or never end: refuse it before opening
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            if path.is_dir():
+                raise IsADirectoryError(path)
+            raise DataFormatError(path, None, "not a regular file (a pipe, device or socket)")
         raw = path.read_bytes()
     except IsADirectoryError:
         raise DataFormatError(path, None, "is a folder, not a file") from None
@@ -191,33 +266,36 @@ def _parse_row(path: Path, lineno: int, line: str) -> list[int]:
     return [parse_int(path, lineno, t) for t in tokens]
 
 
-def read_txy(path: str | os.PathLike) -> PelletTrack:
+def read_txy(path: str | os.PathLike, *, check: bool = True) -> PelletTrack:
     """Read a pellet file into a :class:`PelletTrack` (seconds, mm, validity mask).
 
     Accepts tabs or any white space, CRLF or LF, blank lines (skipped), a UTF-8 BOM.
     Raises :class:`DataFormatError` (file and line) for a wrong field count, a token that
-    is not an integer, an empty file, or times that do not strictly increase; and
-    :class:`MissingDataError` if no value in the file is tracked at all.
+    is not an integer, an empty file, times that are negative, beyond ``MAX_TIME_S``,
+    that do not strictly increase or jump by more than ``MAX_GAP_S``, a frame spacing outside ``FRAME_STEP_RANGE_S``; with
+    ``check`` (default), for implausible geometry or units
+    (:func:`cassi_fit.pellets.plausibility_problem`); and :class:`MissingDataError` if no
+    value in the file is tracked at all. A gap over ``LONG_GAP_S`` warns
+    (:class:`TimeGapWarning`, naming the line).
     """
     path, lines = read_lines(path)
     if not lines:
         raise DataFormatError(path, None, "empty file (no data lines)")
     rows = np.array([_parse_row(path, n, s) for n, s in lines], dtype=np.int64)
-    times_us = rows[:, 0]
-    bad = np.flatnonzero(np.diff(times_us) <= 0)
-    if bad.size:
-        k = int(bad[0]) + 1
-        raise DataFormatError(
-            path,
-            lines[k][0],
-            f"time {times_us[k]} us does not increase (previous {times_us[k - 1]} us)",
-        )
+    times = rows[:, 0] / 1e6
+    _check_times(path, times, [n for n, _ in lines])
     coords = rows[:, 1:].reshape(-1, len(PELLET_NAMES), 2)
     valid = coords != UNTRACKED
     if not valid.any():
         raise MissingDataError(f"{path}: no tracked value at all (every value is {UNTRACKED})")
     positions = np.where(valid, coords / 1e3, np.nan)
-    return PelletTrack(times=times_us / 1e6, positions=positions, valid=valid, path=path)
+    track = PelletTrack(times=times, positions=positions, valid=valid, path=path)
+    if check:
+        _check_frame_step(path, times)
+        problem = plausibility_problem(track)
+        if problem is not None:
+            raise DataFormatError(path, None, problem)
+    return track
 
 
 def _to_int_rows(path: Path, track: PelletTrack) -> np.ndarray:

@@ -54,3 +54,44 @@ def test_unexpected_error_is_one_line_and_debug_shows_traceback(failing_command,
     assert capsys.readouterr().err == "cassi: error: RuntimeError: first line\n"
     with pytest.raises(RuntimeError):
         cli.main(["--debug", "boom"])
+
+
+def test_sigterm_cleans_up_like_ctrl_c(monkeypatch, tmp_path, capsys):
+    """SIGTERM mid-write: exit 130, no temporary file left (the writer's clean-up ran)."""
+    import os
+    import signal
+    import time
+
+    from cassi_fit._io import atomic_write
+
+    def not_converted(signum, frame):  # what runs if cli.main does not convert SIGTERM
+        raise RuntimeError("SIGTERM reached the previous handler")
+
+    previous = signal.signal(signal.SIGTERM, not_converted)
+    module = types.ModuleType("cassi_fit._cli.slow")
+
+    def write(fh):
+        fh.write("half")
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)  # interrupted by the handler
+
+    def register(subparsers):
+        p = subparsers.add_parser("slow", help="writes slowly")
+        p.set_defaults(func=lambda args: atomic_write(tmp_path / "out.txt", write))
+
+    module.register = register
+    monkeypatch.setitem(sys.modules, "cassi_fit._cli.slow", module)
+    monkeypatch.setattr(cli, "SUBCOMMANDS", cli.SUBCOMMANDS + ("slow",))
+    try:
+        assert cli.main(["slow"]) == 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert capsys.readouterr().err == "cassi: interrupted\n"
+    assert list(tmp_path.iterdir()) == []
+    assert signal.getsignal(signal.SIGTERM) is previous
+
+
+def test_broken_pipe_is_quiet(failing_command, capsys):
+    failing_command["exc"] = BrokenPipeError(32, "Broken pipe")
+    assert cli.main(["boom"]) == 141
+    assert capsys.readouterr().err == ""

@@ -20,7 +20,9 @@ def pellet_file(tmp_path_factory):
     jaw = np.asarray(jax.vmap(lambda th: rigid.apply(*rigid.from_pivot(th, PIVOT), REFERENCE))(
         theta))
     positions = np.zeros((n, 8, 2))
-    positions[:, :6] = np.arange(12.0).reshape(6, 2)
+    # lips and tongue in a plausible posture (read_txy checks the anatomy)
+    positions[:, :6] = [[15.0, 18.0], [9.0, -21.0], [-17.0, 1.0], [-28.0, 8.0], [-39.0, 15.0],
+                        [-53.0, 17.0]]
     positions[:, 6:] = jaw
     valid = np.ones((n, 8, 2), bool)
     valid[:2] = False  # leading untracked rows, as in real files

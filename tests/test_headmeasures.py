@@ -46,11 +46,11 @@ def test_round_trip_and_refusals(tmp_path):
 
 def test_columns_in_any_order_and_case(tmp_path):
     cols = list(reversed(FIELD_NAMES))
-    vals = [str(float(i + 1)) for i in range(10)]
+    vals = [str(getattr(DEFAULT_HEAD_MEASURES, c) + 0.5) for c in cols]
     p = tmp_path / "h.txt"
     p.write_text("SUBJECT " + " ".join(c.upper() for c in cols) + "\nx1 " + " ".join(vals) + "\n")
     m = read_headmeasures(p)["X1"]
-    assert m.nose_protrusion == 1.0 and m.gonion_x == 10.0
+    assert m.nose_protrusion == 20.5 and m.gonion_x == -84.5
 
 
 @pytest.mark.parametrize(

@@ -22,7 +22,8 @@ def test_fixtures():
 
 
 def test_round_trip_and_format(tmp_path):
-    pts = np.random.default_rng(1).uniform(-60, 30, size=(20, 2))
+    rng = np.random.default_rng(1)  # a random palate: front to back, above the incisor tip
+    pts = np.stack([np.sort(rng.uniform(-60, -4, 20))[::-1], rng.uniform(4, 27, 20)], axis=1)
     p = write_outline(tmp_path / "PAL.DAT", pts)
     raw = p.read_bytes()
     assert raw.count(b"\r\n") == 20 and all(s.startswith(b" ") for s in raw.split(b"\r\n")[:-1])

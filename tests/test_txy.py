@@ -19,13 +19,19 @@ from cassi_fit.txy import (
 )
 
 FIXTURES = Path(__file__).parent / "fixtures"
-ROW = "\t".join(["0"] + ["1000"] * 16)
+# a plausible rest posture in um (the reader checks the anatomy): UL LL T1..T4 MNI MNM
+POSTURE = ["15000", "18000", "9000", "-21000", "-17000", "1000", "-28000", "8000", "-39000",
+           "15000", "-53000", "17000", "-1000", "-8000", "-43000", "-3000"]
+ROW = "\t".join(["0"] + POSTURE)
 
 
 def _track(n=6, seed=0):
     rng = np.random.default_rng(seed)
     times = np.arange(n) * FRAME_STEP_US * 1e-6
-    positions = rng.uniform(-70, 30, size=(n, 8, 2))
+    # random values around a plausible posture (the reader checks the anatomy)
+    rest = np.array([[15, 18], [9, -21], [-17, 1], [-28, 8], [-39, 15], [-53, 17], [-1, -8],
+                     [-43, -3]], dtype=float)
+    positions = rest + rng.uniform(-1.5, 1.5, size=(n, 8, 2))
     valid = rng.random((n, 8, 2)) > 0.2
     return PelletTrack(times, positions, valid)
 
@@ -97,9 +103,10 @@ def test_writers_refuse_to_overwrite(tmp_path):
 
 
 def test_whitespace_lf_bom_and_blank_lines(tmp_path):
-    body = "\n".join(f"{t}  " + "   ".join(["1500"] * 16) for t in (0, 6866)) + "\n\n  \n"
+    body = "\n".join(f"{t}  " + "   ".join(POSTURE) for t in (0, 6866)) + "\n\n  \n"
     track = read_txy(_write(tmp_path, "\ufeff" + body))
-    assert track.n_frames == 2 and np.all(track.positions == 1.5)
+    expected = np.array([int(v) for v in POSTURE]).reshape(8, 2) / 1e3
+    assert track.n_frames == 2 and np.all(track.positions == expected)
 
 
 @pytest.mark.parametrize(

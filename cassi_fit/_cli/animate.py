@@ -211,11 +211,10 @@ def run(args) -> int:
         raise CassiError(f"--out {out}: must end in {', '.join(ANIMATION_SUFFIXES)}")
     recording = load_recording_args(args.recording)
     out = out or Path(f"{recording.subject}_{recording.task}.mp4")
-    if out.exists() and not args.force:
-        raise CassiError(f"{out}: file exists (pass --force to replace it)")
     csv_out = Path(args.penetration) if args.penetration else None
-    if csv_out is not None and csv_out.exists() and not args.force:
-        raise CassiError(f"{csv_out}: file exists (pass --force to replace it)")
+    from cassi_fit._io import check_outputs  # before any work: no input, no clash, no overwrite
+
+    check_outputs([out, csv_out], overwrite=args.force)
     state, animation = animate_recording(recording, args)
     from cassi_fit.render import Renderer
     from cassi_fit.reports import penetration_summary, write_penetration_csv

@@ -56,6 +56,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    from cassi_fit._io import check_outputs
     from cassi_fit.errors import CassiError
     from cassi_fit.export import export_frame, export_glb
 
@@ -63,11 +64,10 @@ def run(args) -> int:
     suffix = out.suffix.lower()
     if suffix not in SUFFIXES:
         raise CassiError(f"--out {out}: must end in {', '.join(SUFFIXES)}")
-    if out.exists() and not args.force:
-        raise CassiError(f"{out}: file exists (pass --force to replace it)")
     if args.max_keyframes < 0 or args.max_keyframes == 1:
         raise CassiError(f"--max-keyframes must be 0 or at least 2, got {args.max_keyframes}")
     recording = load_recording_args(args.recording)
+    check_outputs([out], overwrite=args.force)  # before any work: never an input or data file
     state, animation = animate_recording(recording, args)
     model = state.model
     if suffix == ".glb":

@@ -64,7 +64,7 @@ def collect(path: Path, list_only: bool = False) -> dict:
     from cassi_fit.dataset import Dataset, load_recording
     from cassi_fit.errors import MissingDataError
 
-    if path.is_file():
+    if path.exists() and not path.is_dir():  # a file (load_recording refuses a FIFO)
         rec = _quietly(load_recording, path)
         info = _describe(rec)
         return {"path": str(path), "kind": "file", "subject": rec.subject, "task": rec.task, **info}
@@ -98,8 +98,10 @@ def _print_file(report: dict, out) -> None:
     q = report["quality"]
     first = q["first_valid_frame"]
     print(f"{report['subject']} {report['task']}  {report['path']}", file=out)
+    paper = q.get("first_complete_frame")
+    moved = f" (moved from {paper}: mistracked)" if paper is not None and paper != first else ""
     print(f"  frames {q['n_frames']}  duration {q['duration_s']:.3f} s  first valid frame "
-          f"{'-' if first is None else first}  first jaw frame "
+          f"{'-' if first is None else first}{moved}  first jaw frame "
           f"{'-' if q['first_jaw_frame'] is None else q['first_jaw_frame']}", file=out)  # fmt: skip
     print(f"  palate {report['palate_points'] or '-'} points  pharynx "
           f"{report['pharynx_points'] or '-'} points  head measures "

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._io import OutputGroup, atomic_outputs
 from ..errors import OutputExistsError
 from ._measures import MEASURES
 from ._ratings import (
@@ -104,22 +105,44 @@ OUTPUT_NAMES = ("evaluation_subjects.csv", "evaluation_recordings.csv", "evaluat
 
 
 def write_table(
-    result: EvaluationResult, out_dir: str | os.PathLike, *, overwrite: bool = False
+    result: EvaluationResult, out_dir: str | os.PathLike, *, overwrite: bool = False,
+    group: OutputGroup | None = None,
 ) -> list[Path]:
     """Write ``evaluation_subjects.csv``, ``evaluation_recordings.csv`` and
-    ``evaluation.md`` into ``out_dir``; each atomically. Refuses (``OutputExistsError``)
-    before writing anything if one exists and ``overwrite`` is false."""
-    from .._io import atomic_write
-
+    ``evaluation.md`` into ``out_dir``, all or nothing (``_io.atomic_outputs``: an error
+    or Ctrl-C leaves none of them). Refuses (``OutputExistsError``) before writing
+    anything if one exists and ``overwrite`` is false. ``group``: stage the files in a
+    caller's ``atomic_outputs`` group instead (they appear when it ends)."""
     out_dir = Path(out_dir)
     paths = [out_dir / name for name in OUTPUT_NAMES]
     existing = [str(p) for p in paths if p.exists()]
     if existing and not overwrite:
         raise OutputExistsError(
             f"{', '.join(existing)}: file exists (pass overwrite=True / --force to replace it)")
+    if group is None:
+        with atomic_outputs(overwrite=overwrite) as own:
+            return write_table(result, out_dir, overwrite=overwrite, group=own)
     md = "# Objective evaluation (CASSI Table 2)\n\n" + markdown_table(result)
     texts = (_csv_text(result.subjects, _SUBJECT_META), _csv_text(result.recordings, _META), md)
-    return [atomic_write(p, t, overwrite=overwrite) for p, t in zip(paths, texts, strict=True)]
+    return [group.write(p, t) for p, t in zip(paths, texts, strict=True)]
+
+
+SUMMARY_NAME = "evaluation_summary.png"
+
+
+def write_report(
+    result: EvaluationResult, out_dir: str | os.PathLike, *, overwrite: bool = False,
+    summary_name: str = SUMMARY_NAME,
+) -> list[Path]:
+    """The whole evaluation output, all or nothing: :func:`write_table`'s three files and
+    :func:`plot_summary`'s figure (``summary_name``) in ``out_dir``; an error or Ctrl-C
+    while writing any of them leaves none. Returns the four paths."""
+    out_dir = Path(out_dir)
+    with atomic_outputs(overwrite=overwrite) as group:
+        written = write_table(result, out_dir, overwrite=overwrite, group=group)
+        written.append(plot_summary(result, out_dir / summary_name, overwrite=overwrite,
+                                    group=group))
+    return written
 
 
 def compare(a: EvaluationResult, b: EvaluationResult, *,
@@ -156,18 +179,21 @@ _PLOTTED = {
 
 
 def plot_summary(
-    result: EvaluationResult, path: str | os.PathLike, *, overwrite: bool = False
+    result: EvaluationResult, path: str | os.PathLike, *, overwrite: bool = False,
+    group: OutputGroup | None = None,
 ) -> Path:
     """A PNG: top row, subjects per rating for teeth, lips, tongue (beside CASSI's Table 2
-    counts); bottom row, the key measures per subject against their thresholds (dashed)."""
+    counts); bottom row, the key measures per subject against their thresholds (dashed).
+    Written atomically; ``group``: staged in a caller's ``atomic_outputs`` group."""
+    if group is None:
+        with atomic_outputs(overwrite=overwrite) as own:
+            return plot_summary(result, path, overwrite=overwrite, group=own)
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .._io import atomic_output_path, commit_output
-
-    tmp, final = atomic_output_path(path, overwrite=overwrite)
+    tmp = group.path(path)
     rated = [s for s in result.subjects if s.rated]
     totals = result.totals()
     fig, axes = plt.subplots(2, 3, figsize=(13, 7.5), constrained_layout=True)
@@ -200,10 +226,7 @@ def plot_summary(
     fig.suptitle(f"Objective evaluation: calibration {s.get('calibration', '?')}, "
                  f"collisions {s.get('collisions', '?')}")
     try:
-        fig.savefig(tmp, dpi=100)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        fig.savefig(tmp, dpi=100)  # the group removes tmp on any failure
     finally:
         plt.close(fig)
-    return commit_output(tmp, final)
+    return Path(path)
