@@ -59,6 +59,7 @@ if TYPE_CHECKING:
     from .evaluate import compare as compare
     from .evaluate import evaluate_dataset as evaluate_dataset
     from .evaluate import evaluate_recording as evaluate_recording
+    from .evaluate import write_report as write_report
     from .evaluate import write_table as write_table
     from .face_model import MATERIALS as MATERIALS
     from .face_model import FaceModel as FaceModel
@@ -106,6 +107,8 @@ if TYPE_CHECKING:
     from .palate import with_palate as with_palate
     from .pellets import JAW_PELLETS as JAW_PELLETS
     from .pellets import PELLET_NAMES as PELLET_NAMES
+    from .pellets import MistrackedFirstLineWarning as MistrackedFirstLineWarning
+    from .pellets import first_clean_line as first_clean_line
     from .pellets import first_valid_line as first_valid_line
     from .pellets import pellet_index as pellet_index
     from .quality import QualityReport as QualityReport
@@ -125,6 +128,7 @@ if TYPE_CHECKING:
     from .synth import make_subject as make_subject
     from .synth import synth_recording as synth_recording
     from .txy import PelletTrack as PelletTrack
+    from .txy import TimeGapWarning as TimeGapWarning
     from .txy import first_valid_frame as first_valid_frame
     from .txy import read_txy as read_txy
     from .txy import require_tracked as require_tracked
@@ -151,12 +155,15 @@ _PUBLIC = {
     "JAW_PELLETS": "pellets",
     "pellet_index": "pellets",
     "first_valid_line": "pellets",
+    "first_clean_line": "pellets",
+    "MistrackedFirstLineWarning": "pellets",
     # txy (data)
     "PelletTrack": "txy",
     "read_txy": "txy",
     "write_txy": "txy",
     "first_valid_frame": "txy",
     "require_tracked": "txy",
+    "TimeGapWarning": "txy",
     # outlines (data)
     "read_outline": "outlines",
     "write_outline": "outlines",
@@ -254,6 +261,7 @@ _PUBLIC = {
     "evaluate_recording": "evaluate",
     "EvaluationResult": "evaluate",
     "write_table": "evaluate",
+    "write_report": "evaluate",
     "compare": "evaluate",
     # corpus (runs)
     "run_corpus": "corpus",
@@ -271,22 +279,22 @@ __all__ = [
     "DegenerateGeometryError", "Dogleg", "EvaluationResult", "FaceModel", "FaceParams",
     "FixedPivot", "FrameFit", "GaussNewton", "HeadMeasures", "InvalidChoiceError", "JAW_METHODS",
     "JAW_PELLETS", "JawDiagnostics", "JawFit", "JawMethod", "JawTruth", "Labels",
-    "LevenbergMarquardt", "MATERIALS", "MissingDataError", "OutputExistsError", "PELLET_NAMES",
-    "PelletTrack", "QualityReport", "Recording", "Renderer", "RenderingUnavailableError",
-    "SOLVERS", "STATUS_LABELS", "SmoothPivot", "Solver", "Status", "SubjectAnatomy",
-    "SubjectState", "TASKS", "Topology", "animate", "animate_recording", "build_palate",
-    "calibrate_dataset", "calibrate_subject", "calibration_choice", "closed_form",
-    "closed_form_paper", "compare", "dataset_items", "default_params", "deform",
-    "detect_mistracks", "ensure_default_corpus", "evaluate_dataset", "evaluate_recording",
-    "first_valid_frame", "first_valid_line", "fit_jaw", "generate_corpus", "initialize",
-    "jaw_corpus", "jaw_diagnostics", "jaw_from_track", "jaw_method", "jaw_solver", "labels_for",
-    "load_anatomy", "load_calibrations", "load_model", "load_recording", "load_truth",
-    "make_subject", "model_pellets", "pellet_index", "quality_report", "read_calibration",
-    "read_headmeasures", "read_lab", "read_labels", "read_outline", "read_textgrid", "read_txy",
-    "repair", "require_tracked", "rigid", "run_corpus", "segment_summary", "synth",
-    "synth_recording", "vertex_normals", "with_palate", "write_animation", "write_calibration",
-    "write_headmeasures", "write_lab", "write_outline", "write_penetration_csv", "write_table",
-    "write_textgrid", "write_txy",
+    "LevenbergMarquardt", "MATERIALS", "MissingDataError", "MistrackedFirstLineWarning",
+    "OutputExistsError", "PELLET_NAMES", "PelletTrack", "QualityReport", "Recording", "Renderer",
+    "RenderingUnavailableError", "SOLVERS", "STATUS_LABELS", "SmoothPivot", "Solver", "Status",
+    "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning", "Topology", "animate",
+    "animate_recording", "build_palate", "calibrate_dataset", "calibrate_subject",
+    "calibration_choice", "closed_form", "closed_form_paper", "compare", "dataset_items",
+    "default_params", "deform", "detect_mistracks", "ensure_default_corpus", "evaluate_dataset",
+    "evaluate_recording", "first_clean_line", "first_valid_frame", "first_valid_line", "fit_jaw",
+    "generate_corpus", "initialize", "jaw_corpus", "jaw_diagnostics", "jaw_from_track",
+    "jaw_method", "jaw_solver", "labels_for", "load_anatomy", "load_calibrations", "load_model",
+    "load_recording", "load_truth", "make_subject", "model_pellets", "pellet_index",
+    "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
+    "read_outline", "read_textgrid", "read_txy", "repair", "require_tracked", "rigid",
+    "run_corpus", "segment_summary", "synth", "synth_recording", "vertex_normals", "with_palate",
+    "write_animation", "write_calibration", "write_headmeasures", "write_lab", "write_outline",
+    "write_penetration_csv", "write_report", "write_table", "write_textgrid", "write_txy",
 ]
 
 

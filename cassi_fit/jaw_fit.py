@@ -958,23 +958,17 @@ def jaw_from_track(track: PelletTrack, *, method: JawMethod | str = "closed-form
     value cannot tilt every frame. ``options`` (``solver``, ``smoothness``, ...) go to
     :func:`fit_jaw` with a method alias. Errors name the file.
     """
-    from .quality import detect_mistracks
-    from .txy import JAW_PELLETS, pellet_index
+    from .pellets import JAW_PELLETS, detect_mistracks, first_clean_line, pellet_index
 
     where = str(track.path) if track.path is not None else "<pellet track>"
     cols = [pellet_index(p) for p in JAW_PELLETS]
     tracked = track.frame_valid(JAW_PELLETS)
-    mistracked = detect_mistracks(track)[:, cols].any(axis=1) & tracked
+    flags = detect_mistracks(track)
+    mistracked = flags[:, cols].any(axis=1) & tracked
     usable = tracked & ~mistracked
     n = track.n_frames
-    if reference_frame is None:
-        if not usable.any():
-            hint = (f"; all {int(tracked.sum())} tracked lines look mistracked (jumps "
-                    f"faster than a jaw moves: check the file's times and units)"
-                    if tracked.any() else "")
-            raise MissingDataError(f"{where}: no line where both jaw pellets (MNI, MNM) are "
-                                   f"tracked and not mistracked{hint}")
-        reference_frame = int(np.flatnonzero(usable)[0])
+    if reference_frame is None:  # the one first-valid-line rule (pellets), for the jaw pellets
+        reference_frame = first_clean_line(track, JAW_PELLETS, where, mistracked=flags)
     elif (isinstance(reference_frame, bool) or not isinstance(reference_frame, (int, np.integer))
           or not 0 <= reference_frame < n):
         raise InvalidChoiceError(f"{where}: reference_frame must be a frame index in "

@@ -129,7 +129,8 @@ def test_mistracked_rows_are_marked(tmp_path, capsys):
     jaw = np.asarray(jax.vmap(lambda th: rigid.apply(*rigid.from_pivot(th, PIVOT), REFERENCE))(
         theta))
     positions = np.zeros((n, 8, 2))
-    positions[:, :6] = np.arange(12.0).reshape(6, 2)
+    positions[:, :6] = [[15.0, 18.0], [9.0, -21.0], [-17.0, 1.0], [-28.0, 8.0], [-39.0, 15.0],
+                        [-53.0, 17.0]]
     positions[:, 6:] = jaw
     positions[0, 6, 1] -= 30.0  # a mistrack in the first valid line
     positions[40, 6, 1] -= 30.0  # and one later

@@ -8,8 +8,6 @@ from pathlib import Path
 
 from cassi_fit.options import COLLISION_MODES, JAW_METHODS
 
-SUMMARY_NAME = "evaluation_summary.png"
-
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -68,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     if not dataset.is_dir():
         raise CassiError(f"{dataset}: no such dataset folder")
     out = Path(args.out)
-    from cassi_fit.evaluate import OUTPUT_NAMES
+    from cassi_fit.evaluate import OUTPUT_NAMES, SUMMARY_NAME
 
     targets = [out / name for name in (*OUTPUT_NAMES, SUMMARY_NAME)]
     existing = [str(p) for p in targets if p.exists()]
@@ -84,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         if not folder.is_dir():
             raise CassiError(f"--calibration {folder}: no such folder")
         calibrations = load_calibrations(folder)
-    from cassi_fit.evaluate import evaluate_dataset, markdown_table, plot_summary, write_table
+    from cassi_fit.evaluate import SUMMARY_NAME, evaluate_dataset, markdown_table, write_report
 
     result = evaluate_dataset(
         dataset,
@@ -97,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
         stride=args.stride,
     )
     print(markdown_table(result), end="")
-    written = write_table(result, out, overwrite=args.force)
-    written.append(plot_summary(result, out / SUMMARY_NAME, overwrite=args.force))
+    # all or nothing: an interrupted run leaves none of the tables and figure
+    written = write_report(result, out, overwrite=args.force, summary_name=SUMMARY_NAME)
     print("wrote " + ", ".join(str(p) for p in written), file=sys.stderr)
     return 1 if not any(s.rated for s in result.subjects) else 0

@@ -49,9 +49,11 @@ from ._ratings import problems as problems
 from ._ratings import rate as rate
 from ._ratings import rating as rating
 from ._report import OUTPUT_NAMES as OUTPUT_NAMES
+from ._report import SUMMARY_NAME as SUMMARY_NAME
 from ._report import compare as compare
 from ._report import markdown_table as markdown_table
 from ._report import plot_summary as plot_summary
+from ._report import write_report as write_report
 from ._report import write_table as write_table
 from ._rows import NO_RECORDING as NO_RECORDING
 from ._rows import EvaluationResult as EvaluationResult
@@ -69,5 +71,5 @@ __all__ = [
     "TONGUE_POKE_MM", "EvaluationResult", "MeasureSpec", "RecordingRow", "SubjectRow",
     "combine", "compare", "describe", "evaluate_dataset", "evaluate_recording",
     "markdown_table", "measure", "penetration_of", "plot_summary", "problems", "rate",
-    "rating", "sustain_frames", "sustained_max", "sustained_min", "write_table",
+    "rating", "sustain_frames", "sustained_max", "sustained_min", "write_report", "write_table", "SUMMARY_NAME",
 ]  # fmt: skip
