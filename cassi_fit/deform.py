@@ -126,7 +126,7 @@ def lips(
     return jnp.concatenate([xy, z[:, None]], -1)
 
 
-def tongue_midline(model: FaceModel) -> tuple[np.ndarray, np.ndarray]:
+def tongue_midline(model: FaceModel) -> tuple[Int[np.ndarray, " n"], Int[np.ndarray, " n"]]:
     """``(tongue, top)``: the tongue region's vertex indices ``(n,)`` and, for each, the
     index of the upper-midline vertex of its cross-section ``(n,)``. Static numpy, from
     the topology only (usable under ``jit``).
