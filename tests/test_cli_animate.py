@@ -214,7 +214,6 @@ def test_demo_writes_everything_and_reruns(corpus, tmp_path, capsys, monkeypatch
         (["animate", "{txy}", "--out", "{existing}"], "exists"),
         (["animate", "{txy}", "--mode", "cassi", "--collisions", "project"], "collision"),
         (["animate", "{txy}", "--cassi", "--mode", "improved"], "disagree"),
-        (["animate", "{txy}", "--mode", "paper"], "--mode"),
     ],
 )
 def test_errors_are_one_line(argv, fragment, corpus, sentence, tmp_path, capsys):
