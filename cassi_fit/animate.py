@@ -140,13 +140,14 @@ def frame_params(
 
 
 @eqx.filter_jit
-def _geometry_kernel(model, params, jaw_weights, tongue_anchor, collisions, report):
-    """Compiled once per (model topology, frame count, the four static options)."""
+def _geometry_kernel(model, params, style, collisions, report):
+    """Compiled once per (model topology, frame count, the static options); ``style``:
+    the ``deform.deform`` keywords as a tuple of pairs (hashable)."""
     from . import collide
     from .deform import deform, model_pellets
 
     def one(p):
-        vertices = deform(model, p, jaw_weights=jaw_weights, tongue_anchor=tongue_anchor)
+        vertices = deform(model, p, **dict(style))
         before = collide.report(model, vertices) if report else None
         if collisions == "project":
             vertices = collide.project(model, vertices)
@@ -164,15 +165,26 @@ def _geometry_kernel(model, params, jaw_weights, tongue_anchor, collisions, repo
 
 def batch_geometry(
     model: eqx.Module, params: eqx.Module, *, jaw_weights: str = "cassi", tongue_anchor: str = "follow",
-    collisions: str = "off", report: bool = False,
+    collisions: str = "off", report: bool = False, tongue_shape: str = "thick",
+    lip_rounding: bool = True,
 ) -> tuple:
     """All frames of ``params`` (FaceParams with a leading ``(m,)`` axis) in one compiled
     call: vertices ``(m, V, 3)`` and model pellet sites ``(m, 8, 2)`` mm; with ``report``,
     also the per-frame penetration depths before and after projection (two dicts of
-    ``(m,)`` mm, keys ``collide.REPORT_KEYS``). ``m`` is not padded here."""
+    ``(m,)`` mm, keys ``collide.REPORT_KEYS``). ``m`` is not padded here. ``jaw_weights``,
+    ``tongue_anchor``, ``tongue_shape``, ``lip_rounding``: as ``deform.deform``."""
     check_choice("collisions", collisions, COLLISION_MODES)
-    out = _geometry_kernel(model, params, jaw_weights, tongue_anchor, collisions, bool(report))
+    style = (("jaw_weights", jaw_weights), ("tongue_anchor", tongue_anchor),
+             ("tongue_shape", tongue_shape), ("lip_rounding", bool(lip_rounding)))
+    out = _geometry_kernel(model, params, style, collisions, bool(report))
     return out if report else out[:2]
+
+
+def style_of(state: eqx.Module) -> dict:
+    """The ``deform.deform`` keywords a ``SubjectState`` was initialized with."""
+    return {"jaw_weights": state.jaw_weights, "tongue_anchor": state.tongue_anchor,
+            "tongue_shape": getattr(state, "tongue_shape", "thick"),
+            "lip_rounding": bool(getattr(state, "lip_rounding", True))}
 
 
 def frame_bucket(m: int) -> int:
@@ -208,8 +220,7 @@ def geometry(
     check_choice("collisions", collisions, COLLISION_MODES)
     m = int(jnp.shape(params.jaw_theta)[0])
     batch = jax.tree.map(lambda x: pad_frames(x, frame_bucket(m)), params)
-    vertices, sites = batch_geometry(state.model, batch, jaw_weights=state.jaw_weights,
-                                     tongue_anchor=state.tongue_anchor, collisions=collisions)
+    vertices, sites = batch_geometry(state.model, batch, collisions=collisions, **style_of(state))
     return _unpad((vertices, sites), m)
 
 
@@ -282,8 +293,8 @@ def animate(
     report = has_collision_data(state.model)
     if collisions != "off":
         require_collision_data(state.model)
-    out = batch_geometry(state.model, params, jaw_weights=state.jaw_weights,
-                         tongue_anchor=state.tongue_anchor, collisions=collisions, report=report)
+    out = batch_geometry(state.model, params, collisions=collisions, report=report,
+                         **style_of(state))
     vertices, sites, params = _unpad((out[0], out[1], params), m)
     before, after = ({k: np.asarray(v)[:m] for k, v in d.items()} for d in out[2:]) if report \
         else ({}, {})

@@ -49,6 +49,7 @@ pytree :class:`Unknowns`.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -59,7 +60,17 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
-from .conformation import FORMAT, Calibration, lips_ahead, plain, with_values
+from .conformation import (
+    BOUND_HIT_FRACTION,
+    FORMAT,
+    JAW_SCALE_BOUND,
+    JAW_TURN_BOUND_RAD,
+    Calibration,
+    lips_ahead,
+    plain,
+    skin_landmarks,
+    with_values,
+)
 from .dataset import Dataset, Recording, recording_source
 from .errors import CassiError, DataFormatError, DegenerateGeometryError, MissingDataError
 from .face_model import FaceModel
@@ -100,6 +111,28 @@ class Unknowns(eqx.Module):
                      for name in UNKNOWN_NAMES))
 
 
+def bounded_jaw(x: Unknowns) -> tuple[Float[Array, ""], Float[Array, " 2"]]:
+    """``(theta rad, log scales (2,))`` of the jaw shape from the unknowns, each kept
+    smoothly inside its anatomical bound ``B`` (``conformation.JAW_TURN_BOUND_RAD``,
+    ``log JAW_SCALE_BOUND``) as ``B tanh(u / B)``: slope 1 at 0 and a bijection onto
+    (-B, B), so a fit whose optimum lies inside the bounds reaches the same shape, and
+    none goes beyond ``B``."""
+    b = math.log(JAW_SCALE_BOUND)
+    return (JAW_TURN_BOUND_RAD * jnp.tanh(x.jaw_theta / JAW_TURN_BOUND_RAD),
+            b * jnp.tanh(x.log_jaw_scale / b))
+
+
+def bounds_hit(x: Unknowns) -> tuple[str, ...]:
+    """The jaw-shape unknowns of ``x`` at (``BOUND_HIT_FRACTION`` of) their bound."""
+    theta, log_scale = (np.asarray(a, np.float64) for a in bounded_jaw(x))
+    b = math.log(JAW_SCALE_BOUND)
+    hit = [name for name, value in zip(("jaw_scale_x", "jaw_scale_y"), log_scale, strict=True)
+           if abs(value) >= BOUND_HIT_FRACTION * b]
+    if abs(float(theta)) >= BOUND_HIT_FRACTION * JAW_TURN_BOUND_RAD:
+        hit.append("jaw_turn")
+    return tuple(hit)
+
+
 #: The unknowns' names, in order.
 UNKNOWN_NAMES = ("log_scale", "upper_lip", "lower_lip", "face_width", "jaw_theta",
                  "log_jaw_scale")
@@ -136,7 +169,8 @@ def _data(model, pellets, head):
         "mask_ll": np.isfinite(p[:, LL]).all(-1).astype(float),
         "pellets": np.nan_to_num(p),
         "d": np.linalg.norm(p[:, MNI] - p[:, MNM], axis=-1),
-        "head_xy": np.array([[head.gonion_x, head.gonion_y], [head.gnathion_x, head.gnathion_y]]),
+        # the skin over the bony Headmeasures points, as the model's landmarks are skin
+        "head_xy": skin_landmarks(model, head),
         "face_width": np.asarray(float(head.face_width)),
         "mouth_width": np.asarray(float(head.mouth_width)),
         "nose": np.asarray(float(head.nose_protrusion)),
@@ -166,10 +200,11 @@ class _Problem:
             # tip, so that the skin over the teeth stays where the teeth are
             tip = jnp.asarray(self.model.vertices)[self.index["lower_incisor_tip"], :2]
             tip = tip.astype(dtype)
-            turn = tip - rotation_matrix(x.jaw_theta) @ tip
+            theta, log_scale = bounded_jaw(x)
+            turn = tip - rotation_matrix(theta) @ tip
             names += ["jaw_shape_theta", "jaw_shape_translation", "jaw_shape_scale",
                       "mouth_width", "nose_tip"]
-            values += [x.jaw_theta, turn, jnp.exp(x.log_jaw_scale), s * data["mouth_width"] / m["mouth_width"],
+            values += [theta, turn, jnp.exp(log_scale), s * data["mouth_width"] / m["mouth_width"],
                        jnp.stack([s * data["nose"] - m["nose_protrusion"], jnp.zeros_like(s)])]
         p = default_params(dtype=dtype)
         return with_values(p, {k: jnp.asarray(v, dtype) for k, v in zip(names, values, strict=True)})
@@ -330,6 +365,11 @@ def calibrate_subject(
         converged &= ok
     problem = _Problem(model, data, measured)
     result = _summarise(problem, x, method, collisions, converged, recordings, lines)
+    if result.bounds_hit:
+        warnings.warn(f"subject {result.subject}: the jaw shape reached its anatomical bound "
+                      f"({', '.join(result.bounds_hit)}; conformation.JAW_SCALE_BOUND, "
+                      "JAW_TURN_BOUND_RAD): its Headmeasures do not fit an adult jaw of the "
+                      "model's proportions", stacklevel=2)
     if not all(np.isfinite(v) for v in (result.scale, result.upper_lip_thickness,
                                         result.lower_lip_thickness, result.face_width)):
         raise CassiError(f"subject {result.subject}: calibration gave a non-finite value")
@@ -403,6 +443,7 @@ def _summarise(problem, x, method, collisions, converged, recordings, lines):
         head_is_default=not problem.measured,
         collisions=bool(collisions),
         converged=bool(converged),
+        bounds_hit=bounds_hit(x) if problem.measured else (),
     )
 
 
@@ -446,7 +487,8 @@ def read_calibration(path: str | Path) -> Calibration:
                 "gonion": (math.nan, math.nan), "gnathion": (math.nan, math.nan),
                 "lip_rest_offset": (0.0, 0.0),
                 "residuals": {}, "observed": {}, "recordings": (), "first_lines": (),
-                "head_is_default": False, "collisions": False, "converged": True}
+                "head_is_default": False, "collisions": False, "converged": True,
+                "bounds_hit": ()}
     for k, v in defaults.items():
         data.setdefault(k, v)
     params = data["params"]
@@ -468,6 +510,10 @@ def read_calibration(path: str | Path) -> Calibration:
     if not _numeric(offset) or np.shape(offset) != (2,) or not np.all(np.isfinite(offset)):
         raise DataFormatError(path, None, "lip_rest_offset must be two numbers (mm)")
     data["lip_rest_offset"] = tuple(float(d) for d in offset)
+    hit = data["bounds_hit"]
+    if not isinstance(hit, (list, tuple)) or not all(isinstance(h, str) for h in hit):
+        raise DataFormatError(path, None, "bounds_hit must be a list of names")
+    data["bounds_hit"] = tuple(hit)
     data["gonion"], data["gnathion"] = tuple(data["gonion"]), tuple(data["gnathion"])
     data["recordings"], data["first_lines"] = tuple(data["recordings"]), tuple(data["first_lines"])
     return Calibration(**data)
@@ -558,11 +604,12 @@ def write_summary(
 
     res_keys = sorted({k for c in calibrations.values() for k in c.residuals})
     header = ["subject", "method", "scale", "upper_lip_thickness_mm", "lower_lip_thickness_mm",
-              "face_width_mm", "converged"] + [f"residual_{k}_mm" for k in res_keys]
+              "face_width_mm", "converged", "bounds_hit"] + [f"residual_{k}_mm" for k in res_keys]
     rows = [",".join(header)]
     for name, c in calibrations.items():
         values = [name, c.method, f"{c.scale:.6f}", f"{c.upper_lip_thickness:.3f}",
-                  f"{c.lower_lip_thickness:.3f}", f"{c.face_width:.3f}", str(c.converged)]
+                  f"{c.lower_lip_thickness:.3f}", f"{c.face_width:.3f}", str(c.converged),
+                  ";".join(c.bounds_hit)]
         values += [f"{c.residuals.get(k, float('nan')):.4f}" for k in res_keys]
         rows.append(",".join(values))
     return atomic_write(Path(path), "\n".join(rows) + "\n", overwrite=overwrite)

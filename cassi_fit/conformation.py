@@ -10,6 +10,12 @@ Three sources (``initialize(..., calibration=...)``, docs/PIPELINE.md):
 * a :class:`Calibration`: the subject's shape fitted through the model by
   ``cassi_fit.calibrate`` (``cassi calibrate``), read back from its JSON file.
 
+Gonion and gnathion in Headmeasures are bone points (paper section 3); the model's are
+skin vertices: :func:`skin_landmarks` maps the one onto the other by the soft-tissue
+thickness of ``headmeasures.SOFT_TISSUE_THICKNESS_MM``. A fitted jaw shape is kept within
+:data:`JAW_SCALE_BOUND` and :data:`JAW_TURN_BOUND_RAD` (adult proportions); a subject
+whose values hit a bound is flagged (``Calibration.bounds_hit``).
+
 Lip thickness is Headmeasures' (docs/FORMATS.md): how far the lip pellet sits ahead of
 the incisor tip at rest; :func:`lips_ahead` measures it on one data line.
 """
@@ -29,13 +35,30 @@ from . import rigid
 from .dataset import Recording
 from .deform import FaceParams, default_params
 from .face_model import FaceModel
-from .headmeasures import HeadMeasures
+from .headmeasures import SOFT_TISSUE_THICKNESS_MM, HeadMeasures
 from .jaw import closed_form
 from .options import CONFORMATIONS, check_choice
 from .pellets import LL, MNI, MNM, UL
 
 #: The ``format`` entry of a calibration file.
 FORMAT = "cassi_fit calibration 1"
+
+#: The fitted jaw's proportions (x and y scale about the lower incisor tip, relative to
+#: the model after the p/d scaling) stay within 1 / b .. b, b = 1.30. Two spreads add up
+#: in that ratio: the jaw itself (the model's bony gonion is 77 mm behind its lower
+#: incisor tip, at the short end of adult jaws, whose gonion lies 80-100 mm behind the
+#: incisors: condyle 90-100 mm, ramus set 2-10 mm ahead of it, the norms of
+#: docs/SYNTHETIC.md), up to 1.25; and p/d, whose pellet spacing MNI-MNM (37-45 mm
+#: against the model's 43.3) scales the whole subject by up to 1.17 although the jaw
+#: is not that much larger. 1.30 admits the first and most of the second; a fit that
+#: wants more is fitting a mismatch (bone read as skin, a wrong measure), not a jaw.
+JAW_SCALE_BOUND = 1.30
+#: The fitted jaw shape's turn stays within +-10 deg: the mandibular plane angle (to
+#: SN) is 32 +- 5 deg in adults, so 2 SD.
+JAW_TURN_BOUND_RAD = float(np.radians(10.0))
+#: A bound counts as hit when the fitted value reaches this fraction of it (the bounded
+#: parameterisation approaches a bound only asymptotically).
+BOUND_HIT_FRACTION = 0.95
 
 
 @dataclass(frozen=True)
@@ -51,6 +74,9 @@ class Calibration:
     vertical displacement from there, so that the lips are together (at rest) where the
     first valid line has them, as the report assumes, instead of being pushed into each
     other or apart by a pellet placed higher or lower on the lip than the model's site.
+    ``bounds_hit``: the jaw-shape unknowns (``"jaw_scale_x"``, ``"jaw_scale_y"``,
+    ``"jaw_turn"``) that reached their anatomical bound (:data:`JAW_SCALE_BOUND`,
+    :data:`JAW_TURN_BOUND_RAD`); empty when the fit stayed inside.
     """
 
     subject: str
@@ -73,6 +99,7 @@ class Calibration:
     collisions: bool
     converged: bool
     format: str = field(default=FORMAT)
+    bounds_hit: tuple = field(default=())
 
     def face_params(self, dtype=float) -> FaceParams:
         """The conformation as a ``deform.FaceParams`` (no animation)."""
@@ -130,12 +157,35 @@ def _xy(model, name) -> np.ndarray:
     return np.asarray(model.vertices)[model.landmarks[name], :2]
 
 
+def skin_normal(model: FaceModel, name: str) -> Float[np.ndarray, " 2"]:
+    """The outward unit normal of the model's rest skin at landmark ``name``, its x, y
+    (midsagittal) part ``(2,)``: area-weighted over the faces around the vertex."""
+    v = np.asarray(model.vertices, np.float64)
+    faces = np.asarray(model.faces)
+    around = faces[(faces == model.landmarks[name]).any(axis=1)]
+    a, b, c = (v[around[:, k]] for k in range(3))
+    n = np.cross(b - a, c - a).sum(axis=0)
+    return n[:2] / np.linalg.norm(n)
+
+
+def skin_landmarks(model: FaceModel, head: HeadMeasures) -> Float[np.ndarray, "2 2"]:
+    """The skin points ``[[gonion], [gnathion]]`` (subject mm, pellet frame) over the
+    subject's bony gonion and gnathion (Headmeasures ``head``): each moved outwards by
+    its soft-tissue thickness (``headmeasures.SOFT_TISSUE_THICKNESS_MM``) along the
+    model's skin normal there (:func:`skin_normal`)."""
+    bone = np.array([[head.gonion_x, head.gonion_y], [head.gnathion_x, head.gnathion_y]])
+    t = SOFT_TISSUE_THICKNESS_MM
+    return bone + np.stack([t["gonion"] * skin_normal(model, "gonion"),
+                            t["gnathion"] * skin_normal(model, "gnathion")])
+
+
 def jaw_shape(model: FaceModel, head: HeadMeasures, scale: float) -> tuple[float, Float[np.ndarray, " 2"]]:
-    """Paper step 5: the closed form from the model's [gnathion, gonion] to the subject's
-    (Headmeasures ``head``, times ``scale``), as ``(theta rad, t (2,) mm)``; neutral if
-    degenerate (jaw status DEGENERATE or worse)."""
+    """Paper step 5: the closed form from the model's [gnathion, gonion] (skin) to the
+    subject's, the skin over its bony Headmeasures points (:func:`skin_landmarks`) times
+    ``scale``, as ``(theta rad, t (2,) mm)``; neutral if degenerate (jaw status
+    DEGENERATE or worse)."""
     reference = np.stack([_xy(model, "gnathion"), _xy(model, "gonion")])
-    current = scale * np.array([[head.gnathion_x, head.gnathion_y], [head.gonion_x, head.gonion_y]])
+    current = scale * skin_landmarks(model, head)[::-1]
     motion = _closed_form_one(jnp.asarray(reference), jnp.asarray(current))
     if int(motion.status) >= 2:
         return 0.0, np.zeros(2)

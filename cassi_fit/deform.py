@@ -10,7 +10,9 @@
    it), with two couplings: lip rounding (the corners move toward each other when the lips
    come forward, CASSI's future work) and the nose tip rising with the upper lip so that a
    gap always remains between them (CASSI section 2, step 3);
-4. tongue: CASSI's #55-#62 (``cassi_fit.tongue``).
+4. tongue: CASSI's #55-#62 (``cassi_fit.tongue``); with ``tongue_shape="flat"`` every
+   cross-section collapses onto its upper midline point (CASSI's tongue: "a flat surface
+   with no thickness", paper section 5), a sheet as wide as the model's tongue.
 
 Everything is written for one frame; ``jax.vmap`` over frames. With default parameters
 every stage is the identity to the last bit, so ``deform`` returns the stored rest mesh.
@@ -27,7 +29,7 @@ from jaxtyping import Float, Int
 
 from . import rigid
 from .face_model import FaceModel
-from .options import JAW_WEIGHTS, TONGUE_ANCHORS, check_choice
+from .options import JAW_WEIGHTS, TONGUE_ANCHORS, TONGUE_SHAPES, check_choice
 from .pellets import PELLET_NAMES
 from .tongue import tongue_displacement
 
@@ -109,40 +111,84 @@ def jaw(model: FaceModel, v: Float[Array, "V 3"], p: FaceParams, weights: str = 
     return v.at[:, :2].set(xy)
 
 
-def lips(model: FaceModel, v: Float[Array, "V 3"], p: FaceParams) -> Float[Array, "V 3"]:
-    """Stage 3: lip displacements, lip rounding and the nose tip coupling."""
+def lips(
+    model: FaceModel, v: Float[Array, "V 3"], p: FaceParams, rounding: bool = True
+) -> Float[Array, "V 3"]:
+    """Stage 3: lip displacements, the nose tip coupling (CASSI section 3) and, with
+    ``rounding`` (static; CASSI's future work, so off in its reproduction), lip rounding."""
     f = model.fields
     xy = v[:, :2] + p.upper_lip * f["upper_lip"][:, None] + p.lower_lip * f["lower_lip"][:, None]
     xy = xy.at[:, 1].add(_smooth_positive(p.upper_lip[1]) * f["nose_rise"])
+    if not rounding:
+        return jnp.concatenate([xy, v[:, 2:]], -1)
     forward = 0.5 * (p.upper_lip[0] + p.lower_lip[0])
     z = v[:, 2] * (1.0 - LIP_ROUNDING_PER_MM * forward * f["mouth"])
     return jnp.concatenate([xy, z[:, None]], -1)
 
 
-def tongue(model: FaceModel, v: Float[Array, "V 3"], p: FaceParams, anchor: str = "follow") -> Float[Array, "V 3"]:
-    """Stage 4: tongue params #55-#62 spread along the tongue (``cassi_fit.tongue``)."""
-    idx = model.regions["tongue"]
+def tongue_midline(model: FaceModel) -> tuple[Int[np.ndarray, " n"], Int[np.ndarray, " n"]]:
+    """``(tongue, top)``: the tongue region's vertex indices ``(n,)`` and, for each, the
+    index of the upper-midline vertex of its cross-section ``(n,)``. Static numpy, from
+    the topology only (usable under ``jit``).
+
+    The layout is ``model/build_model.py``'s tube: stations of ``R`` ring vertices, ring
+    vertex 0 on the upper midline, then a tip and a root vertex; T1..T4 are the upper
+    midline vertices of stations 4, 8, 12, 16, so ``R = (T2 - T1) / 4``. A model with
+    another layout raises ``MissingDataError`` (the flat tongue cannot be built).
+    """
+    from .errors import MissingDataError
+
+    idx = np.asarray(model.regions["tongue"], np.int64)
+    t1, t2 = model.landmarks["T1"], model.landmarks["T2"]
+    ring = (t2 - t1) // 4
+    start = t1 - 4 * ring
+    stations = (idx.size - 2) // ring if ring > 0 else 0
+    if ring < 3 or stations * ring + 2 != idx.size or not np.array_equal(
+            idx, start + np.arange(idx.size)):
+        raise MissingDataError(
+            "the face model's tongue is not build_model.py's tube (stations of rings, "
+            "then tip and root); the flat tongue needs that layout")
+    station = np.minimum(np.arange(idx.size) // ring, stations - 1)
+    station[-2] = 0  # the tip vertex belongs to the first station
+    return idx, start + station * ring
+
+
+def tongue(
+    model: FaceModel, v: Float[Array, "V 3"], p: FaceParams, anchor: str = "follow",
+    shape: str = "thick",
+) -> Float[Array, "V 3"]:
+    """Stage 4: tongue params #55-#62 spread along the tongue (``cassi_fit.tongue``);
+    ``shape`` (static, ``options.TONGUE_SHAPES``): ``"flat"`` puts every vertex of a
+    cross-section on its upper midline point in x, y (keeping z, the width): a sheet of
+    zero thickness through T1..T4, as CASSI's tongue."""
+    check_choice("tongue anchor", anchor, TONGUE_ANCHORS)
+    check_choice("tongue shape", shape, TONGUE_SHAPES)
+    idx, top = tongue_midline(model)
     s = model.fields["tongue_s"]
     site_s = jnp.stack([s[model.landmarks[k]] for k in ("T1", "T2", "T3", "T4")])
-    check_choice("tongue anchor", anchor, TONGUE_ANCHORS)
     d = tongue_displacement(s[idx], site_s, p.tongue, model.measures["tongue_anchor_s"], anchor)
+    if shape == "flat":
+        v = v.at[idx, :2].set(v[top, :2])
     return v.at[idx, :2].add(d)
 
 
 def deform(
     model: FaceModel, params: FaceParams, *, jaw_weights: str = "cassi",
-    tongue_anchor: str = "follow",
+    tongue_anchor: str = "follow", tongue_shape: str = "thick", lip_rounding: bool = True,
 ) -> Float[Array, "V 3"]:
     """Vertices (V, 3) mm of ``model`` posed by ``params`` (one frame; vmap for many).
 
     ``jaw_weights``: ``"cassi"`` (Parke's fractions x 1.11111, lower teeth 100 %) or
-    ``"parke"``; ``tongue_anchor``: ``"fixed"`` | ``"follow"`` | ``"none"``. Both static.
+    ``"parke"``; ``tongue_anchor``: ``"fixed"`` | ``"follow"`` | ``"none"``;
+    ``tongue_shape``: ``"thick"`` | ``"flat"`` (CASSI's zero-thickness sheet);
+    ``lip_rounding``: the corners come together as the lips come forward. All static.
+    With ``tongue_shape="flat"`` the default parameters no longer give the rest mesh.
     """
     v = jnp.asarray(model.vertices)
     v = conformation(model, v, params)
     v = jaw(model, v, params, jaw_weights)
-    v = lips(model, v, params)
-    return tongue(model, v, params, tongue_anchor)
+    v = lips(model, v, params, bool(lip_rounding))
+    return tongue(model, v, params, tongue_anchor, tongue_shape)
 
 
 def vertex_normals(vertices: Float[Array, "V 3"], faces: Int[np.ndarray, "F 3"]) -> Float[Array, "V 3"]:

@@ -50,22 +50,45 @@ FIELD_NAMES = tuple(f.name for f in fields(HeadMeasures))
 #: Fields that are lengths and must be positive.
 POSITIVE_FIELDS = FIELD_NAMES[4:]
 
-#: Adult averages, used when a dataset has no measures for a subject. Distances after
-#: Farkas-style norms (FACE_MODEL_NOTES.md: bizygomatic 135, bigonial 100, mouth 50,
-#: nose tip 20 from subnasale); lip thickness from the median UL/LL pellets (15, 18) and
-#: (9, -21) and a lower incisor tip near (-1.5, -1) on a jaw line sloping 3.5 degrees; gonion about 85 mm behind and 35 mm below
-#: the incisor tip (condyle 90-100 behind and 20-30 above, ramus about 55-60 tall);
-#: gnathion at the chin, about 43 mm below the incisor tip.
+#: Which fields are points on the bone and which are soft-tissue (skin) measures. The
+#: paper (section 3): "Both the gonion and the gnathion are part of the jaw bone", so
+#: gonion and gnathion are bony landmarks (as on a cephalogram); the face model's
+#: ``gonion`` and ``gnathion`` landmarks are skin vertices, reached from the bone by
+#: :data:`SOFT_TISSUE_THICKNESS_MM` (``conformation.skin_landmarks``). The widths are
+#: skin-to-skin anthropometry (Farkas), the lip thicknesses pellet (on the vermilion) to
+#: incisor tip, and the nose subnasale to pronasale: all soft tissue.
+BONE_FIELDS = ("gonion_x", "gonion_y", "gnathion_x", "gnathion_y")
+SOFT_TISSUE_FIELDS = tuple(f for f in FIELD_NAMES if f not in BONE_FIELDS)
+
+#: Soft-tissue thickness (mm) over the bony landmarks, adult means from the facial
+#: reconstruction tables: over gnathion/menton about 7 mm (Rhine & Moore 1984, "beneath
+#: chin", normal build, 6-8 mm; Stephan & Simpson 2008, J Forensic Sci 53:1257, pooled
+#: adult gnathion of the same order); over gonion about 12 mm (Rhine & Moore 1984,
+#: "gonion", normal build 11-12 mm; larger, 15-20 mm, in CT studies of heavier builds).
+#: Applied along the model's skin normal at the landmark, projected on the midsagittal
+#: plane (the pellet frame).
+SOFT_TISSUE_THICKNESS_MM = {"gnathion": 7.0, "gonion": 12.0}
+
+#: The face model at rest, used when a dataset has no measures for a subject, so that a
+#: subject whose row equals these leaves the face unchanged (tests/test_cassi_mode.py).
+#: Bony gonion and gnathion: the model's skin landmarks (-84, -36.5) and (-4, -49.5) mm
+#: moved inwards by the thicknesses above along the skin normal (their sagittal parts
+#: (-0.274, -0.120) and (0.352, -0.936)); they agree with adult bone: gnathion 43 mm below
+#: the incisor tip (anterior lower face height 40-45 mm), gonion 81 mm behind and 35 mm
+#: below it. The rest are the model's own measures (model/model.json "measures": face
+#: width, jaw width, mouth width, lip thickness, nose), which sit in the adult ranges of
+#: Farkas' norms (bizygomatic 130-140, bigonial 95-105, mouth 45-55, nose 17-23 mm).
+#: Rebuilding the model with other proportions means updating these.
 DEFAULT_HEAD_MEASURES = HeadMeasures(
-    gonion_x=-85.0,
-    gonion_y=-35.0,
-    gnathion_x=0.0,
-    gnathion_y=-43.0,
-    face_width=135.0,
-    jaw_width=100.0,
-    mouth_width=50.0,
-    upper_lip_thickness=15.0,
-    lower_lip_thickness=11.5,
+    gonion_x=-80.708,
+    gonion_y=-35.056,
+    gnathion_x=-6.467,
+    gnathion_y=-42.949,
+    face_width=135.108,
+    jaw_width=101.024,
+    mouth_width=49.0,
+    upper_lip_thickness=14.9,
+    lower_lip_thickness=15.004,
     nose_protrusion=20.0,
 )
 

@@ -17,11 +17,18 @@ Paper section 2; :func:`initialize`:
    thickness per speaker, nose tip (``conformation.default_conformation``), or a fitted
    ``conformation.Calibration``; tongue (#55-#62) and lips (#63-#66) from the first frame.
 
+A :class:`Mode` bundles every choice of a run (``MODES``: ``"improved"``, the toolkit's
+defaults; ``"cassi"``, the paper's choices, docs/CASSI_MODE.md); ``initialize(...,
+mode=...)`` and :func:`animate_recording` take its name or the record, and an explicit
+keyword overrides the mode's value.
+
 :func:`animate_recording` runs initialization and :func:`cassi_fit.animate.animate` with
 the command line's options (``cassi animate``, ``cassi export``).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass, replace
 
 import equinox as eqx
 import jax
@@ -35,10 +42,62 @@ from .dataset import Recording, recording_source
 from .errors import CassiError, DegenerateGeometryError
 from .face_model import FaceModel
 from .jaw import closed_form
-from .options import CONFORMATIONS, GAP_POLICIES, JAW_WEIGHTS, TONGUE_ANCHORS, check_choice
+from .options import (
+    CONFORMATIONS,
+    GAP_POLICIES,
+    JAW_WEIGHTS,
+    MODES,
+    TONGUE_ANCHORS,
+    TONGUE_SHAPES,
+    check_choice,
+)
 from .pellets import LL, MNI, MNM, UL, first_valid_line
 
 _closed_form_one = jax.jit(closed_form)  # one frame; eager dispatch of its small ops is slow
+
+
+@dataclass(frozen=True)
+class Mode:
+    """Every choice of a run, in one record (docs/CASSI_MODE.md gives each against the
+    paper). ``conformation``: ``None`` (the subject's shape from Headmeasures and the first
+    valid line) or ``"cassi"`` (only the jaw shape, paper step 5); ``tongue_shape``,
+    ``tongue_anchor``, ``jaw_weights``, ``lip_rounding``: as ``deform.deform``;
+    ``collisions``, ``jaw``, ``stride``: as ``animate.animate``; ``gap_policy``: as
+    ``gaps.repair``. Use :func:`mode_named` or ``dataclasses.replace`` to vary one."""
+
+    name: str
+    conformation: str | None
+    tongue_shape: str
+    tongue_anchor: str
+    jaw_weights: str
+    lip_rounding: bool
+    collisions: str
+    jaw: str
+    stride: int
+    gap_policy: str
+
+
+#: The toolkit's defaults: a thick tongue whose back follows T4, lip rounding, the
+#: subject's conformation from Headmeasures (collisions are a further option).
+IMPROVED = Mode("improved", None, "thick", "follow", "cassi", True, "off", "closed-form", 1,
+                "hold")
+#: The paper's choices: a flat tongue of zero thickness (section 5), its back anchored
+#: behind and below T4 (section 4), Parke's regions x 1.11111 (section 3.1), only the
+#: jaw shape adjusted (section 3), the closed form per frame (Eqs 1-7), no collisions,
+#: no lip rounding (both future work). ``stride=10`` gives the Indigo's rate (section 2).
+CASSI = Mode("cassi", "cassi", "flat", "fixed", "cassi", False, "off", "closed-form", 1,
+             "hold")
+_MODES = {"improved": IMPROVED, "cassi": CASSI}
+
+
+def mode_named(mode: str | Mode | None, **changes: object) -> Mode:
+    """The :class:`Mode` of ``mode`` (a name of ``options.MODES``, a record, or None for
+    ``"improved"``), with the fields in ``changes`` that are not None replaced."""
+    if mode is None:
+        mode = IMPROVED
+    elif not isinstance(mode, Mode):
+        mode = _MODES[check_choice("mode", mode, MODES)]
+    return replace(mode, **{k: v for k, v in changes.items() if v is not None})
 
 
 class SubjectState(eqx.Module):
@@ -53,6 +112,8 @@ class SubjectState(eqx.Module):
     shape, from which the tongue and lip parameters are measured (with a calibration, UL
     and LL raised by its ``lip_rest_offset``). initial_params: the parameters of the first
     valid frame. tracked_pellets: the names of the pellets the file ever tracks.
+    jaw_weights, tongue_anchor, tongue_shape, lip_rounding, gap_policy: the run's
+    choices; mode: the name of the :class:`Mode` they came from.
     """
 
     model: eqx.Module
@@ -68,6 +129,9 @@ class SubjectState(eqx.Module):
     tongue_anchor: str = eqx.field(static=True)
     gap_policy: str = eqx.field(static=True)
     source: str = eqx.field(static=True)
+    tongue_shape: str = eqx.field(static=True, default="thick")
+    lip_rounding: bool = eqx.field(static=True, default=True)
+    mode: str = eqx.field(static=True, default="improved")
 
 
 def _scale(model, pellets: Float[np.ndarray, "8 2"], source: str, first: int) -> float:
@@ -83,11 +147,13 @@ def _scale(model, pellets: Float[np.ndarray, "8 2"], source: str, first: int) ->
     return float(np.linalg.norm(sites[MNI] - sites[MNM])) / d
 
 
-def _rest_pellets(model, conformation, size, jaw_weights, tongue_anchor, calibration):
+def _rest_pellets(model, conformation, size, mode, calibration):
     """The model's pellet sites ``(8, 2)`` mm in the subject's shape, computed by the same
     compiled call (batch ``size``) that animate() will use for this recording."""
     batch = jax.tree.map(lambda x: jnp.broadcast_to(x, (size, *jnp.shape(x))), conformation)
-    rest = batch_geometry(model, batch, jaw_weights=jaw_weights, tongue_anchor=tongue_anchor)[1][0]
+    rest = batch_geometry(model, batch, jaw_weights=mode.jaw_weights,
+                          tongue_anchor=mode.tongue_anchor, tongue_shape=mode.tongue_shape,
+                          lip_rounding=mode.lip_rounding)[1][0]
     if calibration is not None:  # the lips' vertical rest where the first valid lines have them
         rest = rest.at[UL, 1].add(calibration.lip_rest_offset[0])
         rest = rest.at[LL, 1].add(calibration.lip_rest_offset[1])
@@ -99,9 +165,12 @@ def initialize(
     model: FaceModel | None = None,
     *,
     calibration: Calibration | str | None = None,
-    jaw_weights: str = "cassi",
-    tongue_anchor: str = "follow",
-    gap_policy: str = "hold",
+    jaw_weights: str | None = None,
+    tongue_anchor: str | None = None,
+    gap_policy: str | None = None,
+    mode: str | Mode | None = None,
+    tongue_shape: str | None = None,
+    lip_rounding: bool | None = None,
 ) -> SubjectState:
     """Fit the face model to the subject of ``recording`` (CASSI's initialization).
 
@@ -113,15 +182,26 @@ def initialize(
     shape; ``cassi calibrate``). Returns a :class:`SubjectState`. Raises
     ``MissingDataError`` (jaw pellets never tracked), ``DegenerateGeometryError``
     (coincident jaw pellets on the first valid line), ``InvalidChoiceError`` (an unknown
-    option) or ``CassiError`` (a calibration of another subject).
+    option) or ``CassiError`` (a calibration of another subject, or a fitted calibration
+    in the ``"cassi"`` mode). ``mode``: a :class:`Mode` or its name (default
+    ``"improved"``); ``jaw_weights``, ``tongue_anchor``, ``tongue_shape``,
+    ``lip_rounding``, ``gap_policy`` and ``calibration``, when given, override it.
     """
     from .face_model import load_model
     from .palate import with_palate
 
-    check_choice("jaw weights", jaw_weights, JAW_WEIGHTS)
-    check_choice("tongue anchor", tongue_anchor, TONGUE_ANCHORS)
-    check_choice("gap policy", gap_policy, GAP_POLICIES)
+    mode = mode_named(mode, jaw_weights=jaw_weights, tongue_anchor=tongue_anchor,
+                      gap_policy=gap_policy, tongue_shape=tongue_shape,
+                      lip_rounding=lip_rounding)
+    check_choice("jaw weights", mode.jaw_weights, JAW_WEIGHTS)
+    check_choice("tongue anchor", mode.tongue_anchor, TONGUE_ANCHORS)
+    check_choice("tongue shape", mode.tongue_shape, TONGUE_SHAPES)
+    check_choice("gap policy", mode.gap_policy, GAP_POLICIES)
     fitted = calibration if isinstance(calibration, Calibration) else None
+    if fitted is not None and mode.conformation == "cassi":
+        raise CassiError("the cassi mode uses the paper's conformation; a fitted "
+                         "calibration belongs to the improved mode")
+    calibration = mode.conformation if calibration is None else calibration
     if calibration is not None and fitted is None:
         check_choice("calibration", calibration, CONFORMATIONS)
     source = recording_source(recording)
@@ -146,15 +226,16 @@ def initialize(
     # at the batch size animate() will use for every line of this recording, so that both
     # share one compilation (the extra frames cost ~0.1 s)
     size = frame_bucket(track.times.shape[0] - first)
-    rest = _rest_pellets(model, conformation, size, jaw_weights, tongue_anchor, fitted)
+    rest = _rest_pellets(model, conformation, size, mode, fitted)
     reference = jnp.asarray(scale * pellets[[MNI, MNM]])
     initial = _closed_form_one(rest[jnp.array([MNI, MNM])], reference)
     state = SubjectState(
         model=model, scale=scale, first_frame=first, reference_jaw=reference,
         initial_jaw=(initial.theta, initial.translation), conformation=conformation,
         rest_pellets=rest, initial_params=conformation, tracked_pellets=tracked,
-        jaw_weights=jaw_weights, tongue_anchor=tongue_anchor, gap_policy=gap_policy,
-        source=source,
+        jaw_weights=mode.jaw_weights, tongue_anchor=mode.tongue_anchor,
+        gap_policy=mode.gap_policy, source=source, tongue_shape=mode.tongue_shape,
+        lip_rounding=bool(mode.lip_rounding), mode=mode.name,
     )  # fmt: skip
     first_params = frame_params(
         state, np.broadcast_to(scale * pellets, (size, 8, 2)), np.zeros(size), np.zeros((size, 2))
@@ -168,15 +249,23 @@ def animate_recording(
     model: FaceModel | None = None,
     *,
     calibration: Calibration | str | None = None,
-    jaw: str = "closed-form",
-    stride: int = 1,
-    jaw_weights: str = "cassi",
-    tongue_anchor: str = "follow",
-    gap_policy: str = "hold",
-    collisions: str = "off",
+    jaw: str | None = None,
+    stride: int | None = None,
+    jaw_weights: str | None = None,
+    tongue_anchor: str | None = None,
+    gap_policy: str | None = None,
+    collisions: str | None = None,
+    mode: str | Mode | None = None,
+    tongue_shape: str | None = None,
+    lip_rounding: bool | None = None,
 ) -> tuple[SubjectState, Animation]:
     """:func:`initialize`, then :func:`cassi_fit.animate.animate` (the options of ``cassi
-    animate``); returns ``(state, animation)``."""
-    state = initialize(recording, model, calibration=calibration, jaw_weights=jaw_weights,
-                       tongue_anchor=tongue_anchor, gap_policy=gap_policy)
-    return state, animate(state, recording, jaw=jaw, stride=stride, collisions=collisions)
+    animate``); every option not given comes from ``mode`` (default ``"improved"``);
+    returns ``(state, animation)``."""
+    mode = mode_named(mode, jaw=jaw, stride=stride, jaw_weights=jaw_weights,
+                      tongue_anchor=tongue_anchor, gap_policy=gap_policy,
+                      collisions=collisions, tongue_shape=tongue_shape,
+                      lip_rounding=lip_rounding)
+    state = initialize(recording, model, calibration=calibration, mode=mode)
+    return state, animate(state, recording, jaw=mode.jaw, stride=mode.stride,
+                          collisions=mode.collisions)

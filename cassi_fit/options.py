@@ -28,6 +28,13 @@ CONFORMATIONS = ("measures", "cassi")
 CALIBRATION_METHODS = ("separate", "joint")
 #: Where the tongue's back anchor points go (CASSI anchored them behind and below T4).
 TONGUE_ANCHORS = ("fixed", "follow", "none")
+#: The tongue's cross-section: the model's thick tongue, or CASSI's flat surface of zero
+#: thickness through the four tongue pellets (paper section 5: "a flat surface with no
+#: thickness").
+TONGUE_SHAPES = ("thick", "flat")
+#: Whole reproduction modes (``initialize.Mode``; docs/CASSI_MODE.md): the toolkit's
+#: improved defaults, or every choice the paper made.
+MODES = ("improved", "cassi")
 #: Jaw region weights: CASSI's percentages (Parke's times 1.11111) or Parke's own.
 JAW_WEIGHTS = ("cassi", "parke")
 #: The rendered views (the paper's four).

@@ -57,8 +57,12 @@ def test_separate_calibration_recovers_lip_thickness_and_face_width_within_5_per
         assert all(abs(e) < 0.05 for e in errors.values()), (cal.subject, errors)
         assert cal.converged and cal.method == "separate"
         assert cal.residuals["lips_in_teeth"] < 0.05
-        # the jaw shape has 3 unknowns for 4 coordinates: close, not exact
-        assert cal.residuals["gonion"] < 6.0 and cal.residuals["gnathion"] < 6.0
+        # the jaw shape has 3 unknowns for 4 coordinates: close, not exact. Its targets are
+        # the skin over the bony Headmeasures points (conformation.skin_landmarks, issue
+        # 14): the synthetic chins lie up to 10 mm ahead of the model's, which two scales
+        # and a turn about the incisor tip reach only within 10 mm.
+        assert cal.residuals["gonion"] < 6.0 and cal.residuals["gnathion"] < 10.0
+        assert cal.bounds_hit == ()  # the synthetic jaws are adult jaws
         # separate: the scale is the paper's p / d (median over the recordings)
         sites = np.asarray(load_model().vertices)[[2185, 2262], :2]
         assert cal.scale > 0 and np.isfinite(cal.scale)

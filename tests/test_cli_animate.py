@@ -128,6 +128,16 @@ def test_animate_pellet_file_to_gif_and_png(sentence, tmp_path, capsys):
     assert image.std() > 10  # not a blank image
 
 
+def test_animate_in_cassi_mode(sentence, tmp_path, capsys):
+    _, recording = sentence
+    png = tmp_path / "cassi.png"
+    code, text, err = _run(capsys, "animate", recording.path, "--mode", "cassi", "--stride", 40,
+                           "--size", SIZE, "--out", png, "--frame", 2)
+    assert code == 0, err
+    image = iio.imread(png)
+    assert image.shape[:2] == (120, 160) and image.std() > 10
+
+
 def test_every_view_is_non_blank(sentence):
     from cassi_fit.animate import animate
     from cassi_fit.initialize import initialize
@@ -202,6 +212,8 @@ def test_demo_writes_everything_and_reruns(corpus, tmp_path, capsys, monkeypatch
         (["animate", "{root}", "NOBODY", "tp040"], "NOBODY"),
         (["export", "{txy}", "--out", "x.stl"], ".stl"),
         (["animate", "{txy}", "--out", "{existing}"], "exists"),
+        (["animate", "{txy}", "--mode", "cassi", "--collisions", "project"], "collision"),
+        (["animate", "{txy}", "--cassi", "--mode", "improved"], "disagree"),
     ],
 )
 def test_errors_are_one_line(argv, fragment, corpus, sentence, tmp_path, capsys):

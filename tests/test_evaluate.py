@@ -42,6 +42,7 @@ CLEAN = {
     "tongue_lower_front_mm": 0.0,
     "tongue_behind_incisors_mm": 7.0,
     "tongue_palate_mm": 0.0,
+    "tongue_back_v_deg": -10.0,
     "palate_below_incisor_mm": -1.0,
     "tongue_upper_front_before_mm": 0.0,
     "tongue_lower_front_before_mm": 0.0,
@@ -100,6 +101,7 @@ THRESHOLDS = [
     ("tongue_palate_mm", ev.TONGUE_PALATE_MM, +1, "not_counted", "tongue through the palate"),
     ("palate_below_incisor_mm", ev.PALATE_BELOW_MM, +1, "not_counted",
      "palate below the upper incisor tip"),
+    ("tongue_back_v_deg", ev.TONGUE_V_DEG, +1, "not_counted", "tongue's back in a V"),
 ]  # fmt: skip
 
 
@@ -479,7 +481,7 @@ def test_cli_evaluate_cassi_like(corpus, tmp_path, capsys):
     assert "| Subject | Tasks | Teeth | Lips | Tongue |" in text
     assert "| S01 | tp040 |" in text
     assert "S01 tp999 (error:" in text  # the broken file is reported, not rated
-    assert "Calibration: cassi; collisions: off; jaw: closed-form; stride 4" in text
+    assert "Calibration: cassi mode; collisions: off; jaw: closed-form; stride 4" in text
     names = sorted(p.name for p in out.iterdir())
     assert names == sorted([*ev.OUTPUT_NAMES, "evaluation_summary.png"])
     code, _, err = _run(capsys, "evaluate", corpus, "--out", out, "--quiet")

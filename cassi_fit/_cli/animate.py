@@ -12,7 +12,9 @@ from cassi_fit.options import (
     GAP_POLICIES,
     JAW_METHODS,
     JAW_WEIGHTS,
+    MODES,
     TONGUE_ANCHORS,
+    TONGUE_SHAPES,
     VIEWS,
 )
 
@@ -29,9 +31,18 @@ def add_recording_argument(parser: argparse.ArgumentParser) -> None:
 
 def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
+        "--mode",
+        choices=MODES,
+        default=None,
+        help="every choice at once (docs/CASSI_MODE.md): improved (default: thick tongue "
+        "whose back follows T4, conformation from Headmeasures) or cassi (the paper's: "
+        "flat tongue of zero thickness, back anchored behind and below T4, only the jaw "
+        "shape adjusted, no collisions); the options below override it",
+    )
+    parser.add_argument(
         "--jaw",
         choices=JAW_METHODS,
-        default="closed-form",
+        default=None,
         help="how the jaw moves: the paper's closed form from the two jaw pellets (default), "
         "or a least-squares fit: per frame (frame-fit), about one pivot for the whole "
         "recording (fixed-pivot), or about a pivot that moves smoothly (smooth-pivot)",
@@ -39,7 +50,7 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--stride",
         type=int,
-        default=1,
+        default=None,
         metavar="N",
         help="use every Nth data line from the first valid one (default 1: every line; "
         "CASSI showed every 10th); video time stays real time",
@@ -47,14 +58,21 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--tongue-anchor",
         choices=TONGUE_ANCHORS,
-        default="follow",
+        default=None,
         help="the tongue's back anchor points: fixed (CASSI: they never move, hence its V "
         "shape), follow (they move with T4; default) or none",
     )
     parser.add_argument(
+        "--tongue-shape",
+        choices=TONGUE_SHAPES,
+        default=None,
+        help="thick (default) or flat (CASSI: a surface of zero thickness through the "
+        "four tongue pellets)",
+    )
+    parser.add_argument(
         "--gap",
         choices=GAP_POLICIES,
-        default="hold",
+        default=None,
         help="untracked or mistracked pellet values: hold the last good value (default) or "
         "interpolate between good ones; repaired frames are flagged in the caption",
     )
@@ -68,13 +86,12 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--cassi",
         action="store_true",
-        help="CASSI-like: adjust only what the paper did (the jaw shape from gonion and "
-        "gnathion; no lip thickness, face or mouth width); not with --calibration",
+        help="the same as --mode cassi (every choice of the paper); not with --calibration",
     )
     parser.add_argument(
         "--collisions",
         choices=COLLISION_MODES,
-        default="off",
+        default=None,
         help="off (default; as CASSI: the tongue may pass through the teeth and palate) or "
         "project (every frame, the tongue is pushed out of the teeth and the palate and "
         "the lips out of the teeth); penetration depths are measured either way",
@@ -82,7 +99,7 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--jaw-weights",
         choices=JAW_WEIGHTS,
-        default="cassi",
+        default=None,
         help="region weights of the jaw rotation: CASSI's (teeth 100%%; default) or Parke's "
         "(teeth 90%%)",
     )
@@ -193,13 +210,30 @@ def animate_recording(recording, args):
     from cassi_fit.errors import CassiError
     from cassi_fit.initialize import animate_recording as run_pipeline
 
-    if args.stride < 1:
+    if args.stride is not None and args.stride < 1:
         raise CassiError(f"--stride must be at least 1, got {args.stride}")
-    calibration = calibration_choice(getattr(args, "calibration", None), recording.subject,
-                                     cassi=getattr(args, "cassi", False))
+    mode = chosen_mode(args)
+    path = getattr(args, "calibration", None)
+    if mode == "cassi" and path:
+        raise CassiError("--mode cassi (or --cassi) and --calibration exclude each other")
+    if mode == "cassi" and args.collisions == "project":
+        raise CassiError("--mode cassi means no collision handling; drop --collisions project")
+    calibration = calibration_choice(path, recording.subject) if path else None
     return run_pipeline(recording, calibration=calibration, jaw=args.jaw, stride=args.stride,
                         jaw_weights=args.jaw_weights, tongue_anchor=args.tongue_anchor,
-                        gap_policy=args.gap, collisions=args.collisions)
+                        gap_policy=args.gap, collisions=args.collisions, mode=mode,
+                        tongue_shape=getattr(args, "tongue_shape", None))
+
+
+def chosen_mode(args: argparse.Namespace) -> str:
+    """The mode of ``--mode`` and ``--cassi`` (the same as ``--mode cassi``); a
+    ``CassiError`` if they disagree."""
+    from cassi_fit.errors import CassiError
+
+    mode, cassi = getattr(args, "mode", None), getattr(args, "cassi", False)
+    if cassi and mode not in (None, "cassi"):
+        raise CassiError(f"--cassi and --mode {mode} disagree")
+    return "cassi" if cassi else mode or "improved"
 
 
 def run(args) -> int:

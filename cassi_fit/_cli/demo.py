@@ -5,6 +5,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from cassi_fit.options import MODES
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
@@ -36,6 +38,12 @@ def register(subparsers) -> None:
     )
     parser.add_argument(
         "--subject", metavar="NAME", help="which synthetic subject (default: the first)"
+    )
+    parser.add_argument(
+        "--mode", choices=MODES, default="improved",
+        help="how the videos are made: improved (default: calibrated, collisions projected) "
+        "or cassi (every choice of the paper: flat tongue, anchored back, no collisions; "
+        "docs/CASSI_MODE.md); the comparison still is CASSI mode against the calibrated face",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run)
@@ -103,16 +111,16 @@ def jaw_plot(path, state, animation, *, title=""):
     return atomic_write(path, buffer.getvalue(), overwrite=True)
 
 
-def _comparison(path: Path, recording, animation, stride, size):
-    """Side by side at the frame where the CASSI-like tongue is deepest in the front
-    teeth: CASSI-like (paper's conformation, no collisions) and calibrated + projected."""
+def _comparison(path: Path, recording, animation, stride, size, caption="calibrated + collisions"):
+    """Side by side at the frame where the CASSI-mode tongue is deepest in the front
+    teeth: the CASSI mode (initialize.CASSI) and the demo's animation."""
     import numpy as np
 
     from cassi_fit.animate import animate
     from cassi_fit.initialize import initialize
     from cassi_fit.render import Renderer, save_png
 
-    state = initialize(recording, calibration="cassi")
+    state = initialize(recording, mode="cassi")
     cassi = animate(state, recording, stride=stride, collisions="off")
     depth = np.maximum(cassi.penetration["tongue_upper_front"],
                        cassi.penetration["tongue_lower_front"])
@@ -121,11 +129,11 @@ def _comparison(path: Path, recording, animation, stride, size):
     renderer = Renderer(state.model, size=(width // 2 * 2, height), views=("inside", "front"))
     t = float(cassi.times[k])
     left = renderer.render(cassi.vertices[k], caption=(
-        f"CASSI-like, t={t:.2f} s: tongue {depth[k]:.1f} mm into the front teeth"))
+        f"CASSI mode, t={t:.2f} s: tongue {depth[k]:.1f} mm into the front teeth"))
     after = max(float(animation.penetration_after["tongue_upper_front"][k]),
                 float(animation.penetration_after["tongue_lower_front"][k]))
     right = renderer.render(animation.vertices[k], caption=(
-        f"calibrated + collisions: {after:.1f} mm"))
+        f"{caption}: {after:.1f} mm"))
     return save_png(path, np.concatenate([left, right], axis=0), overwrite=True)
 
 
@@ -178,14 +186,19 @@ def run(args) -> int:
     recordings = _corpus_recordings(args.subject)  # [jaw wagging, sentence]
     from cassi_fit.calibrate import calibrate_subject, calibration_path, write_calibration
 
-    print(f"calibrating {recordings[0].subject} ...", file=sys.stderr)
-    calibration = calibrate_subject(recordings)
-    written.append(write_calibration(calibration_path(out, calibration.subject), calibration,
-                                     overwrite=True))
+    cassi = args.mode == "cassi"
+    calibration = None
+    if not cassi:
+        print(f"calibrating {recordings[0].subject} ...", file=sys.stderr)
+        calibration = calibrate_subject(recordings)
+        written.append(write_calibration(calibration_path(out, calibration.subject),
+                                         calibration, overwrite=True))
     for recording in recordings:
-        print(f"animating {recording.subject} {recording.task} ...", file=sys.stderr)
-        state = initialize(recording, calibration=calibration)
-        animation = animate(state, recording, stride=args.stride, collisions="project")
+        print(f"animating {recording.subject} {recording.task} ({args.mode} mode) ...",
+              file=sys.stderr)
+        state = initialize(recording, calibration=calibration, mode=args.mode)
+        animation = animate(state, recording, stride=args.stride,
+                            collisions="off" if cassi else "project")
         renderer = renderer or Renderer(state.model, size=size)
         stem = f"{recording.subject}_{recording.task}"
         written.append(
@@ -202,8 +215,10 @@ def run(args) -> int:
         )
         written += _stills(out, renderer, recording, animation)
         if recording is recordings[-1]:  # the sentence: CASSI-like against this, and glTF
-            written.append(_comparison(out / f"{stem}_cassi_vs_calibrated.png", recording,
-                                       animation, args.stride, size))
+            written.append(_comparison(
+                out / f"{stem}_cassi_vs_{args.mode if cassi else 'calibrated'}.png", recording,
+                animation, args.stride, size,
+                "CASSI mode" if cassi else "calibrated + collisions"))
             written.append(
                 export_glb(
                     out / f"{stem}.glb",

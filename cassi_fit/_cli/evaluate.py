@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from cassi_fit.options import COLLISION_MODES, JAW_METHODS
+from cassi_fit.options import COLLISION_MODES, JAW_METHODS, MODES
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -28,8 +28,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     which.add_argument("--calibration", metavar="DIR",
                        help="per-subject calibration files written by `cassi calibrate`")
     which.add_argument("--cassi", action="store_true",
-                       help="CASSI-like: only the paper's conformation (jaw shape from gonion "
-                       "and gnathion) and no collision handling")
+                       help="the same as --mode cassi")
+    parser.add_argument("--mode", choices=MODES, default=None,
+                        help="improved (default) or cassi: every choice of the paper (flat "
+                        "tongue of zero thickness, back anchored behind and below T4, only "
+                        "the jaw shape adjusted, no collisions; docs/CASSI_MODE.md)")
     parser.add_argument("--collisions", choices=COLLISION_MODES, default=None,
                         help="push the tongue and lips out of the teeth and palate (project) "
                         "or not (off; the default)")
@@ -59,9 +62,14 @@ def run(args: argparse.Namespace) -> int:
 
     if args.stride < 1:
         raise CassiError(f"--stride must be at least 1, got {args.stride}")
-    if args.cassi and args.collisions == "project":
-        raise CassiError("--cassi means CASSI-like, without collision handling; drop "
-                         "--collisions project or --cassi")
+    from cassi_fit._cli.animate import chosen_mode
+
+    mode = chosen_mode(args)
+    if mode == "cassi" and args.collisions == "project":
+        raise CassiError("--cassi (--mode cassi) means the paper's choices, without collision "
+                         "handling; drop --collisions project or --cassi")
+    if mode == "cassi" and args.calibration:
+        raise CassiError("--mode cassi and --calibration exclude each other")
     dataset = Path(args.dataset)
     if not dataset.is_dir():
         raise CassiError(f"{dataset}: no such dataset folder")
@@ -73,9 +81,7 @@ def run(args: argparse.Namespace) -> int:
     if existing and not args.force:  # refuse before the (slow) evaluation
         raise OutputExistsError(f"{', '.join(existing)}: file exists (pass --force to replace)")
     calibrations = None
-    if args.cassi:
-        calibrations = "cassi"
-    elif args.calibration:
+    if args.calibration:
         from cassi_fit.calibrate import load_calibrations
 
         folder = Path(args.calibration)
@@ -93,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         jaw=args.jaw,
         stride=args.stride,
+        mode=mode,
     )
     print(markdown_table(result), end="")
     # all or nothing: an interrupted run leaves none of the tables and figure

@@ -44,6 +44,7 @@ from ._ratings import TONGUE_HIDDEN_MM as TONGUE_HIDDEN_MM
 from ._ratings import TONGUE_PALATE_MM as TONGUE_PALATE_MM
 from ._ratings import TONGUE_POKE_DEEP_MM as TONGUE_POKE_DEEP_MM
 from ._ratings import TONGUE_POKE_MM as TONGUE_POKE_MM
+from ._ratings import TONGUE_V_DEG as TONGUE_V_DEG
 from ._ratings import describe as describe
 from ._ratings import problems as problems
 from ._ratings import rate as rate
@@ -68,7 +69,7 @@ __all__ = [
     "NO_RECORDING", "OUTPUT_NAMES", "PALATE_BELOW_MM", "RATINGS", "SLOPE_DOWN_DEG",
     "SLOPE_STEEP_DEG", "SLOPE_UP_DEG", "SLOPE_VERY_STEEP_DEG", "SUSTAIN_S", "TEETH_APART_MM",
     "TEETH_IN_LIPS_MM", "TONGUE_HIDDEN_MM", "TONGUE_PALATE_MM", "TONGUE_POKE_DEEP_MM",
-    "TONGUE_POKE_MM", "EvaluationResult", "MeasureSpec", "RecordingRow", "SubjectRow",
+    "TONGUE_POKE_MM", "TONGUE_V_DEG", "EvaluationResult", "MeasureSpec", "RecordingRow", "SubjectRow",
     "combine", "compare", "describe", "evaluate_dataset", "evaluate_recording",
     "markdown_table", "measure", "penetration_of", "plot_summary", "problems", "rate",
     "rating", "sustain_frames", "sustained_max", "sustained_min", "write_report", "write_table", "SUMMARY_NAME",

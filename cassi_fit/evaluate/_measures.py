@@ -87,6 +87,9 @@ MEASURES: dict[str, MeasureSpec] = {
         "mm", "max", True, "tongue depth in the lower front teeth (sustained)"),
     "tongue_behind_incisors_mm": MeasureSpec(
         "mm", "min", True, "tongue front behind the lower incisors' lingual face (median)"),
+    "tongue_back_v_deg": MeasureSpec(
+        "deg", "max", True, "sharpest concave (V) bend of the tongue's back midline, T3 to "
+        "the root (sustained; not counted)"),
     "tongue_palate_mm": MeasureSpec(
         "mm", "max", True, "tongue depth in the palate (sustained; not counted)"),
     "palate_below_incisor_mm": MeasureSpec(
@@ -138,6 +141,7 @@ class _Sites:
     lower_lip: np.ndarray
     tongue: np.ndarray
     palate_oral: np.ndarray
+    tongue_back: np.ndarray  # upper-midline vertices from T3's station to the root, in order
 
     def all(self) -> np.ndarray:
         parts = [np.atleast_1d(np.asarray(getattr(self, f))) for f in self.__dataclass_fields__]
@@ -210,7 +214,21 @@ def _sites(model: FaceModel) -> _Sites:
         lower_lip=np.asarray(model.regions["lower_lip"], np.int64),
         tongue=tongue,
         palate_oral=palate[: N_ALONG * N_ACROSS],
+        tongue_back=_tongue_back(model),
     )
+
+
+def _tongue_back(model: FaceModel) -> np.ndarray:
+    """The tongue's upper-midline vertices from T3's cross-section to the root, tip to
+    root order (``deform.tongue_midline``): where CASSI saw its V (section 4)."""
+    from ..deform import tongue_midline
+
+    tops = np.unique(tongue_midline(model)[1])  # station order: the tube is built tip first
+    start = int(np.searchsorted(tops, model.landmarks["T3"]))
+    back = tops[start:]
+    if back.size < 3:
+        raise MissingDataError("the face model's tongue has fewer than 3 stations behind T3")
+    return back
 
 
 
@@ -227,6 +245,18 @@ def _angle_deg(back, front):
     """Angle (deg) of the side-view line from ``back (3,)`` to ``front (3,)``."""
     d = front - back
     return jnp.degrees(jnp.arctan2(d[1], d[0]))
+
+
+def back_v_deg(midline: Float[Array, "k 3"]) -> Float[Array, ""]:
+    """The sharpest concave bend (deg) of a tongue midline ``(k, 3)`` (x, y used), tip to
+    root order: at each interior point the turn from the incoming to the outgoing
+    segment, + clockwise in the side view (+x front, +y up), which along a tongue running
+    backwards is a valley, a V; a dome turns the other way. The largest such turn; <= 0
+    when the whole back is convex."""
+    d = jnp.diff(midline[:, :2], axis=0)
+    cross = d[:-1, 0] * d[1:, 1] - d[:-1, 1] * d[1:, 0]
+    dot = jnp.sum(d[:-1] * d[1:], -1)
+    return jnp.max(-jnp.degrees(jnp.arctan2(cross, dot)))
 
 
 def _frame_quantities(parts: dict) -> dict:
@@ -255,6 +285,7 @@ def _frame_quantities(parts: dict) -> dict:
         "protrusion": jnp.max(p["lower_lip"][:, 0]) - jnp.max(p["upper_lip"][:, 0]),
         "tongue_behind": jnp.mean(p["lower_lingual_front"][:, 0]) - jnp.max(p["tongue"][:, 0]),
         "palate_below": upper_tip[1] - jnp.min(p["palate_oral"][:, 1]),
+        "back_v": back_v_deg(p["tongue_back"]),
     }
 
 
@@ -370,6 +401,7 @@ def measure(state: SubjectState, anim: Animation) -> dict[str, float]:
         "tongue_upper_front_mm": hi(after["tongue_upper_front"]),
         "tongue_lower_front_mm": hi(after["tongue_lower_front"]),
         "tongue_behind_incisors_mm": median(raw["tongue_behind"]),
+        "tongue_back_v_deg": hi(raw["back_v"]),
         "tongue_palate_mm": hi(after["tongue_palate"]),
         "palate_below_incisor_mm": float(np.max(raw["palate_below"])),
         "tongue_upper_front_before_mm": hi(before["tongue_upper_front"]),

@@ -92,6 +92,17 @@ PALATE_BELOW_MM = 0.0
 #: same 1 mm as the teeth.
 TONGUE_PALATE_MM = 1.0
 
+#: The tongue's back in a V (CASSI: "a V-shape in the back at times", all tasks of all
+#: subjects but one; not rated, section 4), deg: the sharpest concave turn of the upper
+#: midline behind T3 between neighbouring stations (3-5 mm apart), sustained 50 ms
+#: (``_measures.back_v_deg``). A real dorsum is convex from the blade to the root, and
+#: the model's rest back turns only convexly; a concave turn comes from the pellets or
+#: from how the back is tied to them. 30 deg over a 4 mm station is a radius of
+#: curvature under 8 mm, finer than the pellets can show (T3-T4 are 12-13 mm apart, so
+#: they resolve bends of half that radius at best): a crease made by the model, which
+#: reads as a V in the inside view.
+TONGUE_V_DEG = 30.0
+
 RATINGS = ("EXCELLENT", "VERY GOOD", "GOOD", "FAIR")
 COMPONENTS = ("teeth", "lips", "tongue")
 #: CASSI's Table 2 totals (EXCELLENT, VERY GOOD, GOOD, FAIR over its 15 subjects).
@@ -165,6 +176,8 @@ def problems(measures: Mapping[str, float]) -> dict[str, list[str]]:
         other.append("palate below the upper incisor tip")
     if v("tongue_palate_mm") > TONGUE_PALATE_MM:
         other.append("tongue through the palate")
+    if "tongue_back_v_deg" in measures and v("tongue_back_v_deg") > TONGUE_V_DEG:
+        other.append("tongue's back in a V")
     return {"teeth": teeth, "lips": lips, "tongue": tongue, "not_counted": other}
 
 

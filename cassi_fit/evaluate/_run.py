@@ -9,7 +9,7 @@ from collections.abc import Iterable, Mapping
 from typing import TYPE_CHECKING, Union
 
 from ..errors import CassiError, MissingDataError
-from ..options import COLLISION_MODES, CONFORMATIONS, JAW_METHODS, check_choice
+from ..options import COLLISION_MODES, CONFORMATIONS, JAW_METHODS, MODES, check_choice
 from ._measures import measure
 from ._rows import EvaluationResult, RecordingRow, SubjectRow
 
@@ -24,8 +24,10 @@ if TYPE_CHECKING:
 CalibrationChoice = Union[None, str, "Calibration"]
 
 
-def _calibration_label(calibration: CalibrationChoice) -> str:
-    """The word the tables print for ``calibration``."""
+def _calibration_label(calibration: CalibrationChoice, mode: str = "improved") -> str:
+    """The word the tables print for ``calibration`` (``"cassi mode"`` in that mode)."""
+    if mode == "cassi":
+        return "cassi mode"
     if calibration is None:
         return "default"
     if isinstance(calibration, str):
@@ -48,26 +50,38 @@ def evaluate_recording(
     jaw: str = "closed-form",
     stride: int = 1,
     model: FaceModel | None = None,
+    mode: str = "improved",
 ) -> RecordingRow:
     """Animate one recording and rate it: an OK :class:`RecordingRow`.
 
     ``calibration``: None (the toolkit's conformation from Headmeasures), ``"cassi"``
     (only what the paper did) or a ``calibrate.Calibration``; ``collisions``: ``"off"``
     or ``"project"`` (``options.COLLISION_MODES``); ``jaw`` (``options.JAW_METHODS``),
-    ``stride``: as ``animate.animate``. Errors propagate (``CassiError``).
+    ``stride``: as ``animate.animate``; ``mode``: ``options.MODES`` (``"cassi"``: every
+    choice of the paper, ``initialize.CASSI``: flat tongue, fixed back anchors, no lip
+    rounding, the paper's conformation; then ``calibration`` must be None and
+    ``collisions`` ``"off"``). Errors propagate (``CassiError``).
     """
     from ..animate import animate
     from ..initialize import initialize
 
     _check_settings(collisions, jaw, stride)
+    _check_mode(mode, calibration, collisions)
     if isinstance(calibration, str):
         check_choice("calibration", calibration, CONFORMATIONS)
-    state = initialize(recording, model, calibration=calibration)
+    state = initialize(recording, model, calibration=calibration, mode=mode)
     anim = animate(state, recording, jaw=jaw, stride=stride, collisions=collisions)
     return RecordingRow.evaluated(
         recording.subject, recording.task, measure(state, anim), frames=int(anim.n_frames),
-        stride=int(stride), jaw=jaw, calibration=_calibration_label(calibration),
+        stride=int(stride), jaw=jaw, calibration=_calibration_label(calibration, mode),
         collisions=collisions)
+
+
+def _check_mode(mode: str, calibration: object, collisions: str) -> None:
+    check_choice("mode", mode, MODES)
+    if mode == "cassi" and (calibration not in (None, "cassi") or collisions != "off"):
+        raise CassiError("the cassi mode is the paper's: no calibration and no collision "
+                         "handling")
 
 
 def _calibration_for(
@@ -112,6 +126,7 @@ def evaluate_dataset(
     jaw: str = "closed-form",
     stride: int = 1,
     model: FaceModel | None = None,
+    mode: str = "improved",
 ) -> EvaluationResult:
     """Evaluate every recording of a dataset (or the chosen ``subjects``/``tasks``) and
     rate each subject.
@@ -121,13 +136,15 @@ def evaluate_dataset(
     gets the default, with a warning). A recording that fails (a ``CassiError``: bad data,
     non-finite geometry) is kept as a ``FAILED`` row with its message and not rated; its
     subject is rated from the others. ``collisions``, ``jaw`` and ``stride`` are checked
-    before anything is animated. Progress bar over the files on stderr (tqdm).
+    before anything is animated; ``mode``: as :func:`evaluate_recording`. Progress bar
+    over the files on stderr (tqdm).
     """
     from tqdm import tqdm
 
     from ..dataset import Dataset, DefaultHeadMeasuresWarning
 
     _check_settings(collisions, jaw, stride)
+    _check_mode(mode, None if isinstance(calibrations, (str, type(None))) else {}, collisions)
     if isinstance(calibrations, str):
         check_choice("calibrations", calibrations, CONFORMATIONS)
     dataset = dataset_or_path if isinstance(dataset_or_path, Dataset) else Dataset(
@@ -145,14 +162,14 @@ def evaluate_dataset(
                 recording = dataset.load(subject, task)
             rows.append(evaluate_recording(recording, calibration=calibration,
                                            collisions=collisions, jaw=jaw, stride=stride,
-                                           model=model))
+                                           model=model, mode=mode))
         except CassiError as exc:
             rows.append(RecordingRow.not_evaluated(
-                subject, task, str(exc), calibration=_calibration_label(calibration),
+                subject, task, str(exc), calibration=_calibration_label(calibration, mode),
                 **settings))
     planned = list(dict.fromkeys(subject for subject, _ in plan))  # those with chosen tasks
     per_subject = [SubjectRow.of_recordings(s, [r for r in rows if r.subject == s], **settings)
                    for s in planned]
     label = "calibrated" if isinstance(calibrations, Mapping) else _calibration_label(
-        calibrations)
+        calibrations, mode)
     return EvaluationResult(rows, per_subject, {**settings, "calibration": label})
