@@ -70,9 +70,11 @@ if TYPE_CHECKING:
     from .headmeasures import HeadMeasures as HeadMeasures
     from .headmeasures import read_headmeasures as read_headmeasures
     from .headmeasures import write_headmeasures as write_headmeasures
+    from .initialize import Mode as Mode
     from .initialize import SubjectState as SubjectState
     from .initialize import animate_recording as animate_recording
     from .initialize import initialize as initialize
+    from .initialize import mode_named as mode_named
     from .jaw import closed_form as closed_form
     from .jaw import closed_form_paper as closed_form_paper
     from .jaw_fit import ClosedForm as ClosedForm
@@ -248,6 +250,8 @@ _PUBLIC = {
     "initialize": "initialize",
     "SubjectState": "initialize",
     "animate_recording": "initialize",
+    "Mode": "initialize",
+    "mode_named": "initialize",
     # animate (pipeline)
     "Animation": "animate",
     # render (outputs)
@@ -279,7 +283,7 @@ __all__ = [
     "DegenerateGeometryError", "Dogleg", "EvaluationResult", "FaceModel", "FaceParams",
     "FixedPivot", "FrameFit", "GaussNewton", "HeadMeasures", "InvalidChoiceError", "JAW_METHODS",
     "JAW_PELLETS", "JawDiagnostics", "JawFit", "JawMethod", "JawTruth", "Labels",
-    "LevenbergMarquardt", "MATERIALS", "MissingDataError", "MistrackedFirstLineWarning",
+    "LevenbergMarquardt", "MATERIALS", "MissingDataError", "MistrackedFirstLineWarning", "Mode",
     "OutputExistsError", "PELLET_NAMES", "PelletTrack", "QualityReport", "Recording", "Renderer",
     "RenderingUnavailableError", "SOLVERS", "STATUS_LABELS", "SmoothPivot", "Solver", "Status",
     "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning", "Topology", "animate",
@@ -289,7 +293,7 @@ __all__ = [
     "evaluate_recording", "first_clean_line", "first_valid_frame", "first_valid_line", "fit_jaw",
     "generate_corpus", "initialize", "jaw_corpus", "jaw_diagnostics", "jaw_from_track",
     "jaw_method", "jaw_solver", "labels_for", "load_anatomy", "load_calibrations", "load_model",
-    "load_recording", "load_truth", "make_subject", "model_pellets", "pellet_index",
+    "load_recording", "load_truth", "make_subject", "mode_named", "model_pellets", "pellet_index",
     "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
     "read_outline", "read_textgrid", "read_txy", "repair", "require_tracked", "rigid",
     "run_corpus", "segment_summary", "synth", "synth_recording", "vertex_normals", "with_palate",

@@ -28,7 +28,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float, Shaped
 
 from . import rigid
 from .dataset import Recording
@@ -194,7 +194,7 @@ def frame_bucket(m: int) -> int:
     return _FRAME_BUCKET * 2 ** max(math.ceil(math.log2(max(m, 1) / _FRAME_BUCKET)), 0)
 
 
-def pad_frames(x: Float[Array, "m ..."] | np.ndarray, size: int) -> Array:
+def pad_frames(x: Shaped[ArrayLike, "m ..."], size: int) -> Shaped[Array, "size ..."]:
     """``x (m, ...)`` with its last row repeated along axis 0 up to ``size`` rows.
 
     Concrete arrays are padded in numpy, so that different ``m`` compile nothing."""

@@ -101,7 +101,7 @@ class Calibration:
     format: str = field(default=FORMAT)
     bounds_hit: tuple = field(default=())
 
-    def face_params(self, dtype=float) -> FaceParams:
+    def face_params(self, dtype: type | np.dtype = float) -> FaceParams:
         """The conformation as a ``deform.FaceParams`` (no animation)."""
         values = {k: jnp.asarray(v, dtype) for k, v in self.params.items()}
         return with_values(default_params(dtype=dtype), values)
