@@ -341,9 +341,13 @@ def recovery_markdown(rows: list[dict]) -> str:
         sel = [r for r in rows if r["method"] == m]
         rest = [abs(r["lower_lip_thickness_error_mm"] - r["tip_offset_difference_mm"])
                 for r in sel]
+        span = {g: [r[f"residual_{g}_mm"] for r in sel] for g in ("gonion", "gnathion")}
         summary.append([m, f"{worst[(m, 'upper_lip_thickness')]:.2f}",
                         f"{worst[(m, 'lower_lip_thickness')]:.2f}", f"{max(rest):.2f}",
-                        f"{worst[(m, 'scale')]:.2f}", f"{worst[(m, 'face_width')]:.2f}",
+                        f"{worst[(m, 'scale')]:.2f}",
+                        *(f"{min(v):.2f}-{max(v):.2f}" for v in span.values()),
+                        f"{max(r['residual_lips_in_teeth_mm'] for r in sel):.3f}",
+                        f"{worst[(m, 'face_width')]:.2f}",
                         f"{sum(r['converged'] for r in sel)}/{len(sel)}"])
     per = {(r["method"], r["subject"]): r for r in rows}
     subjects = list(dict.fromkeys(r["subject"] for r in rows))
@@ -372,6 +376,7 @@ def recovery_markdown(rows: list[dict]) -> str:
     return (_header("Calibration recovery (synthetic truth)", text)
             + _table(["method", "upper lip, worst abs error %", "lower lip, worst abs error %",
                       "lower minus offset, worst mm", "scale p/d, worst abs error %",
+                      "gonion residual mm", "gnathion residual mm", "lips in teeth, max mm",
                       "face width (set from Headmeasures), worst abs difference %", "converged"],
                      summary)
             + "\nPer subject (lip errors signed; mm for the lower lip's, beside the offset "
