@@ -92,6 +92,7 @@ def main(argv=None) -> int:
     from cassi_fit.render import Renderer
 
     results = {}
+    load = os.getloadavg()[0]
     recording = synthetic_recording(args.seconds)
     model = load_model()
     wall = time.perf_counter()
@@ -130,7 +131,8 @@ def main(argv=None) -> int:
     results["total wall time"] = total
     note = (
         f"{m} frames, {frames} in the MP4, {width}x{height} 2x2 grid, "
-        f"{m / results['render + encode MP4']:.0f} frames/s rendered, {os.cpu_count()} CPUs"
+        f"{m / results['render + encode MP4']:.0f} frames/s rendered, {os.cpu_count()} CPUs, "
+        f"load average {load:.1f} at the start: other processes slow every figure"
     )
     print(f"{'total wall time':<34s} {total:8.3f} s  ({note})")
     ok = total < 20.0 and results["geometry, all frames, compiled"] < 0.2 and frames == m

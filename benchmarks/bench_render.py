@@ -95,7 +95,8 @@ def main(argv=None) -> int:
         markers = {"measured": sites, "model": sites + 1.0}
     header = (
         f"{len(frames)} frames, {width}x{height}, {frames.shape[1]} vertices, "
-        f"{len(model.faces)} triangles, {os.cpu_count()} CPUs"
+        f"{len(model.faces)} triangles, {os.cpu_count()} CPUs, load average "
+        f"{os.getloadavg()[0]:.1f} at the start (other processes slow every figure)"
     )
     print(header)
     rows = []
