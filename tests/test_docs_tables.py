@@ -9,12 +9,15 @@ table quotes a code constant with its value, the value is checked against the co
 """
 
 import re
+import sys
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 GENERATED = ROOT / "docs" / "generated"
+sys.path.insert(0, str(ROOT / "experiments"))
+import quote_tables  # noqa: E402
 
 #: (document, the table's header line) -> why it may hold digits without being generated.
 SPECIFICATIONS = {
@@ -103,6 +106,29 @@ def test_the_check_catches_a_changed_figure_and_passes_a_quoted_one(tmp_path):
     # a table without digits needs no source
     doc.write_text("| a | b |\n|---|---|\n| x | y |\n")
     assert stale_tables([doc], "") == []
+
+
+def test_every_marked_quote_is_its_source_table_now():
+    # `make experiments` / `make bench` end with experiments/quote_tables.py, which copies
+    # the table under each "<!-- quoted from docs/generated/X.md, table K -->" marker
+    marked = 0
+    for doc in documents():
+        text = doc.read_text(encoding="utf-8")
+        marked += len(re.findall(quote_tables.MARKER.pattern, text, re.M))
+        assert quote_tables.requote(text, doc.name) == text, f"{doc.name}: run make experiments"
+    assert marked >= 8
+
+
+def test_requote_replaces_a_stale_copy_and_names_a_missing_source(tmp_path):
+    gen = tmp_path / "docs" / "generated"
+    gen.mkdir(parents=True)
+    (gen / "t.md").write_text("<!-- written by x -->\n| a |\n|---|\n| 1 |\n\n| b |\n|---|\n| 2 |\n")
+    doc = "x\n<!-- quoted from docs/generated/t.md, table 2 -->\n| b |\n|---|\n| 9 |\n\ny\n"
+    assert quote_tables.requote(doc, "doc.md", tmp_path) == doc.replace("9", "2")
+    new = "<!-- quoted from docs/generated/t.md, table 1 -->\n\nz\n"
+    assert quote_tables.requote(new, "doc.md", tmp_path) == new.replace("\n\n", "\n| a |\n|---|\n| 1 |\n\n")
+    with pytest.raises(ValueError, match="doc.md:1: docs/generated/t.md has no table 3"):
+        quote_tables.requote("<!-- quoted from docs/generated/t.md, table 3 -->\n", "doc.md", tmp_path)
 
 
 def test_every_listed_specification_still_exists():
