@@ -56,9 +56,20 @@ def documented():
     return {r["method"]: r for r in summary}, {r["subject"]: r for r in per_subject}
 
 
+def _half_unit(cell):
+    """Half a unit of the last printed digit of ``cell``: a documented bound is the
+    measured number rounded, so the measured number may exceed the print by this much."""
+    return 0.5 * 10.0 ** -len(cell.split(".")[1]) if "." in cell else 0.5
+
+
+def _bound(cell):
+    """The largest value a printed upper bound ``cell`` stands for."""
+    return float(cell) + _half_unit(cell)
+
+
 def _span(cell):
-    lo, hi = (float(v) for v in cell.split("-"))
-    return lo, hi
+    lo, hi = cell.split("-")
+    return float(lo) - _half_unit(lo), _bound(hi)
 
 
 def test_the_module_corpus_is_the_documented_one():
@@ -120,17 +131,17 @@ def test_separate_calibration_reproduces_the_documented_recovery(corpus, separat
         assert e["offset_mm"] == pytest.approx(float(doc["tip offset difference mm"]), abs=0.006)
         # the documented explanation: the lower lip is off by the unobserved tip offset,
         # up to what the table says remains
-        assert abs(e["lower_mm"] - e["offset_mm"]) <= float(worst["lower minus offset, worst mm"])
-        assert abs(e["upper"]) <= float(worst["upper lip, worst abs error %"])
+        assert abs(e["lower_mm"] - e["offset_mm"]) <= _bound(worst["lower minus offset, worst mm"])
+        assert abs(e["upper"]) <= _bound(worst["upper lip, worst abs error %"])
         # face width is set from Headmeasures, not fitted: the model reaches the setting
-        assert abs(e["face"]) <= float(
-            worst["face width (set from Headmeasures), worst abs difference %"]) + 0.005
+        assert abs(e["face"]) <= _bound(
+            worst["face width (set from Headmeasures), worst abs difference %"])
         assert cal.converged and cal.method == "separate"
-        assert cal.residuals["lips_in_teeth"] <= float(worst["lips in teeth, max mm"]) + 5e-4
+        assert cal.residuals["lips_in_teeth"] <= _bound(worst["lips in teeth, max mm"])
         # the jaw shape has 3 unknowns for 4 coordinates: within the documented ranges
         for point in ("gonion", "gnathion"):
             lo, hi = _span(worst[f"{point} residual mm"])
-            assert lo - 0.005 <= cal.residuals[point] <= hi + 0.005, (cal.subject, point)
+            assert lo <= cal.residuals[point] <= hi, (cal.subject, point)
 
 
 def test_separate_scale_is_p_over_the_median_first_line_jaw_pellet_distance(corpus, separate):
@@ -140,7 +151,7 @@ def test_separate_scale_is_p_over_the_median_first_line_jaw_pellet_distance(corp
     for subject, cal in separate.items():
         d = []
         for rec in _recordings(corpus, subject):
-            xy = np.asarray(rec.track.positions)[first_valid_line(rec.track)]
+            xy = np.asarray(rec.track.positions)[first_valid_line(rec.track)[0]]
             d.append(np.linalg.norm(xy[MNI] - xy[MNM]))
         assert cal.scale == pytest.approx(p / np.median(d), rel=1e-9), subject
 
@@ -154,7 +165,7 @@ def test_joint_calibration_reproduces_the_documented_recovery(corpus, documented
     assert e["lower"] == pytest.approx(float(doc["lower error % (joint)"]), abs=0.006)
     assert cal.method == "joint" and cal.converged
     # jointly the scale answers to every recording's jaw pellet distance
-    assert abs(e["scale"]) <= float(summary["joint"]["scale p/d, worst abs error %"])
+    assert abs(e["scale"]) <= _bound(summary["joint"]["scale p/d, worst abs error %"])
 
 
 def test_the_lip_estimate_is_each_first_line_and_their_least_squares_compromise(separate):

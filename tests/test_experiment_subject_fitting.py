@@ -36,6 +36,12 @@ def _tables(text):
     return tables
 
 
+def _bound(cell):
+    """The largest value a printed upper bound ``cell`` stands for (it is the measured
+    number rounded to the printed digits)."""
+    return float(cell) + (0.5 * 10.0 ** -len(cell.split(".")[1]) if "." in cell else 0.5)
+
+
 def _documented():
     summary, per_subject = _doc_tables(RECOVERY)
     return {r["method"]: r for r in summary}, {r["subject"]: r for r in per_subject}
@@ -211,10 +217,10 @@ def test_small_run_explains_the_lower_lip_and_writes_the_docs_tables(tmp_path, c
             float(per_subject[r["subject"]]["tip offset difference mm"]), abs=0.006)
         # the lower lip is off by that offset, up to what the docs say remains
         rest = float(r["lower_lip_thickness_error_mm"]) - float(r["tip_offset_difference_mm"])
-        assert abs(rest) <= float(worst["lower minus offset, worst mm"]), r["subject"]
+        assert abs(rest) <= _bound(worst["lower minus offset, worst mm"]), r["subject"]
         # face width is set from Headmeasures: the model reaches the setting
-        assert abs(float(r["face_width_error_percent"])) <= float(
-            worst["face width (set from Headmeasures), worst abs difference %"]) + 0.005
+        assert abs(float(r["face_width_error_percent"])) <= _bound(
+            worst["face width (set from Headmeasures), worst abs difference %"])
         # the estimates are not the truth copied: the lips carry the pellet noise
         assert float(r["upper_lip_thickness_mm"]) != float(r["true_upper_lip_thickness_mm"])
     noise = _csv(out / "lip_noise.csv")
@@ -226,7 +232,7 @@ def test_small_run_explains_the_lower_lip_and_writes_the_docs_tables(tmp_path, c
     assert float(at[2.0, "separate", "upper_lip_thickness"]["max_abs_error_mm"]) > 0.01
     offsets = [abs(float(per_subject[s]["tip offset difference mm"])) for s in ("S01", "S02", "S03")]
     assert float(at[0.0, "separate", "lower_lip_thickness"]["max_abs_error_mm"]) == pytest.approx(
-        max(offsets), abs=float(summary["separate"]["lower minus offset, worst mm"]))
+        max(offsets), abs=_bound(summary["separate"]["lower minus offset, worst mm"]))
     penetration = _csv(out / "penetration.csv")
     assert len(penetration) == 6 and all(r["status"] == "ok" for r in penetration)
     # projection leaves (almost) nothing of the tongue in the teeth
