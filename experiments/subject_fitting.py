@@ -17,10 +17,12 @@ to a temporary folder and removed afterwards; the true anatomy of every subject 
 2. Lip thickness vs pellet noise. The corpus regenerated at ``noise_scale`` 0, 1 and 2
    (times the default 0.21 mm per coordinate) and calibrated again; the median and largest
    |error| per level, method and lip: ``lip_noise.csv``, ``lip_noise.png``.
-3. The evaluation (``cassi_fit.evaluate``): CASSI-like (calibration ``"cassi"``, collisions
-   off) vs calibrated (step 1's ``"separate"`` calibrations, collisions projected). Each is
-   written with ``write_table`` and ``plot_summary`` into ``cassi_like/`` and
-   ``calibrated/``; ``compare`` into ``evaluation_comparison.md``. Per recording, the 95th
+3. The evaluation (``cassi_fit.evaluate``) in the three ``SETTINGS``: CASSI-like
+   (calibration ``"cassi"``, collisions off), calibrated (step 1's ``"separate"``
+   calibrations) with collisions off, and calibrated with collisions projected. Each is
+   written with ``write_table`` and ``plot_summary`` into its folder (``cassi_like/``,
+   ``calibrated_only/``, ``calibrated/``); ``compare`` of the first and the last into
+   ``evaluation_comparison.md``. Per recording, the 95th
    percentile over frames of the penetration depths (tongue in the teeth, tongue in the
    palate, lips in the teeth): ``penetration.csv``, ``penetration.png``.
 4. A summary on stdout: the worst errors per method, whether the upper lip's errors are
