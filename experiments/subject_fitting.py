@@ -267,12 +267,14 @@ def noise_study(workdir, plan: Plan, model) -> list[dict]:
     return rows
 
 
-def evaluate_both(root, calibrations: dict, model, tasks=None, progress=False) -> dict:
-    """Step 3: folder name (``SETTINGS``) -> ``evaluate.EvaluationResult``."""
+def evaluate_both(root, calibrations: dict, model, tasks=None, progress=False,
+                  settings=tuple(SETTINGS)) -> dict:
+    """Step 3: folder name (``settings``, names of ``SETTINGS``) -> ``EvaluationResult``."""
     from cassi_fit.evaluate import evaluate_dataset
 
     out = {}
-    for name, (calibration, collisions, _) in SETTINGS.items():
+    for name in settings:
+        calibration, collisions, _ = SETTINGS[name]
         cal = calibration if calibration == "cassi" else calibrations[calibration]
         out[name] = evaluate_dataset(root, calibrations=cal, collisions=collisions, tasks=tasks,
                                      subjects=list(calibrations[METHODS[0]]), jaw=JAW,
