@@ -29,12 +29,14 @@ pictures: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_jaw.py
-	$(BIN)/python benchmarks/bench_render.py
-	$(BIN)/python benchmarks/bench_animation.py
+	$(BIN)/python benchmarks/bench_render.py --docs docs/generated
+	$(BIN)/python benchmarks/bench_animation.py --docs docs/generated
+	$(BIN)/python experiments/quote_tables.py
 
 experiments: $(STAMP)
 	$(BIN)/python experiments/jaw_comparison.py --out experiments/output --docs docs/generated --force
-	$(BIN)/python experiments/subject_fitting.py --out experiments/output --force
+	$(BIN)/python experiments/subject_fitting.py --out experiments/output --docs docs/generated --force
+	$(BIN)/python experiments/quote_tables.py
 
 # ruff; the import-linter contracts (layers, no cycles; pyproject.toml); the public surface's
 # type annotations (tests/test_architecture.py, which also runs the contracts).

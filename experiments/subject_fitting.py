@@ -1,6 +1,7 @@
 """Subject-specific fitting: does calibration recover a speaker's face, and does it help?
 
-    python experiments/subject_fitting.py [--out experiments/output] [--small] [--force]
+    python experiments/subject_fitting.py [--out experiments/output] [--docs DIR] [--small]
+                                          [--force]
     python experiments/subject_fitting.py --dataset DIR [--tasks tp005,tp010] [--out DIR]
 
 Synthetic part (a corpus from ``cassi_fit.synth.generate_corpus``, seed ``SEED``, written
@@ -11,27 +12,35 @@ to a temporary folder and removed afterwards; the true anatomy of every subject 
    width and scale ``p/d`` with their percent errors, every residual group
    (``Calibration.residuals``, subject mm) and whether the fit converged:
    ``calibration_recovery.csv``, ``calibration_recovery.png`` (estimated vs true, the
-   identity line and the +-5 % band).
+   identity line and the +-5 % band), ``lower_lip_geometry.png`` (the lower lip's error
+   against the tip-offset difference, ``GEOMETRY``).
 2. Lip thickness vs pellet noise. The corpus regenerated at ``noise_scale`` 0, 1 and 2
    (times the default 0.21 mm per coordinate) and calibrated again; the median and largest
    |error| per level, method and lip: ``lip_noise.csv``, ``lip_noise.png``.
-3. The evaluation (``cassi_fit.evaluate``): CASSI-like (calibration ``"cassi"``, collisions
-   off) vs calibrated (step 1's ``"separate"`` calibrations, collisions projected). Each is
-   written with ``write_table`` and ``plot_summary`` into ``cassi_like/`` and
-   ``calibrated/``; ``compare`` into ``evaluation_comparison.md``. Per recording, the 95th
+3. The evaluation (``cassi_fit.evaluate``) in the three ``SETTINGS``: CASSI-like
+   (calibration ``"cassi"``, collisions off), calibrated (step 1's ``"separate"``
+   calibrations) with collisions off, and calibrated with collisions projected. Each is
+   written with ``write_table`` and ``plot_summary`` into its folder (``cassi_like/``,
+   ``calibrated_only/``, ``calibrated/``); ``compare`` of the first and the last into
+   ``evaluation_comparison.md``. Per recording, the 95th
    percentile over frames of the penetration depths (tongue in the teeth, tongue in the
    palate, lips in the teeth): ``penetration.csv``, ``penetration.png``.
-4. A summary on stdout: the worst errors per method, whether all lip thickness and face
-   width errors are within ``TOLERANCE_PERCENT``, the rating totals of both evaluations.
+4. A summary on stdout: the worst errors per method, whether the upper lip's errors are
+   within ``TOLERANCE_PERCENT``, what remains of the lower lip's once the tip-offset
+   difference is taken off, face width's difference from the setting, the rating totals
+   of the evaluations.
 
 Dataset part (``--dataset DIR``, instead of the synthetic one; there is no truth): the
 calibration of every subject by both methods with its residuals
 (``calibration_residuals.csv``), then step 3 on that dataset.
 
-Face width is fitted to Headmeasures' ``face_width``, which on the synthetic corpus *is*
-the truth: its error says whether the model can reach the measurement. The lip
-thicknesses are inferred from the pellets of the first valid lines, so their errors carry
-the pellet noise. Nothing is overwritten: if an output exists the run stops before any
+Face width is *set* from Headmeasures' ``face_width``, which on the synthetic corpus *is*
+the truth: its "error" only says whether the model can reach the measurement, and is no
+fitting accuracy. The lip thicknesses are inferred from the pellets of the first valid
+lines, so their errors carry the pellet noise; the lower one also carries the difference
+between the subject's incisor-tip-to-MNI geometry and the model's (``GEOMETRY``), which no
+pellet observes. ``--docs DIR`` also writes the Markdown tables the documentation quotes
+(``DOC_TABLES``), each headed by the command that wrote it. Nothing is overwritten: if an output exists the run stops before any
 work, unless ``--force``.
 """
 
@@ -52,7 +61,8 @@ METHODS = ("separate", "joint")
 #: Estimated quantities compared with the truth: name -> unit ("" = dimensionless).
 QUANTITIES = {"upper_lip_thickness": "mm", "lower_lip_thickness": "mm", "face_width": "mm",
               "scale": ""}
-#: The quantities whose errors must stay within TOLERANCE_PERCENT.
+#: ``all_within``'s default quantities (the summary applies it to the upper lip only: the
+#: lower lip carries the unobserved tip offset, face width is set, not fitted).
 CHECKED = ("upper_lip_thickness", "lower_lip_thickness", "face_width")
 TOLERANCE_PERCENT = 5.0
 LIPS = ("upper_lip_thickness", "lower_lip_thickness")
@@ -68,7 +78,17 @@ PENETRATION_KINDS = {
 #: The evaluation settings: output folder -> (calibration, collisions, label).
 SETTINGS = {
     "cassi_like": ("cassi", "off", "CASSI-like (paper's conformation, collisions off)"),
+    "calibrated_only": ("separate", "off", "calibrated (separate), collisions off"),
     "calibrated": ("separate", "project", "calibrated (separate) + collisions projected"),
+}
+#: Geometry the lower-lip estimate cannot see (subject mm, along the jaw line MNM -> MNI):
+#: row column -> meaning. The estimate places the *model's* lower incisor tip on the
+#: subject's jaw pellets, so it is off by exactly how much further ahead of MNI the
+#: subject's tip is than the model's (``tip_offset_difference_mm``), plus pellet noise.
+GEOMETRY = {
+    "true_tip_ahead_of_mni_mm": "subject's lower incisor tip ahead of MNI (synthetic truth)",
+    "model_tip_ahead_of_mni_mm": "the model's, in subject mm (divided by the true scale p/d)",
+    "tip_offset_difference_mm": "true minus model: the lower-lip error it predicts",
 }
 
 
@@ -102,7 +122,8 @@ def recovery_rows(calibrations: dict, truths: dict | None = None) -> list[dict]:
 
     ``calibrations``: method -> {subject -> Calibration} (only the attributes named in
     ``QUANTITIES``, ``residuals``, ``converged`` and ``head_is_default`` are read);
-    ``truths``: subject -> {quantity -> true value}, or None (no truth: no error columns).
+    ``truths``: subject -> {quantity -> true value} (and optionally the ``GEOMETRY``
+    keys, copied), or None (no truth: no error columns).
     Residual columns are the union of the groups over all calibrations (NaN where a
     calibration lacks one).
     """
@@ -118,6 +139,11 @@ def recovery_rows(calibrations: dict, truths: dict | None = None) -> list[dict]:
                 if truths is not None:
                     row[f"true_{_column(q)}"] = float(truths[subject][q])
                     row[f"{q}_error_percent"] = percent_error(getattr(cal, q), truths[subject][q])
+            if truths is not None and "lower_lip_thickness" in QUANTITIES:
+                row["lower_lip_thickness_error_mm"] = float(
+                    cal.lower_lip_thickness - truths[subject]["lower_lip_thickness"])
+                for k in (k for k in GEOMETRY if k in truths[subject]):
+                    row[k] = float(truths[subject][k])
             for g in groups:
                 row[f"residual_{g}_mm"] = float(cal.residuals.get(g, np.nan))
             rows.append(row)
@@ -197,17 +223,27 @@ def make_corpus(root, plan: Plan, noise_scale: float = 1.0, n_subjects: int | No
 
 def true_values(root, subjects, model) -> dict:
     """subject -> {quantity -> truth} from each subject's ``anatomy.json``; the true scale
-    is the model's MNI-MNM distance over the subject's (rigid, noise-free) one."""
+    is the model's MNI-MNM distance over the subject's (rigid, noise-free) one. Also the
+    ``GEOMETRY`` columns: where the subject's lower incisor tip lies ahead of MNI along
+    the jaw line, against the model's (subject mm)."""
     from cassi_fit.synth import load_anatomy
 
-    v = np.asarray(model.vertices)
-    p = float(np.linalg.norm(v[model.landmarks["MNI"], :2] - v[model.landmarks["MNM"], :2]))
+    v = np.asarray(model.vertices)[:, :2]
+    mni, mnm, tip = (v[model.landmarks[k]] for k in ("MNI", "MNM", "lower_incisor_tip"))
+    p = float(np.linalg.norm(mni - mnm))
+    model_ahead = float(np.dot(tip - mni, (mni - mnm) / p))  # model mm
     out = {}
     for s in subjects:
         a = load_anatomy(root, s)
+        scale = p / a.jaw_pellet_distance
+        forward = (a.mni_rest - a.mnm_rest) / a.jaw_pellet_distance
+        true_ahead = float(np.dot(a.lower_incisor_tip_rest - a.mni_rest, forward))
         out[s] = {"upper_lip_thickness": a.upper_lip_thickness,
                   "lower_lip_thickness": a.lower_lip_thickness,
-                  "face_width": a.face_width, "scale": p / a.jaw_pellet_distance}
+                  "face_width": a.face_width, "scale": scale,
+                  "true_tip_ahead_of_mni_mm": true_ahead,
+                  "model_tip_ahead_of_mni_mm": model_ahead / scale,
+                  "tip_offset_difference_mm": true_ahead - model_ahead / scale}
     return out
 
 
@@ -231,12 +267,14 @@ def noise_study(workdir, plan: Plan, model) -> list[dict]:
     return rows
 
 
-def evaluate_both(root, calibrations: dict, model, tasks=None, progress=False) -> dict:
-    """Step 3: folder name (``SETTINGS``) -> ``evaluate.EvaluationResult``."""
+def evaluate_both(root, calibrations: dict, model, tasks=None, progress=False,
+                  settings=tuple(SETTINGS)) -> dict:
+    """Step 3: folder name (``settings``, names of ``SETTINGS``) -> ``EvaluationResult``."""
     from cassi_fit.evaluate import evaluate_dataset
 
     out = {}
-    for name, (calibration, collisions, _) in SETTINGS.items():
+    for name in settings:
+        calibration, collisions, _ = SETTINGS[name]
         cal = calibration if calibration == "cassi" else calibrations[calibration]
         out[name] = evaluate_dataset(root, calibrations=cal, collisions=collisions, tasks=tasks,
                                      subjects=list(calibrations[METHODS[0]]), jaw=JAW,
@@ -279,6 +317,144 @@ def penetration_rows(root, calibrations: dict, model, tasks=None) -> list[dict]:
                     row[f"{label}_{kind}_p95_mm"] = value
             rows.append(row)
     return rows
+
+
+# ------------------------------------------------------------------ documentation tables
+
+DOCS_COMMAND = ("python experiments/subject_fitting.py --out experiments/output "
+                "--docs docs/generated --force")
+#: The Markdown files ``--docs`` writes (README.md and docs/ quote their tables verbatim).
+DOC_TABLES = ("calibration_recovery.md", "lip_noise.md", "evaluation_totals.md",
+              "penetration.md", "subject_fitting_cost.md")
+
+
+def _header(title: str, text: str) -> str:
+    return (f"<!-- written by `{DOCS_COMMAND}`; do not edit: `make experiments` rewrites it "
+            f"-->\n# {title}\n\n{text}\n\n")
+
+
+def _table(head: list[str], rows: list[list]) -> str:
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def recovery_markdown(rows: list[dict]) -> str:
+    """``calibration_recovery.md``: per method the worst errors, then per subject the lip
+    errors beside the unobserved tip-offset difference (``GEOMETRY``)."""
+    worst = worst_errors(rows)
+    n = len({r["subject"] for r in rows})
+    summary = []
+    for m in METHODS:
+        sel = [r for r in rows if r["method"] == m]
+        rest = [abs(r["lower_lip_thickness_error_mm"] - r["tip_offset_difference_mm"])
+                for r in sel]
+        span = {g: [r[f"residual_{g}_mm"] for r in sel] for g in ("gonion", "gnathion")}
+        summary.append([m, f"{worst[(m, 'upper_lip_thickness')]:.2f}",
+                        f"{worst[(m, 'lower_lip_thickness')]:.2f}", f"{max(rest):.2f}",
+                        f"{worst[(m, 'scale')]:.2f}",
+                        *(f"{min(v):.2f}-{max(v):.2f}" for v in span.values()),
+                        f"{max(r['residual_lips_in_teeth_mm'] for r in sel):.3f}",
+                        f"{worst[(m, 'face_width')]:.2f}",
+                        f"{sum(r['converged'] for r in sel)}/{len(sel)}"])
+    per = {(r["method"], r["subject"]): r for r in rows}
+    subjects = list(dict.fromkeys(r["subject"] for r in rows))
+    detail = []
+    for subj in subjects:
+        a, b = per[METHODS[0], subj], per[METHODS[1], subj]
+        detail.append([subj, f"{a['true_upper_lip_thickness_mm']:.2f}",
+                       f"{a['upper_lip_thickness_error_percent']:+.2f}",
+                       f"{b['upper_lip_thickness_error_percent']:+.2f}",
+                       f"{a['true_lower_lip_thickness_mm']:.2f}",
+                       f"{a['tip_offset_difference_mm']:+.2f}",
+                       f"{a['lower_lip_thickness_error_mm']:+.2f}",
+                       f"{a['lower_lip_thickness_error_percent']:+.2f}",
+                       f"{b['lower_lip_thickness_error_percent']:+.2f}"])
+    text = (f"The default synthetic corpus ({n} subjects, tasks {', '.join(FULL.tasks)}, seed "
+            f"{SEED}), calibrated by both methods. |error| in percent of the truth. The "
+            "lower-lip estimate places the *model's* lower incisor tip on the subject's jaw "
+            "pellets; the synthetic subject's own tip-to-MNI geometry is drawn from dental "
+            "norms (docs/SYNTHETIC.md), so the estimate is off by the difference (tip offset "
+            "difference: how much further ahead of MNI, along MNM -> MNI, the subject's tip "
+            "lies than the model's, subject mm). \"lower minus offset\": the largest "
+            "|lower-lip error - offset difference| (mm), what remains once that difference is "
+            "accounted for. Face width is set directly from Headmeasures (which on the "
+            "synthetic corpus holds the truth): its column says the model reaches the "
+            "measurement; it is no fitting accuracy.")
+    return (_header("Calibration recovery (synthetic truth)", text)
+            + _table(["method", "upper lip, worst abs error %", "lower lip, worst abs error %",
+                      "lower minus offset, worst mm", "scale p/d, worst abs error %",
+                      "gonion residual mm", "gnathion residual mm", "lips in teeth, max mm",
+                      "face width (set from Headmeasures), worst abs difference %", "converged"],
+                     summary)
+            + "\nPer subject (lip errors signed; mm for the lower lip's, beside the offset "
+            "difference that predicts it):\n\n"
+            + _table(["subject", "upper lip true mm", "upper error % (separate)",
+                      "upper error % (joint)", "lower lip true mm", "tip offset difference mm",
+                      "lower error mm (separate)", "lower error % (separate)",
+                      "lower error % (joint)"], detail))
+
+
+def noise_markdown(summary: list[dict]) -> str:
+    """``lip_noise.md``: median and largest |lip error| per noise level and method."""
+    rows = [[f"{r['noise_sd_mm']:.2f}", r["method"], r["quantity"].split("_")[0],
+             f"{r['median_abs_error_mm']:.3f}", f"{r['max_abs_error_mm']:.3f}",
+             f"{r['max_abs_error_percent']:.2f}"] for r in summary]
+    text = (f"The corpus regenerated at noise scales {', '.join(f'{n:g}' for n in NOISE_SCALES)}"
+            f" ({summary[0]['subjects']} subjects) and calibrated again. The lower lip's error "
+            "does not fall to 0 without noise: it is the unobserved tip-offset difference "
+            "(calibration_recovery.md).")
+    return (_header("Lip thickness vs pellet noise", text)
+            + _table(["noise SD per coordinate mm", "method", "lip", "median abs error mm",
+                      "max abs error mm", "max abs error %"], rows))
+
+
+def totals_markdown(results: dict) -> str:
+    """``evaluation_totals.md``: rating totals per setting beside CASSI's Table 2."""
+    from cassi_fit.evaluate import CASSI_TOTALS, COMPONENTS
+
+    def text(t):
+        return "/".join(str(int(k)) for k in t)
+
+    rows = [["CASSI's Table 2 (real subjects, rated by eye)",
+             *(text(CASSI_TOTALS[c]) for c in COMPONENTS)]]
+    for name, result in results.items():
+        rated = sum(s.rated for s in result.subjects)
+        totals = result.totals()
+        rows.append([f"{SETTINGS[name][2]} ({rated} subjects)",
+                     *(text(totals[c]) for c in COMPONENTS)])
+    intro = ("Subjects rated EXCELLENT/VERY GOOD/GOOD/FAIR (CASSI's Table 2 layout; thresholds "
+             f"in docs/EVALUATION.md), on the default synthetic corpus (tasks "
+             f"{', '.join(FULL.tasks)}); jaw: {JAW}.")
+    return _header("Evaluation totals", intro) + _table(["setting", *COMPONENTS], rows)
+
+
+def penetration_markdown(rows: list[dict]) -> str:
+    """``penetration.md``: per kind, the median and largest over recordings of the 95th
+    percentile depth in each setting."""
+    ok = [r for r in rows if r["status"] == "ok"]
+    out = []
+    for kind in PENETRATION_KINDS:
+        cells = []
+        for s in ("cassi_like", "calibrated_before", "calibrated_after"):
+            v = [r[f"{s}_{kind}_p95_mm"] for r in ok]
+            cells.append(f"{np.median(v):.2f} / {np.max(v):.2f}")
+        out.append([kind.replace("_", " "), *cells])
+    intro = (f"Per recording ({len(ok)} of {len(rows)} animated), the {PENETRATION_PERCENTILE:g}th "
+             "percentile over frames of the penetration depth (mm); cells: median / largest "
+             "over recordings.")
+    return (_header("Penetration depths", intro)
+            + _table(["kind", "CASSI-like", "calibrated, collisions off",
+                      "calibrated, collisions projected"], out))
+
+
+def cost_markdown(seconds: dict, recordings: int, subjects: int) -> str:
+    """``subject_fitting_cost.md``: wall time of each step of this run (one run, 2 cores)."""
+    intro = (f"Wall time of one run of the experiment ({subjects} subjects, {recordings} "
+             "recordings), including JAX compilation; one run on a shared 2-core machine, so "
+             "expect a spread of tens of percent.")
+    return (_header("Cost of the subject-fitting experiment", intro)
+            + _table(["step", "seconds"], [[k, f"{v:.0f}"] for k, v in seconds.items()]))
 
 
 # ------------------------------------------------------------------ figures
@@ -328,6 +504,26 @@ def plot_recovery(rows, path, overwrite=False):
         ax.legend(fontsize=7, loc="upper left")
     fig.suptitle(f"Calibration recovery on the synthetic corpus ({len(rows) // len(METHODS)} "
                  "subjects)")
+    return _save(fig, path, overwrite)
+
+
+def plot_geometry(rows, path, overwrite=False):
+    """Lower-lip error (mm) vs the tip-offset difference the estimate cannot see, both
+    methods, with the identity line (the error the difference predicts)."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(4.6, 4.2))
+    x = np.array([r["tip_offset_difference_mm"] for r in rows])
+    line = np.array([x.min() - 0.3, x.max() + 0.3])
+    ax.plot(line, line, color="0.4", lw=1, label="error = offset difference")
+    for method, marker in zip(METHODS, "ox", strict=False):
+        sel = [r for r in rows if r["method"] == method]
+        ax.plot([r["tip_offset_difference_mm"] for r in sel],
+                [r["lower_lip_thickness_error_mm"] for r in sel], marker, ms=5, ls="none",
+                mfc="none" if marker == "o" else None, label=method)
+    ax.set(xlabel="subject's minus model's tip ahead of MNI (mm)",
+           ylabel="lower lip estimate - truth (mm)",
+           title="Lower lip: the unobserved incisor geometry", aspect="equal")
+    ax.legend(fontsize=7)
     return _save(fig, path, overwrite)
 
 
@@ -382,8 +578,8 @@ def output_names(synthetic: bool) -> list[str]:
     """The files a run writes, relative to ``--out``."""
     from cassi_fit.evaluate import OUTPUT_NAMES
 
-    names = (["calibration_recovery.csv", "calibration_recovery.png", "lip_noise.csv",
-              "lip_noise.png"] if synthetic else ["calibration_residuals.csv"])
+    names = (["calibration_recovery.csv", "calibration_recovery.png", "lower_lip_geometry.png",
+              "lip_noise.csv", "lip_noise.png"] if synthetic else ["calibration_residuals.csv"])
     for folder in SETTINGS:
         names += [f"{folder}/{n}" for n in (*OUTPUT_NAMES, "evaluation_summary.png")]
     return names + ["evaluation_comparison.md", "penetration.csv", "penetration.png"]
@@ -397,8 +593,8 @@ def write_evaluation(results: dict, penetration: list[dict], out: Path, overwrit
     for folder, result in results.items():
         write_table(result, out / folder, overwrite=overwrite)
         plot_summary(result, out / folder / "evaluation_summary.png", overwrite=overwrite)
-    a, b = (results[k] for k in SETTINGS)
-    text = compare(a, b, labels=tuple(label for *_, label in SETTINGS.values()))
+    a, b = results["cassi_like"], results["calibrated"]
+    text = compare(a, b, labels=(SETTINGS["cassi_like"][2], SETTINGS["calibrated"][2]))
     failed = [f"{r.subject} {r.task} ({r.status_text})" for k in SETTINGS
               for r in results[k].failed]
     atomic_write(out / "evaluation_comparison.md",
@@ -419,11 +615,16 @@ def summary_lines(recovery: list[dict] | None, noise: list[dict] | None, results
             sel = [r for r in recovery if r["method"] == m]
             lines.append(f"{m:9s} worst |error|: " + ", ".join(
                 f"{q.replace('_thickness', '').replace('_', ' ')} {worst[(m, q)]:.2f}%"
-                for q in QUANTITIES) + f"; converged {sum(r['converged'] for r in sel)}"
+                for q in QUANTITIES if q != "face_width") + f"; converged {sum(r['converged'] for r in sel)}"
                 f"/{len(sel)}")
-        verdict = "yes" if all_within(recovery) else "NO"
-        lines.append(f"all lip thickness and face width errors within {TOLERANCE_PERCENT:g}%: "
-                     f"{verdict}")
+        verdict = "yes" if all_within(recovery, ("upper_lip_thickness",)) else "NO"
+        lines.append(f"upper lip thickness errors within {TOLERANCE_PERCENT:g}%: {verdict}")
+        rest = max(abs(r["lower_lip_thickness_error_mm"] - r["tip_offset_difference_mm"])
+                   for r in recovery)
+        lines.append(f"lower lip: largest |error - tip offset difference| {rest:.2f} mm "
+                     "(the difference no pellet observes; calibration_recovery.md)")
+        lines.append("face width is set from Headmeasures (not fitted): largest |difference| "
+                     f"{max(worst[(m, 'face_width')] for m in METHODS):.2f}%")
     if noise:
         for r in (r for r in noise if r["method"] == "separate"):
             lines.append(f"noise x{r['noise_scale']:g} {r['quantity']:20s} |error| median "
@@ -446,7 +647,7 @@ def summary_lines(recovery: list[dict] | None, noise: list[dict] | None, results
 # ------------------------------------------------------------------ main
 
 
-def _run_synthetic(plan, out, force, model, clock):
+def _run_synthetic(plan, out, force, model, clock, docs=None):
     import tempfile
 
     from cassi_fit._io import atomic_write
@@ -458,15 +659,25 @@ def _run_synthetic(plan, out, force, model, clock):
         recovery = recovery_rows(cals, truths)
         atomic_write(out / "calibration_recovery.csv", csv_text(recovery), overwrite=force)
         plot_recovery(recovery, out / "calibration_recovery.png", overwrite=force)
-        clock("calibration recovery")
+        plot_geometry(recovery, out / "lower_lip_geometry.png", overwrite=force)
+        clock("calibration recovery (both methods)")
         noise = noise_summary(noise_study(workdir, plan, model))
         atomic_write(out / "lip_noise.csv", csv_text(noise), overwrite=force)
         plot_noise(noise, out / "lip_noise.png", overwrite=force)
-        clock("lip thickness vs noise")
+        clock(f"lip thickness vs noise ({len(NOISE_SCALES)} corpora x both methods)")
         results = evaluate_both(root, cals, model, progress=sys.stderr.isatty())
         penetration = penetration_rows(root, cals, model)
         write_evaluation(results, penetration, out, force)
-        clock("evaluation")
+        clock(f"evaluation ({len(SETTINGS)} settings) and penetration")
+    if docs is not None:
+        texts = {"calibration_recovery.md": recovery_markdown(recovery),
+                 "lip_noise.md": noise_markdown(noise),
+                 "evaluation_totals.md": totals_markdown(results),
+                 "penetration.md": penetration_markdown(penetration),
+                 "subject_fitting_cost.md": cost_markdown(
+                     clock.seconds, len(penetration), plan.n_subjects)}
+        for name, text in texts.items():
+            atomic_write(Path(docs) / name, text, overwrite=force)
     return summary_lines(recovery, noise, results, penetration)
 
 
@@ -507,10 +718,15 @@ def main(argv=None) -> int:
                         help="run on this dataset instead (no truth: calibration residuals "
                         "and the evaluation only)")
     parser.add_argument("--tasks", help="with --dataset: comma-separated tasks (default all)")
+    parser.add_argument("--docs", metavar="DIR",
+                        help="also write the documentation's Markdown tables (DOC_TABLES) "
+                        "into DIR (synthetic runs only; make experiments: docs/generated)")
     parser.add_argument("--force", action="store_true", help="replace existing outputs")
     args = parser.parse_args(argv)
     if args.tasks and not args.dataset:
         parser.error("--tasks goes with --dataset (the synthetic tasks are fixed)")
+    if args.docs and args.dataset:
+        parser.error("--docs goes with the synthetic run (the tables quote its truth)")
     import jax
 
     # Lip thickness errors of a few hundredths of a mm are compared: float32 would blur them.
@@ -519,9 +735,11 @@ def main(argv=None) -> int:
     from cassi_fit.face_model import load_model
 
     out = Path(args.out)
-    existing = [n for n in output_names(args.dataset is None) if (out / n).exists()]
+    paths = [out / n for n in output_names(args.dataset is None)]
+    paths += [Path(args.docs) / n for n in DOC_TABLES] if args.docs else []
+    existing = [p for p in paths if p.exists()]
     if existing and not args.force:
-        print(f"error: {out / existing[0]} exists (and {len(existing) - 1} more outputs); "
+        print(f"error: {existing[0]} exists (and {len(existing) - 1} more outputs); "
               "pass --force to replace them", file=sys.stderr)
         return 1
     start = last = time.perf_counter()
@@ -530,7 +748,10 @@ def main(argv=None) -> int:
         nonlocal last
         now = time.perf_counter()
         print(f"[{step}: {now - last:.0f} s]", flush=True)
+        clock.seconds[step] = now - last
         last = now
+
+    clock.seconds = {}
 
     model = load_model()
     try:
@@ -538,7 +759,8 @@ def main(argv=None) -> int:
             tasks = [t.strip().lower() for t in args.tasks.split(",")] if args.tasks else None
             lines = _run_dataset(args.dataset, tasks, out, args.force, model, clock)
         else:
-            lines = _run_synthetic(SMALL if args.small else FULL, out, args.force, model, clock)
+            lines = _run_synthetic(SMALL if args.small else FULL, out, args.force, model, clock,
+                                   args.docs)
     except CassiError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

@@ -1,5 +1,6 @@
 """The subject-fitting experiment: its helpers on hand-made numbers, the small run, the
-dataset run and the notebook."""
+dataset run and the notebook. Bounds on the runs are the numbers the experiment itself
+documented in docs/generated/calibration_recovery.md (written by ``make experiments``)."""
 
 import csv
 import sys
@@ -14,6 +15,36 @@ from nbclient import NotebookClient
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "experiments"))
 import subject_fitting as sf  # noqa: E402
+
+RECOVERY = ROOT / "docs" / "generated" / "calibration_recovery.md"
+
+
+def _doc_tables(path):
+    """Every Markdown table of the file ``path`` (see ``_tables``)."""
+    return _tables(Path(path).read_text(encoding="utf-8"))
+
+
+def _tables(text):
+    """Every Markdown table of ``text``: a list of tables, each a list of {header: cell}."""
+    tables, block = [], []
+    for line in [*text.splitlines(), ""]:
+        if line.startswith("|"):
+            block.append([c.strip() for c in line.strip().strip("|").split("|")])
+        elif block:
+            tables.append([dict(zip(block[0], row, strict=True)) for row in block[2:]])
+            block = []
+    return tables
+
+
+def _bound(cell):
+    """The largest value a printed upper bound ``cell`` stands for (it is the measured
+    number rounded to the printed digits)."""
+    return float(cell) + (0.5 * 10.0 ** -len(cell.split(".")[1]) if "." in cell else 0.5)
+
+
+def _documented():
+    summary, per_subject = _doc_tables(RECOVERY)
+    return {r["method"]: r for r in summary}, {r["subject"]: r for r in per_subject}
 
 
 def _calibration(upper, lower, width, scale, residuals, converged=True):
@@ -65,6 +96,29 @@ def test_recovery_rows_compare_each_calibration_with_its_subject():
     assert plain == [{"method": "joint", "subject": "S01", "converged": True,
                       "head_is_default": False, "upper_lip_thickness_mm": 1.0,
                       "lower_lip_thickness_mm": 2.0, "face_width_mm": 3.0, "scale": 4.0}]
+
+
+def test_recovery_rows_carry_the_lower_lip_error_and_the_tip_offset_difference():
+    truths = {k: {**v, "true_tip_ahead_of_mni_mm": 1.5, "model_tip_ahead_of_mni_mm": 0.5,
+                  "tip_offset_difference_mm": 1.0} for k, v in TRUTHS.items()}
+    cals = {m: {"S01": _calibration(10.0, 21.2, 100.0, 1.0, {"gonion": 0.5, "gnathion": 2.0,
+                                                             "lips_in_teeth": 0.0})}
+            for m in sf.METHODS}
+    rows = sf.recovery_rows(cals, truths)
+    assert rows[0]["lower_lip_thickness_error_mm"] == pytest.approx(1.2)
+    assert rows[0]["tip_offset_difference_mm"] == 1.0
+    text = sf.recovery_markdown(rows)
+    assert text.startswith(f"<!-- written by `{sf.DOCS_COMMAND}`")
+    # the summary: what remains of the lower-lip error once the offset is accounted for
+    summary, per_subject = _tables(text)
+    assert summary[0]["lower minus offset, worst mm"] == "0.20"
+    assert summary[0]["lower lip, worst abs error %"] == "6.00"
+    assert summary[0]["gonion residual mm"] == "0.50-0.50"
+    assert per_subject[0]["tip offset difference mm"] == "+1.00"
+    assert per_subject[0]["lower error mm (separate)"] == "+1.20"
+    # without the geometry columns (no truth of it) the table cannot be written
+    with pytest.raises(KeyError):
+        sf.recovery_markdown(_rows())
 
 
 def test_worst_errors_and_the_tolerance():
@@ -131,29 +185,54 @@ def test_main_refuses_existing_outputs_before_any_work(tmp_path, capsys):
     assert sf.main(["--dataset", str(tmp_path), "--out", str(tmp_path)]) == 1
     with pytest.raises(SystemExit):
         sf.main(["--tasks", "tp106", "--out", str(tmp_path)])
+    with pytest.raises(SystemExit):
+        sf.main(["--dataset", str(tmp_path), "--docs", str(tmp_path)])
+    # a documentation table that exists is not replaced either
+    docs = tmp_path / "docs"
+    docs.mkdir()
+    (docs / "evaluation_totals.md").write_text("mine")
+    assert sf.main(["--small", "--out", str(tmp_path / "new"), "--docs", str(docs)]) == 1
+    assert "evaluation_totals.md exists" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
 
 
 @pytest.mark.slow
-def test_small_run_recovers_lips_and_face_width_within_5_percent(tmp_path, capsys):
-    out = tmp_path / "out"
-    assert sf.main(["--small", "--out", str(out)]) == 0
+def test_small_run_explains_the_lower_lip_and_writes_the_docs_tables(tmp_path, capsys):
+    summary, per_subject = _documented()
+    out, docs = tmp_path / "out", tmp_path / "docs"
+    assert sf.main(["--small", "--out", str(out), "--docs", str(docs)]) == 0
     for name in sf.output_names(synthetic=True):
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    for name in sf.DOC_TABLES:
+        first = (docs / name).read_text(encoding="utf-8").splitlines()[0]
+        assert first.startswith(f"<!-- written by `{sf.DOCS_COMMAND}`"), name
     rows = _csv(out / "calibration_recovery.csv")
     assert sorted((r["method"], r["subject"]) for r in rows) == [
         (m, s) for m in sorted(sf.METHODS) for s in ("S01", "S02", "S03")]
     for r in rows:
+        worst = summary[r["method"]]
         assert r["converged"] == "True"
-        for q in sf.CHECKED:
-            assert abs(float(r[f"{q}_error_percent"])) < 5.0, (r["method"], r["subject"], q)
+        # the subjects' geometry does not depend on the tasks: the documented offsets
+        assert float(r["tip_offset_difference_mm"]) == pytest.approx(
+            float(per_subject[r["subject"]]["tip offset difference mm"]), abs=0.006)
+        # the lower lip is off by that offset, up to what the docs say remains
+        rest = float(r["lower_lip_thickness_error_mm"]) - float(r["tip_offset_difference_mm"])
+        assert abs(rest) <= _bound(worst["lower minus offset, worst mm"]), r["subject"]
+        # face width is set from Headmeasures: the model reaches the setting
+        assert abs(float(r["face_width_error_percent"])) <= _bound(
+            worst["face width (set from Headmeasures), worst abs difference %"])
         # the estimates are not the truth copied: the lips carry the pellet noise
         assert float(r["upper_lip_thickness_mm"]) != float(r["true_upper_lip_thickness_mm"])
     noise = _csv(out / "lip_noise.csv")
     assert sorted({float(r["noise_scale"]) for r in noise}) == list(sf.NOISE_SCALES)
-    # without noise the upper lip (seen directly) is exact; with noise it is not
+    # without noise the upper lip (seen directly) is exact, with noise it is not; the
+    # lower lip without noise is off by the largest offset difference, not 0
     at = {(float(r["noise_scale"]), r["method"], r["quantity"]): r for r in noise}
     assert float(at[0.0, "separate", "upper_lip_thickness"]["max_abs_error_mm"]) < 1e-6
     assert float(at[2.0, "separate", "upper_lip_thickness"]["max_abs_error_mm"]) > 0.01
+    offsets = [abs(float(per_subject[s]["tip offset difference mm"])) for s in ("S01", "S02", "S03")]
+    assert float(at[0.0, "separate", "lower_lip_thickness"]["max_abs_error_mm"]) == pytest.approx(
+        max(offsets), abs=_bound(summary["separate"]["lower minus offset, worst mm"]))
     penetration = _csv(out / "penetration.csv")
     assert len(penetration) == 6 and all(r["status"] == "ok" for r in penetration)
     # projection leaves (almost) nothing of the tongue in the teeth
@@ -161,13 +240,19 @@ def test_small_run_recovers_lips_and_face_width_within_5_percent(tmp_path, capsy
         assert float(r["calibrated_after_tongue_in_teeth_p95_mm"]) < 0.1
     text = (out / "evaluation_comparison.md").read_text(encoding="utf-8")
     assert "CASSI-like" in text and "calibrated (separate)" in text
+    totals = _doc_tables(docs / "evaluation_totals.md")[0]
+    assert [r["setting"].split(" (")[0] for r in totals] == [
+        "CASSI's Table 2", "CASSI-like", "calibrated", "calibrated"]
+    assert all(sum(map(int, r["teeth"].split("/"))) == 3 for r in totals[1:])
     printed = capsys.readouterr().out
-    assert "all lip thickness and face width errors within 5%: yes" in printed
+    assert "lower lip: largest |error - tip offset difference|" in printed
+    assert "face width is set from Headmeasures (not fitted)" in printed
     assert "ratings CASSI-like" in printed and "ratings calibrated" in printed
 
 
 @pytest.mark.slow
 def test_dataset_run_has_residuals_but_no_truth(tmp_path, capsys):
+    summary, _ = _documented()
     corpus = sf.make_corpus(tmp_path / "corpus", sf.Plan(1, ("tp106", "tp040"), 1))
     out = tmp_path / "out"
     assert sf.main(["--dataset", str(corpus), "--out", str(out)]) == 0
@@ -177,7 +262,12 @@ def test_dataset_run_has_residuals_but_no_truth(tmp_path, capsys):
     rows = _csv(out / "calibration_residuals.csv")
     assert [r["method"] for r in rows] == list(sf.METHODS)
     assert not any(k.startswith("true_") or k.endswith("_percent") for k in rows[0])
-    assert float(rows[0]["residual_gonion_mm"]) >= 0.0
+    # S01 is one of the documented subjects: its jaw-shape residuals lie in the documented
+    # ranges (0.05 mm: the scale here comes from 2 first lines instead of 3)
+    for r in rows:
+        for point in ("gonion", "gnathion"):
+            lo, hi = (float(v) for v in summary[r["method"]][f"{point} residual mm"].split("-"))
+            assert lo - 0.05 <= float(r[f"residual_{point}_mm"]) <= hi + 0.05, (r["method"], point)
     assert "converged 1/1" in capsys.readouterr().out
 
 
@@ -193,4 +283,4 @@ def test_notebook_runs_and_shows_figures_and_the_table():
     assert "| CASSI-like (3 subjects) |" in tables
     assert "| calibrated + collisions (3 subjects) |" in tables
     text = "".join(o.get("text", "") for o in outputs)
-    assert "within 5%: yes" in text
+    assert "lower lip: largest |error - tip offset difference|" in text
