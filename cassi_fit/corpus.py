@@ -1000,6 +1000,10 @@ def calibrate_corpus(
     options = {"tasks": None if tasks is None else tuple(sorted(str(t).lower() for t in tasks)),
                "method": method, "collisions": bool(collisions)}
     items = dataset_items(dataset, subjects=subjects, per_subject=True)
+    if not items:
+        from .errors import MissingDataError
+
+        raise MissingDataError(f"{dataset}: no recordings found (for the subjects chosen)")
     run = run_corpus(calibrate_task, items, out, options=options, **run_options)
     cals = {r.item.subject: read_calibration(calibration_path(out, r.item.subject))
             for r in run.results if r.status == Status.OK}
