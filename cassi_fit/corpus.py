@@ -185,8 +185,10 @@ def _write_marker(out_dir: str, item: CorpusItem, fingerprint: str, result: Task
         p = Path(p)
         rel = os.path.relpath(p, root) if p.is_absolute() else str(p)
         outputs[rel] = _file_digest(root / rel)
+    # the keys are sorted in the file: "columns" keeps the row's own order, which is the
+    # table's column order (a resumed row must give the same table as a computed one)
     doc = {"subject": item.subject, "task": item.task, "fingerprint": fingerprint,
-           "row": result.row, "outputs": outputs}
+           "row": result.row, "columns": list(result.row), "outputs": outputs}
     text = json.dumps(doc, indent=1, sort_keys=True, default=_json_scalar) + "\n"
     atomic_write(marker_path(out_dir, item), text, overwrite=True)
 
@@ -212,7 +214,8 @@ def completed_row(out_dir: str | os.PathLike, item: CorpusItem, fingerprint: str
         out = Path(out_dir) / rel
         if not out.is_file() or out.stat().st_size != want["bytes"] or _file_digest(out) != want:
             return None
-    return doc["row"]
+    row = doc["row"]
+    return {k: row[k] for k in doc.get("columns", row)}
 
 
 # ------------------------------------------------------------ running one item

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from jaxtyping import Float
+from jaxtyping import Bool, Float
 
 from .animate import Animation
 
@@ -56,13 +56,15 @@ def jaw_comparison_plot(
     times: Float[np.ndarray, " n"],
     *,
     labels: Labels | None = None,
+    valid: Bool[np.ndarray, " n"] | None = None,
     title: str = "",
 ) -> Path:
     """A PNG of the jaw per frame: the paper's closed form (Eqs 1-7) against the fixed-
     and smooth-pivot least-squares fits: rotation theta (deg), pivot x and y (mm).
 
     reference_jaw (2, 2) mm: MNI, MNM on the reference frame; current_jaw (n, 2, 2) mm:
-    MNI, MNM per frame; times (n,) s. ``labels`` (``labels.Labels``): each labelled
+    MNI, MNM per frame; times (n,) s; ``valid`` (n,): frames whose jaw pellets are
+    tracked (default: all; the others are left out of the fits and the plot). ``labels`` (``labels.Labels``): each labelled
     segment is shaded on every panel and named above the top one. Written atomically,
     replacing ``path``."""
     import io
@@ -76,15 +78,21 @@ def jaw_comparison_plot(
     from .jaw_fit import fit_jaw
 
     t = np.asarray(times, np.float64)
+    reference_jaw, current_jaw = np.asarray(reference_jaw), np.asarray(current_jaw)
+    if valid is not None:  # untracked frames: finite stand-ins, excluded by ``valid``
+        valid = np.asarray(valid, bool)
+        current_jaw = np.where(valid[:, None, None], current_jaw, reference_jaw)
     fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
     for method, style in (
         ("closed-form", dict(lw=0.8, color="0.45")),
         ("fixed-pivot", dict(lw=1.6, color="tab:blue")),
         ("smooth-pivot", dict(lw=1.6, color="tab:orange", ls="--")),
     ):
-        fit = fit_jaw(np.asarray(reference_jaw), np.asarray(current_jaw), method=method)
-        pivot = np.where(fit.pivot_defined[:, None], fit.pivot, np.nan)
-        axes[0].plot(t, np.degrees(fit.theta), label=method, **style)
+        fit = fit_jaw(reference_jaw, current_jaw, method=method, valid=valid)
+        shown = fit.pivot_defined if valid is None else fit.pivot_defined & valid
+        pivot = np.where(shown[:, None], fit.pivot, np.nan)
+        theta = np.where(True if valid is None else valid, np.degrees(fit.theta), np.nan)
+        axes[0].plot(t, theta, label=method, **style)
         axes[1].plot(t, pivot[:, 0], **style)
         axes[2].plot(t, pivot[:, 1], **style)
     for ax, name in zip(axes, ("jaw rotation theta (deg)", "pivot x (mm, model)",
