@@ -95,8 +95,8 @@ def jaw_comparison_plot(
         axes[0].plot(t, theta, label=method, **style)
         axes[1].plot(t, pivot[:, 0], **style)
         axes[2].plot(t, pivot[:, 1], **style)
-    for ax, name in zip(axes, ("jaw rotation theta (deg)", "pivot x (mm, model)",
-                               "pivot y (mm, model)"), strict=True):
+    for ax, name in zip(axes, ("jaw rotation theta (deg)", "pivot x (mm)",
+                               "pivot y (mm)"), strict=True):
         ax.set_ylabel(name)
     axes[2].set_xlabel("time (s)")
     for ax in axes[1:]:  # the closed-form pivot runs off at small angles (Eqs 6-7)
