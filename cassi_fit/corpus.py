@@ -935,6 +935,8 @@ def evaluate_corpus(
     if not items:
         raise MissingDataError(f"{dataset}: no recordings found (for the subjects and tasks "
                                "chosen)")
+    if folder is not None:
+        _check_calibrations(folder, items)
     options = {"conformation": conformation, "calibration_dir": folder,
                "collisions": collisions, "jaw": jaw, "stride": int(stride)}
     run_options.setdefault("desc", "evaluate")
@@ -943,6 +945,21 @@ def evaluate_corpus(
     settings = {"stride": int(stride), "jaw": jaw, "collisions": collisions,
                 "calibration": label}
     return run, evaluation_result(run, settings)
+
+
+def _check_calibrations(folder: str, items: Sequence[CorpusItem]) -> None:
+    """Read the folder's calibration files once here, so that a broken one stops the run
+    before it starts (instead of failing every recording of its subject), and warn for
+    each subject that has none (its recordings get the default conformation)."""
+    import warnings
+
+    from . import calibrate
+
+    have = calibrate.load_calibrations(Path(folder))
+    for subject in dict.fromkeys(item.subject for item in items):
+        if subject not in have:
+            warnings.warn(f"{subject}: no calibration given; using the default conformation",
+                          stacklevel=3)
 
 
 # ------------------------------------------------------------ `cassi calibrate`
