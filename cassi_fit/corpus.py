@@ -185,8 +185,10 @@ def _write_marker(out_dir: str, item: CorpusItem, fingerprint: str, result: Task
         p = Path(p)
         rel = os.path.relpath(p, root) if p.is_absolute() else str(p)
         outputs[rel] = _file_digest(root / rel)
+    # the keys are sorted in the file: "columns" keeps the row's own order, which is the
+    # table's column order (a resumed row must give the same table as a computed one)
     doc = {"subject": item.subject, "task": item.task, "fingerprint": fingerprint,
-           "row": result.row, "outputs": outputs}
+           "row": result.row, "columns": list(result.row), "outputs": outputs}
     text = json.dumps(doc, indent=1, sort_keys=True, default=_json_scalar) + "\n"
     atomic_write(marker_path(out_dir, item), text, overwrite=True)
 
@@ -212,7 +214,8 @@ def completed_row(out_dir: str | os.PathLike, item: CorpusItem, fingerprint: str
         out = Path(out_dir) / rel
         if not out.is_file() or out.stat().st_size != want["bytes"] or _file_digest(out) != want:
             return None
-    return doc["row"]
+    row = doc["row"]
+    return {k: row[k] for k in doc.get("columns", row)}
 
 
 # ------------------------------------------------------------ running one item
@@ -812,3 +815,277 @@ def jaw_corpus(
                      out_dir, options=options, **run_options)
     written = write_table(run.rows(), table, overwrite=replace)
     return run, written
+
+
+# ------------------------------------------------------ shared by the commands below
+def _calibration_for(item: CorpusItem, conformation: str | None, calibration_dir: str | None):
+    """``initialize``'s calibration for one item: ``conformation`` (e.g. "cassi"), else
+    ``calibration_dir/SUBJECT.calibration.json`` when that file exists, else None (the
+    default conformation; the rows say "default")."""
+    if conformation is not None:
+        return conformation
+    if calibration_dir is None:
+        return None
+    from .calibrate import calibration_path, read_calibration
+
+    path = calibration_path(calibration_dir, item.subject)
+    return read_calibration(path) if path.is_file() else None
+
+
+def _load_quietly(item: CorpusItem) -> Recording:
+    """:func:`load_item` without the default-head-measures warning (the rows say which
+    conformation was used; a warning per worker would only repeat it)."""
+    import warnings
+
+    from .dataset import DefaultHeadMeasuresWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DefaultHeadMeasuresWarning)
+        return load_item(item)
+
+
+def _refuse_existing(paths: Sequence[Path], replace: bool) -> None:
+    existing = [str(p) for p in paths if p.exists()]
+    if existing and not replace:  # refuse before the run, not after it
+        raise OutputExistsError(f"{existing[0]}: file exists (pass overwrite=True / --force, "
+                                "or resume=True / --resume)")
+
+
+def _replace(run_options: Mapping[str, Any]) -> bool:
+    return bool(run_options.get("overwrite") or run_options.get("resume"))
+
+
+# ------------------------------------------------------------ `cassi evaluate`
+MEASURE_PREFIX = "measure."
+
+
+def evaluate_task(item: CorpusItem, out_dir: str, *, conformation: str | None = None,
+                  calibration_dir: str | None = None, collisions: str = "off",
+                  jaw: str = "closed-form", stride: int = 1, mode: str = "improved",
+                  overwrite: bool = False) -> TaskResult:
+    """``cassi evaluate``'s task: animate one recording and measure it
+    (``evaluate.evaluate_recording`` with the worker's model). The row holds ``frames``,
+    ``calibration`` (its label) and every measure as ``measure.NAME``; ratings are derived
+    from the measures afterwards (:func:`evaluation_result`). Writes no file."""
+    from .evaluate import evaluate_recording
+
+    recording = _load_quietly(item)
+    row = evaluate_recording(recording, calibration=_calibration_for(item, conformation,
+                                                                     calibration_dir),
+                             collisions=collisions, jaw=jaw, stride=stride,
+                             model=worker_model(), mode=mode)
+    out = {"frames": row.frames, "calibration": row.calibration}
+    out.update((MEASURE_PREFIX + k, float(v)) for k, v in sorted(row.measures.items()))
+    return TaskResult(out)
+
+
+def evaluation_result(run: CorpusRun, settings: Mapping[str, Any]):
+    """The ``evaluate.EvaluationResult`` of a run of :func:`evaluate_task`: one
+    ``RecordingRow`` per item in the run's sorted order (FAILED ones with their error),
+    then each subject's row combined from its recordings in that order. ``settings``:
+    ``stride``, ``jaw``, ``collisions`` and the ``calibration`` label."""
+    from .evaluate import EvaluationResult, RecordingRow, SubjectRow
+
+    common = {k: settings[k] for k in ("stride", "jaw", "collisions")}
+    rows = []
+    for r in run.results:
+        s, t = r.item.subject, r.item.task
+        if r.status == Status.FAILED:
+            rows.append(RecordingRow.not_evaluated(s, t, r.error,
+                                                   calibration=settings["calibration"], **common))
+            continue
+        measures = {k[len(MEASURE_PREFIX):]: float(v) for k, v in r.row.items()
+                    if k.startswith(MEASURE_PREFIX)}
+        rows.append(RecordingRow.evaluated(s, t, measures, frames=int(r.row["frames"]),
+                                           calibration=r.row["calibration"], **common))
+    subjects = list(dict.fromkeys(r.subject for r in rows))
+    per_subject = [SubjectRow.of_recordings(s, [r for r in rows if r.subject == s], **common)
+                   for s in subjects]
+    return EvaluationResult(rows, per_subject, dict(settings))
+
+
+def evaluate_corpus(
+    dataset: Dataset | str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    calibrations: str | os.PathLike | None = None,
+    collisions: str = "off",
+    jaw: str = "closed-form",
+    stride: int = 1,
+    subjects: Iterable[str] | None = None,
+    tasks: Iterable[str] | None = None,
+    mode: str = "improved",
+    **run_options: Any,
+):
+    """``cassi evaluate DATASET``: :func:`evaluate_task` on every recording, combined per
+    subject (:func:`evaluation_result`). ``calibrations``: None (default conformation),
+    ``"cassi"`` or a folder of ``cassi calibrate`` files (a subject without one gets the
+    default); ``mode``: ``options.MODES`` (``"cassi"``: the paper's every choice, no
+    calibration folder, no collisions). Completion markers go to ``out_dir``; the tables are the caller's
+    (``evaluate.write_table``). Returns ``(run, EvaluationResult)``."""
+    from .errors import MissingDataError
+    from .options import COLLISION_MODES, CONFORMATIONS, JAW_METHODS, MODES, check_choice
+
+    check_choice("collisions", collisions, COLLISION_MODES)
+    check_choice("jaw method", jaw, JAW_METHODS)
+    check_choice("mode", mode, MODES)
+    if isinstance(stride, bool) or int(stride) != stride or stride < 1:
+        raise CassiError(f"stride must be an integer of at least 1, got {stride!r}")
+    folder = None if calibrations is None or str(calibrations) in CONFORMATIONS else str(
+        Path(calibrations).absolute())
+    conformation = str(calibrations) if calibrations is not None and folder is None else None
+    items = dataset_items(dataset, subjects=subjects, tasks=tasks)
+    if not items:
+        raise MissingDataError(f"{dataset}: no recordings found (for the subjects and tasks "
+                               "chosen)")
+    if folder is not None:
+        _check_calibrations(folder, items)
+    options = {"conformation": conformation, "calibration_dir": folder,
+               "collisions": collisions, "jaw": jaw, "stride": int(stride), "mode": mode}
+    run_options.setdefault("desc", "evaluate")
+    run = run_corpus(evaluate_task, items, out_dir, options=options, **run_options)
+    label = ("cassi mode" if mode == "cassi" else "calibrated" if folder is not None
+             else (conformation or "default"))
+    settings = {"stride": int(stride), "jaw": jaw, "collisions": collisions,
+                "calibration": label}
+    return run, evaluation_result(run, settings)
+
+
+def _check_calibrations(folder: str, items: Sequence[CorpusItem]) -> None:
+    """Read the folder's calibration files once here, so that a broken one stops the run
+    before it starts (instead of failing every recording of its subject), and warn for
+    each subject that has none (its recordings get the default conformation)."""
+    import warnings
+
+    from . import calibrate
+
+    have = calibrate.load_calibrations(Path(folder))
+    for subject in dict.fromkeys(item.subject for item in items):
+        if subject not in have:
+            warnings.warn(f"{subject}: no calibration given; using the default conformation",
+                          stacklevel=3)
+
+
+# ------------------------------------------------------------ `cassi calibrate`
+def calibrate_task(item: CorpusItem, out_dir: str, *, tasks: Sequence[str] | None = None,
+                   method: str = "separate", collisions: bool = True,
+                   overwrite: bool = False) -> TaskResult:
+    """``cassi calibrate``'s task, per subject (``item.task == ""``): calibrate the
+    subject from ``tasks`` (default: all its recordings) with the worker's model and write
+    ``out_dir/SUBJECT.calibration.json``. Row: method, scale, lip thicknesses, face width
+    (mm), convergence."""
+    import warnings
+
+    from .calibrate import calibrate_subject, calibration_path, write_calibration
+    from .dataset import Dataset
+    from .errors import MissingDataError
+
+    ds = Dataset(item.root)
+    have = ds.tasks(item.subject)
+    wanted = have if tasks is None else [t for t in have if t in {x.lower() for x in tasks}]
+    if not wanted:
+        raise MissingDataError(f"{ds.root}: subject {item.subject} has none of the tasks "
+                               f"{', '.join(tasks or [])}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        recordings = [ds.load(item.subject, t) for t in wanted]
+    cal = calibrate_subject(recordings, worker_model(), method=method, collisions=collisions)
+    path = write_calibration(calibration_path(out_dir, item.subject), cal, overwrite=overwrite)
+    row = {"method": cal.method, "recordings": len(recordings), "scale": float(cal.scale),
+           "upper_lip_thickness_mm": float(cal.upper_lip_thickness),
+           "lower_lip_thickness_mm": float(cal.lower_lip_thickness),
+           "face_width_mm": float(cal.face_width), "converged": bool(cal.converged)}
+    return TaskResult(row, (str(path),))
+
+
+def calibrate_corpus(
+    dataset: Dataset | str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    subjects: Iterable[str] | None = None,
+    tasks: Iterable[str] | None = None,
+    method: str = "separate",
+    collisions: bool = True,
+    **run_options: Any,
+) -> tuple[CorpusRun, dict]:
+    """``cassi calibrate DATASET``: :func:`calibrate_task` per subject (float64), then
+    ``out_dir/calibration_summary.csv`` (the calibrated subjects, read back from their
+    files in sorted order) and ``out_dir/calibration_corpus.csv`` (every subject, failed
+    ones with their error; and ``.parquet``). Returns ``(run, {subject: Calibration})``."""
+    from .calibrate import calibration_path, read_calibration, write_summary
+    from .options import CALIBRATION_METHODS, check_choice
+
+    check_choice("calibration method", method, CALIBRATION_METHODS)
+    out = Path(out_dir)
+    summary, table = out / "calibration_summary.csv", out / "calibration_corpus.csv"
+    _refuse_existing([summary, table], _replace(run_options))
+    run_options.setdefault("x64", True)  # calibration residuals are sub-millimetre
+    run_options.setdefault("desc", "calibrate")
+    options = {"tasks": None if tasks is None else tuple(sorted(str(t).lower() for t in tasks)),
+               "method": method, "collisions": bool(collisions)}
+    items = dataset_items(dataset, subjects=subjects, per_subject=True)
+    if not items:
+        from .errors import MissingDataError
+
+        raise MissingDataError(f"{dataset}: no recordings found (for the subjects chosen)")
+    run = run_corpus(calibrate_task, items, out, options=options, **run_options)
+    cals = {r.item.subject: read_calibration(calibration_path(out, r.item.subject))
+            for r in run.results if r.status == Status.OK}
+    write_summary(summary, cals, overwrite=_replace(run_options))
+    write_table(run.rows(), table, overwrite=_replace(run_options))
+    return run, cals
+
+
+# ------------------------------------------------------------ `cassi animate DATASET`
+def video_output_path(out_dir: str | os.PathLike, item: CorpusItem, suffix: str = ".mp4"
+                      ) -> Path:
+    """``out_dir/SUBJECT/TASK.mp4`` (or the given suffix)."""
+    return Path(out_dir) / item.subject / f"{item.task}{suffix}"
+
+
+def animate_task(item: CorpusItem, out_dir: str, *, suffix: str = ".mp4",
+                 size: tuple[int, int] = (640, 480), views: Sequence[str] | None = None,
+                 conformation: str | None = None, calibration_dir: str | None = None,
+                 audio: bool = True, markers: bool = False, labels: bool = True,
+                 overwrite: bool = False, **animate_options: Any) -> TaskResult:
+    """``cassi animate DATASET``'s task: animate one recording
+    (``initialize.animate_recording`` with ``animate_options``: jaw, stride, jaw_weights,
+    tongue_anchor, gap_policy, collisions) and write ``out_dir/SUBJECT/TASK.mp4`` (or
+    ``.gif``), the current label (``labels.labels_for``) in each frame's caption."""
+    from .initialize import animate_recording
+    from .labels import labels_for
+    from .render import Renderer
+    from .video import write_animation
+
+    recording = _load_quietly(item)
+    state, animation = animate_recording(
+        recording, worker_model(), calibration=_calibration_for(item, conformation,
+                                                                calibration_dir),
+        **animate_options)
+    views = tuple(views) if views else None
+    renderer = Renderer(state.model, size=tuple(size), **(
+        {"views": views, "grid": len(views) > 1} if views else {}))
+    found = labels_for(recording.path) if labels else None
+    path = write_animation(
+        video_output_path(out_dir, item, suffix), animation, renderer, subject=item.subject,
+        task=item.task, audio=recording.audio if audio and suffix == ".mp4" else None,
+        markers=markers, progress=False, overwrite=overwrite, labels=found)
+    row = {"frames": int(animation.n_frames), "stride": int(animation.stride),
+           "video": str(Path(path).relative_to(Path(out_dir))),
+           "label_file": found.path.name if found is not None and found.path else ""}
+    return TaskResult(row, (str(path),))
+
+
+def animate_corpus(dataset: Dataset | str | os.PathLike, out_dir: str | os.PathLike, *,
+                   subjects: Iterable[str] | None = None, tasks: Iterable[str] | None = None,
+                   task_options: Mapping[str, Any] | None = None, **run_options: Any
+                   ) -> tuple[CorpusRun, list[Path]]:
+    """``cassi animate DATASET --out DIR``: :func:`animate_task` (``task_options``) on
+    every recording, then ``DIR/animate_corpus.csv`` (and ``.parquet``): one row per
+    recording, failed ones with their error."""
+    table = Path(out_dir) / "animate_corpus.csv"
+    _refuse_existing([table], _replace(run_options))
+    run_options.setdefault("desc", "animate")
+    run = run_corpus(animate_task, dataset_items(dataset, subjects=subjects, tasks=tasks),
+                     out_dir, options=dict(task_options or {}), **run_options)
+    return run, write_table(run.rows(), table, overwrite=_replace(run_options))

@@ -40,6 +40,7 @@ from .errors import CassiError, DataFormatError
 
 if TYPE_CHECKING:
     from .animate import Animation
+    from .labels import Labels
     from .render import Renderer
 
 FRAME_STEP_US = 6866
@@ -369,10 +370,14 @@ def count_frames(path: str | os.PathLike) -> int:
 # --------------------------------------------------------------------------- animations
 
 
-def frame_caption(subject: str, task: str, time_s: float, line: int, status: str = "ok") -> str:
-    """The caption of one frame: subject, task, recording time and (1-based) data line."""
+def frame_caption(subject: str, task: str, time_s: float, line: int, status: str = "ok",
+                  label: str = "") -> str:
+    """The caption of one frame: subject, task, recording time, (1-based) data line, the
+    frame's status unless "ok", and the current phone/word ``label`` (quoted) if any."""
     text = f"{subject} {task}   t = {time_s:7.3f} s   line {line + 1}"
-    return text if status == "ok" else f"{text}   [{status}]"
+    if status != "ok":
+        text = f"{text}   [{status}]"
+    return f'{text}   "{label}"' if label else text
 
 
 def animation_frames(
@@ -384,11 +389,13 @@ def animation_frames(
     markers: bool = False,
     progress: bool = True,
     indices: Iterable[int] | None = None,
+    labels: Labels | None = None,
 ) -> Iterator[UInt8[np.ndarray, "h w 3"]]:
     """Render the frames ``indices`` (default all) of an ``animate.Animation`` with
     ``renderer`` (a ``render.Renderer``); yields ``uint8 (H, W, 3)`` images. ``markers``:
     draw the measured pellets and the model's pellet sites (never-tracked pellets left
-    out). The progress bar goes to stderr."""
+    out); ``labels`` (``labels.Labels``): the label at each frame's time is captioned.
+    The progress bar goes to stderr."""
     import sys
 
     from tqdm import tqdm
@@ -399,6 +406,8 @@ def animation_frames(
     measured = np.asarray(animation.pellets_measured)
     model_sites = np.asarray(animation.pellets_model)
     shown = np.isfinite(measured).all(axis=(0, 2))
+    current = (labels.at(np.asarray(animation.times, np.float64)) if labels is not None
+               else np.full(animation.n_frames, "", dtype=str))
     indices = range(animation.n_frames) if indices is None else indices
     for k in tqdm(
         indices, desc="rendering", unit="frame", file=sys.stderr, disable=not progress, leave=False
@@ -411,7 +420,8 @@ def animation_frames(
             }
         status = STATUS_LABELS[int(animation.frame_status[k])]
         caption = frame_caption(
-            subject, task, float(animation.times[k]), int(animation.frame_index[k]), status
+            subject, task, float(animation.times[k]), int(animation.frame_index[k]), status,
+            str(current[k]),
         )
         yield renderer.render(vertices[k], caption=caption, **kwargs)
 
@@ -432,10 +442,13 @@ def write_animation(
     markers: bool = False,
     progress: bool = True,
     overwrite: bool = False,
+    labels: Labels | None = None,
 ) -> Path:
     """Render ``animation`` to an MP4/GIF at the recording's pace (``frame_rate(stride)``);
     an MP4 carries ``audio`` (a ``.wav`` on the recording's clock) aligned so that the
-    first frame sounds at its own recording time. Returns the path written."""
+    first frame sounds at its own recording time; ``labels`` (``labels.Labels``, e.g.
+    ``labels.labels_for(pellet_path)``) put the current phone/word in each caption.
+    Returns the path written."""
     times = np.asarray(animation.times, np.float64)
     step_us = FRAME_STEP_US
     if len(times) > 1:  # the recording's own line period, should it not be XRMB's
@@ -443,6 +456,7 @@ def write_animation(
     fps = frame_rate(animation.stride, step_us)
     start = float(animation.times[0])
     frames = animation_frames(
-        animation, renderer, subject=subject, task=task, markers=markers, progress=progress
+        animation, renderer, subject=subject, task=task, markers=markers, progress=progress,
+        labels=labels,
     )
     return write_video(path, frames, fps, audio=audio, audio_start=start, overwrite=overwrite)

@@ -146,3 +146,24 @@ def test_mistracked_rows_are_marked(tmp_path, capsys):
     assert float(rows[30]["theta_deg"]) == pytest.approx(np.rad2deg(theta[30] - theta[1]),
                                                          abs=0.01)
     assert "2 mistracked" in capsys.readouterr().out
+
+
+def test_labels_beside_the_file_add_a_column_and_segments(pellet_file, tmp_path, capsys):
+    import shutil
+
+    from cassi_fit.labels import Labels, write_lab
+
+    path = tmp_path / pellet_file[0].name
+    shutil.copy(pellet_file[0], path)
+    write_lab(path.with_suffix(".lab"), Labels([0.05, 0.2], [0.2, 0.3], ("ma", "pa")))
+    out = tmp_path / "jaw.csv"
+    assert cli.main(["jaw", str(path), "--csv", str(out)]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert {r["label"] for r in rows if 0.1 < float(r["time_s"]) < 0.15} == {"ma"}
+    assert rows[-1]["label"] == ""  # after the last segment
+    segments = list(csv.DictReader((tmp_path / "jaw.segments.csv").open()))
+    assert [s["label"] for s in segments] == ["ma", "pa"]
+    inside = [float(r["theta_deg"]) for r in rows
+              if 0.2 <= float(r["time_s"]) < 0.3 and r["status"] == "ok"]
+    assert float(segments[1]["jaw_peak_opening_deg"]) == pytest.approx(max(inside), abs=1e-6)
+    assert "2 labelled segments (jw99_tp001.lab)" in capsys.readouterr().out

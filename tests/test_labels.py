@@ -199,3 +199,29 @@ def test_segment_summary_peaks_and_statuses():
 def test_read_labels_refuses_other_suffixes(tmp_path):
     with pytest.raises(DataFormatError, match=".lab or .TextGrid"):
         read_labels(Path(tmp_path / "x.txt"))
+
+
+def test_video_captions_carry_the_current_label():
+    from types import SimpleNamespace
+
+    from cassi_fit.video import animation_frames, frame_caption
+
+    n = 4
+    animation = SimpleNamespace(
+        vertices=np.zeros((n, 3, 3)), pellets_measured=np.zeros((n, 8, 2)),
+        pellets_model=np.zeros((n, 8, 2)), frame_status=np.zeros(n, int),
+        times=np.array([0.1, 0.2, 0.3, 0.4]), frame_index=np.arange(n), n_frames=n)
+    captions = []
+
+    class Recorder:
+        def render(self, vertices, caption="", **kwargs):
+            captions.append(caption)
+            return np.zeros((2, 2, 3), np.uint8)
+
+    labels = Labels([0.15, 0.3], [0.25, 0.5], ("pa", "ta"))
+    list(animation_frames(animation, Recorder(), subject="S01", task="tp040",
+                          progress=False, labels=labels))
+    assert captions == [frame_caption("S01", "tp040", t, k, "ok", lab)
+                        for k, (t, lab) in enumerate(zip(animation.times,
+                                                         ("", "pa", "ta", "ta"), strict=True))]
+    assert captions[1].endswith('"pa"') and '"' not in captions[0]

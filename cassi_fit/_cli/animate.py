@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from cassi_fit._cli._corpus import add_run_arguments, finish, run_options
 from cassi_fit.options import (
     ANIMATION_SUFFIXES,
     COLLISION_MODES,
@@ -156,6 +157,10 @@ def register(subparsers) -> None:
     parser.add_argument("--no-audio", action="store_true", help="leave the sound out of an .mp4")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    # DATASET alone with --out DIR: every recording to DIR/SUBJECT/TASK.mp4 (run_dataset)
+    add_run_arguments(parser, force=False)
+    parser.add_argument("--format", choices=("mp4", "gif"), default="mp4",
+                        help="DATASET form: the videos' format (default mp4)")
     parser.set_defaults(func=run)
 
 
@@ -239,6 +244,8 @@ def chosen_mode(args: argparse.Namespace) -> str:
 def run(args) -> int:
     from cassi_fit.errors import CassiError
 
+    if len(args.recording) == 1 and Path(args.recording[0]).is_dir():
+        return run_dataset(args)
     size, views = parse_size(args.size), parse_views(args.views)
     out = Path(args.out) if args.out else None
     if out is not None and out.suffix.lower() not in ANIMATION_SUFFIXES:
@@ -295,3 +302,30 @@ def write_output(out: Path, animation, renderer, recording, args) -> Path:
         progress=not args.quiet,
         overwrite=args.force,
     )
+
+
+def run_dataset(args) -> int:
+    """``cassi animate DATASET --out DIR``: one video per recording
+    (``corpus.animate_corpus``), in parallel; exit 1 if any failed."""
+    from cassi_fit.corpus import animate_corpus
+    from cassi_fit.errors import CassiError
+
+    if not args.out or Path(args.out).suffix.lower() in ANIMATION_SUFFIXES:
+        raise CassiError(f"{args.recording[0]}: a dataset folder; give --out DIR for its videos")
+    if args.stride < 1:
+        raise CassiError(f"--stride must be at least 1, got {args.stride}")
+    if args.cassi and args.calibration:
+        raise CassiError("--cassi and --calibration exclude each other")
+    options = {"suffix": f".{args.format}", "size": parse_size(args.size),
+               "views": parse_views(args.views), "conformation": "cassi" if args.cassi else None,
+               "calibration_dir": (str(Path(args.calibration).absolute()) if args.calibration
+                                   else None),
+               "audio": not args.no_audio, "markers": args.markers, "jaw": args.jaw,
+               "stride": args.stride, "jaw_weights": args.jaw_weights,
+               "tongue_anchor": args.tongue_anchor, "gap_policy": args.gap,
+               "collisions": args.collisions}
+    run, written = animate_corpus(args.recording[0], args.out, task_options=options,
+                                  **run_options(args))
+    print(f"{len(run.results) - len(run.failed)} of {len(run.results)} videos written to "
+          f"{args.out} on {run.workers} worker(s); table {written[0]}")
+    return finish(run)

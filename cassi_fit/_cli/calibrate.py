@@ -7,6 +7,8 @@ from pathlib import Path
 
 from cassi_fit.options import CALIBRATION_METHODS
 
+from ._corpus import add_run_arguments, finish, run_options
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
@@ -16,7 +18,10 @@ def register(subparsers) -> None:
         "of each of its recordings, face width and jaw shape (gonion, gnathion) from "
         "Headmeasures.txt, and the p/d scale, fitted by least squares through the face "
         "model (docs/CALIBRATION.md). Writes OUT/SUBJECT.calibration.json per subject "
-        "(use it with 'cassi animate --calibration OUT') and OUT/calibration_summary.csv.",
+        "(use it with 'cassi animate --calibration OUT'), OUT/calibration_summary.csv and "
+        "OUT/calibration_corpus.csv (every subject, failed ones with their error). Subjects "
+        "are independent tasks: run in parallel (--jobs, --scheduler), resumable (--resume); "
+        "the exit status is 1 if any subject failed.",
     )
     parser.add_argument("dataset", metavar="DATASET", help="a dataset folder")
     parser.add_argument("--out", default="calibration", metavar="DIR",
@@ -31,7 +36,7 @@ def register(subparsers) -> None:
                         "(default: all of the subject's)")
     parser.add_argument("--no-collisions", action="store_true",
                         help="leave out the penalty that keeps the lips out of the teeth")
-    parser.add_argument("--force", action="store_true", help="replace existing files")
+    add_run_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
 
@@ -41,42 +46,25 @@ def _words(text):
 
 
 def run(args) -> int:
-    import jax
-
-    jax.config.update("jax_enable_x64", True)  # calibration residuals are sub-millimetre
-    from cassi_fit.calibrate import (
-        calibrate_dataset,
-        calibration_path,
-        write_calibration,
-        write_summary,
-    )
+    from cassi_fit.calibrate import calibration_path
+    from cassi_fit.corpus import calibrate_corpus
+    from cassi_fit.dataset import Dataset
     from cassi_fit.errors import CassiError, OutputExistsError
 
     root = Path(args.dataset)
     if not root.is_dir():
         raise CassiError(f"{root}: no such dataset folder")
     out = Path(args.out)
-    from cassi_fit.dataset import Dataset
-
-    dataset = Dataset(root)
-    subjects = _words(args.subjects) or dataset.subjects()
+    subjects = _words(args.subjects) or Dataset(root).subjects()
     targets = [calibration_path(out, s) for s in subjects] + [out / "calibration_summary.csv"]
-    if not args.force:
+    if not (args.force or args.resume):
         existing = [str(p) for p in targets if p.exists()]
         if existing:
-            raise OutputExistsError(f"{existing[0]}: file exists (pass --force to replace it)")
-    cals = calibrate_dataset(
-        dataset,
-        subjects=subjects,
-        tasks=_words(args.tasks),
-        method=args.method,
-        collisions=not args.no_collisions,
-        progress=not args.quiet,
-    )
-    out.mkdir(parents=True, exist_ok=True)
-    for subject, cal in cals.items():
-        write_calibration(calibration_path(out, subject), cal, overwrite=args.force)
-    write_summary(out / "calibration_summary.csv", cals, overwrite=args.force)
+            raise OutputExistsError(f"{existing[0]}: file exists (pass --force to replace it "
+                                    "or --resume to continue)")
+    run, cals = calibrate_corpus(root, out, subjects=subjects, tasks=_words(args.tasks),
+                                 method=args.method, collisions=not args.no_collisions,
+                                 **run_options(args))
     print(f"{'subject':8} {'scale':>7} {'UL mm':>7} {'LL mm':>7} {'face mm':>8}  residuals (mm)")
     for subject, c in cals.items():
         worst = max(c.residuals.items(), key=lambda kv: kv[1])
@@ -84,5 +72,6 @@ def run(args) -> int:
         print(f"{subject:8} {c.scale:7.4f} {c.upper_lip_thickness:7.2f} "
               f"{c.lower_lip_thickness:7.2f} {c.face_width:8.1f}  largest {worst[0]} "
               f"{worst[1]:.2f}{flag}")
-    print(f"wrote {len(cals)} calibration file(s) and calibration_summary.csv to {out}")
-    return 0
+    print(f"wrote {len(cals)} calibration file(s), calibration_summary.csv and "
+          f"calibration_corpus.csv to {out} ({run.workers} worker(s))")
+    return finish(run)

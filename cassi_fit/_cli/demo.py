@@ -70,45 +70,16 @@ def _corpus_recordings(subject):
     return [dataset.load(subject, task) for task in wanted]
 
 
-def jaw_plot(path, state, animation, *, title=""):
-    """Closed-form jaw (theta, pivot) per frame against the fixed- and smooth-pivot fits."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+def jaw_plot(path, state, animation, *, title="", labels=None):
+    """Closed-form jaw (theta, pivot) per frame against the fixed- and smooth-pivot fits,
+    the labelled segments shaded (``reports.jaw_comparison_plot``)."""
     import numpy as np
 
-    from cassi_fit._io import atomic_write
-    from cassi_fit.jaw_fit import fit_jaw
+    from cassi_fit.reports import jaw_comparison_plot
 
-    current = np.asarray(animation.pellets_measured)[:, 6:8]
-    t = np.asarray(animation.times)
-    fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
-    for method, style in (
-        ("closed-form", dict(lw=0.8, color="0.45")),
-        ("fixed-pivot", dict(lw=1.6, color="tab:blue")),
-        ("smooth-pivot", dict(lw=1.6, color="tab:orange", ls="--")),
-    ):
-        fit = fit_jaw(np.asarray(state.reference_jaw), current, method=method)
-        pivot = np.where(fit.pivot_defined[:, None], fit.pivot, np.nan)
-        axes[0].plot(t, np.degrees(fit.theta), label=method, **style)
-        axes[1].plot(t, pivot[:, 0], **style)
-        axes[2].plot(t, pivot[:, 1], **style)
-    axes[0].set_ylabel("jaw rotation theta (deg)")
-    axes[1].set_ylabel("pivot x (mm, model)")
-    axes[2].set_ylabel("pivot y (mm, model)")
-    axes[2].set_xlabel("time (s)")
-    for ax in axes[1:]:  # the closed-form pivot runs off at small angles (Eqs 6-7)
-        ax.set_ylim(-160, 80)
-    axes[0].legend(loc="upper right", fontsize=8)
-    axes[0].set_title(title or "jaw: closed form (Eqs 1-7) vs least-squares pivot fits")
-    fig.tight_layout()
-    import io
-
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=110)
-    plt.close(fig)
-    return atomic_write(path, buffer.getvalue(), overwrite=True)
+    return jaw_comparison_plot(path, np.asarray(state.reference_jaw),
+                               np.asarray(animation.pellets_measured)[:, 6:8],
+                               np.asarray(animation.times), labels=labels, title=title)
 
 
 def _comparison(path: Path, recording, animation, stride, size, caption="calibrated + collisions"):
@@ -172,6 +143,7 @@ def run(args) -> int:
     from cassi_fit.errors import CassiError
     from cassi_fit.export import export_glb
     from cassi_fit.initialize import initialize
+    from cassi_fit.labels import labels_for
     from cassi_fit.render import Renderer
 
     from .animate import parse_size
@@ -237,6 +209,7 @@ def run(args) -> int:
                     state,
                     animation,
                     title=f"{stem}: closed form vs pivot fits",
+                    labels=labels_for(recording.path),
                 )
             )
     print(f"demo written to {out.resolve()}:")

@@ -8,6 +8,8 @@ from pathlib import Path
 
 from cassi_fit.options import COLLISION_MODES, JAW_METHODS, MODES
 
+from ._corpus import add_run_arguments, finish, run_options
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -45,7 +47,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "tp106); default: every task of every subject")
     parser.add_argument("--subjects", nargs="+", metavar="SUBJECT",
                         help="only these subjects (default: all)")
-    parser.add_argument("--force", action="store_true", help="replace existing outputs")
+    add_run_arguments(parser)  # recordings in parallel: --jobs, --scheduler, --resume, --force
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
 
@@ -78,31 +80,22 @@ def run(args: argparse.Namespace) -> int:
 
     targets = [out / name for name in (*OUTPUT_NAMES, SUMMARY_NAME)]
     existing = [str(p) for p in targets if p.exists()]
-    if existing and not args.force:  # refuse before the (slow) evaluation
+    if existing and not (args.force or args.resume):  # refuse before the (slow) evaluation
         raise OutputExistsError(f"{', '.join(existing)}: file exists (pass --force to replace)")
-    calibrations = None
-    if args.calibration:
-        from cassi_fit.calibrate import load_calibrations
+    calibrations = "cassi" if args.cassi else args.calibration
+    if args.calibration and not Path(args.calibration).is_dir():
+        raise CassiError(f"--calibration {args.calibration}: no such folder")
+    from cassi_fit.corpus import evaluate_corpus
+    from cassi_fit.evaluate import markdown_table, write_report
 
-        folder = Path(args.calibration)
-        if not folder.is_dir():
-            raise CassiError(f"--calibration {folder}: no such folder")
-        calibrations = load_calibrations(folder)
-    from cassi_fit.evaluate import SUMMARY_NAME, evaluate_dataset, markdown_table, write_report
-
-    result = evaluate_dataset(
-        dataset,
-        calibrations=calibrations,
-        collisions=args.collisions or "off",
-        tasks=_words(args.tasks),
-        subjects=_words(args.subjects),
-        progress=not args.quiet,
-        jaw=args.jaw,
-        stride=args.stride,
-        mode=mode,
-    )
+    run, result = evaluate_corpus(dataset, out, calibrations=calibrations,
+                                  collisions=args.collisions or "off", jaw=args.jaw,
+                                  stride=args.stride, tasks=_words(args.tasks),
+                                  subjects=_words(args.subjects), mode=mode,
+                                  **run_options(args))
     print(markdown_table(result), end="")
     # all or nothing: an interrupted run leaves none of the tables and figure
-    written = write_report(result, out, overwrite=args.force, summary_name=SUMMARY_NAME)
+    written = write_report(result, out, overwrite=args.force or args.resume,
+                           summary_name=SUMMARY_NAME)
     print("wrote " + ", ".join(str(p) for p in written), file=sys.stderr)
-    return 1 if not any(s.rated for s in result.subjects) else 0
+    return max(finish(run), 1 if not any(s.rated for s in result.subjects) else 0)

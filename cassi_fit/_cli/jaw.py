@@ -1,5 +1,7 @@
 """``cassi jaw RECORDING --method ... --csv OUT.csv``: jaw rotation per frame, as a table,
-and truth-free diagnostics of the fit beside it (``OUT.diagnostics.csv``)."""
+and truth-free diagnostics of the fit beside it (``OUT.diagnostics.csv``); with labels
+beside the pellet file, a label column and ``OUT.segments.csv``.
+``cassi jaw DATASET --out DIR``: the same for every recording (``corpus.jaw_corpus``)."""
 
 from __future__ import annotations
 
@@ -9,8 +11,8 @@ from pathlib import Path
 
 from cassi_fit.options import JAW_METHODS, SOLVERS
 
-COLUMNS = ("time_s", "theta_deg", "pivot_a_mm", "pivot_b_mm", "tx_mm", "ty_mm", "residual_mm",
-           "status")
+from ._corpus import add_run_arguments, finish, run_options
+
 DIAGNOSTIC_COLUMNS = ("method", "frames_used", "jaw_distance_sd_mm", "jaw_distance_range_mm",
                       "residual_median_mm", "pivot_iqr_x_mm", "pivot_iqr_y_mm",
                       "pivot_plausible_fraction")
@@ -30,10 +32,15 @@ def register(subparsers) -> None:
         "from it (theta > 0 = opening), the pivot, the rms pellet residual and a status word "
         "(ok, pivot-undefined, invalid-frame, mistracked, ...). Diagnostics that need no "
         "truth (jaw-pellet distance spread, pivot spread, share of anatomically plausible "
-        "pivots) are printed and written to OUT.diagnostics.csv; see docs/JAW.md.",
+        "pivots) are printed and written to OUT.diagnostics.csv; see docs/JAW.md. Phone or "
+        "word labels beside the pellet file (X.lab, X.TextGrid) add a label column and "
+        "OUT.segments.csv (peak jaw opening and lip aperture per segment). With a DATASET "
+        "folder alone and --out DIR: every recording, in parallel, to DIR/SUBJECT/TASK.jaw.csv "
+        "(and TASK.segments.csv) and the corpus table DIR/jaw_corpus.csv (and .parquet).",
     )
     parser.add_argument("recording", nargs="+", metavar="RECORDING",
-                        help="PELLET_FILE, or DATASET_DIR SUBJECT TASK")
+                        help="PELLET_FILE, or DATASET_DIR SUBJECT TASK, or DATASET_DIR "
+                        "(with --out)")
     parser.add_argument("--method", choices=JAW_METHODS, default="closed-form")
     parser.add_argument("--solver", choices=SOLVERS, default="optimistix-lm")
     parser.add_argument("--smoothness", type=float, default=1.0, metavar="W",
@@ -41,8 +48,13 @@ def register(subparsers) -> None:
                         "(finite, > 0)")
     parser.add_argument("--compare-methods", action="store_true",
                         help="diagnostics for all four methods, not only --method")
-    parser.add_argument("--csv", required=True, metavar="OUT.csv", help="table to write")
-    parser.add_argument("--force", action="store_true", help="replace an existing OUT.csv")
+    parser.add_argument("--csv", metavar="OUT.csv", help="table to write (one recording)")
+    parser.add_argument("--out", metavar="DIR", help="output folder (DATASET form)")
+    parser.add_argument("--no-labels", action="store_true",
+                        help="ignore label files beside the pellet files")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_run_arguments(parser, force=False)
+    parser.add_argument("--force", action="store_true", help="replace existing outputs")
     parser.set_defaults(func=run)
 
 
@@ -110,17 +122,10 @@ def diagnostics_path(out: Path) -> Path:
     return out.with_name(stem + ".diagnostics.csv")
 
 
-def format_rows(times, fit) -> str:
-    """The CSV text: a header, then one row per frame (see ``COLUMNS``)."""
-    import numpy as np
-
-    lines = [",".join(COLUMNS)]
-    theta_deg = np.rad2deg(fit.theta)
-    for k, name in enumerate(fit.status_names):
-        values = (times[k], theta_deg[k], fit.pivot[k, 0], fit.pivot[k, 1],
-                  fit.translation[k, 0], fit.translation[k, 1], fit.residual[k])
-        lines.append(",".join(f"{v:.6f}" for v in values) + f",{name}")
-    return "\n".join(lines) + "\n"
+def segments_path(out: Path) -> Path:
+    """``OUT.csv`` -> ``OUT.segments.csv`` (beside the table)."""
+    stem = out.name[:-4] if out.name.lower().endswith(".csv") else out.name
+    return out.with_name(stem + ".segments.csv")
 
 
 def format_diagnostics(rows) -> str:
@@ -147,26 +152,65 @@ def print_diagnostics(rows) -> None:
 
 
 def run(args) -> int:
+    from cassi_fit.errors import CassiError
+
+    corpus_form = len(args.recording) == 1 and Path(args.recording[0]).is_dir()
+    if corpus_form:
+        if args.csv or args.compare_methods:
+            raise CassiError("a DATASET folder takes --out DIR (not --csv or "
+                             "--compare-methods); one recording takes --csv OUT.csv")
+        if not args.out:
+            raise CassiError(f"{args.recording[0]}: a dataset folder; give --out DIR for "
+                             "its tables (or DATASET SUBJECT TASK --csv OUT.csv)")
+        return run_dataset(args)
+    if args.out or not args.csv:
+        raise CassiError("one recording takes --csv OUT.csv (--out DIR is for a DATASET "
+                         "folder alone)")
+    if args.jobs is not None or args.scheduler or args.resume:
+        raise CassiError("--jobs, --scheduler and --resume are for a DATASET folder")
+    return run_recording(args)
+
+
+def run_dataset(args) -> int:
+    """``cassi jaw DATASET --out DIR``."""
+    from cassi_fit.corpus import jaw_corpus
+    from cassi_fit.jaw_fit import jaw_method
+
+    jaw_method(args.method, solver=args.solver, smoothness=args.smoothness)  # checks W
+    run, written = jaw_corpus(args.recording[0], args.out, method=args.method,
+                              solver=args.solver, smoothness=args.smoothness,
+                              labels=not args.no_labels, **run_options(args))
+    ok = len(run.results) - len(run.failed)
+    print(f"{ok} of {len(run.results)} recordings fitted ({args.method}) on {run.workers} "
+          f"worker(s); tables: {', '.join(str(p) for p in written)}")
+    return finish(run)
+
+
+def run_recording(args) -> int:
+    """``cassi jaw RECORDING --csv OUT.csv``."""
     import jax
 
     # The CSV reports pivots to a micrometre; at small angles they need float64 (the pivot
     # is a quotient by sin(theta/2)), so the command computes in float64.
     jax.config.update("jax_enable_x64", True)
     from cassi_fit._io import atomic_write
+    from cassi_fit.corpus import csv_text, jaw_frame_csv
     from cassi_fit.jaw_fit import jaw_diagnostics, jaw_from_track, jaw_method
+    from cassi_fit.labels import SEGMENT_COLUMNS, labels_for, segment_summary
     from cassi_fit.status import Status
     from cassi_fit.txy import JAW_PELLETS, pellet_index
 
     method = jaw_method(args.method, solver=args.solver, smoothness=args.smoothness)
     out = Path(args.csv)
-    diag_out = diagnostics_path(out)
+    diag_out, seg_out = diagnostics_path(out), segments_path(out)
     inputs = [Path(args.recording[0])] if len(args.recording) == 1 else []
-    for path in (out, diag_out):  # refuse before the (slower) fit
+    for path in (out, diag_out, seg_out):  # refuse before the (slower) fit
         _check_output(path, inputs, args.force)
     track = _load_track(args.recording)
     if track.path is not None:
-        for path in (out, diag_out):
+        for path in (out, diag_out, seg_out):
             _check_output(path, [track.path], args.force)
+    labels = None if args.no_labels or track.path is None else labels_for(track.path)
     fit = jaw_from_track(track, method=method)
     jaw_points = track.positions[:, [pellet_index(p) for p in JAW_PELLETS], :]
     rows = [jaw_diagnostics(fit, jaw_points)]
@@ -174,8 +218,13 @@ def run(args) -> int:
         others = [jaw_method(m, solver=args.solver, smoothness=args.smoothness)
                   for m in JAW_METHODS if m != args.method]
         rows += [jaw_diagnostics(jaw_from_track(track, method=m), jaw_points) for m in others]
-    atomic_write(out, format_rows(track.times, fit), overwrite=args.force)
+    atomic_write(out, jaw_frame_csv(track.times, fit, labels), overwrite=args.force)
     atomic_write(diag_out, format_diagnostics(rows), overwrite=args.force)
+    if labels is not None:
+        segments = segment_summary(track.times, fit.theta, track.positions, labels,
+                                   usable=fit.status == Status.OK)
+        atomic_write(seg_out, csv_text(segments, SEGMENT_COLUMNS), overwrite=args.force)
+        print(f"{seg_out}: {len(segments)} labelled segments ({labels.path.name})")
     ok = int((fit.status <= 1).sum())
     mistracked = int((fit.status == Status.MISTRACKED).sum())
     print(f"{out}: {track.n_frames} frames, {ok} fitted ({args.method}"
