@@ -37,7 +37,10 @@ if TYPE_CHECKING:
     from .conformation import Calibration as Calibration
     from .corpus import CorpusItem as CorpusItem
     from .corpus import CorpusRun as CorpusRun
+    from .corpus import animate_corpus as animate_corpus
+    from .corpus import calibrate_corpus as calibrate_corpus
     from .corpus import dataset_items as dataset_items
+    from .corpus import evaluate_corpus as evaluate_corpus
     from .corpus import jaw_corpus as jaw_corpus
     from .corpus import run_corpus as run_corpus
     from .dataset import Dataset as Dataset
@@ -117,6 +120,7 @@ if TYPE_CHECKING:
     from .quality import detect_mistracks as detect_mistracks
     from .quality import quality_report as quality_report
     from .render import Renderer as Renderer
+    from .reports import jaw_comparison_plot as jaw_comparison_plot
     from .reports import write_penetration_csv as write_penetration_csv
     from .status import STATUS_LABELS as STATUS_LABELS
     from .status import Status as Status
@@ -260,6 +264,7 @@ _PUBLIC = {
     "write_animation": "video",
     # reports (outputs)
     "write_penetration_csv": "reports",
+    "jaw_comparison_plot": "reports",
     # evaluate (outputs)
     "evaluate_dataset": "evaluate",
     "evaluate_recording": "evaluate",
@@ -270,6 +275,9 @@ _PUBLIC = {
     # corpus (runs)
     "run_corpus": "corpus",
     "jaw_corpus": "corpus",
+    "evaluate_corpus": "corpus",
+    "calibrate_corpus": "corpus",
+    "animate_corpus": "corpus",
     "dataset_items": "corpus",
     "CorpusItem": "corpus",
     "CorpusRun": "corpus",
@@ -287,12 +295,13 @@ __all__ = [
     "OutputExistsError", "PELLET_NAMES", "PelletTrack", "QualityReport", "Recording", "Renderer",
     "RenderingUnavailableError", "SOLVERS", "STATUS_LABELS", "SmoothPivot", "Solver", "Status",
     "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning", "Topology", "animate",
-    "animate_recording", "build_palate", "calibrate_dataset", "calibrate_subject",
-    "calibration_choice", "closed_form", "closed_form_paper", "compare", "dataset_items",
-    "default_params", "deform", "detect_mistracks", "ensure_default_corpus", "evaluate_dataset",
-    "evaluate_recording", "first_clean_line", "first_valid_frame", "first_valid_line", "fit_jaw",
-    "generate_corpus", "initialize", "jaw_corpus", "jaw_diagnostics", "jaw_from_track",
-    "jaw_method", "jaw_solver", "labels_for", "load_anatomy", "load_calibrations", "load_model",
+    "animate_corpus", "animate_recording", "build_palate", "calibrate_corpus", "calibrate_dataset",
+    "calibrate_subject", "calibration_choice", "closed_form", "closed_form_paper", "compare",
+    "dataset_items", "default_params", "deform", "detect_mistracks", "ensure_default_corpus",
+    "evaluate_corpus", "evaluate_dataset", "evaluate_recording", "first_clean_line",
+    "first_valid_frame", "first_valid_line", "fit_jaw", "generate_corpus", "initialize",
+    "jaw_comparison_plot", "jaw_corpus", "jaw_diagnostics", "jaw_from_track", "jaw_method",
+    "jaw_solver", "labels_for", "load_anatomy", "load_calibrations", "load_model",
     "load_recording", "load_truth", "make_subject", "mode_named", "model_pellets", "pellet_index",
     "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
     "read_outline", "read_textgrid", "read_txy", "repair", "require_tracked", "rigid",
