@@ -60,6 +60,7 @@ if TYPE_CHECKING:
     from jaxtyping import Float
 
     from .dataset import Dataset, Recording
+    from .evaluate import EvaluationResult
     from .face_model import FaceModel
     from .jaw_fit import JawFit
     from .labels import Labels
@@ -879,7 +880,7 @@ def evaluate_task(item: CorpusItem, out_dir: str, *, conformation: str | None = 
     return TaskResult(out)
 
 
-def evaluation_result(run: CorpusRun, settings: Mapping[str, Any]):
+def evaluation_result(run: CorpusRun, settings: Mapping[str, Any]) -> EvaluationResult:
     """The ``evaluate.EvaluationResult`` of a run of :func:`evaluate_task`: one
     ``RecordingRow`` per item in the run's sorted order (FAILED ones with their error),
     then each subject's row combined from its recordings in that order. ``settings``:
@@ -916,7 +917,7 @@ def evaluate_corpus(
     tasks: Iterable[str] | None = None,
     mode: str = "improved",
     **run_options: Any,
-):
+) -> tuple[CorpusRun, EvaluationResult]:
     """``cassi evaluate DATASET``: :func:`evaluate_task` on every recording, combined per
     subject (:func:`evaluation_result`). ``calibrations``: None (default conformation),
     ``"cassi"`` or a folder of ``cassi calibrate`` files (a subject without one gets the
