@@ -31,11 +31,13 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_jaw.py
 	$(BIN)/python benchmarks/bench_render.py --docs docs/generated
 	$(BIN)/python benchmarks/bench_animation.py --docs docs/generated
+	$(BIN)/python benchmarks/bench_corpus.py --write docs/generated/bench_corpus.md
 	$(BIN)/python experiments/quote_tables.py
 
 experiments: $(STAMP)
 	$(BIN)/python experiments/jaw_comparison.py --out experiments/output --docs docs/generated --force
 	$(BIN)/python experiments/subject_fitting.py --out experiments/output --docs docs/generated --force
+	$(BIN)/python experiments/cassi_mode.py --subjects 5 --tasks tp011 tp040 --stride 1
 	$(BIN)/python experiments/quote_tables.py
 
 # ruff; the import-linter contracts (layers, no cycles; pyproject.toml); the public surface's

@@ -123,7 +123,8 @@ def main(argv=None) -> None:
 
         command = "python benchmarks/bench_corpus.py " + " ".join(
             a for a in (argv if argv is not None else sys.argv[1:]))
-        Path(args.write).write_text(f"Written by `{command.strip()}`.\n\n```\n{text}\n```\n")
+        Path(args.write).write_text(
+            f"<!-- written by {command.strip().removeprefix('python ')} -->\n\n```\n{text}\n```\n")
 
 
 def _report(command, results, args, rows, estimates) -> list[str]:

@@ -42,6 +42,15 @@ SPECIFICATIONS = {
     ("docs/SYNTHETIC.md", "| family | condyle offset `d_t` | what it tests | source |"):
         "the jaw-kinematics families' definitions",
     ("docs/SYNTHETIC.md", "| column | meaning |"): "truth-file columns",
+    ("docs/CASSI_MODE.md", "| Choice | The paper | CASSI mode | Improved mode |"):
+        "the CASSI mode's choices against the paper's sections (percentages are the paper's)",
+    ("docs/CASSI_MODE.md", "| Landmark | Soft tissue | Source |"):
+        "soft-tissue thickness inputs (headmeasures.SOFT_TISSUE_THICKNESS_MM), with sources",
+    ("docs/FORMATS.md", "| input | result |"): "what each kind of bad input gives (behaviour)",
+    ("docs/FORMATS.md", "| check | why | catches |"):
+        "the plausibility checks' definitions and bounds (code constants)",
+    ("docs/FORMATS.md", "| column | range | basis |"):
+        "Headmeasures plausible ranges (headmeasures.PLAUSIBLE_RANGES), with their basis",
 }
 
 

@@ -407,5 +407,5 @@ def test_a_file_whose_every_line_looks_mistracked_says_why():
 
     track = _track()
     fast = PelletTrack(times=np.arange(40) * 1e-6, positions=track.positions, valid=track.valid)
-    with pytest.raises(MissingDataError, match="look mistracked.*times and units"):
+    with pytest.raises(MissingDataError, match="mistracked.*times and units"):
         jaw_fit.jaw_from_track(fast)
