@@ -13,17 +13,23 @@ REFERENCE = np.array([[-2.0, -18.0], [-35.0, -24.0]])
 PIVOT = np.array([-88.0, -8.0])
 
 
-@pytest.fixture(scope="module")
-def pellet_file(tmp_path_factory):
-    n = 60
+def _opening_jaw(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(positions (n, 8, 2) mm, theta (n,) rad)``: the jaw turning 0-0.2 rad about PIVOT,
+    lips and tongue held in a plausible posture (read_txy checks the anatomy)."""
     theta = np.linspace(0.0, 0.2, n)
     jaw = np.asarray(jax.vmap(lambda th: rigid.apply(*rigid.from_pivot(th, PIVOT), REFERENCE))(
         theta))
     positions = np.zeros((n, 8, 2))
-    # lips and tongue in a plausible posture (read_txy checks the anatomy)
     positions[:, :6] = [[15.0, 18.0], [9.0, -21.0], [-17.0, 1.0], [-28.0, 8.0], [-39.0, 15.0],
                         [-53.0, 17.0]]
     positions[:, 6:] = jaw
+    return positions, theta
+
+
+@pytest.fixture(scope="module")
+def pellet_file(tmp_path_factory):
+    n = 60
+    positions, theta = _opening_jaw(n)
     valid = np.ones((n, 8, 2), bool)
     valid[:2] = False  # leading untracked rows, as in real files
     valid[30, 6] = False  # a dropout of MNI
@@ -125,13 +131,7 @@ def test_bad_smoothness_is_one_clear_error(pellet_file, tmp_path, capsys, value)
 
 def test_mistracked_rows_are_marked(tmp_path, capsys):
     n = 60
-    theta = np.linspace(0.0, 0.2, n)
-    jaw = np.asarray(jax.vmap(lambda th: rigid.apply(*rigid.from_pivot(th, PIVOT), REFERENCE))(
-        theta))
-    positions = np.zeros((n, 8, 2))
-    positions[:, :6] = [[15.0, 18.0], [9.0, -21.0], [-17.0, 1.0], [-28.0, 8.0], [-39.0, 15.0],
-                        [-53.0, 17.0]]
-    positions[:, 6:] = jaw
+    positions, theta = _opening_jaw(n)
     positions[0, 6, 1] -= 30.0  # a mistrack in the first valid line
     positions[40, 6, 1] -= 30.0  # and one later
     track = PelletTrack(times=np.arange(n) * 0.006866, positions=positions,

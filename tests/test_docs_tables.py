@@ -54,16 +54,7 @@ SPECIFICATIONS = {
 }
 
 
-def tables(text: str) -> list[list[str]]:
-    """The Markdown tables of ``text``: runs of consecutive lines starting with '|'."""
-    out, block = [], []
-    for line in [*text.splitlines(), ""]:
-        if line.startswith("|"):
-            block.append(line)
-        elif block:
-            out.append(block)
-            block = []
-    return out
+tables = quote_tables.tables  # the Markdown tables of a text, as the quoting script sees them
 
 
 def documents() -> list[Path]:
