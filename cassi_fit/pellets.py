@@ -237,16 +237,8 @@ def first_valid_line(
     if missing:
         raise MissingDataError(f"{where}: jaw pellet(s) {', '.join(missing)} never tracked")
     names = tuple(p for p, e in zip(PELLET_NAMES, ever, strict=True) if e)
-    complete, clean = clean_lines(track, np.flatnonzero(ever), mistracked)
-    if not complete.any():
-        raise MissingDataError(f"{where}: no line in which {', '.join(names)} are all tracked")
-    if not clean.any():
-        raise MissingDataError(
-            f"{where}: every line with {', '.join(names)} all tracked holds a mistracked "
-            "value (check times and units: see docs/FORMATS.md)"
-        )
-    index = int(np.argmax(clean))
-    _say_moved(where, complete, index, "first valid line")
+    index = _first_clean(track, np.flatnonzero(ever), names, where, mistracked,
+                         "first valid line")
     return FirstLine(index, names)
 
 
@@ -261,16 +253,25 @@ def first_clean_line(
     fit's reference): the first line on which they are all tracked and none is
     mistracked. ``MissingDataError`` naming the file if there is none."""
     where = source_of(track, source)
-    complete, clean = clean_lines(track, [pellet_index(p) for p in pellets], mistracked)
+    return _first_clean(track, [pellet_index(p) for p in pellets], tuple(pellets), where,
+                        mistracked, f"first line with {', '.join(pellets)}")
+
+
+def _first_clean(track, columns, names, where, mistracked, what) -> int:
+    """The first line on which the pellets ``columns`` (named ``names``) are all tracked and
+    none is mistracked; ``MissingDataError`` naming ``where`` if there is none; warns when
+    mistracks moved the line (``what`` names it in the warning)."""
+    complete, clean = clean_lines(track, columns, mistracked)
+    listed = ", ".join(names)
     if not complete.any():
-        raise MissingDataError(f"{where}: no frame in which {', '.join(pellets)} are all tracked")
+        raise MissingDataError(f"{where}: no line in which {listed} are all tracked")
     if not clean.any():
         raise MissingDataError(
-            f"{where}: every frame with {', '.join(pellets)} tracked holds a mistracked value "
+            f"{where}: every line with {listed} all tracked holds a mistracked value "
             "(check times and units: see docs/FORMATS.md)"
         )
     index = int(np.argmax(clean))
-    _say_moved(where, complete, index, f"first line with {', '.join(pellets)}")
+    _say_moved(where, complete, index, what)
     return index
 
 
