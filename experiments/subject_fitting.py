@@ -102,7 +102,9 @@ class Plan:
 
 
 FULL = Plan(n_subjects=15, tasks=("tp106", "tp040", "tp020_2"), noise_subjects=15)
-SMALL = Plan(n_subjects=3, tasks=("tp106", "tp040"), noise_subjects=3)
+SMALL = Plan(n_subjects=2, tasks=("tp106", "tp040"), noise_subjects=2)
+#: the notebook: one subject, one task, every step of the run
+TINY = Plan(n_subjects=1, tasks=("tp106",), noise_subjects=1)
 
 
 # ------------------------------------------------------------------ pure helpers

@@ -1,8 +1,22 @@
-"""Shared test set-up: float64 on (precision is asserted), and the synthetic subject zoo."""
+"""Shared test set-up: float64 on (precision is asserted), and the synthetic subject zoo.
 
+One JAX compilation cache for the whole session, shared with every process the tests start
+(the CLI in subprocesses, notebook kernels, corpus workers): the same functions are compiled
+once instead of once per process. It lives in a fresh temporary folder, removed at exit, so
+no run ever reads another run's executables. ``CASSI_TEST_JAX_CACHE=0`` turns it off.
+"""
+
+import atexit
 import os
+import shutil
+import tempfile
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
+if os.environ.get("CASSI_TEST_JAX_CACHE", "1") != "0" and "JAX_COMPILATION_CACHE_DIR" not in os.environ:
+    _cache = tempfile.mkdtemp(prefix="cassi-test-jax-cache-")
+    atexit.register(shutil.rmtree, _cache, ignore_errors=True)
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = _cache
+    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
 
 import jax  # noqa: E402
 

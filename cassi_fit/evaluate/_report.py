@@ -35,6 +35,10 @@ _SUBJECT_META = ("subject", "tasks", "recordings", "failed", "status", "stride",
                  "calibration", "collisions")
 
 
+
+def _subjects(n: int) -> str:
+    return f"{n} subject" if n == 1 else f"{n} subjects"
+
 def _meta_value(row: RecordingRow | SubjectRow, name: str) -> object:
     return row.status_text if name == "status" else getattr(row, name)
 
@@ -162,7 +166,7 @@ def compare(a: EvaluationResult, b: EvaluationResult, *,
             f"{np.mean([len(s.problems[c]) for s in rated]):.1f}" if rated else "-"
             for c in COMPONENTS)
         totals = result.totals()
-        lines.append(f"| {label} ({len(rated)} subjects) | "
+        lines.append(f"| {label} ({_subjects(len(rated))}) | "
                      + " | ".join(_totals_text(totals[c]) for c in COMPONENTS)
                      + f" | {mean} |")
     return "Counts are EXCELLENT/VERY GOOD/GOOD/FAIR.\n\n" + "\n".join(lines) + "\n"
@@ -200,7 +204,7 @@ def plot_summary(
     x = np.arange(len(RATINGS))
     for k, c in enumerate(COMPONENTS):
         ax = axes[0, k]
-        ax.bar(x - 0.2, totals[c], 0.4, label=f"measured ({len(rated)} subjects)")
+        ax.bar(x - 0.2, totals[c], 0.4, label=f"measured ({_subjects(len(rated))})")
         ax.bar(x + 0.2, CASSI_TOTALS[c], 0.4, label="CASSI Table 2 (15)", alpha=0.5,
                hatch="//")
         ax.set_xticks(x, RATINGS, fontsize=9)
