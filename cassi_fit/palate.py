@@ -51,6 +51,7 @@ from jaxtyping import Array, Float, Int
 
 from .errors import DegenerateGeometryError
 from .face_model import FaceModel
+from .pharynx import slab_faces
 
 #: Upper lingual cervical stations per side of the model's arch (7 crowns, 2 each).
 N_STATIONS = 14
@@ -106,28 +107,9 @@ def resample(outline: Float[Array, "k 2"], n: int = N_HARD) -> Float[Array, "n 2
 
 
 def palate_faces(n_along: int = N_ALONG, n_across: int = N_ACROSS) -> Int[np.ndarray, "Q 3"]:
-    """Triangles (Q, 3) of the closed palate slab; outward-facing winding."""
-    def idx(sheet, i, k):
-        return sheet * n_along * n_across + i * n_across + k
-
-    faces = []
-    for i in range(n_along - 1):
-        for k in range(n_across - 1):
-            a, b, c, d = idx(0, i, k), idx(0, i, k + 1), idx(0, i + 1, k + 1), idx(0, i + 1, k)
-            faces += [(a, b, c), (a, c, d)]               # oral sheet faces down
-            a, b, c, d = idx(1, i, k), idx(1, i, k + 1), idx(1, i + 1, k + 1), idx(1, i + 1, k)
-            faces += [(a, c, b), (a, d, c)]               # nasal sheet faces up
-    for i in range(n_along - 1):                          # the two long edges
-        for k, flip in ((0, False), (n_across - 1, True)):
-            a, b, c, d = idx(0, i, k), idx(0, i + 1, k), idx(1, i + 1, k), idx(1, i, k)
-            tris = [(a, b, c), (a, c, d)]
-            faces += [(x, z, y) for x, y, z in tris] if flip else tris
-    for k in range(n_across - 1):                         # front and back ends
-        for i, flip in ((0, True), (n_along - 1, False)):
-            a, b, c, d = idx(0, i, k), idx(0, i, k + 1), idx(1, i, k + 1), idx(1, i, k)
-            tris = [(a, b, c), (a, c, d)]
-            faces += [(x, z, y) for x, y, z in tris] if flip else tris
-    return np.array(faces, dtype=np.int64)
+    """Triangles (Q, 3) of the closed palate slab; outward-facing winding (the oral sheet
+    faces down; ``pharynx.slab_faces``)."""
+    return slab_faces(n_along, n_across)
 
 
 def _height_at(outline, x):
@@ -196,7 +178,8 @@ def _velum(centre, right, left, wall, thickness):
     t = jnp.asarray(_VELUM_PROFILE, dtype) * VELUM_THICKNESS_MM
     if wall is not None:
         wall = jnp.asarray(wall, dtype)
-        wall_x = jnp.interp(-c[:, 1], -wall[:, 1], wall[:, 0])
+        # the wall at the height of the back surface's midline point
+        wall_x = jnp.interp(-(c[:, 1] + t * normal[1]), -wall[:, 1], wall[:, 0])
         # the back (nasal) surface, t * normal behind the oral one, stays gap mm in front
         c = c.at[:, 0].set(jnp.maximum(c[:, 0], wall_x + VELUM_WALL_GAP_MM - t * normal[0]))
     half_back = left[-1, 2]

@@ -68,11 +68,36 @@ def _check_points(points):
             f"down behind the tongue), got y {values[0, 1]:.1f} and {values[-1, 1]:.1f}")
 
 
+def slab_faces(n_along: int, n_across: int) -> Int[np.ndarray, "Q 3"]:
+    """Triangles (Q, 3) of a closed slab of two sheets ``(n_along, n_across)`` (layout as
+    ``cassi_fit.palate``): outward-facing where the first sheet's rows run along -x (or
+    -y) and its columns along +z, the second sheet behind it."""
+    def idx(sheet, i, k):
+        return sheet * n_along * n_across + i * n_across + k
+
+    faces = []
+    for i in range(n_along - 1):
+        for k in range(n_across - 1):
+            a, b, c, d = idx(0, i, k), idx(0, i, k + 1), idx(0, i + 1, k + 1), idx(0, i + 1, k)
+            faces += [(a, b, c), (a, c, d)]               # oral sheet faces down
+            a, b, c, d = idx(1, i, k), idx(1, i, k + 1), idx(1, i + 1, k + 1), idx(1, i + 1, k)
+            faces += [(a, c, b), (a, d, c)]               # nasal sheet faces up
+    for i in range(n_along - 1):                          # the two long edges
+        for k, flip in ((0, False), (n_across - 1, True)):
+            a, b, c, d = idx(0, i, k), idx(0, i + 1, k), idx(1, i + 1, k), idx(1, i, k)
+            tris = [(a, b, c), (a, c, d)]
+            faces += [(x, z, y) for x, y, z in tris] if flip else tris
+    for k in range(n_across - 1):                         # front and back ends
+        for i, flip in ((0, True), (n_along - 1, False)):
+            a, b, c, d = idx(0, i, k), idx(0, i, k + 1), idx(1, i, k + 1), idx(1, i, k)
+            tris = [(a, b, c), (a, c, d)]
+            faces += [(x, z, y) for x, y, z in tris] if flip else tris
+    return np.array(faces, dtype=np.int64)
+
+
 def wall_faces() -> Int[np.ndarray, "Q 3"]:
     """Triangles of the closed wall slab, outward-facing (the front sheet faces forward)."""
-    from .palate import palate_faces  # the same slab layout (rows, columns, two sheets)
-
-    return palate_faces(N_HEIGHT, N_ACROSS)
+    return slab_faces(N_HEIGHT, N_ACROSS)
 
 
 def midline(points_mm: Float[Array, "n 2"]) -> Float[Array, "h 2"]:

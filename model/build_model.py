@@ -513,8 +513,7 @@ def build():
     tv, tf, ts, tsites, anchor_s = build_tongue()
     parts.append(("tongue", tv, tf, MAT["tongue"]))
     from cassi_fit.palate import DEFAULT_OUTLINE, build_palate
-    from cassi_fit.pharynx import build_pharynx, midline
-    from cassi_fit.pharynx import DEFAULT_WALL
+    from cassi_fit.pharynx import DEFAULT_WALL, build_pharynx, midline
     # the palate's edges on the upper crowns' inner necks, its velum in front of the wall
     necks = uv[collision_chains({"upper_teeth": 0, "lower_teeth": 0},
                                 len(UPPER_TEETH))["upper_lingual_cervical"]]
