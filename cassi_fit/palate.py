@@ -227,6 +227,7 @@ def build_palate(
     left = jnp.concatenate([left, vl])
     dtype = centre.dtype
     v = jnp.linspace(-1.0, 1.0, N_ACROSS, dtype=dtype)[None, :]
+    v = 0.5 * (v - v[:, ::-1])  # exactly antisymmetric: a mirror-symmetric mesh
     side = jnp.where(v < 0, 1.0, 0.0)
     edge_y = side * right[:, 1:2] + (1 - side) * left[:, 1:2]
     y = centre[:, 1:2] + (edge_y - centre[:, 1:2]) * v**2

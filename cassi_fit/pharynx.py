@@ -139,6 +139,7 @@ def build_pharynx(
     f = jnp.linspace(0.0, 1.0, N_HEIGHT, dtype=dtype)[:, None]
     half = HALF_WIDTH_TOP_MM + (HALF_WIDTH_BOTTOM_MM - HALF_WIDTH_TOP_MM) * f
     v = jnp.linspace(-1.0, 1.0, N_ACROSS, dtype=dtype)[None, :]
+    v = 0.5 * (v - v[:, ::-1])  # exactly antisymmetric: a mirror-symmetric mesh
     x = mid[:, :1] + SIDE_DEPTH_MM * v**2
     y = jnp.broadcast_to(mid[:, 1:], (N_HEIGHT, N_ACROSS))
     z = half * v
