@@ -442,7 +442,7 @@ def measure(state: SubjectState, anim: Animation) -> dict[str, float]:
             f"{getattr(state, 'source', 'animation')}: the airway is not a number in "
             f"{int(np.isnan(gap).sum())} of {gap.size} frames")
     out["airway_min_mm"] = float(np.min(gap))
-    out["frames_without_airway"] = int(np.sum(gap <= AIRWAY_CLOSED_MM))
+    out["frames_without_airway"] = float(np.sum(gap <= AIRWAY_CLOSED_MM))
     out["tongue_pharynx_before_mm"] = hi(before["tongue_pharynx"])
     return {k: float(v) for k, v in out.items()}
 
