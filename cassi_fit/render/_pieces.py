@@ -2,8 +2,8 @@
 and by the views that show each piece (numpy only: no OpenGL here).
 
 The paper's ``inside`` view removes the near half of skin, lips, eyes, teeth and palate
-(here also of the pharyngeal wall) or draws the skin see-through, so every material is split once into the triangles on
-either side of z = 0; each piece becomes one instanced pyrender primitive drawn once per
+(here also of the pharyngeal wall) or draws the skin see-through, so every material is
+split once into the triangles on either side of z = 0; each piece becomes one instanced pyrender primitive drawn once per
 view that shows it (:mod:`cassi_fit.render._scene`). Back faces are culled wherever no
 view can show them (materials with a clear winding, away from the cut).
 """
