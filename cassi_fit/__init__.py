@@ -116,6 +116,8 @@ if TYPE_CHECKING:
     from .pellets import first_clean_line as first_clean_line
     from .pellets import first_valid_line as first_valid_line
     from .pellets import pellet_index as pellet_index
+    from .pharynx import build_pharynx as build_pharynx
+    from .pharynx import with_pharynx as with_pharynx
     from .quality import QualityReport as QualityReport
     from .quality import detect_mistracks as detect_mistracks
     from .quality import quality_report as quality_report
@@ -221,6 +223,8 @@ _PUBLIC = {
     # palate (model)
     "build_palate": "palate",
     "with_palate": "palate",
+    "build_pharynx": "pharynx",
+    "with_pharynx": "pharynx",
     # jaw (fitting)
     "closed_form": "jaw",
     "closed_form_paper": "jaw",
@@ -306,6 +310,7 @@ __all__ = [
     "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
     "read_outline", "read_textgrid", "read_txy", "repair", "require_tracked", "rigid",
     "run_corpus", "segment_summary", "synth", "synth_recording", "vertex_normals", "with_palate",
+    "build_pharynx", "with_pharynx",
     "write_animation", "write_calibration", "write_headmeasures", "write_lab", "write_outline",
     "write_penetration_csv", "write_report", "write_table", "write_textgrid", "write_txy",
 ]

@@ -27,8 +27,14 @@ Obstacles, all taken from the posed vertices of a frame, so they move with the j
 * **The lips against each other.** Per skin column between the mouth corners, the lower
   lip's highest point must not be above the upper lip's lowest; where it is, both are
   brought to the middle (:func:`lips_apart`), as lips compress in a closure.
-* **Palate.** The oral sheet of ``cassi_fit.palate`` is a height field ``y = h(x, z)``
-  over its footprint; a tongue point above it is inside by ``y - h``; the way out is down.
+* **Palate.** The oral sheet of ``cassi_fit.palate`` (the hard palate joined to the
+  teeth's necks and the velum behind it) is a height field ``y = h(x, z)`` over its
+  footprint; a tongue point above it is inside by ``y - h``; the way out is down.
+* **Pharyngeal wall.** The front sheet of ``cassi_fit.pharynx`` is a height field
+  ``x = w(y, z)`` over its height (beyond its sides the lateral walls' x holds); a
+  tongue point behind it is inside by ``w - x``; the way out is forward. A model without
+  a pharynx region is given ``pharynx.DEFAULT_WALL``. :func:`airway` is the least
+  front-back distance from the tongue to the wall (< 0: the tongue is through it).
 
 All functions take one frame (``vertices (V, 3)`` mm) and are jit/vmap/grad friendly;
 the model's index chains are static.
@@ -42,6 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
+from . import pharynx as _pharynx
 from .errors import CassiError
 from .face_model import FaceModel
 
@@ -55,6 +62,7 @@ PROJECTION_PASSES = 4
 #: Names of the per-frame depths :func:`report` returns (max over the part's vertices, mm).
 REPORT_KEYS = (
     "tongue_palate",
+    "tongue_pharynx",
     "tongue_upper_teeth",
     "tongue_lower_teeth",
     "tongue_upper_front",
@@ -173,7 +181,9 @@ def _palate_sheet(model, vertices):
 def _palate_depth(q, sheet):
     """Depth of ``q`` above the palate's oral surface (0 outside its footprint) and the
     displacement out (straight down)."""
-    xs = sheet[:, 0, 0]  # rows run front (large x) to back
+    # rows run front (large x) to back, each at one x (its centre's); a row that comes
+    # forward again (the velum along the pharyngeal wall) adds no footprint
+    xs = jax.lax.cummin(sheet[:, _PALATE_ACROSS // 2, 0])
     rows = jnp.arange(xs.shape[0], dtype=q.dtype)
     r = jnp.interp(-q[0], -xs, rows)
     i0 = jnp.clip(jnp.floor(r).astype(jnp.int32), 0, xs.shape[0] - 2)
@@ -190,6 +200,63 @@ def _palate_depth(q, sheet):
     return depth, jnp.array([0.0, -1.0, 0.0]) * push
 
 
+_DEFAULT_WALL = None
+
+
+def _wall_sheet(model, vertices):
+    """The pharyngeal wall's front sheet ``(N_HEIGHT, N_ACROSS, 3)``: the model's, or the
+    default wall's for a model without a pharynx region."""
+    global _DEFAULT_WALL
+    if _pharynx.has_pharynx(model):
+        return _pharynx.front_sheet(model, vertices)
+    if _DEFAULT_WALL is None:
+        _DEFAULT_WALL = np.asarray(_pharynx.build_pharynx(None)[0], np.float64)
+    n = _pharynx.N_HEIGHT * _pharynx.N_ACROSS
+    return jnp.asarray(_DEFAULT_WALL[:n], vertices.dtype).reshape(
+        _pharynx.N_HEIGHT, _pharynx.N_ACROSS, 3)
+
+
+def _wall_gap(q, sheet):
+    """How far ``q`` is in front of the wall (mm, along x; < 0 behind it) and whether it
+    is within the wall's height. Columns run top to bottom; beyond the sides the lateral
+    walls' x holds."""
+    ys = sheet[:, :, 1]
+    # each column's x and z at the height of q (rows top -> bottom: y decreasing)
+    xk = jax.vmap(lambda yc, xc: jnp.interp(-q[1], -yc, xc))(ys.T, sheet[:, :, 0].T)
+    zk = jax.vmap(lambda yc, zc: jnp.interp(-q[1], -yc, zc))(ys.T, sheet[:, :, 2].T)
+    x_wall = jnp.interp(q[2], zk, xk)
+    mid = sheet.shape[1] // 2
+    within = (q[1] <= ys[0, mid]) & (q[1] >= ys[-1, mid])
+    return q[0] - x_wall, within
+
+
+def _pharynx_depth(q, sheet):
+    """Depth of ``q`` behind the wall (0 in front of it or beyond its height) and the
+    displacement out (straight forward)."""
+    gap, within = _wall_gap(q, sheet)
+    depth = jnp.where(within, jnp.maximum(-gap, 0.0), 0.0)
+    push = depth + jnp.where(depth > 0, PROJECTION_MARGIN_MM, 0.0)
+    return depth, jnp.array([1.0, 0.0, 0.0]) * push
+
+
+def airway(model: FaceModel, vertices: Float[Array, "V 3"]) -> Float[Array, ""]:
+    """The airway left between the tongue and the pharyngeal wall in one frame (mm): the
+    least front-back distance (along x, at the vertex's height and side) from a tongue
+    vertex to the wall's front surface, over the tongue vertices within the wall's
+    height; < 0 when the tongue is through the wall, +inf when no tongue vertex is
+    within the wall's height."""
+    tongue = np.asarray(model.regions["tongue"])
+    sheet = _wall_sheet(model, vertices)
+    gap, within = jax.vmap(lambda q: _wall_gap(q, sheet))(vertices[tongue])
+    return jnp.min(jnp.where(within, gap, jnp.inf))
+
+
+@eqx.filter_jit
+def airway_frames(model: FaceModel, vertices: Float[Array, "m V 3"]) -> Float[Array, " m"]:
+    """:func:`airway` of every frame of ``vertices (m, V, 3)`` mm: ``(m,)`` mm."""
+    return jax.vmap(lambda v: airway(model, v))(vertices)
+
+
 def _parts(model):
     tongue = np.asarray(model.regions["tongue"])
     lips = np.concatenate([model.regions["upper_lip"], model.regions["lower_lip"]]).astype(np.int64)
@@ -197,7 +264,8 @@ def _parts(model):
 
 
 def depths(model: FaceModel, vertices: Float[Array, "V 3"]) -> dict[str, Array]:
-    """Per-vertex depths (mm) of one frame: ``tongue_palate``, ``tongue_upper`` and
+    """Per-vertex depths (mm) of one frame: ``tongue_palate``, ``tongue_pharynx``
+    (behind the pharyngeal wall), ``tongue_upper`` and
     ``tongue_lower`` (tongue vertices, the teeth of that arch), ``lips_upper`` and
     ``lips_lower`` (lip vertices); plus ``tongue_upper_front``/``tongue_lower_front``,
     the teeth depths counted only where the closest crown is a front tooth."""
@@ -205,7 +273,9 @@ def depths(model: FaceModel, vertices: Float[Array, "V 3"]) -> dict[str, Array]:
     tongue, lips = _parts(model)
     vt, vl = vertices[tongue], vertices[lips]
     sheet = _palate_sheet(model, vertices)
-    out = {"tongue_palate": jax.vmap(lambda q: _palate_depth(q, sheet)[0])(vt)}
+    wall = _wall_sheet(model, vertices)
+    out = {"tongue_palate": jax.vmap(lambda q: _palate_depth(q, sheet)[0])(vt),
+           "tongue_pharynx": jax.vmap(lambda q: _pharynx_depth(q, wall)[0])(vt)}
     for arch in ("upper", "lower"):
         chains, teeth = arch_chains(model, vertices, arch)
         upper = arch == "upper"
@@ -231,6 +301,7 @@ def report(model: FaceModel, vertices: Float[Array, "V 3"]) -> dict[str, Float[A
     d = depths(model, vertices)
     return {
         "tongue_palate": jnp.max(d["tongue_palate"]),
+        "tongue_pharynx": jnp.max(d["tongue_pharynx"]),
         "tongue_upper_teeth": jnp.max(d["tongue_upper"]),
         "tongue_lower_teeth": jnp.max(d["tongue_lower"]),
         "tongue_upper_front": jnp.max(d["tongue_upper_front"]),
@@ -291,13 +362,17 @@ def _palate_ceiling(q, sheet):
 
 
 def project(model: FaceModel, vertices: Float[Array, "V 3"], passes: int = PROJECTION_PASSES) -> Float[Array, "V 3"]:
-    """One frame with the tongue pushed out of the palate and both arches, and the lips
-    out of both arches, each point by its shortest way out of all of them at once
-    (:func:`_escape`; ``passes`` rounds, for the few points whose way out of one leads
-    into another). Vertices that are inside nothing do not move."""
+    """One frame with the tongue pushed out of the palate and both arches and in front
+    of the pharyngeal wall, and the lips out of both arches, each point by its shortest
+    way out of all of them at once (:func:`_escape`, then forward out of the wall;
+    ``passes`` rounds, for the few points whose way out of one leads into another).
+    A last push forward out of the wall ends it, so no tongue vertex is left behind the
+    wall (the wall wins where it and another obstacle pull apart). Vertices that are
+    inside nothing do not move."""
     require_collision_data(model)
     tongue, lips = _parts(model)
     sheet = _palate_sheet(model, vertices)
+    wall = _wall_sheet(model, vertices)
     arches = [(arch_chains(model, vertices, a)[0], a == "upper") for a in ("upper", "lower")]
 
     def until_out(step):
@@ -315,7 +390,15 @@ def project(model: FaceModel, vertices: Float[Array, "V 3"], passes: int = PROJE
 
         return push
 
-    push_tongue = until_out(lambda q: _escape(q, arches, "lingual", _palate_ceiling(q, sheet)))
+    def tongue_step(q):
+        moved = q + _escape(q, arches, "lingual", _palate_ceiling(q, sheet)).astype(q.dtype)
+        return moved + _pharynx_depth(moved, wall)[1].astype(q.dtype) - q
+
+    walled = until_out(tongue_step)
+
+    def push_tongue(q):
+        q = walled(q)
+        return q + _pharynx_depth(q, wall)[1].astype(q.dtype)
     push_lip = until_out(lambda q: _escape(q, arches, "labial"))
 
     vertices = vertices.at[tongue].set(jax.vmap(push_tongue)(vertices[tongue]))
@@ -363,7 +446,7 @@ def penalty_residuals(
     d = depths(model, vertices)
     keys = []
     if tongue:
-        keys += ["tongue_palate", "tongue_upper", "tongue_lower"]
+        keys += ["tongue_palate", "tongue_pharynx", "tongue_upper", "tongue_lower"]
     if lips:
         keys += ["lips_upper", "lips_lower"]
     if not keys:

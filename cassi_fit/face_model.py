@@ -27,7 +27,7 @@ from jaxtyping import Int
 from ._io import read_json, register_input
 from .errors import DataFormatError, MissingDataError
 
-MATERIALS = ("skin", "lips", "eye", "teeth", "tongue", "palate")
+MATERIALS = ("skin", "lips", "eye", "teeth", "tongue", "palate", "pharynx")
 REGIONS = ("skin", "upper_lip", "lower_lip", "jaw", "under_chin", "neck", "cheek", "nose",
            "eyes", "upper_teeth", "lower_teeth", "tongue", "palate")
 LANDMARKS = ("upper_incisor_tip", "lower_incisor_tip", "MNI", "MNM", "UL", "LL", "T1", "T2",

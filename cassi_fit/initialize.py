@@ -10,7 +10,10 @@ Paper section 2; :func:`initialize`:
    Both frames have their origin at the upper incisor tip, so no translation is needed;
 3. the lower teeth and the jaw: the closed form (Eqs 1-3, 6-7, ``jaw.closed_form``) from
    the model's jaw sites to the scaled first-frame jaw pellets;
-4. the palate from the scaled PAL.DAT (``palate.with_palate``; the model's own if absent);
+4. the pharyngeal wall from the scaled PHA.DAT (``pharynx.with_pharynx``; the model's
+   default wall if absent), then the palate from the scaled PAL.DAT (``palate.with_palate``,
+   joined to the model's upper teeth, its velum in front of the wall; the model's own
+   centreline if absent);
 5. the jaw's shape from the scaled Headmeasures gonion and gnathion against the model's
    gonion and gnathion, by the same closed form (``conformation.jaw_shape``);
 6. beyond the paper (its future work): face and mouth width from Headmeasures, lip
@@ -188,7 +191,8 @@ def initialize(
     ``lip_rounding``, ``gap_policy`` and ``calibration``, when given, override it.
     """
     from .face_model import load_model
-    from .palate import with_palate
+    from .palate import DEFAULT_OUTLINE, with_palate
+    from .pharynx import has_pharynx, with_pharynx
 
     mode = mode_named(mode, jaw_weights=jaw_weights, tongue_anchor=tongue_anchor,
                       gap_policy=gap_policy, tongue_shape=tongue_shape,
@@ -216,8 +220,13 @@ def initialize(
                 f"{source}: the calibration is of subject {fitted.subject}, not {recording.subject}"
             )
         scale = float(fitted.scale)
+    pharynx = getattr(recording, "pharynx", None)
+    if pharynx is not None and has_pharynx(model):
+        model = with_pharynx(model, scale * np.asarray(pharynx, np.float64))
     if recording.palate is not None:
         model = with_palate(model, scale * np.asarray(recording.palate, np.float64))
+    elif pharynx is not None and has_pharynx(model):  # the velum in front of this wall
+        model = with_palate(model, DEFAULT_OUTLINE)
     if fitted is not None:
         conformation = fitted.face_params(jnp.asarray(model.vertices).dtype)
     else:

@@ -1,4 +1,5 @@
-"""A 3D palate from a subject's 2D palatal centreline (``PAL.DAT``), as CASSI drew it.
+"""A 3D palate from a subject's 2D palatal centreline (``PAL.DAT``), joined to the upper
+teeth, with a soft palate (velum) behind it.
 
 CASSI (section 2, "the palatal outline"): the palate is narrow at the front of the mouth
 and wider toward the back, with a slight downward slope from its centreline to its
@@ -6,24 +7,73 @@ edges, and with thickness. Its report (section 4) notes that for two subjects th
 reached below the tip of the upper front teeth; here every vertex is clamped to stay at
 least ``margin`` mm above the upper incisor tip (y = 0 in the model frame).
 
-The mesh has a fixed vertex and face count whatever the outline's point count: the
-centreline is resampled to ``N_ALONG`` points equally spaced in arc length. Vertex layout:
-``[oral sheet (N_ALONG, N_ACROSS), nasal sheet (N_ALONG, N_ACROSS)]`` flattened row-major;
-the nasal sheet lies ``thickness`` mm above the oral one.
+**The hard palate joined to the teeth.** Given the upper arch's lingual cervical chain
+(the crowns' inner necks, ``FaceModel.collision["upper_lingual_cervical"]``), the hard
+palate's rows stand at the chain's stations: each row runs from the right neck over the
+PAL.DAT centreline (its midline, at the station's x) to the left neck, so its lateral
+edges *are* the teeth's necks (no gap). In front of the first station (the central
+incisors' lingual necks) two rows close the palate toward the centreline's front end
+(the alveolar ridge behind the incisors); behind the last molar two rows carry it to the
+centreline's back end, the edges held at the last molar's neck. Without a chain (a bare
+outline) the old parametric shape is used: half width and edge drop growing from front
+to back. Across a row the oral surface is ``y = centre + (edge - centre) v^2`` (v from
+-1 at the right edge to 1 at the left): the vault.
+
+**The velum.** ``N_VELUM`` rows continue from the centreline's back end (taken as the
+posterior nasal spine) down and back: length ``VELUM_LENGTH_MM``, at ``VELUM_ANGLE_DEG``
+to the palatal plane (taken as the model's horizontal), thickest a third of the way
+down (``VELUM_THICKNESS_MM``) and narrowing to the uvula. Adult values from lateral
+cephalograms: the velum (PNS to the uvula tip) is about 30-35 mm long and 8-10 mm thick,
+hanging at about 130 degrees to the palatal plane at rest (e.g. Verma et al. 2014,
+Imaging Sci Dent 44(3):193-198, 300 adults; You et al. 2008, Dentomaxillofac Radiol
+37(6):344-349). Given the pharyngeal wall's midline (``cassi_fit.pharynx``), the velum's
+back surface is kept ``VELUM_WALL_GAP_MM`` in front of it: at rest the airway behind
+the velum is about 6 mm deep in adults (velum-level sagittal distances, J Oral
+Maxillofac Res 2017;8(3):e4), and in speech the velum rises against the wall for every
+oral sound; a subject whose velum would reach the wall gets one that hangs down along it,
+a narrow port open.
+
+The mesh has a fixed vertex and face count whatever the outline's point count. Vertex
+layout: ``[oral sheet (N_ALONG, N_ACROSS), nasal sheet (N_ALONG, N_ACROSS)]`` flattened
+row-major, rows front to back (``N_HARD`` hard-palate rows, then ``N_VELUM`` velum rows),
+columns from the subject's right (z < 0) to the left; every row of the oral sheet lies
+at one x (the collision treats it as a height field). The nasal sheet lies ``thickness``
+mm above the hard palate's oral sheet and the velum's thickness behind its oral surface.
 """
 
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
 from .errors import DegenerateGeometryError
 from .face_model import FaceModel
+from .pharynx import slab_faces
 
-N_ALONG = 12
+#: Upper lingual cervical stations per side of the model's arch (7 crowns, 2 each).
+N_STATIONS = 14
+N_FRONT = 2   # rows in front of the first station (toward the alveolar ridge)
+N_BACK = 2    # rows behind the last molar
+#: Hard-palate rows, velum rows, all rows.
+N_HARD = N_FRONT + N_STATIONS + N_BACK
+N_VELUM = 5
+N_ALONG = N_HARD + N_VELUM
 N_ACROSS = 7
+
+#: Velum (soft palate) at rest; sources in the module docstring.
+VELUM_LENGTH_MM = 32.0
+VELUM_ANGLE_DEG = 130.0
+VELUM_THICKNESS_MM = 9.0
+UVULA_HALF_WIDTH_MM = 5.0
+VELUM_WALL_GAP_MM = 2.0
+#: The least half width of a palate row (mm): the central incisors' necks meet at the
+#: midline, where a row of zero width would make zero-area triangles.
+MIN_HALF_WIDTH_MM = 1.0
+# velum thickness profile along its rows (fraction of VELUM_THICKNESS_MM), root to tip
+_VELUM_PROFILE = (0.7, 1.0, 0.9, 0.75, 0.55)
 
 # A default centreline (mm, front to back) shaped like the palates in XRMB PAL.DAT files.
 DEFAULT_OUTLINE = np.array([
@@ -47,7 +97,7 @@ def _check_outline(outline):
         raise DegenerateGeometryError("palate outline has zero length (all points coincide)")
 
 
-def resample(outline: Float[Array, "k 2"], n: int = N_ALONG) -> Float[Array, "n 2"]:
+def resample(outline: Float[Array, "k 2"], n: int = N_HARD) -> Float[Array, "n 2"]:
     """``n`` points equally spaced in arc length along a polyline (k, 2) mm -> (n, 2)."""
     outline = jnp.asarray(outline)
     seg = jnp.linalg.norm(jnp.diff(outline, axis=0), axis=1)
@@ -57,66 +107,163 @@ def resample(outline: Float[Array, "k 2"], n: int = N_ALONG) -> Float[Array, "n 
 
 
 def palate_faces(n_along: int = N_ALONG, n_across: int = N_ACROSS) -> Int[np.ndarray, "Q 3"]:
-    """Triangles (Q, 3) of the closed palate slab; outward-facing winding."""
-    def idx(sheet, i, k):
-        return sheet * n_along * n_across + i * n_across + k
+    """Triangles (Q, 3) of the closed palate slab; outward-facing winding (the oral sheet
+    faces down; ``pharynx.slab_faces``)."""
+    return slab_faces(n_along, n_across)
 
-    faces = []
-    for i in range(n_along - 1):
-        for k in range(n_across - 1):
-            a, b, c, d = idx(0, i, k), idx(0, i, k + 1), idx(0, i + 1, k + 1), idx(0, i + 1, k)
-            faces += [(a, b, c), (a, c, d)]               # oral sheet faces down
-            a, b, c, d = idx(1, i, k), idx(1, i, k + 1), idx(1, i + 1, k + 1), idx(1, i + 1, k)
-            faces += [(a, c, b), (a, d, c)]               # nasal sheet faces up
-    for i in range(n_along - 1):                          # the two long edges
-        for k, flip in ((0, False), (n_across - 1, True)):
-            a, b, c, d = idx(0, i, k), idx(0, i + 1, k), idx(1, i + 1, k), idx(1, i, k)
-            tris = [(a, b, c), (a, c, d)]
-            faces += [(x, z, y) for x, y, z in tris] if flip else tris
-    for k in range(n_across - 1):                         # front and back ends
-        for i, flip in ((0, True), (n_along - 1, False)):
-            a, b, c, d = idx(0, i, k), idx(0, i, k + 1), idx(1, i, k + 1), idx(1, i, k)
-            tris = [(a, b, c), (a, c, d)]
-            faces += [(x, z, y) for x, y, z in tris] if flip else tris
-    return np.array(faces, dtype=np.int64)
+
+def _height_at(outline, x):
+    """The centreline's height at each ``x`` (held beyond its ends; its x made
+    non-increasing from front to back first, so a trace that steps forward is read as
+    flat there)."""
+    fine = resample(outline, 48)
+    xs = jax.lax.cummin(fine[:, 0])
+    return jnp.interp(-x, -xs, fine[:, 1])
+
+
+def _parametric_hard(outline, front_half_width, back_half_width, front_edge_drop,
+                     back_edge_drop):
+    """Rows (centre (N_HARD, 2), right edge (N_HARD, 3), left edge (N_HARD, 3)) of the
+    hard palate without teeth to join: CASSI's narrow-front, wide-back shape."""
+    centre = resample(outline)
+    u = jnp.linspace(0.0, 1.0, N_HARD, dtype=centre.dtype)
+    # half width rises quickly behind the alveolar ridge (sin), the drop linearly
+    half = front_half_width + (back_half_width - front_half_width) * jnp.sin(jnp.pi / 2 * u)
+    drop = front_edge_drop + (back_edge_drop - front_edge_drop) * u
+    left = jnp.stack([centre[:, 0], centre[:, 1] - drop, half], -1)
+    return centre, left * jnp.array([1.0, 1.0, -1.0], left.dtype), left
+
+
+def _joined_hard(outline, arch):
+    """The hard palate's rows joined to the upper arch's lingual cervical chain ``arch
+    (2 N_STATIONS, 3)`` (right back molar -> front -> left back molar)."""
+    arch = jnp.asarray(arch)
+    left = arch[N_STATIONS:]
+    right = arch[:N_STATIONS][::-1]
+    dtype = left.dtype
+    x_st = jax.lax.cummin(left[:, 0])  # stations front to back, x non-increasing
+    fine = resample(outline, 48)
+    x_front = jnp.maximum(fine[0, 0], x_st[0])
+    x_back = jnp.minimum(jax.lax.cummin(fine[:, 0])[-1], x_st[-1])
+    t_front = jnp.arange(N_FRONT, dtype=dtype) / N_FRONT
+    t_back = jnp.arange(1, N_BACK + 1, dtype=dtype) / N_BACK
+    x_rows = jnp.concatenate([x_front + (x_st[0] - x_front) * t_front, x_st,
+                              x_st[-1] + (x_back - x_st[-1]) * t_back])
+    centre = jnp.stack([x_rows, _height_at(outline, x_rows)], -1)
+
+    def edges(side, sign):
+        z = sign * jnp.maximum(sign * side[:, 2], MIN_HALF_WIDTH_MM)
+        first = jnp.stack([x_rows[:N_FRONT], jnp.full(N_FRONT, side[0, 1], dtype),
+                           jnp.full(N_FRONT, sign * MIN_HALF_WIDTH_MM, dtype)], -1)
+        # the front rows narrow from the first neck to the midline's front end
+        first = first.at[:, 2].set(z[0] + (sign * MIN_HALF_WIDTH_MM - z[0]) * (1 - t_front))
+        mid = jnp.stack([x_rows[N_FRONT:N_FRONT + N_STATIONS], side[:, 1], z], -1)
+        last = jnp.stack([x_rows[N_FRONT + N_STATIONS:], jnp.full(N_BACK, side[-1, 1], dtype),
+                          jnp.full(N_BACK, z[-1], dtype)], -1)
+        return jnp.concatenate([first, mid, last])
+
+    return centre, edges(right, -1.0), edges(left, 1.0)
+
+
+def _velum(centre, right, left, wall, thickness):
+    """Velum rows: centre (N_VELUM, 2), right/left edges (N_VELUM, 3), thickness
+    (N_VELUM,) and the unit normal (2,) toward its nasal side."""
+    dtype = centre.dtype
+    pns = centre[-1]
+    a = jnp.deg2rad(180.0 - VELUM_ANGLE_DEG)
+    d = jnp.array([-jnp.cos(a), -jnp.sin(a)], dtype)
+    normal = jnp.array([-jnp.sin(a), jnp.cos(a)], dtype)
+    f = jnp.arange(1, N_VELUM + 1, dtype=dtype) / N_VELUM
+    c = pns + (VELUM_LENGTH_MM * f)[:, None] * d
+    t = jnp.asarray(_VELUM_PROFILE, dtype) * VELUM_THICKNESS_MM
+    if wall is not None:
+        wall = jnp.asarray(wall, dtype)
+        # the wall at the height of the back surface's midline point
+        wall_x = jnp.interp(-(c[:, 1] + t * normal[1]), -wall[:, 1], wall[:, 0])
+        # the back (nasal) surface, t * normal behind the oral one, stays gap mm in front
+        c = c.at[:, 0].set(jnp.maximum(c[:, 0], wall_x + VELUM_WALL_GAP_MM - t * normal[0]))
+    half_back = left[-1, 2]
+    drop_back = pns[1] - left[-1, 1]
+    half = half_back + (UVULA_HALF_WIDTH_MM - half_back) * f
+    drop = drop_back + (2.0 - drop_back) * jnp.minimum(1.0, 2.0 * f)
+    lv = jnp.stack([c[:, 0], c[:, 1] - drop, half], -1)
+    return c, lv * jnp.array([1.0, 1.0, -1.0], dtype), lv, t, normal
 
 
 def build_palate(
-    outline_mm: Float[np.ndarray, "n 2"] | Float[Array, "n 2"], *, front_half_width: float = 8.0,
-    back_half_width: float = 22.0, front_edge_drop: float = 3.0, back_edge_drop: float = 9.0,
-    thickness: float = 3.0, margin: float = 1.0,
+    outline_mm: Float[np.ndarray, "n 2"] | Float[Array, "n 2"], *,
+    arch: Float[np.ndarray, "k 3"] | Float[Array, "k 3"] | None = None,
+    wall: Float[np.ndarray, "w 2"] | Float[Array, "w 2"] | None = None,
+    front_half_width: float = 8.0, back_half_width: float = 22.0, front_edge_drop: float = 3.0,
+    back_edge_drop: float = 9.0, thickness: float = 3.0, margin: float = 1.0,
 ) -> tuple[Float[Array, "P 3"], Int[np.ndarray, "Q 3"]]:
     """Palate vertices ``(2 * N_ALONG * N_ACROSS, 3)`` mm and faces ``(Q, 3)``.
 
     ``outline_mm``: (n, 2) palatal centreline in the model frame (x front, y up), front to
-    back, any n >= 2. Across the palate (z from -half width to +half width) the oral surface
-    drops quadratically from the centreline by ``edge_drop`` at the edges; half width and
-    drop grow from front to back (narrow at the front, wider toward the back). Every
-    vertex satisfies ``y >= margin`` (above the upper incisor tip): the oral sheet is
-    clamped with ``maximum`` (gradient 0 through the clamped points, 1 elsewhere) and the
-    nasal sheet is the clamped oral sheet raised by ``thickness``. Differentiable in the
-    outline; jit-compatible (the point count n is static).
+    back, any n >= 2: the palate's midline. ``arch``: the upper arch's lingual cervical
+    chain ``(2 * N_STATIONS, 3)`` (``FaceModel.collision["upper_lingual_cervical"]``
+    positions): the hard palate's edges then run along it (module docstring); None: the
+    parametric shape (``front_half_width`` ... ``back_edge_drop``). ``wall``: the
+    pharyngeal wall's midline ``(w, 2)`` (x, y) top to bottom, or None: the velum's back
+    surface is kept in front of it. Every vertex satisfies ``y >= margin`` (above the
+    upper incisor tip): the oral sheet is clamped with ``maximum`` (gradient 0 through
+    the clamped points, 1 elsewhere) and the nasal sheet is the clamped oral sheet moved
+    by the thickness toward the nasal side. Differentiable in the outline, the arch and
+    the wall; jit-compatible (the point counts are static).
     """
     _check_outline(outline_mm)
-    centre = resample(outline_mm)
-    u = jnp.linspace(0.0, 1.0, N_ALONG, dtype=centre.dtype)[:, None]   # front -> back
-    v = jnp.linspace(-1.0, 1.0, N_ACROSS, dtype=centre.dtype)[None, :]  # right -> left
-    # half width rises quickly behind the alveolar ridge (sin), the drop linearly
-    half_width = front_half_width + (back_half_width - front_half_width) * jnp.sin(jnp.pi / 2 * u)
-    drop = front_edge_drop + (back_edge_drop - front_edge_drop) * u
+    outline = jnp.asarray(outline_mm)
+    if arch is None:
+        centre, right, left = _parametric_hard(outline, front_half_width, back_half_width,
+                                               front_edge_drop, back_edge_drop)
+    else:
+        if jnp.shape(arch) != (2 * N_STATIONS, 3):
+            raise DegenerateGeometryError(
+                f"the arch chain must be ({2 * N_STATIONS}, 3), got {jnp.shape(arch)}")
+        centre, right, left = _joined_hard(outline, jnp.asarray(arch, outline.dtype))
+    vc, vr, vl, vt, vn = _velum(centre, right, left, wall, thickness)
+    centre = jnp.concatenate([centre, vc])
+    right = jnp.concatenate([right, vr])
+    left = jnp.concatenate([left, vl])
+    dtype = centre.dtype
+    v = jnp.linspace(-1.0, 1.0, N_ACROSS, dtype=dtype)[None, :]
+    v = 0.5 * (v - v[:, ::-1])  # exactly antisymmetric: a mirror-symmetric mesh
+    side = jnp.where(v < 0, 1.0, 0.0)
+    edge_y = side * right[:, 1:2] + (1 - side) * left[:, 1:2]
+    y = centre[:, 1:2] + (edge_y - centre[:, 1:2]) * v**2
+    z = jnp.where(v < 0, -v * right[:, 2:3], v * left[:, 2:3])
     x = jnp.broadcast_to(centre[:, :1], (N_ALONG, N_ACROSS))
-    y = jnp.maximum(centre[:, 1:] - drop * v**2, margin)
-    z = half_width * v
-    oral = jnp.stack([x, y, z], -1).reshape(-1, 3)
-    nasal = oral + jnp.array([0.0, thickness, 0.0], dtype=oral.dtype)
-    return jnp.concatenate([oral, nasal]), palate_faces()
+    # the edges keep their own x (the chain's), the rest stand on the row's x
+    x = x.at[:, 0].set(right[:, 0]).at[:, -1].set(left[:, 0])
+    y = jnp.maximum(y, margin)
+    oral = jnp.stack([x, y, z], -1)
+    up = jnp.array([0.0, 1.0, 0.0], dtype)
+    offset = jnp.concatenate([
+        jnp.broadcast_to(thickness * up, (N_HARD, 3)),
+        vt[:, None] * jnp.array([vn[0], vn[1], 0.0], dtype)])
+    nasal = oral + offset[:, None, :]
+    return jnp.concatenate([oral.reshape(-1, 3), nasal.reshape(-1, 3)]), palate_faces()
+
+
+def model_arch(model: FaceModel) -> Float[Array, "k 3"] | None:
+    """The model's upper lingual cervical chain positions, or None if it has none (or
+    not ``2 * N_STATIONS`` stations)."""
+    index = model.collision.get("upper_lingual_cervical") if model.collision else None
+    if index is None or len(index) != 2 * N_STATIONS:
+        return None
+    return jnp.asarray(model.vertices)[np.asarray(index)]
 
 
 def with_palate(
     model: FaceModel, outline_mm: Float[np.ndarray, "n 2"] | Float[Array, "n 2"], **shape: float
 ) -> FaceModel:
-    """The model with its palate region rebuilt from ``outline_mm`` (same topology)."""
-    verts, _ = build_palate(outline_mm, **shape)
+    """The model with its palate region rebuilt from ``outline_mm`` (same topology), its
+    edges on the model's upper teeth necks and its velum in front of the model's
+    pharyngeal wall (when the model has them)."""
+    from .pharynx import model_wall_midline
+
+    verts, _ = build_palate(outline_mm, arch=model_arch(model),
+                            wall=model_wall_midline(model), **shape)
     index = np.asarray(model.regions["palate"])
     if len(index) != verts.shape[0]:
         raise DegenerateGeometryError(

@@ -12,7 +12,8 @@ Construction (all mm, model frame: origin = upper incisor tip, +x front, +y up,
   midline around to the back midline. Nose, eye sockets, cheekbones, lips and chin are
   smooth bumps on top of the loft. The two lips are their own rows, with a real opening.
 * eyes: spheres in the sockets; teeth: two arches of individual crowns; tongue: a closed
-  tube shaped through the four tongue pellet sites; palate: ``cassi_fit.palate``.
+  tube shaped through the four tongue pellet sites; palate: ``cassi_fit.palate``
+  (joined to the upper teeth's necks, with a velum); pharyngeal wall: ``cassi_fit.pharynx``.
 """
 
 from __future__ import annotations
@@ -512,8 +513,14 @@ def build():
     tv, tf, ts, tsites, anchor_s = build_tongue()
     parts.append(("tongue", tv, tf, MAT["tongue"]))
     from cassi_fit.palate import DEFAULT_OUTLINE, build_palate
-    pv, pf = build_palate(DEFAULT_OUTLINE)
+    from cassi_fit.pharynx import DEFAULT_WALL, build_pharynx, midline
+    # the palate's edges on the upper crowns' inner necks, its velum in front of the wall
+    necks = uv[collision_chains({"upper_teeth": 0, "lower_teeth": 0},
+                                len(UPPER_TEETH))["upper_lingual_cervical"]]
+    pv, pf = build_palate(DEFAULT_OUTLINE, arch=necks, wall=midline(DEFAULT_WALL))
     parts.append(("palate", np.asarray(pv), np.asarray(pf), MAT["palate"]))
+    hv, hf = build_pharynx(DEFAULT_WALL)
+    parts.append(("pharynx", np.asarray(hv), np.asarray(hf), MAT["pharynx"]))
 
     verts, faces, mats, regions, offsets = [], [], [], {}, {}
     for name, v, f_, m in parts:

@@ -48,6 +48,9 @@ CLEAN = {
     "tongue_lower_front_before_mm": 0.0,
     "tongue_palate_before_mm": 0.0,
     "teeth_in_lips_before_mm": 0.0,
+    "airway_min_mm": 5.0,
+    "frames_without_airway": 0,
+    "tongue_pharynx_before_mm": 0.0,
 }
 
 

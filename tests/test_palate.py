@@ -1,4 +1,5 @@
-"""The 3D palate from a PAL.DAT centreline: fixed topology, shape, never below the incisors."""
+"""The 3D palate from a PAL.DAT centreline: fixed topology, shape, never below the incisors,
+joined to the upper teeth's necks, with a velum."""
 
 import jax
 import jax.numpy as jnp
@@ -9,7 +10,18 @@ from hypothesis import strategies as st
 
 from cassi_fit.errors import DegenerateGeometryError
 from cassi_fit.face_model import load_model
-from cassi_fit.palate import DEFAULT_OUTLINE, N_ACROSS, N_ALONG, build_palate, with_palate
+from cassi_fit.palate import (
+    DEFAULT_OUTLINE,
+    MIN_HALF_WIDTH_MM,
+    N_ACROSS,
+    N_ALONG,
+    N_HARD,
+    VELUM_LENGTH_MM,
+    VELUM_WALL_GAP_MM,
+    build_palate,
+    with_palate,
+)
+from cassi_fit.pharynx import DEFAULT_WALL, midline
 
 
 def _outline(n, dip, seed):
@@ -30,11 +42,12 @@ def test_palate_never_below_the_upper_incisor_tip(n, dip, seed):
 
 def test_narrow_front_wide_back_and_sloping_edges():
     v = np.asarray(build_palate(DEFAULT_OUTLINE)[0])[: N_ALONG * N_ACROSS].reshape(N_ALONG, N_ACROSS, 3)
+    v = v[:N_HARD]  # the hard palate (the velum narrows to the uvula)
     width = v[:, -1, 2] - v[:, 0, 2]
     assert width[0] < width[-1] and np.all(np.diff(width) >= 0)
     mid = N_ACROSS // 2
     assert np.all(v[1:, 0, 1] < v[1:, mid, 1])  # edges lower than the centreline
-    np.testing.assert_allclose(v[:, mid, :2], np.asarray(build_palate(DEFAULT_OUTLINE)[0])[mid:N_ALONG * N_ACROSS:N_ACROSS, :2])
+    np.testing.assert_allclose(v[:, mid, :2], np.asarray(build_palate(DEFAULT_OUTLINE)[0])[mid:N_HARD * N_ACROSS:N_ACROSS, :2])
 
 
 def test_palate_gradient_is_finite():
@@ -56,3 +69,74 @@ def test_with_palate_keeps_topology_and_moves_only_the_palate():
 def test_degenerate_outlines_raise(bad):
     with pytest.raises(DegenerateGeometryError):
         build_palate(bad)
+
+
+MODEL = load_model()
+# S01's PAL.DAT of the synthetic corpus (mm, pellet frame), every third point
+SUBJECT_OUTLINE = np.array([
+    (-4.141, 4.659), (-12.128, 14.206), (-20.115, 19.430), (-28.103, 22.289),
+    (-36.090, 23.853), (-44.077, 24.709), (-52.064, 24.857), (-57.389, 24.084)])
+
+
+def _necks(model):
+    return np.asarray(model.vertices)[np.asarray(model.collision["upper_lingual_cervical"])]
+
+
+def _oral(model):
+    v = np.asarray(model.vertices)[np.asarray(model.regions["palate"])]
+    return v[: N_ALONG * N_ACROSS].reshape(N_ALONG, N_ACROSS, 3)
+
+
+@pytest.mark.parametrize("outline", [None, SUBJECT_OUTLINE], ids=["default", "subject"])
+def test_the_hard_palate_meets_the_upper_teeth_necks(outline):
+    model = MODEL if outline is None else with_palate(MODEL, outline)
+    oral, necks = _oral(model), _necks(model)
+    edges = np.concatenate([oral[:N_HARD, 0], oral[:N_HARD, -1]])
+    gap = np.linalg.norm(necks[:, None] - edges[None], axis=-1).min(axis=1)
+    # every neck is an edge vertex; the central incisors' mesial necks (at the midline)
+    # only as near as a row's least half width allows
+    off_midline = np.abs(necks[:, 2]) >= MIN_HALF_WIDTH_MM
+    assert off_midline.sum() >= 24
+    assert gap[off_midline].max() < 1e-3  # model.csv keeps 4 decimals
+    assert gap.max() < MIN_HALF_WIDTH_MM + 0.5
+    # the palate's midline is the centreline, and it is no wider than the necks
+    if outline is not None:
+        centre = oral[:N_HARD, N_ACROSS // 2]
+        np.testing.assert_allclose(centre[:, 1], np.interp(-centre[:, 0], -outline[:, 0],
+                                                           outline[:, 1]), atol=0.3)
+    assert oral[:N_HARD, :, 2].max() <= necks[:, 2].max() + 1e-9
+
+
+def test_the_velum_hangs_behind_the_hard_palate_attached():
+    verts = np.asarray(build_palate(DEFAULT_OUTLINE)[0])
+    oral = verts[: N_ALONG * N_ACROSS].reshape(N_ALONG, N_ACROSS, 3)
+    centre = oral[:, N_ACROSS // 2]
+    pns, velum = centre[N_HARD - 1], centre[N_HARD:]
+    steps = np.linalg.norm(np.diff(centre[N_HARD - 1:, :2], axis=0), axis=1)
+    assert np.allclose(steps, steps[0]) and steps.sum() == pytest.approx(VELUM_LENGTH_MM)
+    assert np.all(np.diff(velum[:, 0]) < 0) and np.all(np.diff(velum[:, 1]) < 0)  # down, back
+    drop = np.degrees(np.arctan2(pns[1] - velum[-1, 1], pns[0] - velum[-1, 0]))
+    assert drop == pytest.approx(50.0)  # 130 degrees to the palatal plane
+    # one closed slab: the faces join the last hard row to the first velum row
+    faces = build_palate(DEFAULT_OUTLINE)[1]
+    row = lambda i: (faces // N_ACROSS) % N_ALONG == i  # noqa: E731
+    assert np.any(row(N_HARD - 1).any(axis=1) & row(N_HARD).any(axis=1))
+    # the model's velum: present, thicker than the hard palate
+    nasal = verts[N_ALONG * N_ACROSS:].reshape(N_ALONG, N_ACROSS, 3)
+    thick = np.linalg.norm(nasal[:, N_ACROSS // 2] - centre, axis=1)
+    assert thick[N_HARD:].max() > 2 * thick[:N_HARD].max()
+
+
+def test_the_velum_stays_in_front_of_the_pharyngeal_wall():
+    wall = np.asarray(midline(DEFAULT_WALL + np.array([12.0, 0.0])))  # a wall close behind
+    verts = np.asarray(build_palate(DEFAULT_OUTLINE, wall=wall)[0])
+    free = np.asarray(build_palate(DEFAULT_OUTLINE)[0])
+    half = N_ALONG * N_ACROSS
+    # the velum's midline, oral and nasal (back) surface, in front of the wall's midline
+    velum = np.stack([verts[:half], verts[half:]]).reshape(2, N_ALONG, N_ACROSS, 3)
+    back = velum[:, N_HARD:, N_ACROSS // 2].reshape(-1, 3)
+    wall_x = np.interp(-back[:, 1], -wall[:, 1], wall[:, 0])
+    assert np.all(back[:, 0] >= wall_x + VELUM_WALL_GAP_MM - 1e-6)
+    # without the wall it would have crossed it
+    fv = free[half:].reshape(N_ALONG, N_ACROSS, 3)[N_HARD:].reshape(-1, 3)
+    assert np.any(fv[:, 0] < np.interp(-fv[:, 1], -wall[:, 1], wall[:, 0]))

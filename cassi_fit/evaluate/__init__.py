@@ -14,9 +14,11 @@ run the animation and aggregate per subject into :class:`RecordingRow` and
 (Markdown in Table 2's layout, CSV, a figure; ``_report``).
 """
 
+from ._measures import AIRWAY_CLOSED_MM as AIRWAY_CLOSED_MM
 from ._measures import MEASURES as MEASURES
 from ._measures import SUSTAIN_S as SUSTAIN_S
 from ._measures import MeasureSpec as MeasureSpec
+from ._measures import airway_of as airway_of
 from ._measures import combine as combine
 from ._measures import measure as measure
 from ._measures import penetration_of as penetration_of
@@ -69,7 +71,7 @@ __all__ = [
     "NO_RECORDING", "OUTPUT_NAMES", "PALATE_BELOW_MM", "RATINGS", "SLOPE_DOWN_DEG",
     "SLOPE_STEEP_DEG", "SLOPE_UP_DEG", "SLOPE_VERY_STEEP_DEG", "SUSTAIN_S", "TEETH_APART_MM",
     "TEETH_IN_LIPS_MM", "TONGUE_HIDDEN_MM", "TONGUE_PALATE_MM", "TONGUE_POKE_DEEP_MM",
-    "TONGUE_POKE_MM", "TONGUE_V_DEG", "EvaluationResult", "MeasureSpec", "RecordingRow", "SubjectRow",
+    "TONGUE_POKE_MM", "TONGUE_V_DEG", "AIRWAY_CLOSED_MM", "airway_of", "EvaluationResult", "MeasureSpec", "RecordingRow", "SubjectRow",
     "combine", "compare", "describe", "evaluate_dataset", "evaluate_recording",
     "markdown_table", "measure", "penetration_of", "plot_summary", "problems", "rate",
     "rating", "sustain_frames", "sustained_max", "sustained_min", "write_report", "write_table", "SUMMARY_NAME",

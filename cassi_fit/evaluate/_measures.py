@@ -31,9 +31,9 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ..animate import frame_bucket, pad_frames
-from ..collide import FRONT_TEETH, REPORT_KEYS, has_collision_data, report_frames
+from ..collide import FRONT_TEETH, REPORT_KEYS, airway_frames, has_collision_data, report_frames
 from ..errors import DegenerateGeometryError, MissingDataError
-from ..palate import N_ACROSS, N_ALONG
+from ..palate import N_ACROSS, N_ALONG, N_HARD
 
 if TYPE_CHECKING:
     from ..animate import Animation
@@ -44,6 +44,10 @@ if TYPE_CHECKING:
 #: longer than a mistracked burst the quality check lets through (1-3 lines), shorter
 #: than the briefest bilabial closure or tongue-tip contact (60-150 ms).
 SUSTAIN_S = 0.05
+#: A frame has no airway when the least tongue-to-pharyngeal-wall distance
+#: (``collide.airway``) is at most this (mm): the tongue on the wall (where projection
+#: leaves it, ``collide.PROJECTION_MARGIN_MM`` in front) or through it.
+AIRWAY_CLOSED_MM = 0.01
 
 
 @dataclass(frozen=True)
@@ -103,6 +107,15 @@ MEASURES: dict[str, MeasureSpec] = {
         "mm", "max", False, "as tongue_palate_mm, before projection"),
     "teeth_in_lips_before_mm": MeasureSpec(
         "mm", "max", False, "deepest lip point in the teeth, before projection"),
+    # the airway between the tongue and the pharyngeal wall (collide.airway): reported
+    "airway_min_mm": MeasureSpec(
+        "mm", "min", False, "least tongue-to-pharyngeal-wall distance over the frames "
+        "(front-back; < 0: through the wall)"),
+    "frames_without_airway": MeasureSpec(
+        "frames", "max", False, "frames whose airway is at most AIRWAY_CLOSED_MM"),
+    "tongue_pharynx_before_mm": MeasureSpec(
+        "mm", "max", False, "deepest tongue point behind the pharyngeal wall, before "
+        "projection (sustained)"),
 }  # fmt: skip
 
 
@@ -213,7 +226,7 @@ def _sites(model: FaceModel) -> _Sites:
         upper_lip=np.asarray(model.regions["upper_lip"], np.int64),
         lower_lip=np.asarray(model.regions["lower_lip"], np.int64),
         tongue=tongue,
-        palate_oral=palate[: N_ALONG * N_ACROSS],
+        palate_oral=palate[: N_HARD * N_ACROSS],  # the hard palate (not the velum)
         tongue_back=_tongue_back(model),
     )
 
@@ -357,6 +370,18 @@ def _penetration(model: FaceModel, anim: Animation) -> tuple[dict, dict]:
     return before, after
 
 
+def airway_of(
+    model: FaceModel, vertices: Float[ArrayLike, "m v 3"]
+) -> Float[np.ndarray, " m"]:
+    """``collide.airway`` of every frame of ``vertices (m, V, 3)``: ``(m,)`` mm, the
+    least front-back distance from the tongue to the pharyngeal wall per frame (< 0:
+    through it; +inf: no tongue vertex within the wall's height). Frames padded to
+    ``animate.frame_bucket`` sizes."""
+    vertices = jnp.asarray(vertices)
+    m = vertices.shape[0]
+    return np.asarray(airway_frames(model, pad_frames(vertices, frame_bucket(m))))[:m]
+
+
 def measure(state: SubjectState, anim: Animation) -> dict[str, float]:
     """Per-recording measured quantities (floats, mm and degrees; keys ``MEASURES``).
 
@@ -411,5 +436,13 @@ def measure(state: SubjectState, anim: Animation) -> dict[str, float]:
             np.maximum(before["lips_upper_teeth"], before["lips_lower_teeth"])
         ),
     }
+    gap = airway_of(model, vertices)
+    if np.isnan(gap).any():
+        raise DegenerateGeometryError(
+            f"{getattr(state, 'source', 'animation')}: the airway is not a number in "
+            f"{int(np.isnan(gap).sum())} of {gap.size} frames")
+    out["airway_min_mm"] = float(np.min(gap))
+    out["frames_without_airway"] = float(np.sum(gap <= AIRWAY_CLOSED_MM))
+    out["tongue_pharynx_before_mm"] = hi(before["tongue_pharynx"])
     return {k: float(v) for k, v in out.items()}
 

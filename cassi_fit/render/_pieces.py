@@ -2,8 +2,8 @@
 and by the views that show each piece (numpy only: no OpenGL here).
 
 The paper's ``inside`` view removes the near half of skin, lips, eyes, teeth and palate
-(or draws the skin see-through), so every material is split once into the triangles on
-either side of z = 0; each piece becomes one instanced pyrender primitive drawn once per
+(here also of the pharyngeal wall) or draws the skin see-through, so every material is
+split once into the triangles on either side of z = 0; each piece becomes one instanced pyrender primitive drawn once per
 view that shows it (:mod:`cassi_fit.render._scene`). Back faces are culled wherever no
 view can show them (materials with a clear winding, away from the cut).
 """
@@ -17,7 +17,7 @@ from jaxtyping import Float, Integer
 
 # The face model's material order (cassi_fit.face_model.MATERIALS); repeated here so that
 # rendering does not import JAX.
-_MATERIALS = ("skin", "lips", "eye", "teeth", "tongue", "palate")
+_MATERIALS = ("skin", "lips", "eye", "teeth", "tongue", "palate", "pharynx")
 
 # sRGB colours. The paper draws the palate as the darkest object.
 MATERIAL_COLOURS = {
@@ -27,6 +27,7 @@ MATERIAL_COLOURS = {
     "teeth": (0.96, 0.94, 0.86),
     "tongue": (0.93, 0.52, 0.58),
     "palate": (0.42, 0.17, 0.20),
+    "pharynx": (0.62, 0.34, 0.36),  # the pharyngeal wall: mucosa, lighter than the palate
 }
 MARKER_COLOURS = {"measured": (0.90, 0.08, 0.08), "model": (0.10, 0.72, 0.22)}
 _EXTRA_MARKER_COLOURS = ((0.15, 0.35, 0.95), (0.98, 0.60, 0.05), (0.60, 0.20, 0.80))
@@ -51,7 +52,7 @@ _SHOWN = {
     "inside": set(_MATERIALS) - {"eye"},  # an eyeball floating in the cut head distracts
     "top": {"teeth", "tongue", "palate"},
 }
-_CUT = {"skin", "lips", "eye", "teeth", "palate"}  # near half removed in the inside view
+_CUT = {"skin", "lips", "eye", "teeth", "palate", "pharynx"}  # near half removed in the inside view
 _GLASS = {"skin", "lips", "eye"}  # near half see-through with skin="transparent"
 _MARKER_VIEWS = ("side", "inside")
 #: How the ``inside`` view opens the head: the near half cut away, or see-through skin.
