@@ -50,9 +50,18 @@ _SHOWN = {
     "side": set(_MATERIALS),
     "inside": set(_MATERIALS) - {"eye"},  # an eyeball floating in the cut head distracts
     "top": {"teeth", "tongue", "palate"},
+    "midsagittal": set(),  # drawn in 2D by _section, not by OpenGL
 }
 _CUT = {"skin", "lips", "eye", "teeth", "palate"}  # near half removed in the inside view
 _GLASS = {"skin", "lips", "eye"}  # near half see-through with skin="transparent"
+# Drawn see-through in the top view, so that the tongue's position and groove show under
+# it (otherwise the top view shows the palate's unchanging back in every frame).
+_TOP_GLASS = {"palate"}
+_TOP_GLASS_ALPHA = 0.22
+# Coloured by height in the top view (dark low, light high: a relief map of the dorsum,
+# its groove a darker line down the middle), under the see-through palate.
+_HEIGHT_COLOURED = {"tongue"}
+_HEIGHT_LOW, _HEIGHT_HIGH = (0.30, 0.10, 0.30), (1.00, 0.93, 0.62)  # sRGB
 _MARKER_VIEWS = ("side", "inside")
 #: How the ``inside`` view opens the head: the near half cut away, or see-through skin.
 SKINS = ("cut", "transparent")
@@ -146,6 +155,7 @@ class _Piece:
             static,
             views,
         )
+        self.heights = None  # (low, high) mm: coloured by height per frame (height_colours)
         self.buffer = np.zeros((len(vertex_index), 6 + static.shape[1]), np.float32)
         self.buffer[:, 6:] = static
         self.primitive = self.mesh = None
@@ -164,6 +174,7 @@ def _piece_views(material: str, near: bool, glass: bool, views, skin: str) -> tu
         if skin == "transparent" and material not in _GLASS:
             cut = False  # see-through skin: teeth and palate stay whole
         glass_here = v == "inside" and near and skin == "transparent" and material in _GLASS
+        glass_here = glass_here or (v == "top" and material in _TOP_GLASS)
         if (glass and glass_here) or (not glass and not cut and not glass_here):
             out.append(v)
     return tuple(out)
@@ -194,6 +205,26 @@ def _cull_face(winding: int) -> str | None:
     return {1: "front", -1: "back"}.get(winding)
 
 
+def _height_range(points: np.ndarray) -> tuple[float, float]:
+    """(low, high) y mm of the colour scale: the upper 70 % of the part's rest height range
+    (its top surface, which the top view shows), widened by 5 mm up for its motion."""
+    lo, hi = float(points[..., 1].min()), float(points[..., 1].max())
+    return lo + 0.3 * (hi - lo), hi + 5.0
+
+
+def height_colours(
+    y: Float[np.ndarray, " n"], heights: tuple[float, float], base
+) -> Float[np.ndarray, "n 4"]:
+    """Per-vertex colour factors (n, 4) that turn the material's ``base`` sRGB colour into
+    a dark-to-light height scale over ``heights`` (low, high) mm."""
+    low, high = heights
+    h = np.clip((np.asarray(y, np.float64) - low) / max(high - low, 1e-9), 0.0, 1.0)[:, None]
+    target = (1 - h) * np.array(_linear(_HEIGHT_LOW)) + h * np.array(_linear(_HEIGHT_HIGH))
+    out = np.ones((len(h), 4))
+    out[:, :3] = target / np.maximum(np.array(_linear(base)), 1e-3)
+    return out
+
+
 def _split_pieces(vertices, faces, face_material, materials, views, skin, cull) -> list[_Piece]:
     """Split the mesh by material and by side of the midsagittal plane (triangle centroid);
     "near" is the inside view's camera side.
@@ -222,6 +253,14 @@ def _split_pieces(vertices, faces, face_material, materials, views, skin, cull) 
                     iris[index] if (m == eye and iris is not None) else np.zeros((len(index), 0))
                 )
                 args = (name, near, glass, index, local.reshape(-1, 3), static)
+                if name in _HEIGHT_COLOURED and "top" in shown:  # its own, recoloured piece
+                    height = _Piece(name, near, glass, index, local.reshape(-1, 3),
+                                    np.ones((len(index), 4)), ("top",), cull=face)  # fmt: skip
+                    height.heights = _height_range(vertices[faces[face_material == m]])
+                    pieces.append(height)
+                    shown = tuple(v for v in shown if v != "top")
+                    if not shown:
+                        continue
                 if face is None or glass:
                     pieces.append(_Piece(*args, shown))
                     continue
