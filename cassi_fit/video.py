@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
-from jaxtyping import UInt8
+from jaxtyping import Float, UInt8
 
 from ._io import atomic_output_path, atomic_write, commit_output, register_input, remove_quietly
 from .errors import CassiError, DataFormatError
@@ -434,6 +434,17 @@ def animation_frames(
             str(current[k]),
         )
         yield renderer.render(vertices[k], caption=caption, **kwargs)
+
+
+def subject_traces(recording: Any, scale: float) -> dict[str, Float[np.ndarray, "n 2"] | None]:
+    """The midsagittal view's traces of a ``dataset.Recording``: its subject's palate
+    (PAL.DAT) and pharyngeal wall (PHA.DAT) in the model frame, i.e. the pellet frame's
+    mm times ``scale`` (``SubjectState.scale``); None where the file is absent."""
+    out = {}
+    for name in ("palate", "pharynx"):
+        points = getattr(recording, name, None)
+        out[name] = None if points is None else np.asarray(points, np.float64) * float(scale)
+    return out
 
 
 def _in_3d(points_2d: np.ndarray) -> np.ndarray:

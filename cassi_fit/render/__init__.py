@@ -54,13 +54,14 @@ from ._pieces import MATERIAL_COLOURS as MATERIAL_COLOURS
 from ._pieces import SKINS as SKINS
 from ._pieces import PieceInfo as PieceInfo
 from ._pieces import triangle_winding as triangle_winding
-from ._section import SECTION_VIEW as SECTION_VIEW
-from ._section import Section as Section
-from ._section import section_polylines as section_polylines
-from ._section import section_segments as section_segments
 from ._scene import Markers as Markers
 from ._scene import MeshModel as MeshModel
 from ._scene import Renderer as Renderer
+from ._section import SECTION_VIEW as SECTION_VIEW
+from ._section import Section as Section
+from ._section import midsagittal_figure as midsagittal_figure
+from ._section import section_polylines as section_polylines
+from ._section import section_segments as section_segments
 
 __all__ = [
     "HEADLESS_PLATFORMS",
@@ -77,6 +78,7 @@ __all__ = [
     "Section",
     "add_caption",
     "choose_gl_platform",
+    "midsagittal_figure",
     "ensure_headless_gl",
     "probe_gl_platform",
     "save_png",

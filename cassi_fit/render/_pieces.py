@@ -15,6 +15,8 @@ from typing import NamedTuple
 import numpy as np
 from jaxtyping import Float, Integer
 
+from ..errors import CassiError
+
 # The face model's material order (cassi_fit.face_model.MATERIALS); repeated here so that
 # rendering does not import JAX.
 _MATERIALS = ("skin", "lips", "eye", "teeth", "tongue", "palate")
@@ -270,3 +272,21 @@ def _split_pieces(vertices, faces, face_material, materials, views, skin, cull) 
                 if shown:
                     pieces.append(_Piece(*args, shown, cull=face))
     return pieces
+
+
+def _model_arrays(model):
+    """(rest (V,3) float64, faces (F,3) int64, face_material (F,), material names)."""
+    try:
+        from ..face_model import MATERIALS as materials
+    except ImportError:
+        materials = _MATERIALS
+    rest = np.asarray(model.vertices, dtype=np.float64)
+    faces = np.asarray(model.faces, dtype=np.int64)
+    face_material = np.asarray(model.face_material, dtype=np.int64)
+    if rest.ndim != 2 or rest.shape[1] != 3 or not np.all(np.isfinite(rest)):
+        raise CassiError(f"render: model vertices must be finite (V, 3), got {rest.shape}")
+    if faces.ndim != 2 or faces.shape[1] != 3 or faces.min() < 0 or faces.max() >= len(rest):
+        raise CassiError("render: model faces must be (F, 3) indices into the vertices")
+    if face_material.shape != (len(faces),) or face_material.max() >= len(materials):
+        raise CassiError("render: model face_material must be (F,) indices into MATERIALS")
+    return rest, faces, face_material, tuple(materials)

@@ -28,7 +28,6 @@ from ._pieces import (
     _EXTRA_MARKER_COLOURS,
     _MARGIN_MM,
     _MARKER_VIEWS,
-    _MATERIALS,
     _TOP_GLASS_ALPHA,
     _VIEW_AXES,
     MARKER_COLOURS,
@@ -37,6 +36,7 @@ from ._pieces import (
     PieceInfo,
     _incidence,
     _linear,
+    _model_arrays,
     _split_pieces,
     _vertex_normals,
     height_colours,
@@ -459,24 +459,6 @@ class Renderer:
     def __exit__(self, *exc: object) -> bool:
         self.close()
         return False
-
-
-def _model_arrays(model):
-    """(rest (V,3) float64, faces (F,3) int64, face_material (F,), material names)."""
-    try:
-        from ..face_model import MATERIALS as materials
-    except ImportError:
-        materials = _MATERIALS
-    rest = np.asarray(model.vertices, dtype=np.float64)
-    faces = np.asarray(model.faces, dtype=np.int64)
-    face_material = np.asarray(model.face_material, dtype=np.int64)
-    if rest.ndim != 2 or rest.shape[1] != 3 or not np.all(np.isfinite(rest)):
-        raise CassiError(f"render: model vertices must be finite (V, 3), got {rest.shape}")
-    if faces.ndim != 2 or faces.shape[1] != 3 or faces.min() < 0 or faces.max() >= len(rest):
-        raise CassiError("render: model faces must be (F, 3) indices into the vertices")
-    if face_material.shape != (len(faces),) or face_material.max() >= len(materials):
-        raise CassiError("render: model face_material must be (F,) indices into MATERIALS")
-    return rest, faces, face_material, tuple(materials)
 
 
 def _check_options(size, views, skin, background) -> tuple[tuple[int, int], tuple, str]:

@@ -416,3 +416,78 @@ def _dashed(draw, xy: list, fill, width: int, dash: float) -> None:
     q = np.stack([np.interp(marks, s, p[:, 0]), np.interp(marks, s, p[:, 1])], axis=1).tolist()
     for a, b in zip(q[::2], q[1::2], strict=False):
         draw.line((*a, *b), fill=fill, width=width)
+
+
+def midsagittal_figure(
+    model: Any,
+    vertices: Float[Any, "v 3"],
+    *,
+    traces: Mapping[str, Float[Any, "n 2"] | None] | None = None,
+    pellets: Float[Any, "k 2"] | None = None,
+    trail: Float[Any, "t k 2"] | None = None,
+    time: float | None = None,
+    ax: Any = None,
+) -> Any:
+    """The midsagittal view of one frame as a matplotlib figure (for notebooks and papers).
+
+    ``model``: a :class:`~cassi_fit.FaceModel` (or anything with ``vertices``, ``faces``,
+    ``face_material`` and optionally ``regions``, ``landmarks``, ``measures``);
+    ``vertices (V, 3)`` mm: the posed frame (e.g. ``animation.vertices[k]``); ``traces``:
+    ``{"palate": (n, 2), "pharynx": (m, 2)}`` mm in the model frame
+    (``video.subject_traces(recording, state.scale)``); ``pellets (k, 2)`` mm and
+    ``trail (T, k, 2)`` mm (the last T positions, oldest first); ``time`` in seconds for
+    the title; ``ax``: draw into these axes instead of a new figure. Returns the figure.
+    Lines carry the part's name as their label (``"tongue"``, ``"palate trace"``,
+    ``"jaw (schematic)"``...), so a legend names them.
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Polygon
+
+    from ._pieces import MARKER_COLOURS, MATERIAL_COLOURS, _model_arrays
+
+    rest, faces, face_material, materials = _model_arrays(model)
+    section = Section(
+        rest, faces, face_material, materials, regions=getattr(model, "regions", None),
+        landmarks=getattr(model, "landmarks", None), measures=getattr(model, "measures", None),
+        traces=traces,
+    )  # fmt: skip
+    v = np.asarray(vertices, dtype=np.float64)
+    if v.shape != rest.shape or not np.all(np.isfinite(v)):
+        raise CassiError(f"midsagittal_figure: vertices must be finite {rest.shape}, got {v.shape}")
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(6, 5))
+    else:
+        fig = ax.figure
+    for name, points in section.traces.items():
+        ax.plot(*points.T, color=_TRACE_COLOUR, lw=3.5, alpha=0.8, label=f"{name} trace",
+                solid_capstyle="round")  # fmt: skip
+    contours = section.contours(v)
+    for k, (points, _) in enumerate(contours.pop("jaw", ())):
+        ax.plot(*points.T, ls="--", lw=1, color=_JAW_COLOUR,
+                label="jaw (schematic)" if k == 0 else "_nolegend_")  # fmt: skip
+    for name, lines in contours.items():
+        colour = MATERIAL_COLOURS.get(name, (0.6, 0.6, 0.6))
+        ink = _LINE_DARKEN.get(name, tuple(0.72 * c for c in colour))
+        for k, (points, closed) in enumerate(lines):
+            if closed and name in _FILLED and len(points) >= 3:
+                ax.add_patch(Polygon(points, closed=True, lw=0,
+                                     fc=tuple(0.55 + 0.45 * c for c in colour)))  # fmt: skip
+            xy = np.vstack([points, points[:1]]) if closed else points
+            ax.plot(*xy.T, color=ink, lw=1.8, label=name if k == 0 else "_nolegend_")
+    red = MARKER_COLOURS["measured"]
+    if trail is not None:
+        t = np.asarray(trail, dtype=np.float64)
+        for k in range(t.shape[1]):
+            ax.plot(*t[:, k, :2].T, color=red, alpha=0.35, lw=2,
+                    label="pellet trails" if k == 0 else "_nolegend_")  # fmt: skip
+    if pellets is not None:
+        p = np.asarray(pellets, dtype=np.float64).reshape(-1, 2)
+        ax.plot(*p.T, "o", color=red, ms=6, label="pellets")
+    lo, hi = section.window()
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (mm, front)")
+    ax.set_ylabel("y (mm, up)")
+    ax.set_title("midsagittal section" + ("" if time is None else f", t = {float(time):.3f} s"))
+    return fig
