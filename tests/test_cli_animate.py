@@ -128,6 +128,21 @@ def test_animate_pellet_file_to_gif_and_png(sentence, tmp_path, capsys):
     assert image.std() > 10  # not a blank image
 
 
+def test_animate_midsagittal_view_alone(sentence, tmp_path, capsys):
+    """``--views midsagittal``: the 2D section with the subject's traces, no OpenGL view."""
+    _, recording = sentence
+    png = tmp_path / "section.png"
+    code, _, err = _run(capsys, "animate", recording.path, "--views", "midsagittal",
+                        "--stride", 40, "--size", SIZE, "--out", png, "--frame", 2)
+    assert code == 0, err
+    image = iio.imread(png)[:100]  # above the caption
+    assert image.shape[1] == 160
+    drawn = np.abs(image.astype(int) - image[2, 2]).sum(axis=2) > 60
+    assert 0.02 < drawn.mean() < 0.6  # contours on the light cell background
+    grey = (np.abs(image.astype(int) - 115).max(axis=2) < 25)  # the palate/pharynx traces
+    assert grey.sum() > 20
+
+
 def test_animate_in_cassi_mode(sentence, tmp_path, capsys):
     _, recording = sentence
     png = tmp_path / "cassi.png"
