@@ -139,7 +139,7 @@ def test_animate_midsagittal_view_alone(sentence, tmp_path, capsys):
     assert image.shape[1] == 160
     drawn = np.abs(image.astype(int) - image[2, 2]).sum(axis=2) > 60
     assert 0.02 < drawn.mean() < 0.6  # contours on the light cell background
-    grey = (np.abs(image.astype(int) - 115).max(axis=2) < 25)  # the palate/pharynx traces
+    grey = (np.abs(image.astype(int) - 158).max(axis=2) < 8)  # the palate/pharynx traces
     assert grey.sum() > 20
 
 

@@ -43,7 +43,7 @@ SECTION_VIEW = "midsagittal"
 NEAR_MM = 12.0  # triangles farther than this from the plane at rest are never cut
 Z_EPS = 1e-6  # mm: the cut plane, just off z = 0 (see the module's docstring)
 _BACKGROUND = (250, 250, 247)
-_TRACE_COLOUR = (0.45, 0.45, 0.45)
+_TRACE_COLOUR = (0.62, 0.62, 0.64)
 _JAW_COLOUR = (0.55, 0.50, 0.42)
 _LINE_DARKEN = {"teeth": (0.55, 0.53, 0.45), "eye": (0.5, 0.5, 0.5)}
 _FILLED = {"tongue", "teeth"}  # closed sections filled (light) under their outline
@@ -354,7 +354,9 @@ class Section:
         pil = Image.new("RGB", (w, h), _BACKGROUND)
         draw = ImageDraw.Draw(pil)
         for points in self.traces.values():
-            draw.line(px(points), fill=_rgb(_TRACE_COLOUR), width=3 * line, joint="curve")
+            # wide, under the model: a grey band that shows beside the model's own outline
+            # where they coincide (the model's palate is built from the same PAL.DAT)
+            draw.line(px(points), fill=_rgb(_TRACE_COLOUR), width=5 * line, joint="curve")
         contours = self.contours(vertices)
         jaw = contours.pop("jaw", ())
         for points, _ in jaw:
@@ -459,7 +461,7 @@ def midsagittal_figure(
     else:
         fig = ax.figure
     for name, points in section.traces.items():
-        ax.plot(*points.T, color=_TRACE_COLOUR, lw=3.5, alpha=0.8, label=f"{name} trace",
+        ax.plot(*points.T, color=_TRACE_COLOUR, lw=5, label=f"{name} trace",
                 solid_capstyle="round")  # fmt: skip
     contours = section.contours(v)
     for k, (points, _) in enumerate(contours.pop("jaw", ())):
