@@ -170,6 +170,7 @@ class Renderer:
         self._margin = float(margin)
         self._colours = {**MATERIAL_COLOURS, **(colours or {})}
         self.platform = ensure_headless_gl()
+        self._background = tuple(int(round(255 * c)) for c in background)
         self._build_scene(background, int(antialias))
         self._layout_key, self._placements, self._markers = None, {}, {}
         self.render(rest)  # warm-up: shaders compiled, buffers in the GL context
@@ -404,9 +405,9 @@ class Renderer:
 
     def _draw_gl(self, frame, markers) -> np.ndarray:
         """The OpenGL views of the current layout (skipped if it holds none)."""
-        if not self._placements:
+        if not self._placements:  # the midsagittal view alone: no OpenGL work
             width, height = self.size
-            return np.empty((height, width, 3), np.uint8)
+            return np.full((height, width, 3), self._background, np.uint8)
         self._upload(frame)
         self._set_markers(markers)
         return self._draw()

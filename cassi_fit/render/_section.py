@@ -246,8 +246,9 @@ class Section:
         self._window = None
 
     def window(self) -> tuple[Float[np.ndarray, "2"], Float[np.ndarray, "2"]]:
-        """(lo, hi) (x, y) mm of the view: the rest section of tongue, palate, teeth and lips
-        with the traces and the schematic jaw, plus a margin (the whole rest section if none of those exist)."""
+        """(lo, hi) (x, y) mm of the view: the rest section of tongue, palate, teeth and
+        lips with the traces and the schematic jaw, plus a margin (the whole rest section
+        if none of those exist). Fixed for the model, so a video does not jump."""
         if self._window is None:
             self._window = self._fit_window()
         return self._window
