@@ -58,7 +58,9 @@ _CUT = {"skin", "lips", "eye", "teeth", "palate"}  # near half removed in the in
 _GLASS = {"skin", "lips", "eye"}  # near half see-through with skin="transparent"
 # Drawn see-through in the top view, so that the tongue's position and groove show under
 # it (otherwise the top view shows the palate's unchanging back in every frame).
-_TOP_GLASS = {"palate"}
+# (Names a model may add for the soft palate or the pharynx wall are included: they would
+# hide the tongue's back from above as the palate hides its front.)
+_TOP_GLASS = {"palate", "velum", "soft_palate", "pharynx"}
 _TOP_GLASS_ALPHA = 0.22
 # Coloured by height in the top view (dark low, light high: a relief map of the dorsum,
 # its groove a darker line down the middle), under the see-through palate.

@@ -49,7 +49,7 @@ _LINE_DARKEN = {"teeth": (0.55, 0.53, 0.45), "eye": (0.5, 0.5, 0.5)}
 _FILLED = {"tongue", "teeth"}  # closed sections filled (light) under their outline
 _DRAW_ORDER = ("skin", "lips", "palate", "teeth", "tongue")  # others after, in model order
 # Parts that set the view's window (mm margin around their rest section and the traces).
-_WINDOW_MATERIALS = ("tongue", "palate", "teeth", "lips")
+_WINDOW_MATERIALS = ("tongue", "palate", "teeth", "lips", "velum", "soft_palate", "pharynx")
 _WINDOW_MARGIN_MM = 8.0
 
 
