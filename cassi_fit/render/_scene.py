@@ -115,9 +115,9 @@ class Renderer:
     is the posed mesh cut at z = 0, drawn in 2D into its cell after the OpenGL pass, with
     ``traces`` (``{"palate": (n, 2), "pharynx": (m, 2)}`` mm in the model frame, e.g. the
     subject's PAL.DAT and PHA.DAT times its scale; :meth:`set_traces`), the pellets with
-    their trails and the time (:meth:`render`'s ``trails`` and ``time``). ``skin`` is ``"cut"`` (the inside view removes the near
-    half of skin, lips, eyes, teeth and palate) or ``"transparent"`` (the near skin, lips
-    and eyes drawn see-through). ``antialias`` is the number of multisample samples
+    their trails and the time (:meth:`render`'s ``trails`` and ``time``). ``skin`` is
+    ``"cut"`` (the inside view removes the near half of skin, lips, eyes, teeth and
+    palate) or ``"transparent"`` (the near skin, lips and eyes drawn see-through). ``antialias`` is the number of multisample samples
     (0 = none, the fast default). ``marker_radius`` is in mm (default: 1.2 % of the
     head's height). Cameras are fitted to ``model.vertices`` (the rest mesh) plus
     ``margin`` (a fraction of each cell kept free on every side). ``colours`` overrides
@@ -295,9 +295,7 @@ class Renderer:
             piece.buffer[:, 3:6] = normals[piece.vertex_index]
             if piece.heights is not None:
                 base = self._colours.get(piece.material, (0.7,) * 3)
-                piece.buffer[:, 6:] = height_colours(
-                    piece.buffer[:, 1], piece.heights, base
-                )
+                piece.buffer[:, 6:] = height_colours(piece.buffer[:, 1], piece.heights, base)
             _draw.write_vertices(piece.primitive, piece.buffer)
 
     def _set_markers(self, markers):
