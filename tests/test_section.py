@@ -114,9 +114,10 @@ def standin():
     return standin_model()
 
 
-def _cell(img, k):  # the 3x2 grid's k-th cell
+def _cell(img, k):  # the 3x2 grid's k-th cell; the fifth (midsagittal) is two wide
     h, w = img.shape[0] // 2, img.shape[1] // 3
-    return img[(k // 3) * h : (k // 3 + 1) * h, (k % 3) * w : (k % 3 + 1) * w]
+    right = img.shape[1] if k == 4 else (k % 3 + 1) * w
+    return img[(k // 3) * h : (k // 3 + 1) * h, (k % 3) * w + 2 : right]
 
 
 @render_test
@@ -134,8 +135,9 @@ def test_the_grid_holds_five_views_and_the_section_moves_with_the_tongue(five, s
     rows_b = np.nonzero(green(section_b).any(axis=1))[0]
     assert rows_b.min() < rows_a.min() - 3  # higher in the image
     assert green(_cell(a, 2)).sum() > 20  # the GL cells are still drawn (inside view)
-    empty = _cell(a, 5)[:, 2:]  # (cells are 106.7 pixels wide: leave the shared column)
-    assert np.all(empty == empty[0, 0])  # the sixth cell stays empty
+    top = _cell(a, 3)
+    assert np.any(top != top[0, 0], axis=-1).sum() > 500  # the top view, left of the section
+    assert np.all(a[SIZE[1] // 2 + 2 :, SIZE[0] // 3 + 2] == section_a[2, -3])  # its edge
 
 
 @render_test

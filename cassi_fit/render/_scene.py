@@ -84,17 +84,20 @@ def _cells(views, size, grid: bool) -> dict[str, tuple[float, float, float, floa
     """Cell of each view: (centre x, centre y, width, height) in pixels, y up.
 
     Grid: two columns (front, side / inside, top), three for five or six views (front,
-    side, inside / top, midsagittal); one view fills the image. Not grid: one row.
+    side, inside / top, midsagittal); the midsagittal view, when last in a short last
+    row, takes the rest of the row (two cells wide among five views). One view fills the image.
+    Not grid: one row.
     """
     width, height = size
     n = len(views)
     cols = 1 if n == 1 else ((2 if n <= 4 else 3) if grid else n)
     rows = -(-n // cols)
     cw, ch = width / cols, height / rows
-    return {
-        v: ((i % cols + 0.5) * cw, height - (i // cols + 0.5) * ch, cw, ch)
-        for i, v in enumerate(views)
-    }
+    out = {}
+    for i, v in enumerate(views):
+        span = cols - i % cols if (i == n - 1 and v == SECTION_VIEW) else 1
+        out[v] = ((i % cols + span / 2) * cw, height - (i // cols + 0.5) * ch, span * cw, ch)
+    return out
 
 
 def _sphere(subdivisions: int = 2):
@@ -110,8 +113,8 @@ class Renderer:
 
     ``size`` is the whole output image (W, H) in pixels; in grid mode the views share it as
     a 2x2 grid (front, side / inside, top), each view a (W/2, H/2) cell, or with five
-    views a 3x2 grid (front, side, inside / top, midsagittal); with ``grid=False`` the
-    views stand in one row. The ``midsagittal`` view (:mod:`cassi_fit.render._section`)
+    views a 3x2 grid (front, side, inside / top, midsagittal two cells wide); with
+    ``grid=False`` the views stand in one row. The ``midsagittal`` view (:mod:`cassi_fit.render._section`)
     is the posed mesh cut at z = 0, drawn in 2D into its cell after the OpenGL pass, with
     ``traces`` (``{"palate": (n, 2), "pharynx": (m, 2)}`` mm in the model frame, e.g. the
     subject's PAL.DAT and PHA.DAT times its scale; :meth:`set_traces`), the pellets with
