@@ -51,6 +51,7 @@ _DRAW_ORDER = ("skin", "lips", "palate", "teeth", "tongue")  # others after, in 
 # Parts that set the view's window (mm margin around their rest section and the traces).
 _WINDOW_MATERIALS = ("tongue", "palate", "teeth", "lips", "velum", "soft_palate", "pharynx")
 _WINDOW_MARGIN_MM = 8.0
+_JAW_DROP_MM = 12.0  # more room below: the chin and lower teeth drop as the jaw opens
 
 
 def section_segments(
@@ -268,7 +269,8 @@ class Section:
         p = np.concatenate(points)
         if not len(p):
             p = self.rest[:, :2]
-        return p.min(axis=0) - _WINDOW_MARGIN_MM, p.max(axis=0) + _WINDOW_MARGIN_MM
+        lo, hi = p.min(axis=0) - _WINDOW_MARGIN_MM, p.max(axis=0) + _WINDOW_MARGIN_MM
+        return lo - (0.0, _JAW_DROP_MM), hi
 
     def contours(self, vertices: Float[Any, "v 3"]) -> dict[str, list]:
         """``{material: [(points (n, 2) mm, closed)]}`` of one posed frame, plus ``"jaw"``:
