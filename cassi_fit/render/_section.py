@@ -373,7 +373,7 @@ class Section:
                 if closed and fill is not None and len(xy) >= 3:
                     draw.polygon(xy, fill=fill)
                 draw.line(xy + (xy[:1] if closed else []), fill=ink, width=2 * line,
-                          joint="curve")  # fmt: skip
+                          joint="curve" if line > 1 else None)  # fmt: skip
         labels = sorted(dict.fromkeys([*(trails or {}), *(markers or {})]),
                         key=lambda name: name != "model")  # fmt: skip
         for i, label in enumerate(labels):
@@ -386,7 +386,7 @@ class Section:
                     path = trail[:, k, :2]
                     path = path[np.all(np.isfinite(path), axis=1)]
                     if len(path) >= 2:
-                        draw.line(px(path), fill=faded, width=2 * line, joint="curve")
+                        draw.line(px(path), fill=faded, width=2 * line)
             points = (markers or {}).get(label)
             if points is None and trail.ndim == 3 and len(trail):
                 points = trail[-1]
