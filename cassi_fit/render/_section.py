@@ -30,6 +30,7 @@ even where the mesh has vertices exactly on the midline, as this model's do.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -245,6 +246,7 @@ class Section:
                 out[str(name)] = p
         self.traces = out
         self._window = None
+        self._base = None
 
     def window(self) -> tuple[Float[np.ndarray, "2"], Float[np.ndarray, "2"]]:
         """(lo, hi) (x, y) mm of the view: the rest section of tongue, palate, teeth and
@@ -347,32 +349,34 @@ class Section:
         scale = min(w / (hi[0] - lo[0]), h / (hi[1] - lo[1]))
         mid = (lo + hi) / 2
 
-        def px(points) -> list[tuple[float, float]]:
+        def px(points) -> list[float]:
+            """Model mm (n, 2+) -> the flat pixel list [x0, y0, x1, y1, ...] PIL takes."""
             p = np.asarray(points, dtype=np.float64)[:, :2]
-            x = (p[:, 0] - mid[0]) * scale + w / 2
-            y = h / 2 - (p[:, 1] - mid[1]) * scale
-            return list(zip(x.tolist(), y.tolist(), strict=True))
+            return ((p - mid) * (scale, -scale) + (w / 2, h / 2)).ravel().tolist()
 
         line = max(1, round(min(w, h) / 180))
-        pil = Image.new("RGB", (w, h), _BACKGROUND)
+        key = (w, h, id(self._window))
+        if self._base is None or self._base[0] != key:  # background and traces: drawn once
+            base = Image.new("RGB", (w, h), _BACKGROUND)
+            ink = ImageDraw.Draw(base)
+            for points in self.traces.values():
+                # wide, under the model: a grey band that shows beside the model's own
+                # outline where they coincide (the model's palate is built from PAL.DAT)
+                ink.line(px(points), fill=_rgb(_TRACE_COLOUR), width=5 * line, joint="curve")
+            self._base = (key, base)
+        pil = self._base[1].copy()
         draw = ImageDraw.Draw(pil)
-        for points in self.traces.values():
-            # wide, under the model: a grey band that shows beside the model's own outline
-            # where they coincide (the model's palate is built from the same PAL.DAT)
-            draw.line(px(points), fill=_rgb(_TRACE_COLOUR), width=5 * line, joint="curve")
         contours = self.contours(vertices)
         jaw = contours.pop("jaw", ())
         for points, _ in jaw:
             _dashed(draw, px(points), _rgb(_JAW_COLOUR), line, dash=max(4, 5 * line))
         for name, lines in contours.items():
-            colour = colours.get(name, (0.6, 0.6, 0.6))
-            ink = _rgb(_LINE_DARKEN.get(name, tuple(0.72 * c for c in colour)))
-            fill = _rgb(tuple(0.55 + 0.45 * c for c in colour)) if name in _FILLED else None
+            ink, fill = _inks(name, tuple(colours.get(name, (0.6, 0.6, 0.6))))
             for points, closed in lines:
                 xy = px(points)
-                if closed and fill is not None and len(xy) >= 3:
+                if closed and fill is not None and len(xy) >= 6:
                     draw.polygon(xy, fill=fill)
-                draw.line(xy + (xy[:1] if closed else []), fill=ink, width=2 * line,
+                draw.line(xy + (xy[:2] if closed else []), fill=ink, width=2 * line,
                           joint="curve" if line > 1 else None)  # fmt: skip
         labels = sorted(dict.fromkeys([*(trails or {}), *(markers or {})]),
                         key=lambda name: name != "model")  # fmt: skip
@@ -394,7 +398,8 @@ class Section:
                 continue
             p = np.asarray(points, np.float64).reshape(-1, np.shape(points)[-1])[:, :2]
             r = 2.5 * line + 1
-            for x, y in px(p[np.all(np.isfinite(p), axis=1)]):
+            flat = px(p[np.all(np.isfinite(p), axis=1)])
+            for x, y in zip(flat[::2], flat[1::2], strict=True):
                 if label == "model":  # the model's sites: rings, the data stays on top
                     draw.ellipse((x - r - line, y - r - line, x + r + line, y + r + line),
                                  outline=_rgb(colour), width=max(1, line))  # fmt: skip
@@ -406,6 +411,14 @@ class Section:
         image[top:bottom, left:right] = np.asarray(pil)
 
 
+@functools.lru_cache(maxsize=64)
+def _inks(name: str, colour: tuple) -> tuple[tuple, tuple | None]:
+    """(line colour, fill colour or None) of a material, as 0-255 RGB."""
+    ink = _rgb(_LINE_DARKEN.get(name, tuple(0.72 * c for c in colour)))
+    fill = _rgb(tuple(0.55 + 0.45 * c for c in colour)) if name in _FILLED else None
+    return ink, fill
+
+
 def _rgb(colour) -> tuple[int, int, int]:
     return tuple(int(round(255 * min(max(float(c), 0.0), 1.0))) for c in colour)
 
@@ -413,7 +426,7 @@ def _rgb(colour) -> tuple[int, int, int]:
 def _dashed(draw, xy: list, fill, width: int, dash: float) -> None:
     """A dashed polyline: ``dash`` pixels drawn, ``dash`` skipped, along the path (each
     dash straight from its start to its end)."""
-    p = np.asarray(xy, dtype=np.float64)
+    p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     if len(p) < 2:
         return
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
