@@ -81,7 +81,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     width, height = (int(v) for v in args.size.split("x"))
 
-    from cassi_fit.render import VIEWS, Renderer
+    from cassi_fit.render import PAPER_VIEWS, VIEWS, Renderer
 
     model, frames = frames_of_model(args.frames)
     markers = None
@@ -100,8 +100,8 @@ def main(argv=None) -> int:
     )
     print(header)
     rows = []
-    cases = [("grid (4 views)", VIEWS, 0), ("grid + caption", VIEWS, 0)]
-    cases += [("grid, 4x MSAA", VIEWS, 4)]
+    cases = [("grid (4 views)", PAPER_VIEWS, 0), ("grid (5 views)", VIEWS, 0)]
+    cases += [("grid + caption", PAPER_VIEWS, 0), ("grid, 4x MSAA", PAPER_VIEWS, 4)]
     cases += [(f"single: {v}", (v,), 0) for v in VIEWS]
     for label, views, samples in cases:
         start = time.perf_counter()

@@ -122,6 +122,7 @@ if TYPE_CHECKING:
     from .quality import detect_mistracks as detect_mistracks
     from .quality import quality_report as quality_report
     from .render import Renderer as Renderer
+    from .render import midsagittal_figure as midsagittal_figure
     from .reports import jaw_comparison_plot as jaw_comparison_plot
     from .reports import write_penetration_csv as write_penetration_csv
     from .status import STATUS_LABELS as STATUS_LABELS
@@ -141,6 +142,7 @@ if TYPE_CHECKING:
     from .txy import read_txy as read_txy
     from .txy import require_tracked as require_tracked
     from .txy import write_txy as write_txy
+    from .video import subject_traces as subject_traces
     from .video import write_animation as write_animation
 
 _PUBLIC = {
@@ -264,8 +266,10 @@ _PUBLIC = {
     "Animation": "animate",
     # render (outputs)
     "Renderer": "render",
+    "midsagittal_figure": "render",
     # video (outputs)
     "write_animation": "video",
+    "subject_traces": "video",
     # reports (outputs)
     "write_penetration_csv": "reports",
     "jaw_comparison_plot": "reports",
@@ -306,11 +310,12 @@ __all__ = [
     "first_valid_frame", "first_valid_line", "fit_jaw", "generate_corpus", "initialize",
     "jaw_comparison_plot", "jaw_corpus", "jaw_diagnostics", "jaw_from_track", "jaw_method",
     "jaw_solver", "labels_for", "load_anatomy", "load_calibrations", "load_model",
-    "load_recording", "load_truth", "make_subject", "mode_named", "model_pellets", "pellet_index",
+    "load_recording", "load_truth", "make_subject", "midsagittal_figure", "mode_named",
+    "model_pellets", "pellet_index",
     "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
     "read_outline", "read_textgrid", "read_txy", "repair", "require_tracked", "rigid",
-    "run_corpus", "segment_summary", "synth", "synth_recording", "vertex_normals", "with_palate",
-    "build_pharynx", "with_pharynx",
+    "run_corpus", "segment_summary", "subject_traces", "synth", "synth_recording",
+    "vertex_normals", "with_palate", "build_pharynx", "with_pharynx",
     "write_animation", "write_calibration", "write_headmeasures", "write_lab", "write_outline",
     "write_penetration_csv", "write_report", "write_table", "write_textgrid", "write_txy",
 ]

@@ -1056,7 +1056,7 @@ def animate_task(item: CorpusItem, out_dir: str, *, suffix: str = ".mp4",
     from .initialize import animate_recording
     from .labels import labels_for
     from .render import Renderer
-    from .video import write_animation
+    from .video import subject_traces, write_animation
 
     recording = _load_quietly(item)
     state, animation = animate_recording(
@@ -1064,8 +1064,8 @@ def animate_task(item: CorpusItem, out_dir: str, *, suffix: str = ".mp4",
                                                                 calibration_dir),
         **animate_options)
     views = tuple(views) if views else None
-    renderer = Renderer(state.model, size=tuple(size), **(
-        {"views": views, "grid": len(views) > 1} if views else {}))
+    renderer = Renderer(state.model, size=tuple(size), traces=subject_traces(
+        recording, state.scale), **({"views": views, "grid": len(views) > 1} if views else {}))
     found = labels_for(recording.path) if labels else None
     path = write_animation(
         video_output_path(out_dir, item, suffix), animation, renderer, subject=item.subject,

@@ -37,8 +37,10 @@ TONGUE_SHAPES = ("thick", "flat")
 MODES = ("improved", "cassi")
 #: Jaw region weights: CASSI's percentages (Parke's times 1.11111) or Parke's own.
 JAW_WEIGHTS = ("cassi", "parke")
-#: The rendered views (the paper's four).
-VIEWS = ("front", "side", "inside", "top")
+#: The rendered views: the paper's four and the midsagittal section (the 2D tracing view).
+VIEWS = ("front", "side", "inside", "top", "midsagittal")
+#: The paper's four views (a Renderer's default; ``midsagittal`` is the toolkit's 2D section).
+PAPER_VIEWS = ("front", "side", "inside", "top")
 #: Output kinds of ``cassi animate``.
 ANIMATION_SUFFIXES = (".mp4", ".gif", ".png")
 

@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
-from jaxtyping import UInt8
+from jaxtyping import Float, UInt8
 
 from ._io import atomic_output_path, atomic_write, commit_output, register_input, remove_quietly
 from .errors import CassiError, DataFormatError
@@ -49,6 +49,9 @@ FRAME_STEP_S = FRAME_STEP_US * 1e-6
 """XRMB data-line period, seconds."""
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
+TRAIL_S = 0.1
+"""Seconds of pellet trail behind each pellet in the midsagittal view (at least 2 of the
+animation's frames back)."""
 
 
 class VideoError(CassiError):
@@ -395,6 +398,8 @@ def animation_frames(
     ``renderer`` (a ``render.Renderer``); yields ``uint8 (H, W, 3)`` images. ``markers``:
     draw the measured pellets and the model's pellet sites (never-tracked pellets left
     out); ``labels`` (``labels.Labels``): the label at each frame's time is captioned.
+    A renderer with the ``midsagittal`` view gets, whatever ``markers`` says, the
+    measured pellets with a trail of their last ``TRAIL_S`` seconds and the time.
     The progress bar goes to stderr."""
     import sys
 
@@ -406,6 +411,8 @@ def animation_frames(
     measured = np.asarray(animation.pellets_measured)
     model_sites = np.asarray(animation.pellets_model)
     shown = np.isfinite(measured).all(axis=(0, 2))
+    section = "midsagittal" in getattr(renderer, "views", ())
+    trail = max(2, round(TRAIL_S / (FRAME_STEP_S * animation.stride)))
     current = (labels.at(np.asarray(animation.times, np.float64)) if labels is not None
                else np.full(animation.n_frames, "", dtype=str))
     indices = range(animation.n_frames) if indices is None else indices
@@ -413,6 +420,9 @@ def animation_frames(
         indices, desc="rendering", unit="frame", file=sys.stderr, disable=not progress, leave=False
     ):
         kwargs = {}
+        if section:
+            kwargs["trails"] = {"measured": measured[max(k - trail, 0) : k + 1, shown]}
+            kwargs["time"] = float(animation.times[k])
         if markers:
             kwargs["markers"] = {
                 "measured": _in_3d(measured[k][shown]),
@@ -424,6 +434,17 @@ def animation_frames(
             str(current[k]),
         )
         yield renderer.render(vertices[k], caption=caption, **kwargs)
+
+
+def subject_traces(recording: Any, scale: float) -> dict[str, Float[np.ndarray, "n 2"] | None]:
+    """The midsagittal view's traces of a ``dataset.Recording``: its subject's palate
+    (PAL.DAT) and pharyngeal wall (PHA.DAT) in the model frame, i.e. the pellet frame's
+    mm times ``scale`` (``SubjectState.scale``); None where the file is absent."""
+    out = {}
+    for name in ("palate", "pharynx"):
+        points = getattr(recording, name, None)
+        out[name] = None if points is None else np.asarray(points, np.float64) * float(scale)
+    return out
 
 
 def _in_3d(points_2d: np.ndarray) -> np.ndarray:

@@ -1,9 +1,12 @@
-"""Render the face model's pictures: neutral and open jaw, front/side/inside/top views.
+"""Render the face model's pictures: neutral and open jaw, front/side/inside/top views and
+the midsagittal section.
 
     python model/render_pictures.py --out model/pictures
 
-Writes ``neutral.png`` and ``jaw_open.png`` (the four views in a 2x2 grid) and one PNG
-per view (``neutral_front.png`` ...), with the shared ``cassi_fit.render.Renderer``.
+Writes ``neutral.png`` and ``jaw_open.png`` (the five views in a 3x2 grid) and one PNG
+per view (``neutral_front.png`` ... ``neutral_midsagittal.png``), with the shared
+``cassi_fit.render.Renderer``. The model alone has no subject, so the midsagittal view
+shows no PAL.DAT or PHA.DAT trace and no pellets.
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ def main(argv=None) -> int:
     model = load_model()
     out = Path(args.out)
     captions = {"neutral": "neutral face", "jaw_open": f"jaw open {JAW_OPEN_RAD} rad (CASSI weights)"}
-    with Renderer(model, size=(args.size, args.size), antialias=4) as grid:
+    with Renderer(model, size=(args.size, args.size * 2 // 3), views=VIEWS, antialias=4) as grid:
         for name, verts in poses(model).items():
             save_png(out / f"{name}.png", grid.render(verts, caption=captions[name]))
     with Renderer(model, size=(args.size // 2, args.size // 2), views=VIEWS, grid=False,

@@ -128,6 +128,21 @@ def test_animate_pellet_file_to_gif_and_png(sentence, tmp_path, capsys):
     assert image.std() > 10  # not a blank image
 
 
+def test_animate_midsagittal_view_alone(sentence, tmp_path, capsys):
+    """``--views midsagittal``: the 2D section with the subject's traces, no OpenGL view."""
+    _, recording = sentence
+    png = tmp_path / "section.png"
+    code, _, err = _run(capsys, "animate", recording.path, "--views", "midsagittal",
+                        "--stride", 40, "--size", SIZE, "--out", png, "--frame", 2)
+    assert code == 0, err
+    image = iio.imread(png)[:100]  # above the caption
+    assert image.shape[1] == 160
+    drawn = np.abs(image.astype(int) - image[2, 2]).sum(axis=2) > 60
+    assert 0.02 < drawn.mean() < 0.6  # contours on the light cell background
+    grey = (np.abs(image.astype(int) - 158).max(axis=2) < 8)  # the palate/pharynx traces
+    assert grey.sum() > 20
+
+
 def test_animate_in_cassi_mode(sentence, tmp_path, capsys):
     _, recording = sentence
     png = tmp_path / "cassi.png"
@@ -141,17 +156,37 @@ def test_animate_in_cassi_mode(sentence, tmp_path, capsys):
 def test_every_view_is_non_blank(sentence):
     from cassi_fit.animate import animate
     from cassi_fit.initialize import initialize
+    from cassi_fit.options import VIEWS
     from cassi_fit.render import Renderer
+    from cassi_fit.video import subject_traces
 
     _, recording = sentence
     state = initialize(recording)
     animation = animate(state, recording, stride=40)
-    views = Renderer(state.model, size=(160, 120)).render_views(animation.vertices[1])
-    assert set(views) == {"front", "side", "inside", "top"}
+    renderer = Renderer(state.model, size=(160, 120), views=VIEWS,
+                        traces=subject_traces(recording, state.scale))  # fmt: skip
+    views = renderer.render_views(animation.vertices[1])
+    assert set(views) == {"front", "side", "inside", "top", "midsagittal"}
     for name, image in views.items():
         background = np.median(image.reshape(-1, 3), axis=0)
         drawn = np.abs(image.astype(int) - background).sum(axis=2) > 30
         assert drawn.mean() > 0.05, name
+    # issue 13: the top and midsagittal views change with the data (the frames where the
+    # tongue blade T2 is lowest and highest)
+    t2 = np.asarray(animation.pellets_measured)[:, 3, 1]
+    low, high = (renderer.render_views(animation.vertices[k])
+                 for k in (int(np.argmin(t2)), int(np.argmax(t2))))  # fmt: skip
+    for name in ("top", "midsagittal"):
+        changed = np.abs(low[name].astype(int) - high[name]).sum(axis=2) > 30
+        assert changed.mean() > 0.01, name
+    # in the top view, under the palate too (seen through it), not only where the tongue
+    # sticks out: the palate's and teeth's footprint with the tongue moved out of the view
+    away = np.asarray(animation.vertices[1]).copy()
+    away[state.model.regions["tongue"], 0] += 1000.0
+    cover = renderer.render_views(away)["top"].astype(int)
+    footprint = np.abs(cover - cover[0, 0]).sum(axis=2) > 30
+    changed = np.abs(low["top"].astype(int) - high["top"]).sum(axis=2) > 30
+    assert (changed & footprint).sum() > 0.3 * footprint.sum()  # an opaque palate: 2 %
 
 
 def test_export_glb_and_obj(corpus, sentence, tmp_path, capsys):

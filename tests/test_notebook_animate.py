@@ -28,7 +28,7 @@ def test_notebook_executes(tmp_path, monkeypatch):
     outputs = [o for cell in notebook.cells if cell.cell_type == "code" for o in cell.outputs]
     assert not [o for o in outputs if o.output_type == "error"]
     images = [o for o in outputs if "image/png" in o.get("data", {})]
-    assert len(images) == 4  # front, side, inside, top
+    assert len(images) == 5  # front, side, inside, top; the midsagittal figure
     html = [o["data"]["text/html"] for o in outputs if "text/html" in o.get("data", {})]
     assert any("<video" in h and "base64" in h for h in html)
     text = "".join(o.get("text", "") for o in outputs)

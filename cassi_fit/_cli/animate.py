@@ -111,7 +111,8 @@ def register(subparsers) -> None:
         "animate",
         help="animate the face from a pellet recording (video or still)",
         description="Fit the face to the recording's subject (CASSI's initialization), move it "
-        "with every data line and render it (front, side, inside and top views) to a video "
+        "with every data line and render it (front, side, inside, top and midsagittal "
+        "views) to a video "
         "or a still. An .mp4 carries the recording's sound (a .wav with the pellet file's "
         "stem), aligned to the frames for any stride.",
     )
@@ -121,14 +122,16 @@ def register(subparsers) -> None:
         "--views",
         default=",".join(VIEWS),
         metavar="LIST",
-        help="comma-separated views among front, side, inside, top (default: all four)",
+        help="comma-separated views among front, side, inside, top (the paper's four) and "
+        "midsagittal (the model cut at z = 0 as a 2D tracing, with the subject's palate and "
+        "pharynx traces and the pellets with trails); default: all five",
     )
     parser.add_argument(
         "--size",
         default="640x480",
         metavar="WxH",
         help="size of the whole image in pixels (default 640x480); four views share it as a "
-        "2x2 grid",
+        "2x2 grid, five as a 3x2 grid",
     )
     parser.add_argument(
         "--out",
@@ -259,8 +262,10 @@ def run(args) -> int:
     state, animation = animate_recording(recording, args)
     from cassi_fit.render import Renderer
     from cassi_fit.reports import penetration_summary, write_penetration_csv
+    from cassi_fit.video import subject_traces
 
-    renderer = Renderer(state.model, size=size, views=views, grid=len(views) > 1)
+    renderer = Renderer(state.model, size=size, views=views, grid=len(views) > 1,
+                        traces=subject_traces(recording, state.scale))
     written = write_output(out, animation, renderer, recording, args)
     print(f"wrote {written} ({animation.n_frames} frames, stride {animation.stride})")
     print(penetration_summary(animation))

@@ -15,8 +15,8 @@ def register(subparsers) -> None:
         description="Create the synthetic corpus if it is absent, calibrate one subject's "
         "face (lip thickness, face width, jaw shape), animate its jaw-wagging task and a "
         "spoken sentence with the tongue and lips kept out of the teeth and palate, and "
-        "write to --out: the two videos (the sentence with its sound), the four views as "
-        "stills, the sentence as a .glb, a plot of the paper's closed-form jaw rotation "
+        "write to --out: the two videos (the sentence with its sound), the five views "
+        "(the paper's four and the midsagittal section) as stills, the sentence as a .glb, a plot of the paper's closed-form jaw rotation "
         "against least-squares pivot fits, and a still of CASSI-like against calibrated "
         "with collisions. Re-running replaces the demo's own files in --out.",
     )
@@ -27,7 +27,7 @@ def register(subparsers) -> None:
         "--size",
         default="640x480",
         metavar="WxH",
-        help="video size in pixels, the four views as a 2x2 grid (default 640x480)",
+        help="video size in pixels, the five views as a 3x2 grid (default 640x480)",
     )
     parser.add_argument(
         "--stride",
@@ -109,7 +109,8 @@ def _comparison(path: Path, recording, animation, stride, size, caption="calibra
 
 
 def _stills(out: Path, renderer, recording, animation):
-    """The four views alone and the grid, at the frame of widest jaw opening."""
+    """The five views alone and the grid, at the frame of widest jaw opening (the
+    midsagittal view with the pellets' trails of the last ``video.TRAIL_S``)."""
     import numpy as np
 
     from cassi_fit import video
@@ -122,7 +123,11 @@ def _stills(out: Path, renderer, recording, animation):
         "measured": np.asarray(animation.pellets_measured[k]),
         "model": np.asarray(animation.pellets_model[k]),
     }
-    for view, image in renderer.render_views(animation.vertices[k], markers=markers).items():
+    back = max(2, round(video.TRAIL_S / (video.FRAME_STEP_S * animation.stride)))
+    trails = {"measured": np.asarray(animation.pellets_measured[max(k - back, 0) : k + 1])}
+    views = renderer.render_views(animation.vertices[k], markers=markers, trails=trails,
+                                  time=float(animation.times[k]))  # fmt: skip
+    for view, image in views.items():
         written.append(save_png(out / f"{stem}_{view}.png", image, overwrite=True))
     (grid,) = video.animation_frames(
         animation,
@@ -144,6 +149,7 @@ def run(args) -> int:
     from cassi_fit.export import export_glb
     from cassi_fit.initialize import initialize
     from cassi_fit.labels import labels_for
+    from cassi_fit.options import VIEWS
     from cassi_fit.render import Renderer
 
     from .animate import parse_size
@@ -171,7 +177,8 @@ def run(args) -> int:
         state = initialize(recording, calibration=calibration, mode=args.mode)
         animation = animate(state, recording, stride=args.stride,
                             collisions="off" if cassi else "project")
-        renderer = renderer or Renderer(state.model, size=size)
+        renderer = renderer or Renderer(state.model, size=size, views=VIEWS)
+        renderer.set_traces(video.subject_traces(recording, state.scale))
         stem = f"{recording.subject}_{recording.task}"
         written.append(
             video.write_animation(

@@ -1,12 +1,18 @@
-"""Offscreen rendering of the face model in the paper's four evaluation views.
+"""Offscreen rendering of the face model in the paper's four evaluation views, and the
+midsagittal section.
 
 The paper judged every animation from four views (Scheidt & Hamilton 1999, section 4):
 ``front`` (the full face), ``side`` (the full face in profile, looking to the right of the
 image), ``inside`` (half the face from the side: skin, lips, teeth and palate on the
 camera's side of the midsagittal plane z = 0 cut away, or the skin see-through, so that
 tongue, teeth and palate show) and ``top`` (skin hidden: palate, teeth and tongue seen from
-above, the front of the mouth to the right). Singly, in a row, or as a 2x2 grid (front,
-side / inside, top); pellet markers in the side and inside views; a caption.
+above, the front of the mouth to the right; the palate see-through and the tongue coloured
+by height, dark low to light high, so that its position and groove show and change with
+the data). Singly, in a row, or as a 2x2 grid (front, side / inside, top); pellet markers
+in the side and inside views; a caption. The toolkit's fifth view, ``midsagittal``
+(``_section``), is the posed mesh cut at z = 0 drawn as 2D contours as on an X-ray or MRI
+tracing, with the subject's palate and pharynx traces and the pellets with trails; with
+it the grid is 3x2 (front, side, inside / top, midsagittal).
 
 Speed (llvmpipe, the software OpenGL of headless machines, is the target):
 
@@ -25,7 +31,8 @@ Speed (llvmpipe, the software OpenGL of headless machines, is the target):
 
 The package, by concern: ``_gl`` chooses the OpenGL platform (probes in subprocesses;
 EGL with llvmpipe when there is no display, OSMesa as fallback) before OpenGL is
-imported; ``_pieces`` cuts the mesh into drawable pieces (numpy); ``_scene`` holds the
+imported; ``_pieces`` cuts the mesh into drawable pieces (numpy); ``_section`` cuts it
+at z = 0 and draws the midsagittal view (numpy and Pillow); ``_scene`` holds the
 :class:`Renderer` (cameras, layout, markers); ``_draw`` the shaders and the OpenGL calls
 (the only module that imports pyrender and OpenGL, when a Renderer is made); ``_images``
 captions and PNG files. Importing :mod:`cassi_fit.render` imports neither OpenGL nor
@@ -34,6 +41,7 @@ pyrender, JAX or Pillow.
 
 from __future__ import annotations
 
+from ..options import PAPER_VIEWS as PAPER_VIEWS
 from ..options import VIEWS as VIEWS
 from ._gl import HEADLESS_PLATFORMS as HEADLESS_PLATFORMS
 from ._gl import choose_gl_platform as choose_gl_platform
@@ -49,6 +57,11 @@ from ._pieces import triangle_winding as triangle_winding
 from ._scene import Markers as Markers
 from ._scene import MeshModel as MeshModel
 from ._scene import Renderer as Renderer
+from ._section import SECTION_VIEW as SECTION_VIEW
+from ._section import Section as Section
+from ._section import midsagittal_figure as midsagittal_figure
+from ._section import section_polylines as section_polylines
+from ._section import section_segments as section_segments
 
 __all__ = [
     "HEADLESS_PLATFORMS",
@@ -58,12 +71,18 @@ __all__ = [
     "VIEWS",
     "Markers",
     "MeshModel",
+    "PAPER_VIEWS",
     "PieceInfo",
     "Renderer",
+    "SECTION_VIEW",
+    "Section",
     "add_caption",
     "choose_gl_platform",
+    "midsagittal_figure",
     "ensure_headless_gl",
     "probe_gl_platform",
     "save_png",
+    "section_polylines",
+    "section_segments",
     "triangle_winding",
 ]

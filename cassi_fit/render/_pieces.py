@@ -15,6 +15,8 @@ from typing import NamedTuple
 import numpy as np
 from jaxtyping import Float, Integer
 
+from ..errors import CassiError
+
 # The face model's material order (cassi_fit.face_model.MATERIALS); repeated here so that
 # rendering does not import JAX.
 _MATERIALS = ("skin", "lips", "eye", "teeth", "tongue", "palate", "pharynx")
@@ -51,9 +53,20 @@ _SHOWN = {
     "side": set(_MATERIALS),
     "inside": set(_MATERIALS) - {"eye"},  # an eyeball floating in the cut head distracts
     "top": {"teeth", "tongue", "palate"},
+    "midsagittal": set(),  # drawn in 2D by _section, not by OpenGL
 }
 _CUT = {"skin", "lips", "eye", "teeth", "palate", "pharynx"}  # near half removed in the inside view
 _GLASS = {"skin", "lips", "eye"}  # near half see-through with skin="transparent"
+# Drawn see-through in the top view, so that the tongue's position and groove show under
+# it (otherwise the top view shows the palate's unchanging back in every frame).
+# (Names a model may add for the soft palate or the pharynx wall are included: they would
+# hide the tongue's back from above as the palate hides its front.)
+_TOP_GLASS = {"palate", "velum", "soft_palate", "pharynx"}
+_TOP_GLASS_ALPHA = 0.22
+# Coloured by height in the top view (dark low, light high: a relief map of the dorsum,
+# its groove a darker line down the middle), under the see-through palate.
+_HEIGHT_COLOURED = {"tongue"}
+_HEIGHT_LOW, _HEIGHT_HIGH = (0.30, 0.10, 0.30), (1.00, 0.93, 0.62)  # sRGB
 _MARKER_VIEWS = ("side", "inside")
 #: How the ``inside`` view opens the head: the near half cut away, or see-through skin.
 SKINS = ("cut", "transparent")
@@ -147,6 +160,7 @@ class _Piece:
             static,
             views,
         )
+        self.heights = None  # (low, high) mm: coloured by height per frame (height_colours)
         self.buffer = np.zeros((len(vertex_index), 6 + static.shape[1]), np.float32)
         self.buffer[:, 6:] = static
         self.primitive = self.mesh = None
@@ -165,6 +179,7 @@ def _piece_views(material: str, near: bool, glass: bool, views, skin: str) -> tu
         if skin == "transparent" and material not in _GLASS:
             cut = False  # see-through skin: teeth and palate stay whole
         glass_here = v == "inside" and near and skin == "transparent" and material in _GLASS
+        glass_here = glass_here or (v == "top" and material in _TOP_GLASS)
         if (glass and glass_here) or (not glass and not cut and not glass_here):
             out.append(v)
     return tuple(out)
@@ -195,6 +210,26 @@ def _cull_face(winding: int) -> str | None:
     return {1: "front", -1: "back"}.get(winding)
 
 
+def _height_range(points: np.ndarray) -> tuple[float, float]:
+    """(low, high) y mm of the colour scale: the upper 70 % of the part's rest height range
+    (its top surface, which the top view shows), widened by 5 mm up for its motion."""
+    lo, hi = float(points[..., 1].min()), float(points[..., 1].max())
+    return lo + 0.3 * (hi - lo), hi + 5.0
+
+
+def height_colours(
+    y: Float[np.ndarray, " n"], heights: tuple[float, float], base
+) -> Float[np.ndarray, "n 4"]:
+    """Per-vertex colour factors (n, 4) that turn the material's ``base`` sRGB colour into
+    a dark-to-light height scale over ``heights`` (low, high) mm."""
+    low, high = heights
+    h = np.clip((np.asarray(y, np.float64) - low) / max(high - low, 1e-9), 0.0, 1.0)[:, None]
+    target = (1 - h) * np.array(_linear(_HEIGHT_LOW)) + h * np.array(_linear(_HEIGHT_HIGH))
+    out = np.ones((len(h), 4))
+    out[:, :3] = target / np.maximum(np.array(_linear(base)), 1e-3)
+    return out
+
+
 def _split_pieces(vertices, faces, face_material, materials, views, skin, cull) -> list[_Piece]:
     """Split the mesh by material and by side of the midsagittal plane (triangle centroid);
     "near" is the inside view's camera side.
@@ -223,6 +258,14 @@ def _split_pieces(vertices, faces, face_material, materials, views, skin, cull) 
                     iris[index] if (m == eye and iris is not None) else np.zeros((len(index), 0))
                 )
                 args = (name, near, glass, index, local.reshape(-1, 3), static)
+                if name in _HEIGHT_COLOURED and "top" in shown:  # its own, recoloured piece
+                    height = _Piece(name, near, glass, index, local.reshape(-1, 3),
+                                    np.ones((len(index), 4)), ("top",), cull=face)  # fmt: skip
+                    height.heights = _height_range(vertices[faces[face_material == m]])
+                    pieces.append(height)
+                    shown = tuple(v for v in shown if v != "top")
+                    if not shown:
+                        continue
                 if face is None or glass:
                     pieces.append(_Piece(*args, shown))
                     continue
@@ -232,3 +275,21 @@ def _split_pieces(vertices, faces, face_material, materials, views, skin, cull) 
                 if shown:
                     pieces.append(_Piece(*args, shown, cull=face))
     return pieces
+
+
+def _model_arrays(model):
+    """(rest (V,3) float64, faces (F,3) int64, face_material (F,), material names)."""
+    try:
+        from ..face_model import MATERIALS as materials
+    except ImportError:
+        materials = _MATERIALS
+    rest = np.asarray(model.vertices, dtype=np.float64)
+    faces = np.asarray(model.faces, dtype=np.int64)
+    face_material = np.asarray(model.face_material, dtype=np.int64)
+    if rest.ndim != 2 or rest.shape[1] != 3 or not np.all(np.isfinite(rest)):
+        raise CassiError(f"render: model vertices must be finite (V, 3), got {rest.shape}")
+    if faces.ndim != 2 or faces.shape[1] != 3 or faces.min() < 0 or faces.max() >= len(rest):
+        raise CassiError("render: model faces must be (F, 3) indices into the vertices")
+    if face_material.shape != (len(faces),) or face_material.max() >= len(materials):
+        raise CassiError("render: model face_material must be (F,) indices into MATERIALS")
+    return rest, faces, face_material, tuple(materials)

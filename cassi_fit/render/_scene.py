@@ -21,14 +21,14 @@ import numpy as np
 from jaxtyping import Float, Integer, UInt8
 
 from ..errors import CassiError, RenderingUnavailableError
-from ..options import VIEWS, check_choice
+from ..options import PAPER_VIEWS, VIEWS, check_choice
 from ._gl import ensure_headless_gl
 from ._images import add_caption
 from ._pieces import (
     _EXTRA_MARKER_COLOURS,
     _MARGIN_MM,
     _MARKER_VIEWS,
-    _MATERIALS,
+    _TOP_GLASS_ALPHA,
     _VIEW_AXES,
     MARKER_COLOURS,
     MATERIAL_COLOURS,
@@ -36,9 +36,12 @@ from ._pieces import (
     PieceInfo,
     _incidence,
     _linear,
+    _model_arrays,
     _split_pieces,
     _vertex_normals,
+    height_colours,
 )
+from ._section import SECTION_VIEW, Section
 
 RGB = tuple[float, float, float]
 #: Marker points per label: ``(k, 3)`` or ``(k, 2)`` mm (numpy or JAX).
@@ -80,18 +83,21 @@ def _marker_points(points) -> np.ndarray:
 def _cells(views, size, grid: bool) -> dict[str, tuple[float, float, float, float]]:
     """Cell of each view: (centre x, centre y, width, height) in pixels, y up.
 
-    Grid: two columns (front, side / inside, top); one view fills the image. Not grid:
-    one row.
+    Grid: two columns (front, side / inside, top), three for five or six views (front,
+    side, inside / top, midsagittal); the midsagittal view, when last in a short last
+    row, takes the rest of the row (two cells wide among five views). One view fills the image.
+    Not grid: one row.
     """
     width, height = size
     n = len(views)
-    cols = 1 if n == 1 else (2 if grid else n)
+    cols = 1 if n == 1 else ((2 if n <= 4 else 3) if grid else n)
     rows = -(-n // cols)
     cw, ch = width / cols, height / rows
-    return {
-        v: ((i % cols + 0.5) * cw, height - (i // cols + 0.5) * ch, cw, ch)
-        for i, v in enumerate(views)
-    }
+    out = {}
+    for i, v in enumerate(views):
+        span = cols - i % cols if (i == n - 1 and v == SECTION_VIEW) else 1
+        out[v] = ((i % cols + span / 2) * cw, height - (i // cols + 0.5) * ch, span * cw, ch)
+    return out
 
 
 def _sphere(subdivisions: int = 2):
@@ -106,10 +112,15 @@ class Renderer:
     """Offscreen renderer of one face model: one OpenGL context, one scene, reused per frame.
 
     ``size`` is the whole output image (W, H) in pixels; in grid mode the views share it as
-    a 2x2 grid (front, side / inside, top), each view a (W/2, H/2) cell; with ``grid=False``
-    the views stand in one row. ``skin`` is ``"cut"`` (the inside view removes the near
-    half of skin, lips, eyes, teeth and palate) or ``"transparent"`` (the near skin, lips
-    and eyes drawn see-through). ``antialias`` is the number of multisample samples
+    a 2x2 grid (front, side / inside, top), each view a (W/2, H/2) cell, or with five
+    views a 3x2 grid (front, side, inside / top, midsagittal two cells wide); with
+    ``grid=False`` the views stand in one row. The ``midsagittal`` view (:mod:`cassi_fit.render._section`)
+    is the posed mesh cut at z = 0, drawn in 2D into its cell after the OpenGL pass, with
+    ``traces`` (``{"palate": (n, 2), "pharynx": (m, 2)}`` mm in the model frame, e.g. the
+    subject's PAL.DAT and PHA.DAT times its scale; :meth:`set_traces`), the pellets with
+    their trails and the time (:meth:`render`'s ``trails`` and ``time``). ``skin`` is
+    ``"cut"`` (the inside view removes the near half of skin, lips, eyes, teeth and
+    palate) or ``"transparent"`` (the near skin, lips and eyes drawn see-through). ``antialias`` is the number of multisample samples
     (0 = none, the fast default). ``marker_radius`` is in mm (default: 1.2 % of the
     head's height). Cameras are fitted to ``model.vertices`` (the rest mesh) plus
     ``margin`` (a fraction of each cell kept free on every side). ``colours`` overrides
@@ -124,7 +135,7 @@ class Renderer:
         model: MeshModel,
         *,
         size: tuple[int, int] = (640, 480),
-        views: str | Sequence[str] = VIEWS,
+        views: str | Sequence[str] = PAPER_VIEWS,
         grid: bool = True,
         skin: str = "cut",
         background: RGB = (0.92, 0.92, 0.92),
@@ -133,6 +144,7 @@ class Renderer:
         margin: float = 0.06,
         colours: Mapping[str, RGB] | None = None,
         cull: bool = True,
+        traces: Mapping[str, Float[Any, "n 2"] | None] | None = None,
     ) -> None:
         self.size, self.views, skin = _check_options(size, views, skin, background)
         self.grid = bool(grid)
@@ -143,12 +155,25 @@ class Renderer:
         self._pieces = _split_pieces(
             rest, faces, face_material, materials, self.views, skin, bool(cull)
         )
-        self._fits = {v: self._fit(v, rest) for v in self.views}
-        height = self._fits.get("side", next(iter(self._fits.values())))[3][1]
+        self._section = None
+        if SECTION_VIEW in self.views:
+            self._section = Section(
+                rest, faces, face_material, materials, regions=getattr(model, "regions", None),
+                landmarks=getattr(model, "landmarks", None),
+                measures=getattr(model, "measures", None), traces=traces,
+            )  # fmt: skip
+        self._section_box = None
+        self._fits = {v: self._fit(v, rest) for v in self.views if v != SECTION_VIEW}
+        height = (
+            self._fits.get("side", next(iter(self._fits.values())))[3][1]
+            if self._fits
+            else float(np.ptp(rest[:, 1]))
+        )
         self._marker_radius = float(marker_radius) if marker_radius else 0.012 * height
         self._margin = float(margin)
         self._colours = {**MATERIAL_COLOURS, **(colours or {})}
         self.platform = ensure_headless_gl()
+        self._background = tuple(int(round(255 * c)) for c in background)
         self._build_scene(background, int(antialias))
         self._layout_key, self._placements, self._markers = None, {}, {}
         self.render(rest)  # warm-up: shaders compiled, buffers in the GL context
@@ -191,6 +216,8 @@ class Renderer:
 
     def _add_piece(self, pyrender, piece):
         alpha = 0.35 if piece.glass else 1.0
+        if piece.glass and piece.views == ("top",):  # the palate over the tongue's relief
+            alpha = _TOP_GLASS_ALPHA
         material = pyrender.MetallicRoughnessMaterial(
             baseColorFactor=(*_linear(self._colours.get(piece.material, (0.7,) * 3)), alpha),
             metallicFactor=0.0,
@@ -225,7 +252,16 @@ class Renderer:
             if key == "grid"
             else {key: (width / 2, height / 2, width, height)}
         )
-        self._placements = {v: self._placement(v, cell) for v, cell in cells.items()}
+        self._placements = {
+            v: self._placement(v, cell) for v, cell in cells.items() if v != SECTION_VIEW
+        }
+        self._section_box = None
+        if SECTION_VIEW in cells:  # (left, top, right, bottom) in image rows, y down
+            cx, cy, cw, ch = cells[SECTION_VIEW]
+            self._section_box = tuple(
+                int(round(c)) for c in (cx - cw / 2, height - cy - ch / 2,
+                                        cx + cw / 2, height - cy + ch / 2)
+            )  # fmt: skip
         for piece in self._pieces:
             poses = [self._placements[v] for v in piece.views if v in self._placements]
             piece.mesh.is_visible = bool(poses)
@@ -260,6 +296,9 @@ class Renderer:
         for piece in self._pieces:
             piece.buffer[:, :3] = vertices[piece.vertex_index]
             piece.buffer[:, 3:6] = normals[piece.vertex_index]
+            if piece.heights is not None:
+                base = self._colours.get(piece.material, (0.7,) * 3)
+                piece.buffer[:, 6:] = height_colours(piece.buffer[:, 1], piece.heights, base)
             _draw.write_vertices(piece.primitive, piece.buffer)
 
     def _set_markers(self, markers):
@@ -341,32 +380,65 @@ class Renderer:
         *,
         markers: Markers | None = None,
         caption: str | None = None,
+        trails: Mapping[str, Float[Any, "t k 2"]] | None = None,
+        time: float | None = None,
     ) -> UInt8[np.ndarray, "h w 3"]:
         """One frame as an (H, W, 3) uint8 image: the grid (or the single view).
 
         ``vertices``: (V,3) mm, model frame, the model's topology (numpy or JAX).
         ``markers``: optional ``{label: (k,3) or (k,2) points in mm}``, drawn as spheres in
-        the side and inside views ("measured" red, "model" green, others blue, orange, ...;
-        non-finite points are not drawn). ``caption``: text drawn onto the image.
+        the side and inside views and as dots in the midsagittal one ("measured" red,
+        "model" green, others blue, orange, ...; non-finite points are not drawn).
+        ``caption``: text drawn onto the image. Midsagittal view only: ``trails``
+        ``{label: (T, k, 2) mm}``, each point's last T positions (oldest first; the last
+        is drawn as a dot when ``markers`` lacks the label) and ``time`` in seconds.
         """
         frame = _as_frame(vertices, self._n_vertices)
-        self._upload(frame)
         self._set_layout("grid")
-        self._set_markers(markers)
-        image = self._draw()
+        image = self._draw_gl(frame, markers)
+        self._draw_section(image, frame, markers, trails, time)
         return add_caption(image, caption) if caption else image
 
+    def set_traces(self, traces: Mapping[str, Float[Any, "n 2"] | None] | None) -> None:
+        """Replace the midsagittal view's fixed traces (``{name: (n, 2) mm}``, model frame)."""
+        if self._section is not None:
+            self._section.set_traces(traces)
+
+    def _draw_gl(self, frame, markers) -> np.ndarray:
+        """The OpenGL views of the current layout (skipped if it holds none)."""
+        if not self._placements:  # the midsagittal view alone: no OpenGL work
+            width, height = self.size
+            return np.full((height, width, 3), self._background, np.uint8)
+        self._upload(frame)
+        self._set_markers(markers)
+        return self._draw()
+
+    def _draw_section(self, image, frame, markers, trails, time) -> None:
+        if self._section is None or self._section_box is None:
+            return
+        points = None
+        if markers is not None:
+            points = {k: _marker_points(v)[:, :2] for k, v in markers.items()}
+        self._section.draw(
+            image, self._section_box, frame, colours=self._colours, markers=points,
+            trails=trails, time=time,
+        )  # fmt: skip
+
     def render_views(
-        self, vertices: Float[Any, "v 3"], *, markers: Markers | None = None
+        self,
+        vertices: Float[Any, "v 3"],
+        *,
+        markers: Markers | None = None,
+        trails: Mapping[str, Float[Any, "t k 2"]] | None = None,
+        time: float | None = None,
     ) -> dict[str, UInt8[np.ndarray, "h w 3"]]:
         """Each view alone, filling the whole image: ``{view: (H, W, 3) uint8}``."""
         frame = _as_frame(vertices, self._n_vertices)
-        self._upload(frame)
         out = {}
         for view in self.views:
             self._set_layout(view)
-            self._set_markers(markers)
-            out[view] = self._draw()
+            out[view] = self._draw_gl(frame, markers)
+            self._draw_section(out[view], frame, markers, trails, time)
         return out
 
     def close(self) -> None:
@@ -389,24 +461,6 @@ class Renderer:
     def __exit__(self, *exc: object) -> bool:
         self.close()
         return False
-
-
-def _model_arrays(model):
-    """(rest (V,3) float64, faces (F,3) int64, face_material (F,), material names)."""
-    try:
-        from ..face_model import MATERIALS as materials
-    except ImportError:
-        materials = _MATERIALS
-    rest = np.asarray(model.vertices, dtype=np.float64)
-    faces = np.asarray(model.faces, dtype=np.int64)
-    face_material = np.asarray(model.face_material, dtype=np.int64)
-    if rest.ndim != 2 or rest.shape[1] != 3 or not np.all(np.isfinite(rest)):
-        raise CassiError(f"render: model vertices must be finite (V, 3), got {rest.shape}")
-    if faces.ndim != 2 or faces.shape[1] != 3 or faces.min() < 0 or faces.max() >= len(rest):
-        raise CassiError("render: model faces must be (F, 3) indices into the vertices")
-    if face_material.shape != (len(faces),) or face_material.max() >= len(materials):
-        raise CassiError("render: model face_material must be (F,) indices into MATERIALS")
-    return rest, faces, face_material, tuple(materials)
 
 
 def _check_options(size, views, skin, background) -> tuple[tuple[int, int], tuple, str]:
