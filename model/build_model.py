@@ -36,7 +36,7 @@ MAT = {name: i for i, name in enumerate(MATERIALS)}
 SITES = {"UL": (14.9, 17.8), "LL": (9.4, -21.4), "MNI": (-1.0, -8.0), "MNM": (-44.0, -3.0),
          "T1": (-17.0, 1.0), "T2": (-29.0, 7.0), "T3": (-41.0, 12.5), "T4": (-53.0, 17.0)}
 MOUTH_HALF_WIDTH = 24.5
-EYE_CENTRE = (-9.0, 64.0, 32.0)  # left eyeball centre, mm
+EYE_CENTRE = (-7.5, 64.0, 32.0)  # left eyeball centre, mm
 EYE_RADIUS = 12.0
 JAW_PIVOT = (-95.0, 22.0)  # condyle, mm
 PARKE = {"jaw": 1.00, "lower_teeth": 0.90, "under_chin": 0.75, "neck": 0.50, "cheek": 0.35}
@@ -46,6 +46,10 @@ CASSI_FACTOR = 1.0 / 0.9   # CASSI's 1.11111: the lower teeth move 100 %
 # name, y0 (midline height), xf (front midline x, before nose/lip bumps), cx (section
 # centre), w (half width), xb (back midline x), e (front superellipse exponent),
 # lift (mm the row rises toward the back, following the jaw line), group (upper/lower).
+# The lips at rest (the stomion of each lip, y mm): the upper lip's edge 1.9 mm above the
+# upper incisor tip (the incisor show at rest), the lower lip's 1.6 mm below it, lying on
+# the incisal third of the upper incisors (see model/README.md, "The face", for sources).
+STO_UPPER, STO_LOWER = 1.9, 0.3
 ROWS = [
     ("vertex", 177, -88, -88, 0.0, -88, 2.0, 0, "u"),
     ("crown1", 172, -48, -90, 30, -132, 2.0, 0, "u"),
@@ -63,29 +67,29 @@ ROWS = [
     ("lid_low", 58, 10, -78.5, 66.5, -164, 3.0, 0, "u"),
     ("eyes_low", 54, 10.5, -76, 66, -162, 3.0, 0, "u"),
     ("cheekbone", 47, 11, -74, 65, -158, 3.0, 0, "u"),
-    ("nose_tip_high", 42.5, 12, -73, 64, -155, 2.9, 0, "u"),
-    ("nose_tip", 38, 12, -72, 63, -153, 2.8, 0, "u"),
-    ("nostril", 33, 12, -72, 62, -151, 2.7, 0, "u"),
-    ("subnasale", 29.5, 12, -72, 61, -150, 2.6, 0, "u"),
-    ("philtrum", 24, 11.5, -72, 60, -149, 2.5, 0, "u"),
+    ("nose_tip_high", 40.0, 12, -73, 64, -155, 2.9, 0, "u"),
+    ("nose_tip", 34.5, 12, -72, 63, -153, 2.8, 0, "u"),
+    ("nostril", 29.0, 12, -72, 62, -151, 2.7, 0, "u"),
+    ("subnasale", 24.5, 12, -72, 61, -150, 2.6, 0, "u"),
+    ("philtrum", 21.3, 11.5, -72, 60, -149, 2.5, 0, "u"),
     ("UL", 17.8, 6.0, -72, 59, -148, 2.4, 0, "u"),
-    ("ul_red", 11.0, 5.5, -73, 57.5, -147, 2.4, 0, "u"),
-    ("ul_low", 3.5, 5.0, -73, 57, -147, 2.4, 0, "u"),
-    ("A", 0.2, 5.0, -74, 56.5, -147, 2.4, 0, "u"),
-    ("A_in", 0.2, 5.0, -74, 56.5, -147, 2.4, 0, "u"),
-    ("B_in", -0.2, 5.0, -74, 56.5, -147, 2.4, 0, "l"),
-    ("B", -0.2, 5.0, -74, 56.5, -147, 2.4, 0, "l"),
-    ("ll_high", -4, 5.0, -74, 56, -147, 2.4, 0, "l"),
-    ("ll_red", -13.0, 5.0, -75, 55, -147, 2.3, 0, "l"),
+    ("ul_red", 10.5, 5.5, -73, 57.5, -147, 2.4, 0, "u"),
+    ("ul_low", 5.5, 5.0, -73, 57, -147, 2.4, 0, "u"),
+    ("A", STO_UPPER, 5.0, -74, 56.5, -147, 2.4, 0, "u"),
+    ("A_in", STO_UPPER, 5.0, -74, 56.5, -147, 2.4, 0, "u"),
+    ("B_in", STO_LOWER, 5.0, -74, 56.5, -147, 2.4, 0, "l"),
+    ("B", STO_LOWER, 5.0, -74, 56.5, -147, 2.4, 0, "l"),
+    ("ll_high", -3.0, 5.0, -74, 56, -147, 2.4, 0, "l"),
+    ("ll_red", -9.6, 5.0, -75, 55, -147, 2.3, 0, "l"),
     ("LL", -21.4, 4.0, -76, 54, -147, 2.2, 0.5, "l"),
-    ("fold", -29, 3.0, -78, 52.5, -147, 2.0, 2, "l"),
-    ("chin", -37, 8.0, -80, 50.5, -147, 2.0, 5, "l"),
-    ("chin_low", -44, 6.0, -82, 48.5, -147, 2.0, 9, "l"),
-    ("menton", -49.5, -4.0, -84, 46, -147, 2.0, 13, "l"),
-    ("under_chin", -55, -24.0, -95, 48, -147, 2.0, 14, "l"),
-    ("throat", -63, -42.0, -92, 49, -140, 2.0, 12, "l"),
-    ("neck1", -81, -47.0, -90, 49, -132, 2.0, 6, "l"),
-    ("neck2", -105, -47.0, -90, 50, -130, 2.0, 2, "l"),
+    ("fold", -29, 3.0, -78, 52.5, -146, 2.0, 2, "l"),
+    ("chin", -37, 8.0, -80, 50.5, -144, 2.0, 5, "l"),
+    ("chin_low", -44, 6.0, -82, 48.5, -141, 2.0, 9, "l"),
+    ("menton", -49.5, -4.0, -84, 46, -139, 2.0, 13, "l"),
+    ("under_chin", -55, -24.0, -95, 48, -136, 2.0, 14, "l"),
+    ("throat", -63, -42.0, -92, 49, -133, 2.0, 12, "l"),
+    ("neck1", -81, -47.0, -90, 50, -130, 2.0, 6, "l"),
+    ("neck2", -105, -47.0, -90, 51, -130, 2.0, 2, "l"),
     ("neck_base", -125, -44.0, -90, 53, -134, 2.0, 0, "l"),
 ]
 ROW_INDEX = {r[0]: i for i, r in enumerate(ROWS)}
@@ -93,12 +97,43 @@ ROW_INDEX = {r[0]: i for i, r in enumerate(ROWS)}
 LIP_BUMP = {"UL": 8.9, "ul_red": 9.6, "ul_low": 8.6, "A": 6.5, "A_in": 1.0,
             "B_in": 1.0, "B": 6.5, "ll_high": 8.8, "ll_red": 9.6, "LL": 5.4, "fold": 0.0}
 # Nose: protrusion (mm at the midline) and half width per row.
-NOSE = {"glabella": (0.5, 9), "nasion": (1.0, 8), "lid_up": (2.5, 8), "eye_hi": (4.0, 8),
-        "eyes": (5.5, 8.5), "eye_lo": (7.0, 8.5), "lid_low": (8.5, 9), "eyes_low": (11.0, 9.5),
+NOSE = {"glabella": (0.5, 12), "nasion": (1.0, 12), "lid_up": (2.5, 11), "eye_hi": (4.0, 10.5),
+        "eyes": (5.5, 10), "eye_lo": (7.0, 10), "lid_low": (8.5, 10), "eyes_low": (11.0, 10),
         "cheekbone": (15.5, 10.5), "nose_tip_high": (19.5, 13), "nose_tip": (21.5, 17),
         "nostril": (14.0, 17), "subnasale": (1.5, 12)}
+
+
+def _eye_rows():
+    """Extra rows halfway between the rows from the nasion to below the eyes (2-3 mm apart:
+    the lids' edges are drawn by where the skin meets the eyeball), nose bumps interpolated."""
+    top, bottom = ROW_INDEX["nasion"], ROW_INDEX["eyes_low"]
+    out = list(ROWS[:top + 1])
+    for r0, r1 in zip(ROWS[top:bottom], ROWS[top + 1:bottom + 1], strict=True):
+        name = f"{r0[0]}_{r1[0]}"
+        out.append((name, *[0.5 * (p + q) for p, q in zip(r0[1:8], r1[1:8], strict=True)], r0[8]))
+        NOSE[name] = tuple(0.5 * (p + q) for p, q in zip(NOSE[r0[0]], NOSE[r1[0]], strict=True))
+        out.append(r1)
+    return out + list(ROWS[bottom + 1:])
+
+
+def _nape(rows):
+    """Back midline x (xb) of the rows below the cheekbones from one smooth profile of the
+    height at the back (y0 + lift): the back of the head curves into the nape and the neck
+    instead of falling straight and stepping in under the skull."""
+    ys, xs = (-125, -81, -55, -30, 0, 20, 47), (-134, -130, -131, -135, -143, -150, -158)
+    out = []
+    for r in rows:
+        if r[1] < 47:
+            r = (*r[:5], round(float(np.interp(r[1] + r[7], ys, xs)), 2), *r[6:])
+        out.append(r)
+    return out
+
+
+ROWS = _nape(_eye_rows())
+ROW_INDEX = {r[0]: i for i, r in enumerate(ROWS)}
+EYE_ROWS = {r[0] for r in ROWS[ROW_INDEX["nasion"] + 1:ROW_INDEX["eyes_low"]]}
 # Front z targets (on the mouth row) of the columns; the mouth corner is one of them.
-FRONT_Z = [0, 4, 8, 12, 16, 20, MOUTH_HALF_WIDTH, 29, 34, 39, 44, 49, 53.5]
+FRONT_Z = [0, 4, 8, 12, 16, 20, MOUTH_HALF_WIDTH, 29, 31.5, 34, 36.5, 39, 41.5, 44, 49, 53.5]
 
 
 def bell(u):
@@ -134,8 +169,64 @@ def section_point(row, phi):
         x = cx - (cx - xb) * abs(c)
         z = w * s
     depth = np.clip(xf - x, 0.0, 80.0) / 80.0  # 0 at the front, 1 at the gonion and behind
-    fade = 1.0 - ramp(-x, 100.0, 135.0)  # behind the jaw angle the rows level out again
+    fade = 1.0  # the rows keep their lift round to the nape (no step under the skull)
     return np.array([x, y0 + lift * np.sin(np.pi / 2 * depth) * fade, z])
+
+
+# The palpebral fissure: half width (mm, about the eyeball's centre line in z, shifted
+# 0.5 mm out), the upper and lower lid margins' heights above / below the centre (the
+# upper lid covers the iris's top 1 mm, the lower lid meets its bottom edge), the outer
+# corner's lift (canthal tilt), the lids' thickness on the eyeball.
+FISSURE = {"half_width": 14.5, "upper": 4.6, "lower": 5.4, "tilt": 0.8, "lid": 2.0}
+
+
+def lid_margins(az):
+    """(u, upper, lower): the fissure coordinate u (-1 inner corner, +1 outer) at ``az``
+    and the heights of the upper and lower lid margins there (equal outside |u| < 1)."""
+    ey, ez, f = EYE_CENTRE[1], EYE_CENTRE[2], FISSURE
+    u = (az - ez - 0.5) / f["half_width"]
+    opening = max(1.0 - u * u, 0.0)
+    centre = ey + 0.4 + f["tilt"] * np.clip(u, -1.0, 1.0)
+    return u, centre + f["upper"] * opening**0.6, centre - f["lower"] * opening**0.8
+
+
+# Rows from below the eyes to the nasion (y) whose heights bend to the lid margins: the
+# second and third run along the lower and upper margins (the fissure's outline follows
+# grid rows instead of cutting across them).
+EYE_ROW_Y = (54.0, 59.5, 65.5, 76.0)
+
+
+def eye_row_y(y, az):
+    """Height of a loft point of the eye rows, bent so that rows follow the lid margins."""
+    if not EYE_ROW_Y[0] < y < EYE_ROW_Y[3]:
+        return y
+    u, up, lo = lid_margins(az)
+    g = 1.0 - ramp(abs(u), 0.7, 1.6)
+    target = (EYE_ROW_Y[0], g * lo + (1 - g) * EYE_ROW_Y[1], g * up + (1 - g) * EYE_ROW_Y[2],
+              EYE_ROW_Y[3])
+    return float(np.interp(y, EYE_ROW_Y, target))
+
+
+def eyelids(x, y, az):
+    """x of a skin point near the eye: inside the fissure just behind the eyeball's
+    surface (the eyeball shows), around it the lids lying on the eyeball, blending into
+    the face over 2-9 mm."""
+    ex, ey, ez = EYE_CENTRE
+    f = FISSURE
+    u, y_up, y_lo = lid_margins(az)
+    t_v = max(y - y_up, y_lo - y, 0.0)
+    t_h = max(abs(u) - 1.0, 0.0) * f["half_width"]
+    t = np.hypot(t_v, t_h)
+    inside = abs(u) < 1.0 and y_lo + 0.05 < y < y_up - 0.05
+    ball = np.sqrt(max(EYE_RADIUS**2 - (y - ey) ** 2 - (az - ez) ** 2, 0.0))
+    shell = EYE_RADIUS * np.sqrt(max(1.0 - ((y - ey) / EYE_RADIUS) ** 2
+                                     - ((az - ez) / (1.6 * EYE_RADIUS)) ** 2, 0.0))
+    if inside:
+        return ex + ball - 1.2
+    w = 1.0 - ramp(t, 0.5, 8.0 + 8.0 * ramp(-u, 0.3, 1.2))  # softer toward the nose
+    lid = 0.3 + (f["lid"] - 0.3) * max(ramp(t, 0.0, 2.0), ramp(abs(u), 0.9, 1.1))  # thin margin
+    x = w * (ex + shell + lid) + (1.0 - w) * x
+    return max(x, ex + ball + 0.8) if ball > 0 else x
 
 
 def bumps(name, p):
@@ -143,12 +234,17 @@ def bumps(name, p):
     x, y, z = p
     az = abs(z)
     fr = ramp(x, -55.0, -30.0)  # face features only on the front of the head
+    if name in EYE_ROWS:
+        y = y + fr * (eye_row_y(y, az) - y)
     x0, y0 = x, y
     if name in LIP_BUMP:
         x += LIP_BUMP[name] * bell(az / (MOUTH_HALF_WIDTH + 3.0))
         if name in ("A_in", "B_in"):  # the inner lip rows curl in toward the teeth
             inside = bell(az / MOUTH_HALF_WIDTH)
             y += (1.5 if name == "A_in" else -1.5) * inside
+    if name in ("A", "A_in", "B_in", "B"):  # lips parted at rest, closing to the corners
+        mid = 0.5 * (STO_UPPER + STO_LOWER)
+        y = mid + (y - mid) * np.sqrt(max(1.0 - (az / MOUTH_HALF_WIDTH) ** 2, 0.0))
     if name in ("UL", "ul_red", "ul_low", "ll_high", "ll_red", "LL"):
         # the vermilion is a lens: its height shrinks toward the mouth corners
         u = az / MOUTH_HALF_WIDTH
@@ -164,18 +260,12 @@ def bumps(name, p):
             x += 4.0 * bell((az - 14.5) / 6.0)
         if name == "subnasale":
             x += 3.0 * bell((az - 15.0) / 5.0)
-    # orbit, brow ridge, the eye opening (skin pulled back behind the eyeball's front in
-    # an almond, with a slight lid margin around it), cheekbones
+    # orbit (a shallow hollow above the upper lid), cheek fullness, a broad low brow ridge
     ex, ey, ez = EYE_CENTRE
-    x -= 2.0 * bell(np.hypot((y - ey) / 14.0, (az - ez - 2.0) / 20.0))
+    x -= 1.0 * bell(np.hypot((y - ey - 3.0) / 12.0, (az - ez) / 18.0))
     x += 4.0 * bell(np.hypot((y - 32.0) / 24.0, (az - 36.0) / 20.0))  # cheek fullness
-    x += 3.0 * bell((y - 84.0) / 8.0) * (1.0 - ramp(az, 38.0, 60.0))  # brow ridge, glabella
-    r_eye = np.hypot((y - ey) / 8.0, (az - ez) / 21.0)
-    x += 1.2 * bell((r_eye - 0.8) / 0.3)
-    b = 1.0 - ramp(r_eye, 0.6, 1.0)
-    # inside the opening the skin lies just behind the eyeball (sclera shows to the corners)
-    cap = np.sqrt(max(EYE_RADIUS**2 - (y - ey) ** 2 - (az - ez) ** 2, 0.0))
-    x = x * (1.0 - b) + (ex + max(cap - 2.5, -1.0)) * b
+    x += 1.5 * bell((y - 88.0) / 14.0) * (1.0 - ramp(az, 40.0, 64.0))  # brow ridge
+    x = eyelids(x, y, az)
     x += 4.0 * bell(np.hypot((y - 47.0) / 13.0, (az - 52.0) / 16.0))
     if az > 30:
         z = np.sign(z) * (az + 3.0 * bell(np.hypot((y - 47.0) / 12.0, (x + 50.0) / 22.0)))
@@ -432,22 +522,28 @@ def build_tongue():
     return np.array(verts), np.array(faces), np.array(svals), sites, s[2 * TONGUE_ANCHOR]
 
 
-def build_eye(centre, radius=12.0, n_lat=8, n_lon=12):
-    """A UV sphere (the eyeball)."""
-    verts = [centre + [0, radius, 0]]
-    for i in range(1, n_lat):
-        th = np.pi * i / n_lat
+# Polar angles (degrees from the gaze axis) of the eyeball's rings: close rings at the
+# pupil's and the iris's edges (radius 2.0 and 5.6 mm on a 12 mm ball) keep the colours
+# that cassi_fit.render paints there (per vertex) crisp circles.
+EYE_RINGS = (5.0, 8.5, 10.5, 18.0, 26.0, 29.0, 38.0, 55.0, 75.0, 100.0, 130.0, 160.0)
+
+
+def build_eye(centre, radius=12.0, n_lon=20):
+    """A sphere (the eyeball) whose poles lie on the gaze axis (+x), rings at EYE_RINGS."""
+    verts = [centre + [radius, 0, 0]]
+    for th in np.radians(EYE_RINGS):
         for j in range(n_lon):
             ph = 2 * np.pi * j / n_lon
-            verts.append(centre + radius * np.array([np.sin(th) * np.cos(ph), np.cos(th),
+            verts.append(centre + radius * np.array([np.cos(th), np.sin(th) * np.cos(ph),
                                                      np.sin(th) * np.sin(ph)]))
-    verts.append(centre - [0, radius, 0])
+    verts.append(centre - [radius, 0, 0])
+    n_lat = len(EYE_RINGS)
     faces, last = [], len(verts) - 1
-    ring = lambda i, j: 1 + (i - 1) * n_lon + j % n_lon
+    ring = lambda i, j: 1 + i * n_lon + j % n_lon
     for j in range(n_lon):
-        faces.append((0, ring(1, j + 1), ring(1, j)))
+        faces.append((0, ring(0, j + 1), ring(0, j)))
         faces.append((last, ring(n_lat - 1, j), ring(n_lat - 1, j + 1)))
-        for i in range(1, n_lat - 1):
+        for i in range(n_lat - 1):
             a, b, c, d = ring(i, j), ring(i, j + 1), ring(i + 1, j + 1), ring(i + 1, j)
             faces += [(a, b, c), (a, c, d)]
     return np.array(verts), np.array(faces)
@@ -472,7 +568,7 @@ def skin_fields(verts, ids, lower, corner_z, nose_tip):
     f["mouth"] = (1.0 - ramp(z, corner_z + 2.0, corner_z + 22.0)) * (
         1.0 - ramp(np.abs(y + 3.0), 26.0, 40.0))
     f["nose"] = bell(np.linalg.norm(verts - nose_tip, axis=1) / 24.0)
-    rise_v = np.where(y >= 29.0, 1.0 - ramp(y, 45.0, 66.0), 0.0)
+    rise_v = np.where(y >= ROWS[ROW_INDEX["subnasale"]][1] - 0.5, 1.0 - ramp(y, 45.0, 66.0), 0.0)
     rise_v = np.where([n == "philtrum" for n in names], 1.0 - 0.55, rise_v)
     f["nose_rise"] = rise_v * (1.0 - ramp(z, 20.0, 34.0))
     return f
