@@ -637,7 +637,7 @@ def build():
     row_of = {k: ids[:, 0] == ROW_INDEX[k] for k in ROW_INDEX}
     up_rows = np.isin(names, ["UL", "ul_red", "ul_low", "A", "A_in"])
     lo_rows = np.isin(names, ["B_in", "B", "ll_high", "ll_red", "LL"])
-    close = lambda value: np.isclose(w_parke, value, atol=1e-12)
+    close = lambda value: np.isclose(w_parke, value, rtol=0.0, atol=1e-12)
     regions.update({
         "upper_lip": skin[up_rows & mouth_core],
         "lower_lip": skin[lo_rows & mouth_core],

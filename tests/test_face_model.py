@@ -15,7 +15,9 @@ PARKE = {"jaw": 1.00, "lower_teeth": 0.90, "under_chin": 0.75, "neck": 0.50, "ch
 
 
 def test_files_load_with_a_few_thousand_triangles():
-    assert 1000 <= len(MODEL.faces) <= 6000
+    # issue 14: a face with lids and ears, in the same order of magnitude as the first
+    # model's 2.9 thousand vertices (under 15 thousand; more slows every test)
+    assert 1000 <= len(MODEL.faces) <= 12000 and len(V) <= 6000
     assert MODEL.faces.max() < len(V) and MODEL.face_material.max() < len(MATERIALS)
     assert set(REGIONS) <= set(MODEL.regions) and set(LANDMARKS) <= set(MODEL.landmarks)
     assert set(MEASURES) <= set(MODEL.measures)
