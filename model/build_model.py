@@ -87,10 +87,10 @@ ROWS = [
     ("chin_low", -44, 6.0, -82, 48.5, -141, 2.0, 9, "l"),
     ("menton", -49.5, -4.0, -84, 46, -139, 2.0, 13, "l"),
     ("under_chin", -55, -24.0, -95, 48, -136, 2.0, 14, "l"),
-    ("throat", -63, -42.0, -92, 49, -133, 2.0, 12, "l"),
-    ("neck1", -81, -47.0, -90, 50, -130, 2.0, 6, "l"),
-    ("neck2", -105, -47.0, -90, 51, -130, 2.0, 2, "l"),
-    ("neck_base", -125, -44.0, -90, 53, -134, 2.0, 0, "l"),
+    ("throat", -63, -42.0, -92, 51, -133, 2.0, 12, "l"),
+    ("neck1", -81, -47.0, -90, 53, -130, 2.0, 6, "l"),
+    ("neck2", -105, -47.0, -90, 55, -130, 2.0, 2, "l"),
+    ("neck_base", -125, -44.0, -90, 58, -134, 2.0, 0, "l"),
 ]
 ROW_INDEX = {r[0]: i for i, r in enumerate(ROWS)}
 # Lip protrusion (mm, at the midline) on top of xf; falls to 0 at the mouth corners.
@@ -129,7 +129,21 @@ def _nape(rows):
     return out
 
 
-ROWS = _nape(_eye_rows())
+def _under_jaw_rows(rows):
+    """Extra rows halfway between those from the menton down the throat: the jaw's weights
+    fall from 1 to 0.5 there, and with rows 10-20 mm apart the skin folded along them
+    when the jaw opened wide; twice as many rows spread the stretch."""
+    names = [r[0] for r in rows]
+    top, bottom = names.index("menton"), names.index("neck1")
+    out = list(rows[:top + 1])
+    for r0, r1 in zip(rows[top:bottom], rows[top + 1:bottom + 1], strict=True):
+        out.append((f"{r0[0]}_{r1[0]}",
+                    *[0.5 * (p + q) for p, q in zip(r0[1:8], r1[1:8], strict=True)], r0[8]))
+        out.append(r1)
+    return out + list(rows[bottom + 1:])
+
+
+ROWS = _nape(_under_jaw_rows(_eye_rows()))
 ROW_INDEX = {r[0]: i for i, r in enumerate(ROWS)}
 EYE_ROWS = {r[0] for r in ROWS[ROW_INDEX["nasion"] + 1:ROW_INDEX["eyes_low"]]}
 # Front z targets (on the mouth row) of the columns; the mouth corner is one of them.
@@ -225,6 +239,7 @@ def eyelids(x, y, az):
         return ex + ball - 1.2
     w = 1.0 - ramp(t, 0.5, 8.0 + 8.0 * ramp(-u, 0.3, 1.2))  # softer toward the nose
     lid = 0.3 + (f["lid"] - 0.3) * max(ramp(t, 0.0, 2.0), ramp(abs(u), 0.9, 1.1))  # thin margin
+    lid += 3.0 * ramp(-u, 0.3, 1.3) * ramp(t, 1.0, 5.0)  # fuller toward the nose (no trough)
     x = w * (ex + shell + lid) + (1.0 - w) * x
     return max(x, ex + ball + 0.8) if ball > 0 else x
 
@@ -268,7 +283,7 @@ def bumps(name, p):
     x = eyelids(x, y, az)
     x += 4.0 * bell(np.hypot((y - 47.0) / 13.0, (az - 52.0) / 16.0))
     if az > 30:
-        z = np.sign(z) * (az + 3.0 * bell(np.hypot((y - 47.0) / 12.0, (x + 50.0) / 22.0)))
+        z = np.sign(z) * (az + 2.0 * bell(np.hypot((y - 47.0) / 16.0, (x + 50.0) / 28.0)))
         az = abs(z)
     # chin prominence (mentalis)
     if name in ("chin", "chin_low", "fold"):
@@ -278,10 +293,85 @@ def bumps(name, p):
     if ROWS[ROW_INDEX[name]][8] == "l" and y < 10:
         gon = bell(np.hypot((x + 82.0) / 16.0, (y + 40.0) / 22.0))
         z = np.sign(z) * (az + 5.0 * gon)
-    # ears: a flat bump on the side of the head
-    ear = bell(np.hypot((x + 102.0) / 15.0, (y - 40.0) / 27.0))
-    z = np.sign(z) * (abs(z) + 14.0 * ear) if az > 30 else z
     return np.array([x, y, z])
+
+
+# ---------------------------------------------------------------------------- ears
+# The left ear in the side plane: canal (x, y), length (superaurale to subaurale) and
+# width (mm; Farkas' adult norms are about 60-65 and 30-35), backward tilt of the long axis.
+EAR = {"canal": (-106.0, 38.0), "length": 62.0, "width": 33.0, "tilt_deg": 15.0}
+EAR_N = 24  # points round the outline
+# Rings from the attachment on the head out to the helix rim and back in over the front
+# of the ear: (outline scale, lateral height as a fraction of the rim's, centre pull
+# toward the concha 0..1). 0: base inside the head; 1-2: the back of the rim; 3: the rim's
+# free edge (helix); 4: its inner lip; 5: the scapha groove; 6: the antihelix; 7: concha.
+EAR_RINGS = ((0.80, -0.10, 0.0), (0.97, 0.45, 0.0), (1.03, 0.85, 0.0), (1.0, 1.0, 0.0),
+             (0.88, 0.95, 0.0), (0.80, 0.50, 0.0), (0.64, 0.70, 0.15), (0.32, 0.05, 0.6))
+
+
+def ear_outline(t):
+    """(a, b) of the ear's outline at t in [0, 1): a forward, b up along the ear's axis,
+    from the helix root (front, at the top of the tragus) up over the top, down the back
+    and round the lobe; unit-free (half width 1, half length 1 at the top)."""
+    th = 2 * np.pi * t
+    s, c = np.sin(th), -np.cos(th)  # t = 0 at the bottom of the lobe, 0.25 at the front
+    a = np.sign(s) * np.abs(s) ** 0.75  # fuller than an ellipse: a broad, round top
+    b = np.sign(c) * np.abs(c) ** 0.85
+    lobe = ramp(-b, 0.2, 1.0)
+    return a * (1.0 - 0.3 * lobe) + 0.12 * lobe, b
+
+
+def ear_rim_height(a, b):
+    """Lateral stand-off (mm) of the helix rim from the head round the outline: small at
+    the front where the ear joins the face, most at the back and top, less at the lobe."""
+    back = ramp(-a, -0.6, 0.9)
+    return 4.0 + 16.0 * back * (1.0 - 0.45 * ramp(-b, 0.2, 1.0))
+
+
+def build_ears(skin):
+    """Both ears: a folded sheet from the attachment inside the head out to the helix rim
+    and back in to the concha, mirrored; its faces wound as the skin grid's."""
+    from scipy.interpolate import LinearNDInterpolator
+
+    side = skin[(skin[:, 2] > 20.0) & (skin[:, 0] < -60.0) & (skin[:, 1] > -20.0)]
+    head_z = LinearNDInterpolator(side[:, :2], side[:, 2])
+    cx, cy = EAR["canal"]
+    tilt = np.radians(EAR["tilt_deg"])
+    t = np.arange(EAR_N) / EAR_N
+    a, b = ear_outline(t)
+    rim = ear_rim_height(a, b)
+    concha = np.array([0.35, -0.25])  # centre of the concha in outline units (front, low)
+    half = np.array([EAR["width"] / 2, EAR["length"] / 2])
+    centre = np.array([cx, cy]) + np.array([-0.15 * EAR["width"], 0.18 * EAR["length"]])
+
+    def place(u, v):
+        """outline units -> (x, y): forward is +x, the long axis leans back by tilt."""
+        du, dv = u * half[0], v * half[1]
+        return (centre[0] + du * np.cos(tilt) - dv * np.sin(tilt),
+                centre[1] + du * np.sin(tilt) + dv * np.cos(tilt))
+
+    verts = []
+    for scale, height, pull in EAR_RINGS:
+        u = (1 - pull) * scale * a + pull * concha[0]
+        v = (1 - pull) * scale * b + pull * concha[1]
+        x, y = place(u, v)
+        verts += list(np.column_stack([x, y, head_z(x, y) + height * rim]))
+    x, y = place(*concha)
+    verts.append([x, y, float(head_z(x, y)) - 1.0])  # the canal
+    verts = np.array(verts)
+    if not np.all(np.isfinite(verts)):
+        raise ValueError("an ear point lies off the side of the head")
+    faces, n, last = [], EAR_N, len(verts) - 1
+    for r in range(len(EAR_RINGS) - 1):
+        for j in range(n):
+            p, q = r * n + j, r * n + (j + 1) % n
+            faces += [(p, q + n, q), (p, p + n, q + n)]
+    r = len(EAR_RINGS) - 1
+    faces += [(r * n + j, last, r * n + (j + 1) % n) for j in range(n)]
+    faces = np.array(faces)
+    mirrored = verts * [1, 1, -1]
+    return (np.concatenate([verts, mirrored]),
+            np.concatenate([faces, faces[:, ::-1] + len(verts)]))
 
 
 def build_skin():
@@ -592,7 +682,22 @@ def build():
     mouth_core = (np.abs(sv[:, 2]) < 16.0 + 1e-6) & (sv[:, 0] > -30.0)  # lips' jaw weight flat
     lip_vertex = lip_row & in_mouth
     skin_mat = np.where(lip_vertex[np.array(sf)].all(axis=1), MAT["lips"], MAT["skin"])
-    parts = [("skin", sv, np.array(sf), skin_mat)]
+    n_grid = len(sv)
+    av, af = build_ears(sv)
+    # the ears follow the skin they sit on: weights and fields of the nearest skin vertices
+    from scipy.spatial import cKDTree
+
+    dist, near = cKDTree(sv).query(av, k=4)
+    inv = 1.0 / np.maximum(dist, 1e-6)
+    blend = lambda f: (f[near] * inv).sum(axis=1) / inv.sum(axis=1)
+    w_parke = np.concatenate([w_parke, blend(w_parke)])
+    fields = {k: np.concatenate([f, blend(f)]) for k, f in fields.items()}
+    jaw_shape = jaw_shape_field(sv)
+    jaw_shape = np.concatenate([jaw_shape, blend(jaw_shape)])
+    sf = np.concatenate([np.array(sf), af + n_grid])
+    skin_mat = np.concatenate([skin_mat, np.full(len(af), MAT["skin"])])
+    sv = np.concatenate([sv, av])
+    parts = [("skin", sv, sf, skin_mat)]
     ev, ef = [], []
     for side in (1, -1):
         v, f_ = build_eye(np.array([EYE_CENTRE[0], EYE_CENTRE[1], EYE_CENTRE[2] * side]), EYE_RADIUS)
@@ -631,9 +736,10 @@ def build():
                                      "jaw_shape", "tongue_s")}
     for k, v in fields.items():
         full[k][: len(sv)] = v
-    full["jaw_shape"][: len(sv)] = jaw_shape_field(sv)
+    full["jaw_shape"][: len(sv)] = jaw_shape
     full["tongue_s"][regions["tongue"]] = ts
-    skin = regions["skin"]
+    skin = regions["skin"][:n_grid]  # the grid's vertices (the masks below), then the ears
+    w_parke = w_parke[:n_grid]
     row_of = {k: ids[:, 0] == ROW_INDEX[k] for k in ROW_INDEX}
     up_rows = np.isin(names, ["UL", "ul_red", "ul_low", "A", "A_in"])
     lo_rows = np.isin(names, ["B_in", "B", "ll_high", "ll_red", "LL"])
@@ -645,7 +751,7 @@ def build():
         "under_chin": skin[close(PARKE["under_chin"])],
         "neck": skin[close(PARKE["neck"])],
         "cheek": skin[close(PARKE["cheek"]) & ~lower],
-        "nose": skin[fields["nose"] > 0.3],
+        "nose": skin[fields["nose"][:n_grid] > 0.3],
     })
     T = lambda k: offsets["tongue"] + tsites[k]
     ui = offsets["upper_teeth"] + 3
@@ -661,7 +767,7 @@ def build():
         "mouth_corner_left": index[(ROW_INDEX["A"], corner, 1)],
         "mouth_corner_right": index[(ROW_INDEX["A"], corner, -1)],
     }
-    cheek = np.flatnonzero(row_of["cheekbone"] & (sv[:, 0] > -75.0))  # skin comes first
+    cheek = np.flatnonzero(row_of["cheekbone"] & (sv[:n_grid, 0] > -75.0))  # skin comes first
     landmarks["zygion_left"] = cheek[np.argmax(sv[cheek, 2])]
     landmarks["zygion_right"] = cheek[np.argmin(sv[cheek, 2])]
     landmarks = {k: int(v) for k, v in landmarks.items()}
@@ -775,6 +881,19 @@ PARAMETERS = [  # number, name, unit, min, max, default, kind, stored positions 
 ]
 
 
+def lip_measures(V, landmarks, collision):
+    """The rest face's lip measures (mm, on the midline; model/README.md, "The face"):
+    subnasale to the upper lip's stomion (sn-sto), the vermilion heights (labrale superius
+    to stomion, stomion to labrale inferius), the upper incisor shown below the upper lip
+    and the gap between the lips."""
+    up, lo = collision["upper_lip_columns"][0], collision["lower_lip_columns"][0]
+    y = lambda i: float(V[i][1])
+    sto_u, ls, sto_l, li = y(up[1]), y(up[3]), y(lo[1]), y(lo[3])  # rows A, ul_red, B, ll_red
+    return {"sn-sto": y(landmarks["subnasale"]) - sto_u, "ls-sto": ls - sto_u,
+            "sto-li": sto_l - li, "incisor show": sto_u - y(landmarks["upper_incisor_tip"]),
+            "lip gap": sto_u - sto_l}
+
+
 def _csv(rows, header):
     return ",".join(header) + "\n" + "".join(",".join(map(str, r)) + "\n" for r in rows)
 
@@ -803,6 +922,8 @@ def main(argv=None):
                  _csv(PARAMETERS, ["number", "name", "unit", "min", "max", "default",
                                    "kind", "stored_positions", "description"]), overwrite=True)
     print(f"{len(V)} vertices, {len(F)} triangles -> {out}")
+    lips = lip_measures(V, landmarks, collision)
+    print("lips at rest (mm): " + ", ".join(f"{k} {v:.1f}" for k, v in lips.items()))
     return 0
 
 

@@ -5,7 +5,7 @@ with the jaw open (the pictures of model/README.md's face section).
 
 Writes ``face_{neutral,jaw_open}_{front,side,three_quarter}.png``. The renderer's views
 are the paper's (front, side, inside, top); the three-quarter picture is its front view of
-the mesh turned 35 degrees about the vertical axis (the subject's left toward the
+the mesh turned 35 degrees about the vertical axis (the subject's right side toward the
 camera), with each eye's iris and pupil coloured from the unturned rest mesh.
 """
 
@@ -24,8 +24,8 @@ TURN_DEG = 35.0
 
 
 def turned(vertices: np.ndarray, degrees: float = TURN_DEG) -> np.ndarray:
-    """The vertices turned about the vertical (y) axis: +degrees brings the subject's left
-    (+z) toward a camera in front (+x)."""
+    """The vertices turned about the vertical (y) axis: +degrees brings the subject's right
+    (-z) toward a camera in front (+x)."""
     a = np.radians(degrees)
     c, s = np.cos(a), np.sin(a)
     x, z = vertices[:, 0], vertices[:, 2]

@@ -1,5 +1,7 @@
 """The model files and the rest mesh: loadable, symmetric, finite, the documented weights."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
@@ -81,3 +83,19 @@ def test_topology_is_hashable_by_content_and_frozen():
         a.faces[0, 0] = 1
     with pytest.raises(dataclasses.FrozenInstanceError):
         a.faces = a.faces[:1]
+
+
+def test_lips_at_rest_have_adult_proportions():
+    """Issue 14: sn-sto, vermilion heights (Farkas 1994; Farkas et al. 1984) and upper
+    incisor display at rest (Vig & Brundo 1978) in adult ranges (model/README.md)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "model"))
+    from build_model import lip_measures
+
+    m = lip_measures(V, MODEL.landmarks, MODEL.collision)
+    assert 20.0 <= m["sn-sto"] <= 24.0
+    assert 7.0 <= m["ls-sto"] <= 10.0 and 8.0 <= m["sto-li"] <= 11.0
+    assert m["sto-li"] > m["ls-sto"]  # the lower lip's red is the taller
+    assert 1.0 <= m["incisor show"] <= 3.5
+    assert 0.0 < m["lip gap"] < 2.0  # parted, yet within evaluate's "lips touch" range
