@@ -36,6 +36,7 @@ MAT = {name: i for i, name in enumerate(MATERIALS)}
 SITES = {"UL": (14.9, 17.8), "LL": (9.4, -21.4), "MNI": (-1.0, -8.0), "MNM": (-44.0, -3.0),
          "T1": (-17.0, 1.0), "T2": (-29.0, 7.0), "T3": (-41.0, 12.5), "T4": (-53.0, 17.0)}
 MOUTH_HALF_WIDTH = 24.5
+NECK_HALF_WIDTH = 55.0  # behind the jaw angle, under the ears
 EYE_CENTRE = (-7.5, 64.0, 32.0)  # left eyeball centre, mm
 EYE_RADIUS = 12.0
 JAW_PIVOT = (-95.0, 22.0)  # condyle, mm
@@ -181,6 +182,10 @@ def section_point(row, phi):
         z = w * abs(s) ** (2.0 / e)
     else:
         x = cx - (cx - xb) * abs(c)
+        # behind the jaw angle the rows under the jaw keep the neck's width, so the neck
+        # rises into the head behind the ear instead of meeting a shelf under the skull
+        if lift > 0 or y0 < -60:
+            w = w + max(NECK_HALF_WIDTH - w, 0.0) * ramp(phi, np.pi / 2 + 0.05, np.pi / 2 + 0.6)
         z = w * s
     depth = np.clip(xf - x, 0.0, 80.0) / 80.0  # 0 at the front, 1 at the gonion and behind
     fade = 1.0  # the rows keep their lift round to the nape (no step under the skull)
