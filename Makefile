@@ -26,6 +26,7 @@ test: $(STAMP)
 
 pictures: $(STAMP)
 	$(BIN)/python model/render_pictures.py --out model/pictures
+	$(BIN)/python model/render_face.py --out model/pictures
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_jaw.py

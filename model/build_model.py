@@ -37,7 +37,8 @@ MAT = {name: i for i, name in enumerate(MATERIALS)}
 SITES = {"UL": (14.9, 17.8), "LL": (9.4, -21.4), "MNI": (-1.0, -8.0), "MNM": (-44.0, -3.0),
          "T1": (-17.0, 1.0), "T2": (-29.0, 7.0), "T3": (-41.0, 12.5), "T4": (-53.0, 17.0)}
 MOUTH_HALF_WIDTH = 24.5
-EYE_CENTRE = (-9.0, 64.0, 32.0)  # left eyeball centre, mm
+NECK_HALF_WIDTH = 55.0  # behind the jaw angle, under the ears
+EYE_CENTRE = (-7.5, 64.0, 32.0)  # left eyeball centre, mm
 EYE_RADIUS = 12.0
 JAW_PIVOT = (-95.0, 22.0)  # condyle, mm
 PARKE = {"jaw": 1.00, "lower_teeth": 0.90, "under_chin": 0.75, "neck": 0.50, "cheek": 0.35}
@@ -47,6 +48,10 @@ CASSI_FACTOR = 1.0 / 0.9   # CASSI's 1.11111: the lower teeth move 100 %
 # name, y0 (midline height), xf (front midline x, before nose/lip bumps), cx (section
 # centre), w (half width), xb (back midline x), e (front superellipse exponent),
 # lift (mm the row rises toward the back, following the jaw line), group (upper/lower).
+# The lips at rest (the stomion of each lip, y mm): the upper lip's edge 1.9 mm above the
+# upper incisor tip (the incisor show at rest), the lower lip's 1.6 mm below it, lying on
+# the incisal third of the upper incisors (see model/README.md, "The face", for sources).
+STO_UPPER, STO_LOWER = 1.9, 0.3
 ROWS = [
     ("vertex", 177, -88, -88, 0.0, -88, 2.0, 0, "u"),
     ("crown1", 172, -48, -90, 30, -132, 2.0, 0, "u"),
@@ -64,42 +69,87 @@ ROWS = [
     ("lid_low", 58, 10, -78.5, 66.5, -164, 3.0, 0, "u"),
     ("eyes_low", 54, 10.5, -76, 66, -162, 3.0, 0, "u"),
     ("cheekbone", 47, 11, -74, 65, -158, 3.0, 0, "u"),
-    ("nose_tip_high", 42.5, 12, -73, 64, -155, 2.9, 0, "u"),
-    ("nose_tip", 38, 12, -72, 63, -153, 2.8, 0, "u"),
-    ("nostril", 33, 12, -72, 62, -151, 2.7, 0, "u"),
-    ("subnasale", 29.5, 12, -72, 61, -150, 2.6, 0, "u"),
-    ("philtrum", 24, 11.5, -72, 60, -149, 2.5, 0, "u"),
+    ("nose_tip_high", 40.0, 12, -73, 64, -155, 2.9, 0, "u"),
+    ("nose_tip", 34.5, 12, -72, 63, -153, 2.8, 0, "u"),
+    ("nostril", 29.0, 12, -72, 62, -151, 2.7, 0, "u"),
+    ("subnasale", 24.5, 12, -72, 61, -150, 2.6, 0, "u"),
+    ("philtrum", 21.3, 11.5, -72, 60, -149, 2.5, 0, "u"),
     ("UL", 17.8, 6.0, -72, 59, -148, 2.4, 0, "u"),
-    ("ul_red", 11.0, 5.5, -73, 57.5, -147, 2.4, 0, "u"),
-    ("ul_low", 3.5, 5.0, -73, 57, -147, 2.4, 0, "u"),
-    ("A", 0.2, 5.0, -74, 56.5, -147, 2.4, 0, "u"),
-    ("A_in", 0.2, 5.0, -74, 56.5, -147, 2.4, 0, "u"),
-    ("B_in", -0.2, 5.0, -74, 56.5, -147, 2.4, 0, "l"),
-    ("B", -0.2, 5.0, -74, 56.5, -147, 2.4, 0, "l"),
-    ("ll_high", -4, 5.0, -74, 56, -147, 2.4, 0, "l"),
-    ("ll_red", -13.0, 5.0, -75, 55, -147, 2.3, 0, "l"),
+    ("ul_red", 10.5, 5.5, -73, 57.5, -147, 2.4, 0, "u"),
+    ("ul_low", 5.5, 5.0, -73, 57, -147, 2.4, 0, "u"),
+    ("A", STO_UPPER, 5.0, -74, 56.5, -147, 2.4, 0, "u"),
+    ("A_in", STO_UPPER, 5.0, -74, 56.5, -147, 2.4, 0, "u"),
+    ("B_in", STO_LOWER, 5.0, -74, 56.5, -147, 2.4, 0, "l"),
+    ("B", STO_LOWER, 5.0, -74, 56.5, -147, 2.4, 0, "l"),
+    ("ll_high", -3.0, 5.0, -74, 56, -147, 2.4, 0, "l"),
+    ("ll_red", -9.6, 5.0, -75, 55, -147, 2.3, 0, "l"),
     ("LL", -21.4, 4.0, -76, 54, -147, 2.2, 0.5, "l"),
-    ("fold", -29, 3.0, -78, 52.5, -147, 2.0, 2, "l"),
-    ("chin", -37, 8.0, -80, 50.5, -147, 2.0, 5, "l"),
-    ("chin_low", -44, 6.0, -82, 48.5, -147, 2.0, 9, "l"),
-    ("menton", -49.5, -4.0, -84, 46, -147, 2.0, 13, "l"),
-    ("under_chin", -55, -24.0, -95, 48, -147, 2.0, 14, "l"),
-    ("throat", -63, -42.0, -92, 49, -140, 2.0, 12, "l"),
-    ("neck1", -81, -47.0, -90, 49, -132, 2.0, 6, "l"),
-    ("neck2", -105, -47.0, -90, 50, -130, 2.0, 2, "l"),
-    ("neck_base", -125, -44.0, -90, 53, -134, 2.0, 0, "l"),
+    ("fold", -29, 3.0, -78, 52.5, -146, 2.0, 2, "l"),
+    ("chin", -37, 8.0, -80, 50.5, -144, 2.0, 5, "l"),
+    ("chin_low", -44, 6.0, -82, 48.5, -141, 2.0, 9, "l"),
+    ("menton", -49.5, -4.0, -84, 46, -139, 2.0, 13, "l"),
+    ("under_chin", -55, -24.0, -95, 48, -136, 2.0, 14, "l"),
+    ("throat", -63, -42.0, -92, 51, -133, 2.0, 12, "l"),
+    ("neck1", -81, -47.0, -90, 53, -130, 2.0, 6, "l"),
+    ("neck2", -105, -47.0, -90, 55, -130, 2.0, 2, "l"),
+    ("neck_base", -125, -44.0, -90, 58, -134, 2.0, 0, "l"),
 ]
 ROW_INDEX = {r[0]: i for i, r in enumerate(ROWS)}
 # Lip protrusion (mm, at the midline) on top of xf; falls to 0 at the mouth corners.
 LIP_BUMP = {"UL": 8.9, "ul_red": 9.6, "ul_low": 8.6, "A": 6.5, "A_in": 1.0,
             "B_in": 1.0, "B": 6.5, "ll_high": 8.8, "ll_red": 9.6, "LL": 5.4, "fold": 0.0}
 # Nose: protrusion (mm at the midline) and half width per row.
-NOSE = {"glabella": (0.5, 9), "nasion": (1.0, 8), "lid_up": (2.5, 8), "eye_hi": (4.0, 8),
-        "eyes": (5.5, 8.5), "eye_lo": (7.0, 8.5), "lid_low": (8.5, 9), "eyes_low": (11.0, 9.5),
+NOSE = {"glabella": (0.5, 12), "nasion": (1.0, 12), "lid_up": (2.5, 11), "eye_hi": (4.0, 10.5),
+        "eyes": (5.5, 10), "eye_lo": (7.0, 10), "lid_low": (8.5, 10), "eyes_low": (11.0, 10),
         "cheekbone": (15.5, 10.5), "nose_tip_high": (19.5, 13), "nose_tip": (21.5, 17),
         "nostril": (14.0, 17), "subnasale": (1.5, 12)}
+
+
+def _eye_rows():
+    """Extra rows halfway between the rows from the nasion to below the eyes (2-3 mm apart:
+    the lids' edges are drawn by where the skin meets the eyeball), nose bumps interpolated."""
+    top, bottom = ROW_INDEX["nasion"], ROW_INDEX["eyes_low"]
+    out = list(ROWS[:top + 1])
+    for r0, r1 in zip(ROWS[top:bottom], ROWS[top + 1:bottom + 1], strict=True):
+        name = f"{r0[0]}_{r1[0]}"
+        out.append((name, *[0.5 * (p + q) for p, q in zip(r0[1:8], r1[1:8], strict=True)], r0[8]))
+        NOSE[name] = tuple(0.5 * (p + q) for p, q in zip(NOSE[r0[0]], NOSE[r1[0]], strict=True))
+        out.append(r1)
+    return out + list(ROWS[bottom + 1:])
+
+
+def _nape(rows):
+    """Back midline x (xb) of the rows below the cheekbones from one smooth profile of the
+    height at the back (y0 + lift): the back of the head curves into the nape and the neck
+    instead of falling straight and stepping in under the skull."""
+    ys, xs = (-125, -81, -55, -30, 0, 20, 47), (-134, -130, -131, -135, -143, -150, -158)
+    out = []
+    for r in rows:
+        if r[1] < 47:
+            r = (*r[:5], round(float(np.interp(r[1] + r[7], ys, xs)), 2), *r[6:])
+        out.append(r)
+    return out
+
+
+def _under_jaw_rows(rows):
+    """Extra rows halfway between those from the menton down the throat: the jaw's weights
+    fall from 1 to 0.5 there, and with rows 10-20 mm apart the skin folded along them
+    when the jaw opened wide; twice as many rows spread the stretch."""
+    names = [r[0] for r in rows]
+    top, bottom = names.index("menton"), names.index("neck1")
+    out = list(rows[:top + 1])
+    for r0, r1 in zip(rows[top:bottom], rows[top + 1:bottom + 1], strict=True):
+        out.append((f"{r0[0]}_{r1[0]}",
+                    *[0.5 * (p + q) for p, q in zip(r0[1:8], r1[1:8], strict=True)], r0[8]))
+        out.append(r1)
+    return out + list(rows[bottom + 1:])
+
+
+ROWS = _nape(_under_jaw_rows(_eye_rows()))
+ROW_INDEX = {r[0]: i for i, r in enumerate(ROWS)}
+EYE_ROWS = {r[0] for r in ROWS[ROW_INDEX["nasion"] + 1:ROW_INDEX["eyes_low"]]}
 # Front z targets (on the mouth row) of the columns; the mouth corner is one of them.
-FRONT_Z = [0, 4, 8, 12, 16, 20, MOUTH_HALF_WIDTH, 29, 34, 39, 44, 49, 53.5]
+FRONT_Z = [0, 4, 8, 12, 16, 20, MOUTH_HALF_WIDTH, 29, 31.5, 34, 36.5, 39, 41.5, 44, 49, 53.5]
 
 
 def bell(u):
@@ -133,10 +183,73 @@ def section_point(row, phi):
         z = w * abs(s) ** (2.0 / e)
     else:
         x = cx - (cx - xb) * abs(c)
+        # behind the jaw angle the rows under the jaw keep the neck's width, so the neck
+        # rises into the head behind the ear instead of meeting a shelf under the skull
+        if lift > 0 or y0 < -60:
+            w = w + max(NECK_HALF_WIDTH - w, 0.0) * ramp(phi, np.pi / 2 + 0.05, np.pi / 2 + 0.6)
         z = w * s
     depth = np.clip(xf - x, 0.0, 80.0) / 80.0  # 0 at the front, 1 at the gonion and behind
-    fade = 1.0 - ramp(-x, 100.0, 135.0)  # behind the jaw angle the rows level out again
+    fade = 1.0  # the rows keep their lift round to the nape (no step under the skull)
     return np.array([x, y0 + lift * np.sin(np.pi / 2 * depth) * fade, z])
+
+
+# The palpebral fissure: half width (mm, about the eyeball's centre line in z, shifted
+# 0.5 mm out), the upper and lower lid margins' heights above / below the centre (the
+# upper lid covers the iris's top 0.8 mm, the lower lid meets its bottom edge: a fissure
+# 9.9 mm tall and 29 mm wide, Farkas' adult norms of about 10 and 28-30 mm; the margins
+# are full arcs, not pointed, so that the eye does not read as a slit), the outer
+# corner's lift (canthal tilt), the lids' thickness on the eyeball.
+FISSURE = {"half_width": 14.5, "upper": 4.4, "lower": 5.5, "tilt": 0.8, "lid": 2.0}
+
+
+def lid_margins(az):
+    """(u, upper, lower): the fissure coordinate u (-1 inner corner, +1 outer) at ``az``
+    and the heights of the upper and lower lid margins there (equal outside |u| < 1)."""
+    ey, ez, f = EYE_CENTRE[1], EYE_CENTRE[2], FISSURE
+    u = (az - ez - 0.5) / f["half_width"]
+    opening = max(1.0 - u * u, 0.0)
+    centre = ey + 0.4 + f["tilt"] * np.clip(u, -1.0, 1.0)
+    return u, centre + f["upper"] * opening**0.45, centre - f["lower"] * opening**0.6
+
+
+# Rows from below the eyes to the nasion (y) whose heights bend to the lid margins: the
+# second and third run along the lower and upper margins (the fissure's outline follows
+# grid rows instead of cutting across them).
+EYE_ROW_Y = (54.0, 59.5, 65.5, 76.0)
+
+
+def eye_row_y(y, az):
+    """Height of a loft point of the eye rows, bent so that rows follow the lid margins."""
+    if not EYE_ROW_Y[0] < y < EYE_ROW_Y[3]:
+        return y
+    u, up, lo = lid_margins(az)
+    g = 1.0 - ramp(abs(u), 0.7, 1.6)
+    target = (EYE_ROW_Y[0], g * lo + (1 - g) * EYE_ROW_Y[1], g * up + (1 - g) * EYE_ROW_Y[2],
+              EYE_ROW_Y[3])
+    return float(np.interp(y, EYE_ROW_Y, target))
+
+
+def eyelids(x, y, az):
+    """x of a skin point near the eye: inside the fissure just behind the eyeball's
+    surface (the eyeball shows), around it the lids lying on the eyeball, blending into
+    the face over 2-9 mm."""
+    ex, ey, ez = EYE_CENTRE
+    f = FISSURE
+    u, y_up, y_lo = lid_margins(az)
+    t_v = max(y - y_up, y_lo - y, 0.0)
+    t_h = max(abs(u) - 1.0, 0.0) * f["half_width"]
+    t = np.hypot(t_v, t_h)
+    inside = abs(u) < 1.0 and y_lo + 0.05 < y < y_up - 0.05
+    ball = np.sqrt(max(EYE_RADIUS**2 - (y - ey) ** 2 - (az - ez) ** 2, 0.0))
+    shell = EYE_RADIUS * np.sqrt(max(1.0 - ((y - ey) / EYE_RADIUS) ** 2
+                                     - ((az - ez) / (1.6 * EYE_RADIUS)) ** 2, 0.0))
+    if inside:  # 3 mm behind the ball: the lid margins' triangles dive in at once
+        return ex + ball - 3.0
+    w = 1.0 - ramp(t, 0.5, 8.0 + 8.0 * ramp(-u, 0.3, 1.2))  # softer toward the nose
+    lid = 0.3 + (f["lid"] - 0.3) * max(ramp(t, 0.0, 2.0), ramp(abs(u), 0.9, 1.1))  # thin margin
+    lid += 3.0 * ramp(-u, 0.3, 1.3) * ramp(t, 1.0, 5.0)  # fuller toward the nose (no trough)
+    x = w * (ex + shell + lid) + (1.0 - w) * x
+    return max(x, ex + ball + 0.8) if ball > 0 else x
 
 
 def bumps(name, p):
@@ -144,12 +257,17 @@ def bumps(name, p):
     x, y, z = p
     az = abs(z)
     fr = ramp(x, -55.0, -30.0)  # face features only on the front of the head
+    if name in EYE_ROWS:
+        y = y + fr * (eye_row_y(y, az) - y)
     x0, y0 = x, y
     if name in LIP_BUMP:
         x += LIP_BUMP[name] * bell(az / (MOUTH_HALF_WIDTH + 3.0))
         if name in ("A_in", "B_in"):  # the inner lip rows curl in toward the teeth
             inside = bell(az / MOUTH_HALF_WIDTH)
             y += (1.5 if name == "A_in" else -1.5) * inside
+    if name in ("A", "A_in", "B_in", "B"):  # lips parted at rest, closing to the corners
+        mid = 0.5 * (STO_UPPER + STO_LOWER)
+        y = mid + (y - mid) * np.sqrt(max(1.0 - (az / MOUTH_HALF_WIDTH) ** 2, 0.0))
     if name in ("UL", "ul_red", "ul_low", "ll_high", "ll_red", "LL"):
         # the vermilion is a lens: its height shrinks toward the mouth corners
         u = az / MOUTH_HALF_WIDTH
@@ -165,21 +283,15 @@ def bumps(name, p):
             x += 4.0 * bell((az - 14.5) / 6.0)
         if name == "subnasale":
             x += 3.0 * bell((az - 15.0) / 5.0)
-    # orbit, brow ridge, the eye opening (skin pulled back behind the eyeball's front in
-    # an almond, with a slight lid margin around it), cheekbones
+    # orbit (a shallow hollow above the upper lid), cheek fullness, a broad low brow ridge
     ex, ey, ez = EYE_CENTRE
-    x -= 2.0 * bell(np.hypot((y - ey) / 14.0, (az - ez - 2.0) / 20.0))
+    x -= 1.0 * bell(np.hypot((y - ey - 3.0) / 12.0, (az - ez) / 18.0))
     x += 4.0 * bell(np.hypot((y - 32.0) / 24.0, (az - 36.0) / 20.0))  # cheek fullness
-    x += 3.0 * bell((y - 84.0) / 8.0) * (1.0 - ramp(az, 38.0, 60.0))  # brow ridge, glabella
-    r_eye = np.hypot((y - ey) / 8.0, (az - ez) / 21.0)
-    x += 1.2 * bell((r_eye - 0.8) / 0.3)
-    b = 1.0 - ramp(r_eye, 0.6, 1.0)
-    # inside the opening the skin lies just behind the eyeball (sclera shows to the corners)
-    cap = np.sqrt(max(EYE_RADIUS**2 - (y - ey) ** 2 - (az - ez) ** 2, 0.0))
-    x = x * (1.0 - b) + (ex + max(cap - 2.5, -1.0)) * b
+    x += 1.5 * bell((y - 88.0) / 14.0) * (1.0 - ramp(az, 40.0, 64.0))  # brow ridge
+    x = eyelids(x, y, az)
     x += 4.0 * bell(np.hypot((y - 47.0) / 13.0, (az - 52.0) / 16.0))
     if az > 30:
-        z = np.sign(z) * (az + 3.0 * bell(np.hypot((y - 47.0) / 12.0, (x + 50.0) / 22.0)))
+        z = np.sign(z) * (az + 2.0 * bell(np.hypot((y - 47.0) / 16.0, (x + 50.0) / 28.0)))
         az = abs(z)
     # chin prominence (mentalis)
     if name in ("chin", "chin_low", "fold"):
@@ -189,10 +301,124 @@ def bumps(name, p):
     if ROWS[ROW_INDEX[name]][8] == "l" and y < 10:
         gon = bell(np.hypot((x + 82.0) / 16.0, (y + 40.0) / 22.0))
         z = np.sign(z) * (az + 5.0 * gon)
-    # ears: a flat bump on the side of the head
-    ear = bell(np.hypot((x + 102.0) / 15.0, (y - 40.0) / 27.0))
-    z = np.sign(z) * (abs(z) + 14.0 * ear) if az > 30 else z
     return np.array([x, y, z])
+
+
+# ---------------------------------------------------------------------------- ears
+# The left ear in the side plane: canal (x, y), length (superaurale to subaurale) and
+# width (mm; Farkas' adult norms are about 60-65 and 30-35), backward tilt of the long axis.
+EAR = {"canal": (-106.0, 38.0), "length": 62.0, "width": 33.0, "tilt_deg": 15.0}
+EAR_N = 24  # points round the outline
+# Rings from the attachment on the head out to the helix rim and back in over the front
+# of the ear: (outline scale, lateral height as a fraction of the rim's, centre pull
+# toward the concha 0..1). 0: base inside the head; 1-2: the back of the rim; 3: the rim's
+# free edge (helix); 4: its inner lip; 5: the scapha groove; 6: the antihelix; 7: concha.
+EAR_RINGS = ((0.80, -0.10, 0.0), (0.97, 0.45, 0.0), (1.03, 0.85, 0.0), (1.0, 1.0, 0.0),
+             (0.88, 0.95, 0.0), (0.80, 0.50, 0.0), (0.64, 0.70, 0.15), (0.32, 0.05, 0.6))
+
+
+def ear_outline(t):
+    """(a, b) of the ear's outline at t in [0, 1): a forward, b up along the ear's axis,
+    from the helix root (front, at the top of the tragus) up over the top, down the back
+    and round the lobe; unit-free (half width 1, half length 1 at the top)."""
+    th = 2 * np.pi * t
+    s, c = np.sin(th), -np.cos(th)  # t = 0 at the bottom of the lobe, 0.25 at the front
+    a = np.sign(s) * np.abs(s) ** 0.75  # fuller than an ellipse: a broad, round top
+    b = np.sign(c) * np.abs(c) ** 0.85
+    lobe = ramp(-b, 0.2, 1.0)
+    return a * (1.0 - 0.3 * lobe) + 0.12 * lobe, b
+
+
+def ear_rim_height(a, b):
+    """Lateral stand-off (mm) of the helix rim from the head round the outline: small at
+    the front where the ear joins the face, most at the back and top, less at the lobe."""
+    back = ramp(-a, -0.6, 0.9)
+    return 4.0 + 16.0 * back * (1.0 - 0.45 * ramp(-b, 0.2, 1.0))
+
+
+def build_ears(skin):
+    """Both ears: a folded sheet from the attachment inside the head out to the helix rim
+    and back in to the concha, mirrored; its faces wound as the skin grid's."""
+    from scipy.interpolate import LinearNDInterpolator
+
+    side = skin[(skin[:, 2] > 20.0) & (skin[:, 0] < -60.0) & (skin[:, 1] > -20.0)]
+    head_z = LinearNDInterpolator(side[:, :2], side[:, 2])
+    cx, cy = EAR["canal"]
+    tilt = np.radians(EAR["tilt_deg"])
+    t = np.arange(EAR_N) / EAR_N
+    a, b = ear_outline(t)
+    rim = ear_rim_height(a, b)
+    concha = np.array([0.35, -0.25])  # centre of the concha in outline units (front, low)
+    half = np.array([EAR["width"] / 2, EAR["length"] / 2])
+    centre = np.array([cx, cy]) + np.array([-0.15 * EAR["width"], 0.18 * EAR["length"]])
+
+    def place(u, v):
+        """outline units -> (x, y): forward is +x, the long axis leans back by tilt."""
+        du, dv = u * half[0], v * half[1]
+        return (centre[0] + du * np.cos(tilt) - dv * np.sin(tilt),
+                centre[1] + du * np.sin(tilt) + dv * np.cos(tilt))
+
+    verts = []
+    for scale, height, pull in EAR_RINGS:
+        u = (1 - pull) * scale * a + pull * concha[0]
+        v = (1 - pull) * scale * b + pull * concha[1]
+        x, y = place(u, v)
+        verts += list(np.column_stack([x, y, head_z(x, y) + height * rim]))
+    x, y = place(*concha)
+    verts.append([x, y, float(head_z(x, y)) - 1.0])  # the canal
+    verts = np.array(verts)
+    if not np.all(np.isfinite(verts)):
+        raise ValueError("an ear point lies off the side of the head")
+    faces, n, last = [], EAR_N, len(verts) - 1
+    for r in range(len(EAR_RINGS) - 1):
+        for j in range(n):
+            p, q = r * n + j, r * n + (j + 1) % n
+            faces += [(p, q + n, q), (p, p + n, q + n)]
+    r = len(EAR_RINGS) - 1
+    faces += [(r * n + j, last, r * n + (j + 1) % n) for j in range(n)]
+    faces = np.array(faces)
+    mirrored = verts * [1, 1, -1]
+    return (np.concatenate([verts, mirrored]),
+            np.concatenate([faces, faces[:, ::-1] + len(verts)]))
+
+
+# The glabella and the brow above the inner eye corners: rows from the upper lid to the
+# forehead (y) whose front sections are made convex across z (up to GLABELLA_Z mm), with
+# a weight ramping in from the upper lid: where the nose's bridge met the lids' fullness
+# toward the nose, the bumps left a groove above each inner eye corner that read as a
+# frown in front renders.
+GLABELLA_Y, GLABELLA_Z = (65.0, 71.0, 96.0, 104.0), 34.0
+
+
+def upper_hull(z, x):
+    """Smallest concave function of z on or above the points (z, x), at the points' z."""
+    hull = []
+    for p in zip(z, x, strict=True):
+        while len(hull) >= 2:
+            (z0, x0), (z1, x1) = hull[-2], hull[-1]
+            if (x1 - x0) * (p[0] - z0) <= (p[1] - x0) * (z1 - z0):
+                hull.pop()
+            else:
+                break
+        hull.append(p)
+    hz, hx = zip(*hull, strict=True)
+    return np.interp(z, hz, hx)
+
+
+def smooth_glabella(grid):
+    """Fill the grooves above the inner eye corners (in place): each row's front section
+    lifted toward its convex hull across z, weighted by height (see GLABELLA_Y)."""
+    lo, full, top, off = GLABELLA_Y
+    for i in range(grid.shape[0]):
+        y = grid[i, 0, 1]
+        wy = ramp(y, lo, full) * (1.0 - ramp(y, top, off))
+        if wy <= 0.0:
+            continue
+        cols = np.nonzero(grid[i, :, 2] <= GLABELLA_Z)[0]
+        cols = cols[np.argsort(grid[i, cols, 2])]
+        z, x = grid[i, cols, 2], grid[i, cols, 0]
+        fade = 1.0 - ramp(z, 0.6 * GLABELLA_Z, GLABELLA_Z)
+        grid[i, cols, 0] = x + wy * fade * (upper_hull(z, x) - x)
 
 
 def build_skin():
@@ -205,6 +431,7 @@ def build_skin():
             grid[i, j] = bumps(row[0], section_point(row, phi))
     grid[:, 0, 2] = 0.0
     grid[:, -1, 2] = 0.0
+    smooth_glabella(grid)
     corner = FRONT_Z.index(MOUTH_HALF_WIDTH)
     # collapse the lip rows outside the mouth onto one line (the lips meet at the corners)
     a, a_in, b_in, b = (ROW_INDEX[k] for k in ("A", "A_in", "B_in", "B"))
@@ -433,22 +660,28 @@ def build_tongue():
     return np.array(verts), np.array(faces), np.array(svals), sites, s[2 * TONGUE_ANCHOR]
 
 
-def build_eye(centre, radius=12.0, n_lat=8, n_lon=12):
-    """A UV sphere (the eyeball)."""
-    verts = [centre + [0, radius, 0]]
-    for i in range(1, n_lat):
-        th = np.pi * i / n_lat
+# Polar angles (degrees from the gaze axis) of the eyeball's rings: close rings at the
+# pupil's and the iris's edges (radius 2.0 and 5.6 mm on a 12 mm ball) keep the colours
+# that cassi_fit.render paints there (per vertex) crisp circles.
+EYE_RINGS = (5.0, 8.5, 10.5, 18.0, 26.0, 29.0, 38.0, 55.0, 75.0, 100.0, 130.0, 160.0)
+
+
+def build_eye(centre, radius=12.0, n_lon=20):
+    """A sphere (the eyeball) whose poles lie on the gaze axis (+x), rings at EYE_RINGS."""
+    verts = [centre + [radius, 0, 0]]
+    for th in np.radians(EYE_RINGS):
         for j in range(n_lon):
             ph = 2 * np.pi * j / n_lon
-            verts.append(centre + radius * np.array([np.sin(th) * np.cos(ph), np.cos(th),
+            verts.append(centre + radius * np.array([np.cos(th), np.sin(th) * np.cos(ph),
                                                      np.sin(th) * np.sin(ph)]))
-    verts.append(centre - [0, radius, 0])
+    verts.append(centre - [radius, 0, 0])
+    n_lat = len(EYE_RINGS)
     faces, last = [], len(verts) - 1
-    ring = lambda i, j: 1 + (i - 1) * n_lon + j % n_lon
+    ring = lambda i, j: 1 + i * n_lon + j % n_lon
     for j in range(n_lon):
-        faces.append((0, ring(1, j + 1), ring(1, j)))
+        faces.append((0, ring(0, j + 1), ring(0, j)))
         faces.append((last, ring(n_lat - 1, j), ring(n_lat - 1, j + 1)))
-        for i in range(1, n_lat - 1):
+        for i in range(n_lat - 1):
             a, b, c, d = ring(i, j), ring(i, j + 1), ring(i + 1, j + 1), ring(i + 1, j)
             faces += [(a, b, c), (a, c, d)]
     return np.array(verts), np.array(faces)
@@ -473,7 +706,7 @@ def skin_fields(verts, ids, lower, corner_z, nose_tip):
     f["mouth"] = (1.0 - ramp(z, corner_z + 2.0, corner_z + 22.0)) * (
         1.0 - ramp(np.abs(y + 3.0), 26.0, 40.0))
     f["nose"] = bell(np.linalg.norm(verts - nose_tip, axis=1) / 24.0)
-    rise_v = np.where(y >= 29.0, 1.0 - ramp(y, 45.0, 66.0), 0.0)
+    rise_v = np.where(y >= ROWS[ROW_INDEX["subnasale"]][1] - 0.5, 1.0 - ramp(y, 45.0, 66.0), 0.0)
     rise_v = np.where([n == "philtrum" for n in names], 1.0 - 0.55, rise_v)
     f["nose_rise"] = rise_v * (1.0 - ramp(z, 20.0, 34.0))
     return f
@@ -497,7 +730,22 @@ def build():
     mouth_core = (np.abs(sv[:, 2]) < 16.0 + 1e-6) & (sv[:, 0] > -30.0)  # lips' jaw weight flat
     lip_vertex = lip_row & in_mouth
     skin_mat = np.where(lip_vertex[np.array(sf)].all(axis=1), MAT["lips"], MAT["skin"])
-    parts = [("skin", sv, np.array(sf), skin_mat)]
+    n_grid = len(sv)
+    av, af = build_ears(sv)
+    # the ears follow the skin they sit on: weights and fields of the nearest skin vertices
+    from scipy.spatial import cKDTree
+
+    dist, near = cKDTree(sv).query(av, k=4)
+    inv = 1.0 / np.maximum(dist, 1e-6)
+    blend = lambda f: (f[near] * inv).sum(axis=1) / inv.sum(axis=1)
+    w_parke = np.concatenate([w_parke, blend(w_parke)])
+    fields = {k: np.concatenate([f, blend(f)]) for k, f in fields.items()}
+    jaw_shape = jaw_shape_field(sv)
+    jaw_shape = np.concatenate([jaw_shape, blend(jaw_shape)])
+    sf = np.concatenate([np.array(sf), af + n_grid])
+    skin_mat = np.concatenate([skin_mat, np.full(len(af), MAT["skin"])])
+    sv = np.concatenate([sv, av])
+    parts = [("skin", sv, sf, skin_mat)]
     ev, ef = [], []
     for side in (1, -1):
         v, f_ = build_eye(np.array([EYE_CENTRE[0], EYE_CENTRE[1], EYE_CENTRE[2] * side]), EYE_RADIUS)
@@ -542,13 +790,14 @@ def build():
                                      "jaw_shape", "tongue_s")}
     for k, v in fields.items():
         full[k][: len(sv)] = v
-    full["jaw_shape"][: len(sv)] = jaw_shape_field(sv)
+    full["jaw_shape"][: len(sv)] = jaw_shape
     full["tongue_s"][regions["tongue"]] = ts
-    skin = regions["skin"]
+    skin = regions["skin"][:n_grid]  # the grid's vertices (the masks below), then the ears
+    w_parke = w_parke[:n_grid]
     row_of = {k: ids[:, 0] == ROW_INDEX[k] for k in ROW_INDEX}
     up_rows = np.isin(names, ["UL", "ul_red", "ul_low", "A", "A_in"])
     lo_rows = np.isin(names, ["B_in", "B", "ll_high", "ll_red", "LL"])
-    close = lambda value: np.isclose(w_parke, value, atol=1e-12)
+    close = lambda value: np.isclose(w_parke, value, rtol=0.0, atol=1e-12)
     regions.update({
         "upper_lip": skin[up_rows & mouth_core],
         "lower_lip": skin[lo_rows & mouth_core],
@@ -556,7 +805,7 @@ def build():
         "under_chin": skin[close(PARKE["under_chin"])],
         "neck": skin[close(PARKE["neck"])],
         "cheek": skin[close(PARKE["cheek"]) & ~lower],
-        "nose": skin[fields["nose"] > 0.3],
+        "nose": skin[fields["nose"][:n_grid] > 0.3],
     })
     T = lambda k: offsets["tongue"] + tsites[k]
     ui = offsets["upper_teeth"] + 3
@@ -572,7 +821,7 @@ def build():
         "mouth_corner_left": index[(ROW_INDEX["A"], corner, 1)],
         "mouth_corner_right": index[(ROW_INDEX["A"], corner, -1)],
     }
-    cheek = np.flatnonzero(row_of["cheekbone"] & (sv[:, 0] > -75.0))  # skin comes first
+    cheek = np.flatnonzero(row_of["cheekbone"] & (sv[:n_grid, 0] > -75.0))  # skin comes first
     landmarks["zygion_left"] = cheek[np.argmax(sv[cheek, 2])]
     landmarks["zygion_right"] = cheek[np.argmin(sv[cheek, 2])]
     landmarks = {k: int(v) for k, v in landmarks.items()}
@@ -686,6 +935,19 @@ PARAMETERS = [  # number, name, unit, min, max, default, kind, stored positions 
 ]
 
 
+def lip_measures(V, landmarks, collision):
+    """The rest face's lip measures (mm, on the midline; model/README.md, "The face"):
+    subnasale to the upper lip's stomion (sn-sto), the vermilion heights (labrale superius
+    to stomion, stomion to labrale inferius), the upper incisor shown below the upper lip
+    and the gap between the lips."""
+    up, lo = collision["upper_lip_columns"][0], collision["lower_lip_columns"][0]
+    y = lambda i: float(V[i][1])
+    sto_u, ls, sto_l, li = y(up[1]), y(up[3]), y(lo[1]), y(lo[3])  # rows A, ul_red, B, ll_red
+    return {"sn-sto": y(landmarks["subnasale"]) - sto_u, "ls-sto": ls - sto_u,
+            "sto-li": sto_l - li, "incisor show": sto_u - y(landmarks["upper_incisor_tip"]),
+            "lip gap": sto_u - sto_l}
+
+
 def _csv(rows, header):
     return ",".join(header) + "\n" + "".join(",".join(map(str, r)) + "\n" for r in rows)
 
@@ -714,6 +976,8 @@ def main(argv=None):
                  _csv(PARAMETERS, ["number", "name", "unit", "min", "max", "default",
                                    "kind", "stored_positions", "description"]), overwrite=True)
     print(f"{len(V)} vertices, {len(F)} triangles -> {out}")
+    lips = lip_measures(V, landmarks, collision)
+    print("lips at rest (mm): " + ", ".join(f"{k} {v:.1f}" for k, v in lips.items()))
     return 0
 
 

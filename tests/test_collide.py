@@ -101,7 +101,8 @@ def test_lips_pushed_into_the_teeth_are_projected_out():
 
 
 def test_lips_closed_past_each_other_are_pressed_together_instead():
-    v = _posed(upper_lip=np.array([0.0, -3.0]), lower_lip=np.array([0.0, 5.0]))
+    # the lips rest 1.6 mm apart (upper incisor show): close them 9.2 mm, 7.6 mm past each other
+    v = _posed(upper_lip=np.array([0.0, -3.6]), lower_lip=np.array([0.0, 5.6]))
     assert _report(v)["lips_crossing"] > 7.0
     projected = _project(v)
     assert _report(projected)["lips_crossing"] == 0.0

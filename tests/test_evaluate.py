@@ -274,7 +274,8 @@ def test_rest_model_measures(model):
     state = SimpleNamespace(model=model)
     m = ev.measure(state, posed(model))
     assert set(m) == set(ev.MEASURES)
-    assert m["lip_gap_min_mm"] == pytest.approx(0.4, abs=0.05)  # rows A and B at +-0.2
+    # rows A and B (the lips' edges) at 1.9 and 0.3 mm: parted at rest, the upper incisor shows
+    assert m["lip_gap_min_mm"] == pytest.approx(1.6, abs=0.05)
     assert m["front_overlap_mm"] == pytest.approx(-0.5, abs=0.05)  # lower tip 0.5 below
     assert abs(m["lower_slope_deg"]) < 0.5
     assert m["tongue_upper_front_mm"] < 0.05 and m["tongue_lower_front_mm"] < 0.05

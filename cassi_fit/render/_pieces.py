@@ -25,7 +25,7 @@ _MATERIALS = ("skin", "lips", "eye", "teeth", "tongue", "palate", "pharynx")
 MATERIAL_COLOURS = {
     "skin": (0.89, 0.72, 0.60),
     "lips": (0.70, 0.30, 0.30),
-    "eye": (0.96, 0.96, 0.94),
+    "eye": (0.94, 0.92, 0.89),
     "teeth": (0.96, 0.94, 0.86),
     "tongue": (0.93, 0.52, 0.58),
     "palate": (0.42, 0.17, 0.20),
@@ -33,7 +33,8 @@ MATERIAL_COLOURS = {
 }
 MARKER_COLOURS = {"measured": (0.90, 0.08, 0.08), "model": (0.10, 0.72, 0.22)}
 _EXTRA_MARKER_COLOURS = ((0.15, 0.35, 0.95), (0.98, 0.60, 0.05), (0.60, 0.20, 0.80))
-_IRIS_COLOUR = (0.25, 0.17, 0.10)
+_IRIS_COLOUR = (0.33, 0.22, 0.13)
+_PUPIL_COLOUR = (0.03, 0.03, 0.03)
 
 # Rows: image right, image up, toward the camera, in model axes. The model frame (x front,
 # y up, z to the subject's LEFT) is left-handed, so a view that shows the subject as a
@@ -121,15 +122,18 @@ def _iris_factors(vertices: np.ndarray, faces: np.ndarray, face_material, eye: i
     """Per-vertex colour factor (V,4) darkening the front of each eyeball into an iris.
 
     Each eye is the set of 'eye' vertices on one side of z = 0; its iris is the front half
-    (x above the eye's centre) within 62 % of the eye's half-height of the gaze axis (the
-    +x line through the centre), whatever the eyeball's shape or tessellation. Returns
-    None if the model has no eye material.
+    (x above the eye's centre) within 47 % of the eye's half-height of the gaze axis (the
+    +x line through the centre; 5.6 mm on a 12 mm eyeball), its pupil within 17 % (2 mm),
+    whatever the eyeball's shape or tessellation. Returns None if the model has no eye
+    material.
     """
     used = np.unique(faces[face_material == eye])
     if used.size == 0:
         return None
     factors = np.ones((len(vertices), 4))
-    ratio = np.array(_linear(_IRIS_COLOUR)) / np.array(_linear(MATERIAL_COLOURS["eye"]))
+    white = np.array(_linear(MATERIAL_COLOURS["eye"]))
+    ratio = np.array(_linear(_IRIS_COLOUR)) / white
+    pupil_ratio = np.array(_linear(_PUPIL_COLOUR)) / white
     for side in (used[vertices[used, 2] > 0], used[vertices[used, 2] <= 0]):
         if side.size < 4:
             continue
@@ -137,8 +141,9 @@ def _iris_factors(vertices: np.ndarray, faces: np.ndarray, face_material, eye: i
         lo, hi = p.min(axis=0), p.max(axis=0)
         centre, half = (lo + hi) / 2, (hi[1] - lo[1]) / 2
         off_axis = np.hypot(p[:, 1] - centre[1], p[:, 2] - centre[2])
-        iris = (p[:, 0] > centre[0]) & (off_axis < 0.62 * half)
+        iris = (p[:, 0] > centre[0]) & (off_axis < 0.47 * half)
         factors[side[iris], :3] = ratio
+        factors[side[iris & (off_axis < 0.17 * half)], :3] = pupil_ratio
     return factors
 
 
