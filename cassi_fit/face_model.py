@@ -37,7 +37,7 @@ MEASURES = ("face_width", "jaw_width", "mouth_width", "upper_lip_thickness",
             "lower_lip_thickness", "nose_protrusion")
 # Per-vertex deformation fields stored beside the positions (see model/README.md).
 FIELDS = ("upper_lip", "lower_lip", "upper_vermilion", "lower_vermilion", "mouth", "nose",
-          "nose_rise", "jaw_shape", "tongue_s")
+          "nose_rise", "jaw_shape", "tongue_s", "tongue_jaw", "tongue_follow")
 VERTEX_COLUMNS = ("x", "y", "z", "w_cassi", "w_parke") + FIELDS
 
 

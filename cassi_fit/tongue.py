@@ -15,9 +15,13 @@ sites); in front of T1 it equals T1's. Behind T4 the back anchor option decides:
 
 from __future__ import annotations
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+import numpy as np
+from jaxtyping import Array, Float, Int
 
+from .face_model import MATERIALS, FaceModel
 from .options import TONGUE_ANCHORS, check_choice
 
 
@@ -50,3 +54,43 @@ def tongue_displacement(
         trend = jnp.clip(behind / (site_s[3] - site_s[2]), 0.0, 0.5)
         d = d + (displacement[3] - displacement[2]) * trend
     return d
+
+
+#: Cubic millimetres per millilitre (volumes are reported in mL).
+MM3_PER_ML = 1000.0
+
+
+def closed_mesh_volume(vertices: Float[Array, "V 3"], faces: Int[np.ndarray, "F 3"]) -> Float[Array, ""]:
+    """Signed volume (mm^3) enclosed by the triangles ``faces (F, 3)`` (indices into
+    ``vertices (V, 3)`` mm), by the divergence theorem: the sum over the triangles of
+    ``a . (b x c) / 6``. Exact for a closed, consistently oriented mesh (positive when
+    the triangles face outward), independent of the origin, smooth in the vertices."""
+    faces = np.asarray(faces)
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    return jnp.sum(a * jnp.cross(b, c)) / 6.0
+
+
+def tongue_faces(model: FaceModel) -> Int[np.ndarray, "F 3"]:
+    """The triangles ``(F, 3)`` of the tongue (material ``"tongue"``), as static numpy:
+    a closed tube (model/build_model.py), so :func:`closed_mesh_volume` is its volume."""
+    mat = list(MATERIALS).index("tongue")
+    return np.asarray(model.faces)[np.asarray(model.face_material) == mat]
+
+
+def tongue_volume(model: FaceModel, vertices: Float[Array, "V 3"]) -> Float[Array, ""]:
+    """Volume (mL) of the tongue of ``model`` posed at ``vertices (V, 3)`` mm."""
+    return closed_mesh_volume(vertices, tongue_faces(model)) / MM3_PER_ML
+
+
+def tongue_volumes(model: FaceModel, vertices: Float[Array, "m V 3"]) -> Float[np.ndarray, " m"]:
+    """Per-frame tongue volumes ``(m,)`` mL of ``vertices (m, V, 3)`` mm (numpy; one
+    compiled call per model topology and frame count)."""
+    vertices = jnp.asarray(vertices)
+    if vertices.shape[0] == 0:
+        return np.zeros(0)
+    return np.asarray(_volumes(model, vertices))
+
+
+@eqx.filter_jit
+def _volumes(model, vertices):
+    return jax.vmap(lambda v: tongue_volume(model, v))(vertices)

@@ -367,17 +367,48 @@ def build_arch(arch, teeth, y0, up, snaps=()):
 
 
 # ---------------------------------------------------------------------------- tongue
-# Upper-surface midline (x, y) from the tip to the root, through T1..T4 exactly; thickness
-# (mm, along the inward normal) and half width at each control point.
-TONGUE = [  # x, y, thickness, half width
-    (-9.0, -4.5, 6.0, 8.0), (-12.5, -1.0, 11.0, 11.5), (*SITES["T1"], 16.0, 14.5),
-    (-23.0, 4.5, 20.0, 18.0), (*SITES["T2"], 24.0, 21.0), (-35.0, 10.0, 26.0, 22.5),
-    (*SITES["T3"], 28.0, 22.5), (-47.0, 15.0, 28.0, 22.5), (*SITES["T4"], 28.0, 22.0),
-    (-61.0, 17.0, 28.0, 21.0), (-68.0, 13.5, 28.0, 19.5), (-73.0, 6.0, 26.0, 18.0),
-    (-75.5, -4.0, 22.0, 16.0), (-76.0, -14.0, 18.0, 15.0)]
-TONGUE_RING = 12
-TONGUE_UNDER_TAPER = 0.35  # the underside narrows into the floor of the mouth
+# The tongue as an organ, midsagittal outline in two lines from the tip to the hyoid:
+# * TONGUE_UPPER: the free surface, tip -> dorsum (through T1..T4 exactly, control points
+#   2, 4, 6, 8) -> down the pharyngeal surface of the tongue base (facing the oropharynx)
+#   -> the vallecula -> the hyoid's upper border;
+# * TONGUE_LOWER: the attached side, the tip's underside -> the frenulum -> the floor of the
+#   mouth at the genial tubercles behind the symphysis (genioglossus, geniohyoid) -> along
+#   the floor (mylohyoid, geniohyoid) back to the hyoid.
+# Control point k of one line pairs with control point k of the other: each pair is one
+# cross-section (a fan of sections from the genial/hyoid attachment up into the dorsum,
+# the way the genioglossus fibres run), so no section crosses another.
+# Sources (docs/TONGUE.md): the hyoid body sits about 32 mm in front of C3 (Bibby & Preston
+# 1981, the hyoid triangle: C3-H 31.8 +- 2.9 mm) and about 15 mm below the mandibular
+# plane; with the synthetic pharyngeal walls at x = -66..-78 mm that puts hyoidale at about
+# (-43, -46) mm. The tongue base is kept about 10-15 mm in front of those walls (the
+# oropharyngeal airway's depth). The rest volume (measured, docs/TONGUE.md) is checked
+# against Liegeois et al. 2010 (MRI, 70 adults: 68.9 +- 7.0 mL women, 89.9 +- 11.5 mL men).
+TONGUE_UPPER = [  # x, y: tip -> hyoid
+    (-9.0, -4.5), (-12.5, -1.0), SITES["T1"], (-23.0, 4.5), SITES["T2"], (-35.0, 10.0),
+    SITES["T3"], (-47.0, 15.0), SITES["T4"], (-58.5, 15.5), (-62.0, 9.0), (-63.0, 0.0),
+    (-62.0, -11.0), (-59.0, -23.0), (-54.0, -33.0), (-48.0, -41.0)]
+TONGUE_LOWER = [  # x, y: the tip's underside -> floor of the mouth -> hyoid
+    (-11.5, -9.0), (-15.5, -11.5), (-19.0, -15.0), (-19.5, -20.5), (-17.5, -26.0),
+    (-15.5, -31.0), (-18.5, -34.5), (-23.5, -37.5), (-28.5, -40.0), (-32.5, -42.0),
+    (-36.0, -43.5), (-38.5, -44.5), (-40.5, -45.5), (-42.0, -46.0), (-43.5, -46.0),
+    (-45.0, -45.0)]
+# half width (mm) of each section: the free tongue widens to the dorsum; below the lower
+# teeth's occlusal level it must stay inside the lower arch (the rest projection flattens
+# what does not); the base behind the molars is the widest part.
+TONGUE_HALF_WIDTH = [8.0, 11.5, 14.5, 17.0, 19.0, 20.5, 21.5, 22.5, 23.0, 23.0, 22.5, 21.5,
+                     20.0, 17.5, 13.0, 7.0]
+# jaw attachment at each section's lower end (fraction of the mandible's motion): the
+# floor at the genial tubercles moves with the mandible; toward the hyoid less (the hyoid
+# hangs between mandible, skull base and larynx, and drops only part of the way when the
+# jaw opens)
+TONGUE_FLOOR_JAW = [0.6, 0.8, 0.9, 1.0, 1.0, 1.0, 1.0, 0.95, 0.9, 0.85, 0.8, 0.75, 0.7,
+                    0.65, 0.6, 0.55]
+TONGUE_DORSUM_JAW = 0.35   # jaw-carried share of the free surface (the pellets move it)
+TONGUE_RING = 16
+TONGUE_UNDER_TAPER = 0.25  # the underside narrows into the floor of the mouth
 TONGUE_ANCHOR = 10  # control point index from which CASSI's fixed anchors hold the back
+TONGUE_FREE_TIP = 2  # in front of control point 2 (T1) the whole section follows the pellets
+TONGUE_FLOOR_FOLLOW = 0.2  # share of the pellets' displacement the floor still takes
 
 
 def catmull_rom(points, per_segment=2):
@@ -394,30 +425,45 @@ def catmull_rom(points, per_segment=2):
 
 
 def build_tongue():
-    """Closed tongue tube: vertices, faces, arc length per vertex, control station ids."""
-    ctrl = np.array(TONGUE)
-    st = catmull_rom(ctrl, 2)                # stations; control point k is station 2k
-    xy, thick, hw = st[:, :2], st[:, 2], st[:, 3]
-    s = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
-    tang = np.gradient(xy, axis=0)
-    tang /= np.linalg.norm(tang, axis=1, keepdims=True)
-    n_in = np.stack([-tang[:, 1], tang[:, 0]], 1)      # points into the tongue body
+    """Closed tongue tube: vertices, faces, per-vertex fields (``tongue_s`` arc length
+    along the upper line, ``tongue_jaw`` jaw attachment, ``tongue_follow`` share of the
+    pellet displacement), control station ids of T1..T4, the anchor arc length.
+
+    Station i is the section from the upper-line point U_i (ring vertex 0) to the
+    lower-line point L_i (ring vertex R/2); ring vertex k sits at the fraction
+    u = (1 - cos a_k) / 2 of the way and at z = +-half width x |sin a_k|^0.6 (narrower
+    toward the floor)."""
+    per = np.column_stack([TONGUE_UPPER, TONGUE_LOWER, TONGUE_HALF_WIDTH, TONGUE_FLOOR_JAW])
+    st = catmull_rom(per, 2)                # stations; control point k is station 2k
+    up, lo, hw, floor_jaw = st[:, :2], st[:, 2:4], st[:, 4], st[:, 5]
+    s = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(up, axis=0), axis=1))])
     psi = 2 * np.pi * np.arange(TONGUE_RING) / TONGUE_RING
-    verts, svals = [], []
+    s_free = s[2 * TONGUE_FREE_TIP]
+    verts, svals, jaw, follow = [], [], [], []
     for i in range(len(st)):
+        # the sections in front of T1 (the free tip) follow the pellets whole; behind,
+        # the floor takes only TONGUE_FLOOR_FOLLOW of it
+        attached = min(1.0, s[i] / s_free) if s_free > 0 else 1.0
         for k in range(len(psi)):
             a_m = 2 * np.pi * min(k, TONGUE_RING - k) / TONGUE_RING  # mirror-exact
-            off = thick[i] / 2 * (1 - np.cos(a_m)) * n_in[i]
+            u = 0.5 * (1 - np.cos(a_m))
+            p = up[i] + u * (lo[i] - up[i])
             sgn = 0.0 if k in (0, TONGUE_RING // 2) else (1.0 if k < TONGUE_RING // 2 else -1.0)
             z = hw[i] * sgn * abs(np.sin(a_m)) ** 0.6
             z *= 1.0 - TONGUE_UNDER_TAPER * max(0.0, -np.cos(a_m))  # narrower below
-            verts.append([xy[i, 0] + off[0], xy[i, 1] + off[1], z])
+            verts.append([p[0], p[1], z])
             svals.append(s[i])
+            jaw.append(TONGUE_DORSUM_JAW + u * (floor_jaw[i] - TONGUE_DORSUM_JAW))
+            follow.append(1.0 - attached * u * (1.0 - TONGUE_FLOOR_FOLLOW))
     n_st = len(st)
-    tip = xy[0] + thick[0] / 2 * n_in[0] - 3.0 * tang[0]
-    root = xy[-1] + thick[-1] / 2 * n_in[-1] + 2.0 * tang[-1]
+    tang0 = (up[1] - up[0]) / np.linalg.norm(up[1] - up[0])
+    tip = 0.5 * (up[0] + lo[0]) - 2.5 * tang0
+    root = 0.5 * (up[-1] + lo[-1]) + 1.0 * (up[-1] - up[-2]) / np.linalg.norm(up[-1] - up[-2])
     verts += [[tip[0], tip[1], 0.0], [root[0], root[1], 0.0]]
     svals += [s[0], s[-1]]
+    jaw += [TONGUE_DORSUM_JAW + 0.5 * (floor_jaw[0] - TONGUE_DORSUM_JAW),
+            TONGUE_DORSUM_JAW + 0.5 * (floor_jaw[-1] - TONGUE_DORSUM_JAW)]
+    follow += [1.0, 1.0 - 0.5 * (1.0 - TONGUE_FLOOR_FOLLOW)]
     faces, R = [], TONGUE_RING
     for i in range(n_st - 1):
         for k in range(R):
@@ -429,7 +475,9 @@ def build_tongue():
         faces.append((t0, (k + 1) % R, k))
         faces.append((t1, (n_st - 1) * R + k, (n_st - 1) * R + (k + 1) % R))
     sites = {name: 2 * k * R for name, k in (("T1", 2), ("T2", 4), ("T3", 6), ("T4", 8))}
-    return np.array(verts), np.array(faces), np.array(svals), sites, s[2 * TONGUE_ANCHOR]
+    fields = {"tongue_s": np.array(svals), "tongue_jaw": np.array(jaw),
+              "tongue_follow": np.array(follow)}
+    return np.array(verts), np.array(faces), fields, sites, s[2 * TONGUE_ANCHOR]
 
 
 def build_eye(centre, radius=12.0, n_lat=8, n_lon=12):
@@ -509,7 +557,7 @@ def build():
                         snaps=[(0, 8, SITES["MNI"]), (6, 1, SITES["MNM"])])
     parts.append(("upper_teeth", uv, uf, MAT["teeth"]))
     parts.append(("lower_teeth", lv, lf, MAT["teeth"]))
-    tv, tf, ts, tsites, anchor_s = build_tongue()
+    tv, tf, tfields, tsites, anchor_s = build_tongue()
     parts.append(("tongue", tv, tf, MAT["tongue"]))
     from cassi_fit.palate import DEFAULT_OUTLINE, build_palate
     pv, pf = build_palate(DEFAULT_OUTLINE)
@@ -532,11 +580,12 @@ def build():
     wp[regions["lower_teeth"]] = PARKE["lower_teeth"]
     full = {k: np.zeros(n) for k in ("upper_lip", "lower_lip", "upper_vermilion",
                                      "lower_vermilion", "mouth", "nose", "nose_rise",
-                                     "jaw_shape", "tongue_s")}
+                                     "jaw_shape", "tongue_s", "tongue_jaw", "tongue_follow")}
     for k, v in fields.items():
         full[k][: len(sv)] = v
     full["jaw_shape"][: len(sv)] = jaw_shape_field(sv)
-    full["tongue_s"][regions["tongue"]] = ts
+    for k, v in tfields.items():
+        full[k][regions["tongue"]] = v
     skin = regions["skin"]
     row_of = {k: ids[:, 0] == ROW_INDEX[k] for k in ROW_INDEX}
     up_rows = np.isin(names, ["UL", "ul_red", "ul_low", "A", "A_in"])
