@@ -33,7 +33,7 @@ from . import rigid
 from .face_model import FaceModel
 from .options import JAW_WEIGHTS, TONGUE_ANCHORS, TONGUE_SHAPES, check_choice
 from .pellets import PELLET_NAMES
-from .tongue import closed_mesh_volume, tongue_displacement, tongue_faces
+from .tongue import closed_mesh_volume, keep_volume, tongue_displacement, tongue_faces
 
 #: The model's pellet-site landmarks, in pellet order (``pellets.PELLET_NAMES``).
 PELLET_SITES = PELLET_NAMES
@@ -199,10 +199,7 @@ def tongue(
     relative = p.tongue - (carried[sites] - rest[sites])
     d = tongue_displacement(s[idx], site_s, relative, anchor_s, anchor)
     xy = carried + f["tongue_follow"][idx][:, None] * d
-    faces = tongue_faces(model)
-    volume_in = closed_mesh_volume(v, faces)
-    moved = v.at[idx, :2].set(xy)
-    return moved.at[idx, 2].multiply(volume_in / closed_mesh_volume(moved, faces))
+    return keep_volume(model, v.at[idx, :2].set(xy), closed_mesh_volume(v, tongue_faces(model)))
 
 
 def deform(

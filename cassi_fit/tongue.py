@@ -19,7 +19,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, ArrayLike, Float, Int
 
 from .face_model import MATERIALS, FaceModel
 from .options import TONGUE_ANCHORS, check_choice
@@ -94,3 +94,15 @@ def tongue_volumes(model: FaceModel, vertices: Float[Array, "m V 3"]) -> Float[n
 @eqx.filter_jit
 def _volumes(model, vertices):
     return jax.vmap(lambda v: tongue_volume(model, v))(vertices)
+
+
+def keep_volume(model: FaceModel, vertices: Float[Array, "V 3"], volume: Float[ArrayLike, ""]) -> Float[Array, "V 3"]:
+    """``vertices (V, 3)`` with the tongue's width scaled about the midsagittal plane
+    (``z -> k z``, tongue vertices only) so that its volume is ``volume`` mm^3.
+
+    A linear map in ``z`` scales a closed mesh's volume by ``k`` exactly, so one step is
+    exact: ``k = volume / V``. The pellet sites (at ``z = 0``) do not move; smooth in
+    everything (``V > 0`` for any sane pose of the closed tube)."""
+    idx = np.asarray(model.regions["tongue"])
+    k = volume / closed_mesh_volume(vertices, tongue_faces(model))
+    return vertices.at[idx, 2].multiply(k)

@@ -385,8 +385,8 @@ def build_arch(arch, teeth, y0, up, snaps=()):
 # against Liegeois et al. 2010 (MRI, 70 adults: 68.9 +- 7.0 mL women, 89.9 +- 11.5 mL men).
 TONGUE_UPPER = [  # x, y: tip -> hyoid
     (-9.0, -4.5), (-12.5, -1.0), SITES["T1"], (-23.0, 4.5), SITES["T2"], (-35.0, 10.0),
-    SITES["T3"], (-47.0, 15.0), SITES["T4"], (-58.5, 15.5), (-62.0, 9.0), (-63.0, 0.0),
-    (-62.0, -11.0), (-59.0, -23.0), (-54.0, -33.0), (-48.0, -41.0)]
+    SITES["T3"], (-47.0, 15.0), SITES["T4"], (-58.0, 15.5), (-61.0, 9.0), (-61.5, 0.0),
+    (-60.5, -11.0), (-57.5, -23.0), (-53.0, -33.0), (-48.0, -41.0)]
 TONGUE_LOWER = [  # x, y: the tip's underside -> floor of the mouth -> hyoid
     (-11.5, -9.0), (-15.5, -11.5), (-19.0, -15.0), (-19.5, -20.5), (-17.5, -26.0),
     (-15.5, -31.0), (-18.5, -34.5), (-23.5, -37.5), (-28.5, -40.0), (-32.5, -42.0),
@@ -395,8 +395,8 @@ TONGUE_LOWER = [  # x, y: the tip's underside -> floor of the mouth -> hyoid
 # half width (mm) of each section: the free tongue widens to the dorsum; below the lower
 # teeth's occlusal level it must stay inside the lower arch (the rest projection flattens
 # what does not); the base behind the molars is the widest part.
-TONGUE_HALF_WIDTH = [8.0, 11.5, 14.5, 17.0, 19.0, 20.5, 21.5, 22.5, 23.0, 23.0, 22.5, 21.5,
-                     20.0, 17.5, 13.0, 7.0]
+TONGUE_HALF_WIDTH = [8.0, 11.5, 14.5, 17.0, 19.0, 20.5, 21.5, 22.5, 23.5, 24.0, 24.0, 23.0,
+                     21.0, 18.0, 13.0, 7.0]
 # jaw attachment at each section's lower end (fraction of the mandible's motion): the
 # floor at the genial tubercles moves with the mandible; toward the hyoid less (the hyoid
 # hangs between mandible, skull base and larynx, and drops only part of the way when the
