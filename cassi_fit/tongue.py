@@ -105,4 +105,4 @@ def keep_volume(model: FaceModel, vertices: Float[Array, "V 3"], volume: Float[A
     everything (``V > 0`` for any sane pose of the closed tube)."""
     idx = np.asarray(model.regions["tongue"])
     k = volume / closed_mesh_volume(vertices, tongue_faces(model))
-    return vertices.at[idx, 2].multiply(k)
+    return vertices.at[idx, 2].set(vertices[idx, 2] * k)

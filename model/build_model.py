@@ -409,6 +409,8 @@ TONGUE_UNDER_TAPER = 0.25  # the underside narrows into the floor of the mouth
 TONGUE_ANCHOR = 10  # control point index from which CASSI's fixed anchors hold the back
 TONGUE_FREE_TIP = 2  # in front of control point 2 (T1) the whole section follows the pellets
 TONGUE_FLOOR_FOLLOW = 0.2  # share of the pellets' displacement the floor still takes
+TONGUE_BASE = 11  # control point where the back turns down into the base (y about 0)
+TONGUE_ROOT_FOLLOW = 0.5  # share of the pellets' displacement left at the hyoid end
 
 
 def catmull_rom(points, per_segment=2):
@@ -439,6 +441,9 @@ def build_tongue():
     s = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(up, axis=0), axis=1))])
     psi = 2 * np.pi * np.arange(TONGUE_RING) / TONGUE_RING
     s_free = s[2 * TONGUE_FREE_TIP]
+    # down the tongue base toward the hyoid the pellets' share falls to TONGUE_ROOT_FOLLOW
+    s_base = s[2 * TONGUE_BASE]
+    root_fall = 1.0 - (1.0 - TONGUE_ROOT_FOLLOW) * np.clip((s - s_base) / (s[-1] - s_base), 0, 1)
     verts, svals, jaw, follow = [], [], [], []
     for i in range(len(st)):
         # the sections in front of T1 (the free tip) follow the pellets whole; behind,
@@ -453,8 +458,8 @@ def build_tongue():
             z *= 1.0 - TONGUE_UNDER_TAPER * max(0.0, -np.cos(a_m))  # narrower below
             verts.append([p[0], p[1], z])
             svals.append(s[i])
-            jaw.append(TONGUE_DORSUM_JAW + u * (floor_jaw[i] - TONGUE_DORSUM_JAW))
-            follow.append(1.0 - attached * u * (1.0 - TONGUE_FLOOR_FOLLOW))
+            jaw.append(min(1.0, TONGUE_DORSUM_JAW + u * (floor_jaw[i] - TONGUE_DORSUM_JAW)))
+            follow.append((1.0 - attached * u * (1.0 - TONGUE_FLOOR_FOLLOW)) * root_fall[i])
     n_st = len(st)
     tang0 = (up[1] - up[0]) / np.linalg.norm(up[1] - up[0])
     tip = 0.5 * (up[0] + lo[0]) - 2.5 * tang0
@@ -463,7 +468,7 @@ def build_tongue():
     svals += [s[0], s[-1]]
     jaw += [TONGUE_DORSUM_JAW + 0.5 * (floor_jaw[0] - TONGUE_DORSUM_JAW),
             TONGUE_DORSUM_JAW + 0.5 * (floor_jaw[-1] - TONGUE_DORSUM_JAW)]
-    follow += [1.0, 1.0 - 0.5 * (1.0 - TONGUE_FLOOR_FOLLOW)]
+    follow += [1.0, (1.0 - 0.5 * (1.0 - TONGUE_FLOOR_FOLLOW)) * TONGUE_ROOT_FOLLOW]
     faces, R = [], TONGUE_RING
     for i in range(n_st - 1):
         for k in range(R):
@@ -665,7 +670,18 @@ def tongue_at_rest(V, regions, chains):
 
     rest = SimpleNamespace(regions={**regions, "upper_lip": [], "lower_lip": []},
                            collision={k: np.asarray(v) for k, v in chains.items()})
-    return np.asarray(project(rest, jnp.asarray(V, jnp.float64)))
+    out = np.array(project(rest, jnp.asarray(V, jnp.float64)))
+    # the projection is not exactly mirror-symmetric where the two halves of an arch meet:
+    # of each mirror pair of ring vertices keep the one pushed farther, mirrored
+    idx = np.asarray(regions["tongue"])
+    R = TONGUE_RING
+    ring = idx[:-2].reshape(-1, R)
+    mirror = ring[:, (-np.arange(R)) % R]
+    moved = np.linalg.norm(out[ring] - V[ring], axis=-1)
+    pick = np.where(moved >= np.linalg.norm(out[mirror] - V[mirror], axis=-1), ring, mirror)
+    out[ring] = out[pick] * np.where((pick == ring)[..., None], 1.0, [1.0, 1.0, -1.0])
+    out[ring[:, [0, R // 2]], 2] = 0.0
+    return out
 
 
 # Ring vertices of a crown (see ``tooth``): 0-5 occlusal ring, 6-11 cervical ring, at
