@@ -34,6 +34,7 @@ from ..animate import frame_bucket, pad_frames
 from ..collide import FRONT_TEETH, REPORT_KEYS, has_collision_data, report_frames
 from ..errors import DegenerateGeometryError, MissingDataError
 from ..palate import N_ACROSS, N_ALONG
+from ..tongue import tongue_volumes
 
 if TYPE_CHECKING:
     from ..animate import Animation
@@ -103,6 +104,11 @@ MEASURES: dict[str, MeasureSpec] = {
         "mm", "max", False, "as tongue_palate_mm, before projection"),
     "teeth_in_lips_before_mm": MeasureSpec(
         "mm", "max", False, "deepest lip point in the teeth, before projection"),
+    # the tongue's volume over the frames (docs/TONGUE.md; ~0 for CASSI's flat sheet)
+    "tongue_volume_min_ml": MeasureSpec(
+        "mL", "min", False, "smallest tongue volume over the frames (reported)"),
+    "tongue_volume_max_ml": MeasureSpec(
+        "mL", "max", False, "largest tongue volume over the frames (reported)"),
 }  # fmt: skip
 
 
@@ -411,5 +417,7 @@ def measure(state: SubjectState, anim: Animation) -> dict[str, float]:
             np.maximum(before["lips_upper_teeth"], before["lips_lower_teeth"])
         ),
     }
+    volume = tongue_volumes(model, anim.vertices)
+    out["tongue_volume_min_ml"], out["tongue_volume_max_ml"] = volume.min(), volume.max()
     return {k: float(v) for k, v in out.items()}
 
