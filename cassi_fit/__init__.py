@@ -133,6 +133,8 @@ if TYPE_CHECKING:
     from .synth import load_truth as load_truth
     from .synth import make_subject as make_subject
     from .synth import synth_recording as synth_recording
+    from .tongue import tongue_volume as tongue_volume
+    from .tongue import tongue_volumes as tongue_volumes
     from .txy import PelletTrack as PelletTrack
     from .txy import TimeGapWarning as TimeGapWarning
     from .txy import first_valid_frame as first_valid_frame
@@ -217,6 +219,9 @@ _PUBLIC = {
     "FaceParams": "deform",
     "default_params": "deform",
     "vertex_normals": "deform",
+    # tongue (model)
+    "tongue_volume": "tongue",
+    "tongue_volumes": "tongue",
     "model_pellets": "deform",
     # palate (model)
     "build_palate": "palate",
@@ -305,7 +310,8 @@ __all__ = [
     "load_recording", "load_truth", "make_subject", "mode_named", "model_pellets", "pellet_index",
     "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
     "read_outline", "read_textgrid", "read_txy", "repair", "require_tracked", "rigid",
-    "run_corpus", "segment_summary", "synth", "synth_recording", "vertex_normals", "with_palate",
+    "run_corpus", "segment_summary", "synth", "synth_recording", "tongue_volume",
+    "tongue_volumes", "vertex_normals", "with_palate",
     "write_animation", "write_calibration", "write_headmeasures", "write_lab", "write_outline",
     "write_penetration_csv", "write_report", "write_table", "write_textgrid", "write_txy",
 ]

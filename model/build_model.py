@@ -12,7 +12,9 @@ Construction (all mm, model frame: origin = upper incisor tip, +x front, +y up,
   midline around to the back midline. Nose, eye sockets, cheekbones, lips and chin are
   smooth bumps on top of the loft. The two lips are their own rows, with a real opening.
 * eyes: spheres in the sockets; teeth: two arches of individual crowns; tongue: a closed
-  tube shaped through the four tongue pellet sites; palate: ``cassi_fit.palate``.
+  body from the tip over the dorsum (through the four tongue pellet sites) down to the
+  hyoid and along the floor of the mouth, with its jaw attachment and pellet share per
+  vertex (docs/TONGUE.md); palate: ``cassi_fit.palate``.
 """
 
 from __future__ import annotations
