@@ -45,7 +45,7 @@ from .pellets import JAW_INDEX, LL, PELLET_NAMES, T1, T4, UL
 _FRAME_BUCKET = 64
 _COLLISION_BATCH = 32
 #: Volume-restoring passes after the collision projection (``_project_keeping_volume``).
-TONGUE_VOLUME_PASSES = 2
+TONGUE_VOLUME_PASSES = 3
 
 
 class Animation(eqx.Module):
@@ -145,8 +145,8 @@ def _project_keeping_volume(model, vertices, tongue_shape):
     """``collide.project``; for the thick tongue, then ``TONGUE_VOLUME_PASSES`` times:
     the tongue's volume restored to what it was before the projection
     (``tongue.keep_volume``: its width scaled) and projected again. Pushing the tongue
-    out of the teeth and the palate takes up to about 6 % of its volume off; after the
-    passes it is back within about 1 % (docs/TONGUE.md)."""
+    out of the teeth and the palate takes up to about 6 % of its volume off; each pass
+    gives back most of what is left (docs/TONGUE.md)."""
     from . import collide
     from .tongue import closed_mesh_volume, keep_volume, tongue_faces
 

@@ -387,7 +387,7 @@ def build_arch(arch, teeth, y0, up, snaps=()):
 # against Liegeois et al. 2010 (MRI, 70 adults: 68.9 +- 7.0 mL women, 89.9 +- 11.5 mL men).
 TONGUE_UPPER = [  # x, y: tip -> hyoid
     (-9.0, -4.5), (-12.5, -1.0), SITES["T1"], (-23.0, 4.5), SITES["T2"], (-35.0, 10.0),
-    SITES["T3"], (-47.0, 15.0), SITES["T4"], (-58.0, 15.5), (-61.0, 9.0), (-61.5, 0.0),
+    SITES["T3"], (-47.0, 15.1), SITES["T4"], (-58.0, 15.5), (-61.0, 9.0), (-61.5, 0.0),
     (-60.5, -11.0), (-57.5, -23.0), (-53.0, -33.0), (-48.0, -41.0)]
 TONGUE_LOWER = [  # x, y: the tip's underside -> floor of the mouth -> hyoid
     (-11.5, -9.0), (-15.5, -11.5), (-19.0, -15.0), (-19.5, -20.5), (-17.5, -26.0),
