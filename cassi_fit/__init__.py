@@ -136,6 +136,8 @@ if TYPE_CHECKING:
     from .synth import load_truth as load_truth
     from .synth import make_subject as make_subject
     from .synth import synth_recording as synth_recording
+    from .tongue import tongue_volume as tongue_volume
+    from .tongue import tongue_volumes as tongue_volumes
     from .txy import PelletTrack as PelletTrack
     from .txy import TimeGapWarning as TimeGapWarning
     from .txy import first_valid_frame as first_valid_frame
@@ -221,6 +223,9 @@ _PUBLIC = {
     "FaceParams": "deform",
     "default_params": "deform",
     "vertex_normals": "deform",
+    # tongue (model)
+    "tongue_volume": "tongue",
+    "tongue_volumes": "tongue",
     "model_pellets": "deform",
     # palate (model)
     "build_palate": "palate",
@@ -315,7 +320,8 @@ __all__ = [
     "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
     "read_outline", "read_textgrid", "read_txy", "repair", "require_tracked", "rigid",
     "run_corpus", "segment_summary", "subject_traces", "synth", "synth_recording",
-    "vertex_normals", "with_palate", "build_pharynx", "with_pharynx",
+    "tongue_volume", "tongue_volumes", "vertex_normals", "with_palate", "build_pharynx",
+    "with_pharynx",
     "write_animation", "write_calibration", "write_headmeasures", "write_lab", "write_outline",
     "write_penetration_csv", "write_report", "write_table", "write_textgrid", "write_txy",
 ]

@@ -1071,9 +1071,14 @@ def animate_task(item: CorpusItem, out_dir: str, *, suffix: str = ".mp4",
         video_output_path(out_dir, item, suffix), animation, renderer, subject=item.subject,
         task=item.task, audio=recording.audio if audio and suffix == ".mp4" else None,
         markers=markers, progress=False, overwrite=overwrite, labels=found)
+    from .tongue import tongue_volumes
+
+    volume = tongue_volumes(state.model, animation.vertices)
     row = {"frames": int(animation.n_frames), "stride": int(animation.stride),
            "video": str(Path(path).relative_to(Path(out_dir))),
-           "label_file": found.path.name if found is not None and found.path else ""}
+           "label_file": found.path.name if found is not None and found.path else "",
+           "tongue_volume_min_ml": round(float(volume.min()), 3),
+           "tongue_volume_max_ml": round(float(volume.max()), 3)}
     return TaskResult(row, (str(path),))
 
 

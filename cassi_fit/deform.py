@@ -10,9 +10,11 @@
    it), with two couplings: lip rounding (the corners move toward each other when the lips
    come forward, CASSI's future work) and the nose tip rising with the upper lip so that a
    gap always remains between them (CASSI section 2, step 3);
-4. tongue: CASSI's #55-#62 (``cassi_fit.tongue``); with ``tongue_shape="flat"`` every
-   cross-section collapses onto its upper midline point (CASSI's tongue: "a flat surface
-   with no thickness", paper section 5), a sheet as wide as the model's tongue.
+4. tongue: CASSI's #55-#62 (``cassi_fit.tongue``) on a tongue hung from the jaw whose
+   volume is kept (the width scaled by ``V_rest / V``; docs/TONGUE.md); with
+   ``tongue_shape="flat"`` every cross-section collapses onto its upper midline point
+   (CASSI's tongue: "a flat surface with no thickness", paper section 5), a sheet as wide
+   as the model's tongue, moved by the pellets only.
 
 Everything is written for one frame; ``jax.vmap`` over frames. With default parameters
 every stage is the identity to the last bit, so ``deform`` returns the stored rest mesh.
@@ -31,7 +33,7 @@ from . import rigid
 from .face_model import FaceModel
 from .options import JAW_WEIGHTS, TONGUE_ANCHORS, TONGUE_SHAPES, check_choice
 from .pellets import PELLET_NAMES
-from .tongue import tongue_displacement
+from .tongue import closed_mesh_volume, keep_volume, tongue_displacement, tongue_faces
 
 #: The model's pellet-site landmarks, in pellet order (``pellets.PELLET_NAMES``).
 PELLET_SITES = PELLET_NAMES
@@ -155,21 +157,49 @@ def tongue_midline(model: FaceModel) -> tuple[Int[np.ndarray, " n"], Int[np.ndar
 
 def tongue(
     model: FaceModel, v: Float[Array, "V 3"], p: FaceParams, anchor: str = "follow",
-    shape: str = "thick",
+    shape: str = "thick", jaw_weights: str = "cassi",
 ) -> Float[Array, "V 3"]:
-    """Stage 4: tongue params #55-#62 spread along the tongue (``cassi_fit.tongue``);
-    ``shape`` (static, ``options.TONGUE_SHAPES``): ``"flat"`` puts every vertex of a
-    cross-section on its upper midline point in x, y (keeping z, the width): a sheet of
-    zero thickness through T1..T4, as CASSI's tongue."""
+    """Stage 4: tongue params #55-#62 (``cassi_fit.tongue``).
+
+    ``shape`` (static, ``options.TONGUE_SHAPES``):
+
+    * ``"thick"`` (the tongue as an organ, docs/TONGUE.md): every tongue vertex is first
+      carried by the fraction ``fields["tongue_jaw"]`` of the jaw motion (``j``: the floor
+      of the mouth and the genial attachment move with the mandible, the hyoid end less);
+      then the pellets' displacement relative to that, ``p.tongue[k] - j(T_k)``, is spread
+      along the tongue (``tongue_displacement``) and added with the weight
+      ``fields["tongue_follow"]`` (1 on the upper surface, so T1..T4 land exactly on
+      rest + ``p.tongue``; small on the floor); last, the width ``z`` is scaled about the
+      midsagittal plane by ``V_in / V`` (a linear map in ``z`` scales a closed mesh's
+      volume by the same factor), so the tongue keeps the volume it had on entering the
+      stage (the rest volume), exactly and differentiably; the pellet sites, at ``z = 0``,
+      stay put. A muscular hydrostat narrows as it lengthens.
+    * ``"flat"`` (CASSI): every vertex of a cross-section goes to its upper midline point
+      in x, y (keeping z, the width): a sheet of zero thickness through T1..T4, moved by
+      the pellets only, as CASSI's tongue (no jaw attachment, no volume).
+    """
     check_choice("tongue anchor", anchor, TONGUE_ANCHORS)
     check_choice("tongue shape", shape, TONGUE_SHAPES)
+    check_choice("jaw weights", jaw_weights, JAW_WEIGHTS)
     idx, top = tongue_midline(model)
-    s = model.fields["tongue_s"]
-    site_s = jnp.stack([s[model.landmarks[k]] for k in ("T1", "T2", "T3", "T4")])
-    d = tongue_displacement(s[idx], site_s, p.tongue, model.measures["tongue_anchor_s"], anchor)
+    f = model.fields
+    s = f["tongue_s"]
+    names = ("T1", "T2", "T3", "T4")
+    site_s = jnp.stack([s[model.landmarks[k]] for k in names])
+    anchor_s = model.measures["tongue_anchor_s"]
     if shape == "flat":
+        d = tongue_displacement(s[idx], site_s, p.tongue, anchor_s, anchor)
         v = v.at[idx, :2].set(v[top, :2])
-    return v.at[idx, :2].add(d)
+        return v.at[idx, :2].add(d)
+    rest = v[idx, :2]
+    mandible = model.jaw_weights[jaw_weights][model.landmarks["lower_incisor_tip"]]
+    carried = _move_by_fraction((p.jaw_theta, p.jaw_translation),
+                                f["tongue_jaw"][idx] * mandible, rest)
+    sites = np.array([model.landmarks[k] for k in names]) - idx[0]
+    relative = p.tongue - (carried[sites] - rest[sites])
+    d = tongue_displacement(s[idx], site_s, relative, anchor_s, anchor)
+    xy = carried + f["tongue_follow"][idx][:, None] * d
+    return keep_volume(model, v.at[idx, :2].set(xy), closed_mesh_volume(v, tongue_faces(model)))
 
 
 def deform(
@@ -188,7 +218,7 @@ def deform(
     v = conformation(model, v, params)
     v = jaw(model, v, params, jaw_weights)
     v = lips(model, v, params, bool(lip_rounding))
-    return tongue(model, v, params, tongue_anchor, tongue_shape)
+    return tongue(model, v, params, tongue_anchor, tongue_shape, jaw_weights)
 
 
 def vertex_normals(vertices: Float[Array, "V 3"], faces: Int[np.ndarray, "F 3"]) -> Float[Array, "V 3"]:

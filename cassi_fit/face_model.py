@@ -37,8 +37,9 @@ MEASURES = ("face_width", "jaw_width", "mouth_width", "upper_lip_thickness",
             "lower_lip_thickness", "nose_protrusion")
 # Per-vertex deformation fields stored beside the positions (see model/README.md).
 FIELDS = ("upper_lip", "lower_lip", "upper_vermilion", "lower_vermilion", "mouth", "nose",
-          "nose_rise", "jaw_shape", "tongue_s")
+          "nose_rise", "jaw_shape", "tongue_s", "tongue_jaw", "tongue_follow")
 VERTEX_COLUMNS = ("x", "y", "z", "w_cassi", "w_parke") + FIELDS
+_ONE_IF_ABSENT = ("tongue_follow",)
 
 
 def _digest(value, h) -> None:
@@ -238,8 +239,8 @@ def load_model(path: str | Path | None = None) -> FaceModel:
             raise DataFormatError(mpath, None, f"collision {k} must be a list of columns")
     vertices = jnp.asarray(table[:, :3])
     fields = {f: jnp.asarray(fields_table[:, k]) for k, f in enumerate(extra)}
-    for f in FIELDS:
-        fields.setdefault(f, jnp.zeros(n))
+    for f in FIELDS:  # absent: 0, but the tongue follows its pellets whole (no floor)
+        fields.setdefault(f, jnp.ones(n) if f in _ONE_IF_ABSENT else jnp.zeros(n))
     topology = Topology(
         faces=faces,
         face_material=material,

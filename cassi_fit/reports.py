@@ -32,6 +32,20 @@ def penetration_summary(animation: Animation) -> str:
     return "\n".join(lines)
 
 
+def tongue_volume_summary(model: object, animation: Animation) -> str:
+    """One line: the tongue's volume (mL) at rest and its least and greatest over the
+    frames of ``animation``, also relative to rest (docs/TONGUE.md; CASSI's flat sheet has
+    about none)."""
+    from .tongue import tongue_volumes
+
+    rest = float(tongue_volumes(model, np.asarray(model.vertices)[None])[0])
+    ml = tongue_volumes(model, animation.vertices)
+    text = f"tongue volume, mL: {ml.min():.2f} .. {ml.max():.2f} over the frames (rest {rest:.2f})"
+    if abs(rest) > 1e-9:
+        text += f"; {100 * (ml.min() / rest - 1):+.2f} % .. {100 * (ml.max() / rest - 1):+.2f} %"
+    return text
+
+
 def write_penetration_csv(path: str | Path, animation: Animation, *, overwrite: bool = False) -> Path:
     """A CSV, one row per frame: ``time_s``, ``line`` (1-based data line), then each depth
     (mm) before and after projection. Written atomically; an existing file only with

@@ -16,8 +16,10 @@ sites); in front of T1 it equals T1's. Behind T4 the back anchor option decides:
 from __future__ import annotations
 
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float, Int
 
+from .face_model import MATERIALS, FaceModel
 from .options import TONGUE_ANCHORS, check_choice
 
 
@@ -50,3 +52,52 @@ def tongue_displacement(
         trend = jnp.clip(behind / (site_s[3] - site_s[2]), 0.0, 0.5)
         d = d + (displacement[3] - displacement[2]) * trend
     return d
+
+
+#: Cubic millimetres per millilitre (volumes are reported in mL).
+MM3_PER_ML = 1000.0
+
+
+def closed_mesh_volume(vertices: Float[Array, "V 3"], faces: Int[np.ndarray, "F 3"]) -> Float[Array, ""]:
+    """Signed volume (mm^3) enclosed by the triangles ``faces (F, 3)`` (indices into
+    ``vertices (V, 3)`` mm), by the divergence theorem: the sum over the triangles of
+    ``a . (b x c) / 6``. Exact for a closed, consistently oriented mesh (positive when
+    the triangles face outward), independent of the origin, smooth in the vertices."""
+    faces = np.asarray(faces)
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    return jnp.sum(a * jnp.cross(b, c)) / 6.0
+
+
+def tongue_faces(model: FaceModel) -> Int[np.ndarray, "F 3"]:
+    """The triangles ``(F, 3)`` of the tongue (material ``"tongue"``), as static numpy:
+    a closed tube (model/build_model.py), so :func:`closed_mesh_volume` is its volume."""
+    mat = list(MATERIALS).index("tongue")
+    return np.asarray(model.faces)[np.asarray(model.face_material) == mat]
+
+
+def tongue_volume(model: FaceModel, vertices: Float[Array, "V 3"]) -> Float[Array, ""]:
+    """Volume (mL) of the tongue of ``model`` posed at ``vertices (V, 3)`` mm."""
+    return closed_mesh_volume(vertices, tongue_faces(model)) / MM3_PER_ML
+
+
+def tongue_volumes(model: FaceModel, vertices: Float[ArrayLike, "m V 3"]) -> Float[np.ndarray, " m"]:
+    """Per-frame tongue volumes ``(m,)`` mL of ``vertices (m, V, 3)`` mm, in numpy float64
+    (no compilation, so reporting adds none per recording length)."""
+    faces = tongue_faces(model)
+    used = np.unique(faces)
+    v = np.asarray(np.asarray(vertices)[:, used], np.float64)
+    local = np.searchsorted(used, faces)
+    a, b, c = (v[:, local[:, k]] for k in range(3))
+    return np.einsum("mfi,mfi->m", a, np.cross(b, c)) / 6.0 / MM3_PER_ML
+
+
+def keep_volume(model: FaceModel, vertices: Float[Array, "V 3"], volume: Float[ArrayLike, ""]) -> Float[Array, "V 3"]:
+    """``vertices (V, 3)`` with the tongue's width scaled about the midsagittal plane
+    (``z -> k z``, tongue vertices only) so that its volume is ``volume`` mm^3.
+
+    A linear map in ``z`` scales a closed mesh's volume by ``k`` exactly, so one step is
+    exact: ``k = volume / V``. The pellet sites (at ``z = 0``) do not move; smooth in
+    everything (``V > 0`` for any sane pose of the closed tube)."""
+    idx = np.asarray(model.regions["tongue"])
+    k = volume / closed_mesh_volume(vertices, tongue_faces(model))
+    return vertices.at[idx, 2].set(vertices[idx, 2] * k)

@@ -12,8 +12,10 @@ Construction (all mm, model frame: origin = upper incisor tip, +x front, +y up,
   midline around to the back midline. Nose, eye sockets, cheekbones, lips and chin are
   smooth bumps on top of the loft. The two lips are their own rows, with a real opening.
 * eyes: spheres in the sockets; teeth: two arches of individual crowns; tongue: a closed
-  tube shaped through the four tongue pellet sites; palate: ``cassi_fit.palate``
-  (joined to the upper teeth's necks, with a velum); pharyngeal wall: ``cassi_fit.pharynx``.
+  body from the tip over the dorsum (through the four tongue pellet sites) down to the
+  hyoid and along the floor of the mouth, with its jaw attachment and pellet share per
+  vertex (docs/TONGUE.md); palate: ``cassi_fit.palate`` (joined to the upper teeth's
+  necks, with a velum); pharyngeal wall: ``cassi_fit.pharynx``.
 """
 
 from __future__ import annotations
@@ -595,17 +597,50 @@ def build_arch(arch, teeth, y0, up, snaps=()):
 
 
 # ---------------------------------------------------------------------------- tongue
-# Upper-surface midline (x, y) from the tip to the root, through T1..T4 exactly; thickness
-# (mm, along the inward normal) and half width at each control point.
-TONGUE = [  # x, y, thickness, half width
-    (-9.0, -4.5, 6.0, 8.0), (-12.5, -1.0, 11.0, 11.5), (*SITES["T1"], 16.0, 14.5),
-    (-23.0, 4.5, 20.0, 18.0), (*SITES["T2"], 24.0, 21.0), (-35.0, 10.0, 26.0, 22.5),
-    (*SITES["T3"], 28.0, 22.5), (-47.0, 15.0, 28.0, 22.5), (*SITES["T4"], 28.0, 22.0),
-    (-61.0, 17.0, 28.0, 21.0), (-68.0, 13.5, 28.0, 19.5), (-73.0, 6.0, 26.0, 18.0),
-    (-75.5, -4.0, 22.0, 16.0), (-76.0, -14.0, 18.0, 15.0)]
-TONGUE_RING = 12
-TONGUE_UNDER_TAPER = 0.35  # the underside narrows into the floor of the mouth
+# The tongue as an organ, midsagittal outline in two lines from the tip to the hyoid:
+# * TONGUE_UPPER: the free surface, tip -> dorsum (through T1..T4 exactly, control points
+#   2, 4, 6, 8) -> down the pharyngeal surface of the tongue base (facing the oropharynx)
+#   -> the vallecula -> the hyoid's upper border;
+# * TONGUE_LOWER: the attached side, the tip's underside -> the frenulum -> the floor of the
+#   mouth at the genial tubercles behind the symphysis (genioglossus, geniohyoid) -> along
+#   the floor (mylohyoid, geniohyoid) back to the hyoid.
+# Control point k of one line pairs with control point k of the other: each pair is one
+# cross-section (a fan of sections from the genial/hyoid attachment up into the dorsum,
+# the way the genioglossus fibres run), so no section crosses another.
+# Sources (docs/TONGUE.md): the hyoid body sits about 32 mm in front of C3 (Bibby & Preston
+# 1981, the hyoid triangle: C3-H 31.8 +- 2.9 mm) and about 15 mm below the mandibular
+# plane; with the synthetic pharyngeal walls at x = -66..-78 mm that puts hyoidale at about
+# (-43, -46) mm. The tongue base is kept about 10-15 mm in front of those walls (the
+# oropharyngeal airway's depth). The rest volume (measured, docs/TONGUE.md) is checked
+# against Liegeois et al. 2010 (MRI, 70 adults: 68.9 +- 7.0 mL women, 89.9 +- 11.5 mL men).
+TONGUE_UPPER = [  # x, y: tip -> hyoid
+    (-9.0, -4.5), (-12.5, -1.0), SITES["T1"], (-23.0, 4.5), SITES["T2"], (-35.0, 10.0),
+    SITES["T3"], (-47.0, 15.1), SITES["T4"], (-58.0, 15.5), (-61.0, 9.0), (-61.5, 0.0),
+    (-60.5, -11.0), (-57.5, -23.0), (-53.0, -33.0), (-48.0, -41.0)]
+TONGUE_LOWER = [  # x, y: the tip's underside -> floor of the mouth -> hyoid
+    (-11.5, -9.0), (-15.5, -11.5), (-19.0, -15.0), (-19.5, -20.5), (-17.5, -26.0),
+    (-15.5, -31.0), (-18.5, -34.5), (-23.5, -37.5), (-28.5, -40.0), (-32.5, -42.0),
+    (-36.0, -43.5), (-38.5, -44.5), (-40.5, -45.5), (-42.0, -46.0), (-43.5, -46.0),
+    (-45.0, -45.0)]
+# half width (mm) of each section: the free tongue widens to the dorsum; below the lower
+# teeth's occlusal level it must stay inside the lower arch (the rest projection flattens
+# what does not); the base behind the molars is the widest part.
+TONGUE_HALF_WIDTH = [8.0, 11.5, 14.5, 17.0, 19.0, 20.5, 21.5, 22.5, 23.5, 24.0, 24.0, 23.0,
+                     21.0, 18.0, 13.0, 7.0]
+# jaw attachment at each section's lower end (fraction of the mandible's motion): the
+# floor at the genial tubercles moves with the mandible; toward the hyoid less (the hyoid
+# hangs between mandible, skull base and larynx, and drops only part of the way when the
+# jaw opens)
+TONGUE_FLOOR_JAW = [0.6, 0.8, 0.9, 1.0, 1.0, 1.0, 1.0, 0.95, 0.9, 0.85, 0.8, 0.75, 0.7,
+                    0.65, 0.6, 0.55]
+TONGUE_DORSUM_JAW = 0.35   # jaw-carried share of the free surface (the pellets move it)
+TONGUE_RING = 16
+TONGUE_UNDER_TAPER = 0.25  # the underside narrows into the floor of the mouth
 TONGUE_ANCHOR = 10  # control point index from which CASSI's fixed anchors hold the back
+TONGUE_FREE_TIP = 2  # in front of control point 2 (T1) the whole section follows the pellets
+TONGUE_FLOOR_FOLLOW = 0.2  # share of the pellets' displacement the floor still takes
+TONGUE_BASE = 11  # control point where the back turns down into the base (y about 0)
+TONGUE_ROOT_FOLLOW = 0.5  # share of the pellets' displacement left at the hyoid end
 
 
 def catmull_rom(points, per_segment=2):
@@ -622,30 +657,48 @@ def catmull_rom(points, per_segment=2):
 
 
 def build_tongue():
-    """Closed tongue tube: vertices, faces, arc length per vertex, control station ids."""
-    ctrl = np.array(TONGUE)
-    st = catmull_rom(ctrl, 2)                # stations; control point k is station 2k
-    xy, thick, hw = st[:, :2], st[:, 2], st[:, 3]
-    s = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
-    tang = np.gradient(xy, axis=0)
-    tang /= np.linalg.norm(tang, axis=1, keepdims=True)
-    n_in = np.stack([-tang[:, 1], tang[:, 0]], 1)      # points into the tongue body
+    """Closed tongue tube: vertices, faces, per-vertex fields (``tongue_s`` arc length
+    along the upper line, ``tongue_jaw`` jaw attachment, ``tongue_follow`` share of the
+    pellet displacement), control station ids of T1..T4, the anchor arc length.
+
+    Station i is the section from the upper-line point U_i (ring vertex 0) to the
+    lower-line point L_i (ring vertex R/2); ring vertex k sits at the fraction
+    u = (1 - cos a_k) / 2 of the way and at z = +-half width x |sin a_k|^0.6 (narrower
+    toward the floor)."""
+    per = np.column_stack([TONGUE_UPPER, TONGUE_LOWER, TONGUE_HALF_WIDTH, TONGUE_FLOOR_JAW])
+    st = catmull_rom(per, 2)                # stations; control point k is station 2k
+    up, lo, hw, floor_jaw = st[:, :2], st[:, 2:4], st[:, 4], st[:, 5]
+    s = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(up, axis=0), axis=1))])
     psi = 2 * np.pi * np.arange(TONGUE_RING) / TONGUE_RING
-    verts, svals = [], []
+    s_free = s[2 * TONGUE_FREE_TIP]
+    # down the tongue base toward the hyoid the pellets' share falls to TONGUE_ROOT_FOLLOW
+    s_base = s[2 * TONGUE_BASE]
+    root_fall = 1.0 - (1.0 - TONGUE_ROOT_FOLLOW) * np.clip((s - s_base) / (s[-1] - s_base), 0, 1)
+    verts, svals, jaw, follow = [], [], [], []
     for i in range(len(st)):
+        # the sections in front of T1 (the free tip) follow the pellets whole; behind,
+        # the floor takes only TONGUE_FLOOR_FOLLOW of it
+        attached = min(1.0, s[i] / s_free) if s_free > 0 else 1.0
         for k in range(len(psi)):
             a_m = 2 * np.pi * min(k, TONGUE_RING - k) / TONGUE_RING  # mirror-exact
-            off = thick[i] / 2 * (1 - np.cos(a_m)) * n_in[i]
+            u = 0.5 * (1 - np.cos(a_m))
+            p = up[i] + u * (lo[i] - up[i])
             sgn = 0.0 if k in (0, TONGUE_RING // 2) else (1.0 if k < TONGUE_RING // 2 else -1.0)
             z = hw[i] * sgn * abs(np.sin(a_m)) ** 0.6
             z *= 1.0 - TONGUE_UNDER_TAPER * max(0.0, -np.cos(a_m))  # narrower below
-            verts.append([xy[i, 0] + off[0], xy[i, 1] + off[1], z])
+            verts.append([p[0], p[1], z])
             svals.append(s[i])
+            jaw.append(min(1.0, TONGUE_DORSUM_JAW + u * (floor_jaw[i] - TONGUE_DORSUM_JAW)))
+            follow.append((1.0 - attached * u * (1.0 - TONGUE_FLOOR_FOLLOW)) * root_fall[i])
     n_st = len(st)
-    tip = xy[0] + thick[0] / 2 * n_in[0] - 3.0 * tang[0]
-    root = xy[-1] + thick[-1] / 2 * n_in[-1] + 2.0 * tang[-1]
+    tang0 = (up[1] - up[0]) / np.linalg.norm(up[1] - up[0])
+    tip = 0.5 * (up[0] + lo[0]) - 2.5 * tang0
+    root = 0.5 * (up[-1] + lo[-1]) + 1.0 * (up[-1] - up[-2]) / np.linalg.norm(up[-1] - up[-2])
     verts += [[tip[0], tip[1], 0.0], [root[0], root[1], 0.0]]
     svals += [s[0], s[-1]]
+    jaw += [TONGUE_DORSUM_JAW + 0.5 * (floor_jaw[0] - TONGUE_DORSUM_JAW),
+            TONGUE_DORSUM_JAW + 0.5 * (floor_jaw[-1] - TONGUE_DORSUM_JAW)]
+    follow += [1.0, (1.0 - 0.5 * (1.0 - TONGUE_FLOOR_FOLLOW)) * TONGUE_ROOT_FOLLOW]
     faces, R = [], TONGUE_RING
     for i in range(n_st - 1):
         for k in range(R):
@@ -657,7 +710,9 @@ def build_tongue():
         faces.append((t0, (k + 1) % R, k))
         faces.append((t1, (n_st - 1) * R + k, (n_st - 1) * R + (k + 1) % R))
     sites = {name: 2 * k * R for name, k in (("T1", 2), ("T2", 4), ("T3", 6), ("T4", 8))}
-    return np.array(verts), np.array(faces), np.array(svals), sites, s[2 * TONGUE_ANCHOR]
+    fields = {"tongue_s": np.array(svals), "tongue_jaw": np.array(jaw),
+              "tongue_follow": np.array(follow)}
+    return np.array(verts), np.array(faces), fields, sites, s[2 * TONGUE_ANCHOR]
 
 
 # Polar angles (degrees from the gaze axis) of the eyeball's rings: close rings at the
@@ -758,7 +813,7 @@ def build():
                         snaps=[(0, 8, SITES["MNI"]), (6, 1, SITES["MNM"])])
     parts.append(("upper_teeth", uv, uf, MAT["teeth"]))
     parts.append(("lower_teeth", lv, lf, MAT["teeth"]))
-    tv, tf, ts, tsites, anchor_s = build_tongue()
+    tv, tf, tfields, tsites, anchor_s = build_tongue()
     parts.append(("tongue", tv, tf, MAT["tongue"]))
     from cassi_fit.palate import DEFAULT_OUTLINE, build_palate
     from cassi_fit.pharynx import DEFAULT_WALL, build_pharynx, midline
@@ -787,11 +842,12 @@ def build():
     wp[regions["lower_teeth"]] = PARKE["lower_teeth"]
     full = {k: np.zeros(n) for k in ("upper_lip", "lower_lip", "upper_vermilion",
                                      "lower_vermilion", "mouth", "nose", "nose_rise",
-                                     "jaw_shape", "tongue_s")}
+                                     "jaw_shape", "tongue_s", "tongue_jaw", "tongue_follow")}
     for k, v in fields.items():
         full[k][: len(sv)] = v
     full["jaw_shape"][: len(sv)] = jaw_shape
-    full["tongue_s"][regions["tongue"]] = ts
+    for k, v in tfields.items():
+        full[k][regions["tongue"]] = v
     skin = regions["skin"][:n_grid]  # the grid's vertices (the masks below), then the ears
     w_parke = w_parke[:n_grid]
     row_of = {k: ids[:, 0] == ROW_INDEX[k] for k in ROW_INDEX}
@@ -872,7 +928,18 @@ def tongue_at_rest(V, regions, chains):
 
     rest = SimpleNamespace(regions={**regions, "upper_lip": [], "lower_lip": []},
                            collision={k: np.asarray(v) for k, v in chains.items()})
-    return np.asarray(project(rest, jnp.asarray(V, jnp.float64)))
+    out = np.array(project(rest, jnp.asarray(V, jnp.float64)))
+    # the projection is not exactly mirror-symmetric where the two halves of an arch meet:
+    # of each mirror pair of ring vertices keep the one pushed farther, mirrored
+    idx = np.asarray(regions["tongue"])
+    R = TONGUE_RING
+    ring = idx[:-2].reshape(-1, R)
+    mirror = ring[:, (-np.arange(R)) % R]
+    moved = np.linalg.norm(out[ring] - V[ring], axis=-1)
+    pick = np.where(moved >= np.linalg.norm(out[mirror] - V[mirror], axis=-1), ring, mirror)
+    out[ring] = out[pick] * np.where((pick == ring)[..., None], 1.0, [1.0, 1.0, -1.0])
+    out[ring[:, [0, R // 2]], 2] = 0.0
+    return out
 
 
 # Ring vertices of a crown (see ``tooth``): 0-5 occlusal ring, 6-11 cervical ring, at

@@ -10,6 +10,7 @@ pass. Re-run ``make experiments`` when the calibration changes, and these move w
 
 import dataclasses
 import json
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -263,7 +264,11 @@ def test_cli_calibrate_writes_one_file_per_subject_and_animate_reads_them(
             "--collisions", "project", "--stride", "50", "--penetration", str(depths),
             "--out", str(png), "--size", "160x120"]
     assert cli(args) == 0 and png.is_file()
-    assert "tongue_upper_front" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "tongue_upper_front" in printed
+    # the tongue keeps its volume through the collision projection (docs/TONGUE.md)
+    low, high = re.search(r"tongue volume.*; ([-+.\d]+) % \.\. ([-+.\d]+) %", printed).groups()
+    assert -3.0 < float(low) <= float(high) < 3.0
     table = np.genfromtxt(depths, delimiter=",", names=True)
     assert len(table) > 5 and {"tongue_palate_mm", "lips_lower_teeth_after_mm"} <= set(
         table.dtype.names)

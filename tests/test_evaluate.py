@@ -280,6 +280,8 @@ def test_rest_model_measures(model):
     assert abs(m["lower_slope_deg"]) < 0.5
     assert m["tongue_upper_front_mm"] < 0.05 and m["tongue_lower_front_mm"] < 0.05
     assert m["palate_below_incisor_mm"] < 0.0
+    assert m["tongue_volume_min_ml"] == pytest.approx(m["tongue_volume_max_ml"])
+    assert 55.0 < m["tongue_volume_min_ml"] < 113.0  # the adult range (docs/TONGUE.md)
     assert ev.rate(m)[1] == {"teeth": "EXCELLENT", "lips": "EXCELLENT", "tongue": "EXCELLENT"}
 
 
@@ -504,6 +506,9 @@ def test_evaluate_dataset_rows(corpus):
     assert row.calibration == "cassi" and row.frames > 0 and row.error == ""
     assert set(row.measures) == set(ev.MEASURES)
     assert all(np.isfinite(v) for v in row.measures.values())
+    # the improved tongue keeps its volume over the recording (docs/TONGUE.md)
+    low, high = row.measures["tongue_volume_min_ml"], row.measures["tongue_volume_max_ml"]
+    assert 55.0 < low <= high < 1.03 * low
     (subject,) = result.subjects
     assert subject.tasks == "tp040"
     assert subject.ratings == row.ratings

@@ -261,7 +261,7 @@ def run(args) -> int:
     check_outputs([out, csv_out], overwrite=args.force)
     state, animation = animate_recording(recording, args)
     from cassi_fit.render import Renderer
-    from cassi_fit.reports import penetration_summary, write_penetration_csv
+    from cassi_fit.reports import penetration_summary, tongue_volume_summary, write_penetration_csv
     from cassi_fit.video import subject_traces
 
     renderer = Renderer(state.model, size=size, views=views, grid=len(views) > 1,
@@ -269,6 +269,7 @@ def run(args) -> int:
     written = write_output(out, animation, renderer, recording, args)
     print(f"wrote {written} ({animation.n_frames} frames, stride {animation.stride})")
     print(penetration_summary(animation))
+    print(tongue_volume_summary(state.model, animation))
     if csv_out is not None:
         print(f"wrote {write_penetration_csv(csv_out, animation, overwrite=args.force)}")
     return 0

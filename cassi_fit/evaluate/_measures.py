@@ -34,6 +34,7 @@ from ..animate import frame_bucket, pad_frames
 from ..collide import FRONT_TEETH, REPORT_KEYS, airway_frames, has_collision_data, report_frames
 from ..errors import DegenerateGeometryError, MissingDataError
 from ..palate import N_ACROSS, N_ALONG, N_HARD
+from ..tongue import tongue_volumes
 
 if TYPE_CHECKING:
     from ..animate import Animation
@@ -116,6 +117,11 @@ MEASURES: dict[str, MeasureSpec] = {
     "tongue_pharynx_before_mm": MeasureSpec(
         "mm", "max", False, "deepest tongue point behind the pharyngeal wall, before "
         "projection (sustained)"),
+    # the tongue's volume over the frames (docs/TONGUE.md; ~0 for CASSI's flat sheet)
+    "tongue_volume_min_ml": MeasureSpec(
+        "mL", "min", False, "smallest tongue volume over the frames (reported)"),
+    "tongue_volume_max_ml": MeasureSpec(
+        "mL", "max", False, "largest tongue volume over the frames (reported)"),
 }  # fmt: skip
 
 
@@ -444,5 +450,7 @@ def measure(state: SubjectState, anim: Animation) -> dict[str, float]:
     out["airway_min_mm"] = float(np.min(gap))
     out["frames_without_airway"] = float(np.sum(gap <= AIRWAY_CLOSED_MM))
     out["tongue_pharynx_before_mm"] = hi(before["tongue_pharynx"])
+    volume = tongue_volumes(model, anim.vertices)
+    out["tongue_volume_min_ml"], out["tongue_volume_max_ml"] = volume.min(), volume.max()
     return {k: float(v) for k, v in out.items()}
 
