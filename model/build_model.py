@@ -379,6 +379,45 @@ def build_ears(skin):
             np.concatenate([faces, faces[:, ::-1] + len(verts)]))
 
 
+# The glabella and the brow above the inner eye corners: rows from the upper lid to the
+# forehead (y) whose front sections are made convex across z (up to GLABELLA_Z mm), with
+# a weight ramping in from the upper lid: where the nose's bridge met the lids' fullness
+# toward the nose, the bumps left a groove above each inner eye corner that read as a
+# frown in front renders.
+GLABELLA_Y, GLABELLA_Z = (65.0, 71.0, 96.0, 104.0), 34.0
+
+
+def upper_hull(z, x):
+    """Smallest concave function of z on or above the points (z, x), at the points' z."""
+    hull = []
+    for p in zip(z, x, strict=True):
+        while len(hull) >= 2:
+            (z0, x0), (z1, x1) = hull[-2], hull[-1]
+            if (x1 - x0) * (p[0] - z0) <= (p[1] - x0) * (z1 - z0):
+                hull.pop()
+            else:
+                break
+        hull.append(p)
+    hz, hx = zip(*hull, strict=True)
+    return np.interp(z, hz, hx)
+
+
+def smooth_glabella(grid):
+    """Fill the grooves above the inner eye corners (in place): each row's front section
+    lifted toward its convex hull across z, weighted by height (see GLABELLA_Y)."""
+    lo, full, top, off = GLABELLA_Y
+    for i in range(grid.shape[0]):
+        y = grid[i, 0, 1]
+        wy = ramp(y, lo, full) * (1.0 - ramp(y, top, off))
+        if wy <= 0.0:
+            continue
+        cols = np.nonzero((grid[i, :, 2] <= GLABELLA_Z) & (column_angles() < np.pi / 2))[0]
+        cols = cols[np.argsort(grid[i, cols, 2])]
+        z, x = grid[i, cols, 2], grid[i, cols, 0]
+        fade = 1.0 - ramp(z, 0.6 * GLABELLA_Z, GLABELLA_Z)
+        grid[i, cols, 0] = x + wy * fade * (upper_hull(z, x) - x)
+
+
 def build_skin():
     """Half-head grid -> full mirrored skin: vertices, faces, row/col ids, mouth mask."""
     phis = column_angles()
@@ -389,6 +428,7 @@ def build_skin():
             grid[i, j] = bumps(row[0], section_point(row, phi))
     grid[:, 0, 2] = 0.0
     grid[:, -1, 2] = 0.0
+    smooth_glabella(grid)
     corner = FRONT_Z.index(MOUTH_HALF_WIDTH)
     # collapse the lip rows outside the mouth onto one line (the lips meet at the corners)
     a, a_in, b_in, b = (ROW_INDEX[k] for k in ("A", "A_in", "B_in", "B"))
