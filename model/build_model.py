@@ -194,9 +194,11 @@ def section_point(row, phi):
 
 # The palpebral fissure: half width (mm, about the eyeball's centre line in z, shifted
 # 0.5 mm out), the upper and lower lid margins' heights above / below the centre (the
-# upper lid covers the iris's top 1 mm, the lower lid meets its bottom edge), the outer
+# upper lid covers the iris's top 0.8 mm, the lower lid meets its bottom edge: a fissure
+# 9.9 mm tall and 29 mm wide, Farkas' adult norms of about 10 and 28-30 mm; the margins
+# are full arcs, not pointed, so that the eye does not read as a slit), the outer
 # corner's lift (canthal tilt), the lids' thickness on the eyeball.
-FISSURE = {"half_width": 14.5, "upper": 4.6, "lower": 5.4, "tilt": 0.8, "lid": 2.0}
+FISSURE = {"half_width": 14.5, "upper": 4.4, "lower": 5.5, "tilt": 0.8, "lid": 2.0}
 
 
 def lid_margins(az):
@@ -206,7 +208,7 @@ def lid_margins(az):
     u = (az - ez - 0.5) / f["half_width"]
     opening = max(1.0 - u * u, 0.0)
     centre = ey + 0.4 + f["tilt"] * np.clip(u, -1.0, 1.0)
-    return u, centre + f["upper"] * opening**0.6, centre - f["lower"] * opening**0.8
+    return u, centre + f["upper"] * opening**0.45, centre - f["lower"] * opening**0.6
 
 
 # Rows from below the eyes to the nasion (y) whose heights bend to the lid margins: the
@@ -240,8 +242,8 @@ def eyelids(x, y, az):
     ball = np.sqrt(max(EYE_RADIUS**2 - (y - ey) ** 2 - (az - ez) ** 2, 0.0))
     shell = EYE_RADIUS * np.sqrt(max(1.0 - ((y - ey) / EYE_RADIUS) ** 2
                                      - ((az - ez) / (1.6 * EYE_RADIUS)) ** 2, 0.0))
-    if inside:
-        return ex + ball - 1.2
+    if inside:  # 3 mm behind the ball: the lid margins' triangles dive in at once
+        return ex + ball - 3.0
     w = 1.0 - ramp(t, 0.5, 8.0 + 8.0 * ramp(-u, 0.3, 1.2))  # softer toward the nose
     lid = 0.3 + (f["lid"] - 0.3) * max(ramp(t, 0.0, 2.0), ramp(abs(u), 0.9, 1.1))  # thin margin
     lid += 3.0 * ramp(-u, 0.3, 1.3) * ramp(t, 1.0, 5.0)  # fuller toward the nose (no trough)
