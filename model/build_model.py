@@ -144,7 +144,31 @@ def _under_jaw_rows(rows):
     return out + list(rows[bottom + 1:])
 
 
-ROWS = _nape(_under_jaw_rows(_eye_rows()))
+def _smooth_sides(rows, lo=-25.0, hi=125.0, sigma=7.0):
+    """Section centre (cx) and half width (w) of the rows from the forehead down to the
+    chin smoothed over height (Gaussian kernel, sigma mm, locally linear): their slopes
+    changed from row to row, and the side of the face showed horizontal light and dark
+    bands in side views. The front midline (xf, e: the profile, the lips) is untouched."""
+    ys = np.array([r[1] for r in rows])
+    keep = (ys >= lo - 2 * sigma) & (ys <= hi + 2 * sigma)
+    out = []
+    for r in rows:
+        y = r[1]
+        if not lo <= y <= hi:
+            out.append(r)
+            continue
+        k = np.exp(-0.5 * ((ys[keep] - y) / sigma) ** 2)
+        new = []
+        for col in (3, 4):  # cx, w
+            v = np.array([q[col] for q in rows])[keep]
+            a = np.vstack([np.ones_like(ys[keep]), ys[keep] - y]).T
+            coef = np.linalg.lstsq(a * k[:, None] ** 0.5, v * k**0.5, rcond=None)[0]
+            new.append(round(float(coef[0]), 3))
+        out.append((*r[:3], *new, *r[5:]))
+    return out
+
+
+ROWS = _smooth_sides(_nape(_under_jaw_rows(_eye_rows())))
 ROW_INDEX = {r[0]: i for i, r in enumerate(ROWS)}
 EYE_ROWS = {r[0] for r in ROWS[ROW_INDEX["nasion"] + 1:ROW_INDEX["eyes_low"]]}
 # Front z targets (on the mouth row) of the columns; the mouth corner is one of them.
@@ -420,6 +444,29 @@ def smooth_glabella(grid):
         grid[i, cols, 0] = x + wy * fade * (upper_hull(z, x) - x)
 
 
+def smooth_cheeks(grid, phis, sigma=6.0, lo=-12.0, hi=100.0):
+    """The side of the face (columns from 45 to 135 degrees, rows from below the lower
+    lip to the forehead) smoothed over height, in place: x and z of each point become a
+    Gaussian-weighted (sigma mm) local-linear fit over the column's rows. The cheekbone,
+    cheek and eye-socket bumps and the rows' changing widths made the surface's slope
+    change from row to row, which showed as horizontal light and dark bands in side
+    views."""
+    ys = grid[:, 0, 1].copy()
+    rows = np.nonzero((ys >= lo - 2 * sigma) & (ys <= hi + 2 * sigma))[0]
+    wc = ramp(phis, np.radians(45.0), np.radians(60.0)) * (
+        1.0 - ramp(phis, np.radians(110.0), np.radians(135.0)))
+    wy = ramp(ys, lo, lo + 8.0) * (1.0 - ramp(ys, hi - 10.0, hi))
+    out = grid.copy()
+    for i in np.nonzero(wy > 0)[0]:
+        k = np.exp(-0.5 * ((ys[rows] - ys[i]) / sigma) ** 2)
+        a = np.vstack([np.ones(len(rows)), ys[rows] - ys[i]]).T * np.sqrt(k)[:, None]
+        for j in np.nonzero(wc > 0)[0]:
+            for c in (0, 2):
+                fit = np.linalg.lstsq(a, grid[rows, j, c] * np.sqrt(k), rcond=None)[0][0]
+                out[i, j, c] = grid[i, j, c] + wy[i] * wc[j] * (fit - grid[i, j, c])
+    grid[:] = out
+
+
 def build_skin():
     """Half-head grid -> full mirrored skin: vertices, faces, row/col ids, mouth mask."""
     phis = column_angles()
@@ -431,6 +478,7 @@ def build_skin():
     grid[:, 0, 2] = 0.0
     grid[:, -1, 2] = 0.0
     smooth_glabella(grid)
+    smooth_cheeks(grid, phis)
     corner = FRONT_Z.index(MOUTH_HALF_WIDTH)
     # collapse the lip rows outside the mouth onto one line (the lips meet at the corners)
     a, a_in, b_in, b = (ROW_INDEX[k] for k in ("A", "A_in", "B_in", "B"))
