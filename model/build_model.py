@@ -444,7 +444,7 @@ def smooth_glabella(grid):
         grid[i, cols, 0] = x + wy * fade * (upper_hull(z, x) - x)
 
 
-def smooth_cheeks(grid, phis, sigma=6.0, lo=-12.0, hi=100.0):
+def smooth_cheeks(grid, phis, sigma=6.0, lo=-12.0, hi=100.0, cols=(45.0, 60.0, 110.0, 135.0)):
     """The side of the face (columns from 45 to 135 degrees, rows from below the lower
     lip to the forehead) smoothed over height, in place: x and z of each point become a
     Gaussian-weighted (sigma mm) local-linear fit over the column's rows. The cheekbone,
@@ -453,14 +453,15 @@ def smooth_cheeks(grid, phis, sigma=6.0, lo=-12.0, hi=100.0):
     views."""
     ys = grid[:, 0, 1].copy()
     rows = np.nonzero((ys >= lo - 2 * sigma) & (ys <= hi + 2 * sigma))[0]
-    wc = ramp(phis, np.radians(45.0), np.radians(60.0)) * (
-        1.0 - ramp(phis, np.radians(110.0), np.radians(135.0)))
+    c0, c1, c2, c3 = np.radians(cols)
+    wc = ramp(phis, c0, c1) * (1.0 - ramp(phis, c2, c3))
     wy = ramp(ys, lo, lo + 8.0) * (1.0 - ramp(ys, hi - 10.0, hi))
     out = grid.copy()
     for i in np.nonzero(wy > 0)[0]:
-        k = np.exp(-0.5 * ((ys[rows] - ys[i]) / sigma) ** 2)
-        a = np.vstack([np.ones(len(rows)), ys[rows] - ys[i]]).T * np.sqrt(k)[:, None]
         for j in np.nonzero(wc > 0)[0]:
+            yj = grid[rows, j, 1]  # the column's own heights (the jaw rows rise to the back)
+            k = np.exp(-0.5 * ((yj - grid[i, j, 1]) / sigma) ** 2)
+            a = np.vstack([np.ones(len(rows)), yj - grid[i, j, 1]]).T * np.sqrt(k)[:, None]
             for c in (0, 2):
                 fit = np.linalg.lstsq(a, grid[rows, j, c] * np.sqrt(k), rcond=None)[0][0]
                 out[i, j, c] = grid[i, j, c] + wy[i] * wc[j] * (fit - grid[i, j, c])
@@ -479,6 +480,8 @@ def build_skin():
     grid[:, -1, 2] = 0.0
     smooth_glabella(grid)
     smooth_cheeks(grid, phis)
+    # the jaw angle's flare into the neck (a notch in three-quarter views)
+    smooth_cheeks(grid, phis, sigma=7.0, lo=-80.0, hi=-8.0, cols=(55.0, 75.0, 140.0, 165.0))
     corner = FRONT_Z.index(MOUTH_HALF_WIDTH)
     # collapse the lip rows outside the mouth onto one line (the lips meet at the corners)
     a, a_in, b_in, b = (ROW_INDEX[k] for k in ("A", "A_in", "B_in", "B"))
