@@ -468,6 +468,30 @@ def smooth_cheeks(grid, phis, sigma=6.0, lo=-12.0, hi=100.0, cols=(45.0, 60.0, 1
     grid[:] = out
 
 
+# The back wall of the oral cavity (a pocket of the skin, which has no inside otherwise:
+# without it the background showed through the open mouth in front views): far behind
+# the tongue and the pharynx (x, y range, half width in z, mm). Static; skin material,
+# facing the front (the skin's outside), so the renderer's culling of the skin keeps it.
+# No side walls: the inside view removes only the near half of the skin and would show
+# the far wall face-on behind the tongue (and the model stays mirror-symmetric); so in
+# three-quarter views the background still shows through the far corner of the mouth.
+MOUTH_BACK = {"x": -100.0, "y": (-45.0, 30.0), "z": 32.0}
+
+
+def build_mouth_wall(n=6):
+    """Vertices and faces (wound like the skin grid, before the flip in ``build``) of the
+    back wall of the mouth."""
+    y = np.linspace(*MOUTH_BACK["y"], n + 2)
+    z = np.linspace(-MOUTH_BACK["z"], MOUTH_BACK["z"], n + 1)
+    verts = np.array([[MOUTH_BACK["x"], a, b] for a in y for b in z])
+    k, faces = len(z), []
+    for i in range(len(y) - 1):
+        for j in range(k - 1):
+            a, b, c, d = i * k + j, i * k + j + 1, (i + 1) * k + j + 1, (i + 1) * k + j
+            faces += [(b, d, a), (c, d, b)]
+    return verts, np.array(faces)
+
+
 def build_skin():
     """Half-head grid -> full mirrored skin: vertices, faces, row/col ids, mouth mask."""
     phis = column_angles()
@@ -795,6 +819,14 @@ def build():
     sf = np.concatenate([np.array(sf), af + n_grid])
     skin_mat = np.concatenate([skin_mat, np.full(len(af), MAT["skin"])])
     sv = np.concatenate([sv, av])
+    # the mouth's back wall (static, weights and fields 0): after the ears
+    wv, wf = build_mouth_wall()
+    w_parke = np.concatenate([w_parke, np.zeros(len(wv))])
+    fields = {k: np.concatenate([f, np.zeros(len(wv))]) for k, f in fields.items()}
+    jaw_shape = np.concatenate([jaw_shape, np.zeros(len(wv))])
+    sf = np.concatenate([sf, wf + len(sv)])
+    skin_mat = np.concatenate([skin_mat, np.full(len(wf), MAT["skin"])])
+    sv = np.concatenate([sv, wv])
     parts = [("skin", sv, sf, skin_mat)]
     ev, ef = [], []
     for side in (1, -1):
