@@ -246,7 +246,7 @@ def eye_row_y(y, az):
     if not EYE_ROW_Y[0] < y < EYE_ROW_Y[3]:
         return y
     u, up, lo = lid_margins(az)
-    g = 1.0 - ramp(abs(u), 0.7, 1.6)
+    g = 1.0 - ramp(abs(u), 0.7, 2.0)
     target = (EYE_ROW_Y[0], g * lo + (1 - g) * EYE_ROW_Y[1], g * up + (1 - g) * EYE_ROW_Y[2],
               EYE_ROW_Y[3])
     return float(np.interp(y, EYE_ROW_Y, target))
