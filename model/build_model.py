@@ -468,28 +468,50 @@ def smooth_cheeks(grid, phis, sigma=6.0, lo=-12.0, hi=100.0, cols=(45.0, 60.0, 1
     grid[:] = out
 
 
-# The back wall of the oral cavity (a pocket of the skin, which has no inside otherwise:
-# without it the background showed through the open mouth in front views): far behind
-# the tongue and the pharynx (x, y range, half width in z, mm). Static; skin material,
-# facing the front (the skin's outside), so the renderer's culling of the skin keeps it.
-# No side walls: the inside view removes only the near half of the skin and would show
-# the far wall face-on behind the tongue (and the model stays mirror-symmetric); so in
-# three-quarter views the background still shows through the far corner of the mouth.
+# The walls of the oral cavity (a pocket of the skin, which has no inside otherwise: the
+# background showed through the open mouth): a back wall far behind the tongue and the
+# pharynx (x, y range, half width in z, mm) and, for views from the side of the front,
+# two pairs of curtains across the cheeks (x, y range, inner |z|, largest |z|, least gap
+# to the skin), outside the teeth and the tongue. All face the front (the skin's
+# outside), so the renderer's culling of the skin keeps them, and all lie in planes of
+# constant x: the inside view, which removes the near half of the skin, sees them edge
+# on (side walls would show face-on behind the tongue there). Static, weights 0.
 MOUTH_BACK = {"x": -100.0, "y": (-45.0, 30.0), "z": 32.0}
+MOUTH_CURTAINS = ({"x": -46.0, "y": (-35.0, 25.0), "z": (27.0, 48.0), "gap": 4.0},
+                  {"x": -75.0, "y": (-40.0, 28.0), "z": (24.0, 50.0), "gap": 4.0})
 
 
-def build_mouth_wall(n=6):
+def build_mouth_wall(skin, n=6):
     """Vertices and faces (wound like the skin grid, before the flip in ``build``) of the
-    back wall of the mouth."""
+    back wall and the curtains of the mouth, all facing +x."""
+    from scipy.interpolate import LinearNDInterpolator
+
+    side = skin[(skin[:, 2] > 20.0) & (skin[:, 1] > -70.0) & (skin[:, 1] < 60.0)]
+    head_z = LinearNDInterpolator(side[:, :2], side[:, 2])
+    verts, faces = [], []
+
+    def sheet(x, ys, zs):
+        """A sheet in the plane x at heights ys, zs[i] ascending across at ys[i]."""
+        base, k = len(verts), zs.shape[1]
+        verts.extend([x, y, z] for y, row in zip(ys, zs, strict=True) for z in row)
+        for i in range(len(ys) - 1):
+            for j in range(k - 1):
+                a, b = base + i * k + j, base + i * k + j + 1
+                c, d = base + (i + 1) * k + j + 1, base + (i + 1) * k + j
+                faces.extend([(b, d, a), (c, d, b)])
+
     y = np.linspace(*MOUTH_BACK["y"], n + 2)
     z = np.linspace(-MOUTH_BACK["z"], MOUTH_BACK["z"], n + 1)
-    verts = np.array([[MOUTH_BACK["x"], a, b] for a in y for b in z])
-    k, faces = len(z), []
-    for i in range(len(y) - 1):
-        for j in range(k - 1):
-            a, b, c, d = i * k + j, i * k + j + 1, (i + 1) * k + j + 1, (i + 1) * k + j
-            faces += [(b, d, a), (c, d, b)]
-    return verts, np.array(faces)
+    sheet(MOUTH_BACK["x"], y, np.tile(z, (len(y), 1)))
+    for c in MOUTH_CURTAINS:
+        y = np.linspace(*c["y"], n + 2)
+        outer = np.array([min(c["z"][1], float(head_z(c["x"], a)) - c["gap"]) for a in y])
+        if not np.all(np.isfinite(outer) & (outer > c["z"][0] + 2.0)):
+            raise ValueError("a mouth curtain does not fit inside the cheek")
+        zs = np.array([np.linspace(c["z"][0], o, 4) for o in outer])
+        sheet(c["x"], y, zs)
+        sheet(c["x"], y, -zs[:, ::-1])
+    return np.array(verts), np.array(faces)
 
 
 def build_skin():
@@ -819,8 +841,8 @@ def build():
     sf = np.concatenate([np.array(sf), af + n_grid])
     skin_mat = np.concatenate([skin_mat, np.full(len(af), MAT["skin"])])
     sv = np.concatenate([sv, av])
-    # the mouth's back wall (static, weights and fields 0): after the ears
-    wv, wf = build_mouth_wall()
+    # the mouth's walls (static, weights and fields 0): after the ears
+    wv, wf = build_mouth_wall(sv[:n_grid])
     w_parke = np.concatenate([w_parke, np.zeros(len(wv))])
     fields = {k: np.concatenate([f, np.zeros(len(wv))]) for k, f in fields.items()}
     jaw_shape = np.concatenate([jaw_shape, np.zeros(len(wv))])
