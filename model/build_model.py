@@ -147,7 +147,31 @@ def _under_jaw_rows(rows):
     return out + list(rows[bottom + 1:])
 
 
-ROWS = _nape(_under_jaw_rows(_eye_rows()))
+def _smooth_sides(rows, lo=-25.0, hi=125.0, sigma=7.0):
+    """Section centre (cx) and half width (w) of the rows from the forehead down to the
+    chin smoothed over height (Gaussian kernel, sigma mm, locally linear): their slopes
+    changed from row to row, and the side of the face showed horizontal light and dark
+    bands in side views. The front midline (xf, e: the profile, the lips) is untouched."""
+    ys = np.array([r[1] for r in rows])
+    keep = (ys >= lo - 2 * sigma) & (ys <= hi + 2 * sigma)
+    out = []
+    for r in rows:
+        y = r[1]
+        if not lo <= y <= hi:
+            out.append(r)
+            continue
+        k = np.exp(-0.5 * ((ys[keep] - y) / sigma) ** 2)
+        new = []
+        for col in (3, 4):  # cx, w
+            v = np.array([q[col] for q in rows])[keep]
+            a = np.vstack([np.ones_like(ys[keep]), ys[keep] - y]).T
+            coef = np.linalg.lstsq(a * k[:, None] ** 0.5, v * k**0.5, rcond=None)[0]
+            new.append(round(float(coef[0]), 3))
+        out.append((*r[:3], *new, *r[5:]))
+    return out
+
+
+ROWS = _smooth_sides(_nape(_under_jaw_rows(_eye_rows())))
 ROW_INDEX = {r[0]: i for i, r in enumerate(ROWS)}
 EYE_ROWS = {r[0] for r in ROWS[ROW_INDEX["nasion"] + 1:ROW_INDEX["eyes_low"]]}
 # Front z targets (on the mouth row) of the columns; the mouth corner is one of them.
@@ -225,7 +249,7 @@ def eye_row_y(y, az):
     if not EYE_ROW_Y[0] < y < EYE_ROW_Y[3]:
         return y
     u, up, lo = lid_margins(az)
-    g = 1.0 - ramp(abs(u), 0.7, 1.6)
+    g = 1.0 - ramp(abs(u), 0.7, 2.0)
     target = (EYE_ROW_Y[0], g * lo + (1 - g) * EYE_ROW_Y[1], g * up + (1 - g) * EYE_ROW_Y[2],
               EYE_ROW_Y[3])
     return float(np.interp(y, EYE_ROW_Y, target))
@@ -416,11 +440,81 @@ def smooth_glabella(grid):
         wy = ramp(y, lo, full) * (1.0 - ramp(y, top, off))
         if wy <= 0.0:
             continue
-        cols = np.nonzero(grid[i, :, 2] <= GLABELLA_Z)[0]
+        cols = np.nonzero((grid[i, :, 2] <= GLABELLA_Z) & (column_angles() < np.pi / 2))[0]
         cols = cols[np.argsort(grid[i, cols, 2])]
         z, x = grid[i, cols, 2], grid[i, cols, 0]
         fade = 1.0 - ramp(z, 0.6 * GLABELLA_Z, GLABELLA_Z)
         grid[i, cols, 0] = x + wy * fade * (upper_hull(z, x) - x)
+
+
+def smooth_cheeks(grid, phis, sigma=6.0, lo=-12.0, hi=100.0, cols=(45.0, 60.0, 110.0, 135.0)):
+    """The side of the face (columns from 45 to 135 degrees, rows from below the lower
+    lip to the forehead) smoothed over height, in place: x and z of each point become a
+    Gaussian-weighted (sigma mm) local-linear fit over the column's rows. The cheekbone,
+    cheek and eye-socket bumps and the rows' changing widths made the surface's slope
+    change from row to row, which showed as horizontal light and dark bands in side
+    views."""
+    ys = grid[:, 0, 1].copy()
+    rows = np.nonzero((ys >= lo - 2 * sigma) & (ys <= hi + 2 * sigma))[0]
+    c0, c1, c2, c3 = np.radians(cols)
+    wc = ramp(phis, c0, c1) * (1.0 - ramp(phis, c2, c3))
+    wy = ramp(ys, lo, lo + 8.0) * (1.0 - ramp(ys, hi - 10.0, hi))
+    out = grid.copy()
+    for i in np.nonzero(wy > 0)[0]:
+        for j in np.nonzero(wc > 0)[0]:
+            yj = grid[rows, j, 1]  # the column's own heights (the jaw rows rise to the back)
+            k = np.exp(-0.5 * ((yj - grid[i, j, 1]) / sigma) ** 2)
+            a = np.vstack([np.ones(len(rows)), yj - grid[i, j, 1]]).T * np.sqrt(k)[:, None]
+            for c in (0, 2):
+                fit = np.linalg.lstsq(a, grid[rows, j, c] * np.sqrt(k), rcond=None)[0][0]
+                out[i, j, c] = grid[i, j, c] + wy[i] * wc[j] * (fit - grid[i, j, c])
+    grid[:] = out
+
+
+# The walls of the oral cavity (a pocket of the skin, which has no inside otherwise: the
+# background showed through the open mouth): a back wall far behind the tongue and the
+# pharynx (x, y range, half width in z, mm) and, for views from the side of the front,
+# two pairs of curtains across the cheeks (x, y range, inner |z|, largest |z|, least gap
+# to the skin), outside the teeth and the tongue. All face the front (the skin's
+# outside), so the renderer's culling of the skin keeps them, and all lie in planes of
+# constant x: the inside view, which removes the near half of the skin, sees them edge
+# on (side walls would show face-on behind the tongue there). Static, weights 0.
+MOUTH_BACK = {"x": -100.0, "y": (-45.0, 30.0), "z": 32.0}
+MOUTH_CURTAINS = ({"x": -46.0, "y": (-35.0, 25.0), "z": (27.0, 48.0), "gap": 4.0},
+                  {"x": -75.0, "y": (-40.0, 28.0), "z": (24.0, 50.0), "gap": 4.0})
+
+
+def build_mouth_wall(skin, n=6):
+    """Vertices and faces (wound like the skin grid, before the flip in ``build``) of the
+    back wall and the curtains of the mouth, all facing +x."""
+    from scipy.interpolate import LinearNDInterpolator
+
+    side = skin[(skin[:, 2] > 20.0) & (skin[:, 1] > -70.0) & (skin[:, 1] < 60.0)]
+    head_z = LinearNDInterpolator(side[:, :2], side[:, 2])
+    verts, faces = [], []
+
+    def sheet(x, ys, zs):
+        """A sheet in the plane x at heights ys, zs[i] ascending across at ys[i]."""
+        base, k = len(verts), zs.shape[1]
+        verts.extend([x, y, z] for y, row in zip(ys, zs, strict=True) for z in row)
+        for i in range(len(ys) - 1):
+            for j in range(k - 1):
+                a, b = base + i * k + j, base + i * k + j + 1
+                c, d = base + (i + 1) * k + j + 1, base + (i + 1) * k + j
+                faces.extend([(b, d, a), (c, d, b)])
+
+    y = np.linspace(*MOUTH_BACK["y"], n + 2)
+    z = np.linspace(-MOUTH_BACK["z"], MOUTH_BACK["z"], n + 1)
+    sheet(MOUTH_BACK["x"], y, np.tile(z, (len(y), 1)))
+    for c in MOUTH_CURTAINS:
+        y = np.linspace(*c["y"], n + 2)
+        outer = np.array([min(c["z"][1], float(head_z(c["x"], a)) - c["gap"]) for a in y])
+        if not np.all(np.isfinite(outer) & (outer > c["z"][0] + 2.0)):
+            raise ValueError("a mouth curtain does not fit inside the cheek")
+        zs = np.array([np.linspace(c["z"][0], o, 4) for o in outer])
+        sheet(c["x"], y, zs)
+        sheet(c["x"], y, -zs[:, ::-1])
+    return np.array(verts), np.array(faces)
 
 
 def build_skin():
@@ -434,6 +528,9 @@ def build_skin():
     grid[:, 0, 2] = 0.0
     grid[:, -1, 2] = 0.0
     smooth_glabella(grid)
+    smooth_cheeks(grid, phis)
+    # the jaw angle's flare into the neck (a notch in three-quarter views)
+    smooth_cheeks(grid, phis, sigma=7.0, lo=-80.0, hi=-8.0, cols=(55.0, 75.0, 140.0, 165.0))
     corner = FRONT_Z.index(MOUTH_HALF_WIDTH)
     # collapse the lip rows outside the mouth onto one line (the lips meet at the corners)
     a, a_in, b_in, b = (ROW_INDEX[k] for k in ("A", "A_in", "B_in", "B"))
@@ -800,6 +897,14 @@ def build():
     sf = np.concatenate([np.array(sf), af + n_grid])
     skin_mat = np.concatenate([skin_mat, np.full(len(af), MAT["skin"])])
     sv = np.concatenate([sv, av])
+    # the mouth's walls (static, weights and fields 0): after the ears
+    wv, wf = build_mouth_wall(sv[:n_grid])
+    w_parke = np.concatenate([w_parke, np.zeros(len(wv))])
+    fields = {k: np.concatenate([f, np.zeros(len(wv))]) for k, f in fields.items()}
+    jaw_shape = np.concatenate([jaw_shape, np.zeros(len(wv))])
+    sf = np.concatenate([sf, wf + len(sv)])
+    skin_mat = np.concatenate([skin_mat, np.full(len(wf), MAT["skin"])])
+    sv = np.concatenate([sv, wv])
     parts = [("skin", sv, sf, skin_mat)]
     ev, ef = [], []
     for side in (1, -1):
