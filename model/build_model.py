@@ -968,6 +968,9 @@ def build():
         "cheek": skin[close(PARKE["cheek"]) & ~lower],
         "nose": skin[fields["nose"][:n_grid] > 0.3],
     })
+    # the mouth's walls (the last skin vertices): no anatomy, so the midsagittal section
+    # (cassi_fit.render) leaves them out
+    regions["mouth_wall"] = regions["skin"][len(regions["skin"]) - len(wv):]
     T = lambda k: offsets["tongue"] + tsites[k]
     ui = offsets["upper_teeth"] + 3
     li = offsets["lower_teeth"] + 3

@@ -77,6 +77,13 @@ def test_the_rest_model_section_passes_through_its_midline_sites(face):
     assert min(p[:, 1].min() for p in teeth) < -5 < max(p[:, 1].max() for p in teeth)  # both
     for name in ("UL", "LL"):
         assert _distance(rest[model.landmarks[name], :2], contours["skin"] + contours["lips"]) < 1.0
+    # the mouth's back wall (skin material, no anatomy) is not drawn: every skin point the
+    # section draws at the wall's depth lies outside the wall's height range
+    wall = rest[np.asarray(model.regions["mouth_wall"])]
+    wall = wall[wall[:, 0] == wall[:, 0].min()]  # the back wall (the cheek curtains are off z=0)
+    x, (lo, hi) = wall[0, 0], (wall[:, 1].min(), wall[:, 1].max())
+    skin = np.concatenate([p for p, _ in contours["skin"]])
+    assert not np.any((np.abs(skin[:, 0] - x) < 0.5) & (skin[:, 1] > lo) & (skin[:, 1] < hi))
 
 
 def test_the_section_follows_the_posed_vertices(face):

@@ -215,6 +215,11 @@ class Section:
         # animation moves vertices in x and y, and across z only by the widths' scaling).
         z = self.rest[self.faces, 2]
         near = (z.min(axis=1) < NEAR_MM) & (z.max(axis=1) > -NEAR_MM)
+        # the mouth's walls keep the background out of the rendered open mouth; they are
+        # no anatomy, and a tracing does not show them
+        wall = np.zeros(len(self.rest), bool)
+        wall[np.asarray((regions or {}).get("mouth_wall", ()), dtype=np.int64)] = True
+        near &= ~wall[self.faces].all(axis=1)
         self.parts = {
             name: self.faces[near & (face_material == materials.index(name))]
             for name in order
