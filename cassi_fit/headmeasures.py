@@ -80,13 +80,13 @@ SOFT_TISSUE_THICKNESS_MM = {"gnathion": 7.0, "gonion": 12.0}
 #: Farkas' norms (bizygomatic 130-140, bigonial 95-105, mouth 45-55, nose 17-23 mm).
 #: Rebuilding the model with other proportions means updating these.
 DEFAULT_HEAD_MEASURES = HeadMeasures(
-    gonion_x=-81.572,
-    gonion_y=-32.89,
+    gonion_x=-82.912,
+    gonion_y=-32.785,
     gnathion_x=-6.633,
     gnathion_y=-43.014,
-    face_width=133.11,
-    jaw_width=101.024,
-    mouth_width=49.0,
+    face_width=131.557,
+    jaw_width=103.478,
+    mouth_width=48.913,
     upper_lip_thickness=14.9,
     lower_lip_thickness=15.004,
     nose_protrusion=20.0,

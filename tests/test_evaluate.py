@@ -50,6 +50,8 @@ CLEAN = {
     "teeth_in_lips_before_mm": 0.0,
     "airway_min_mm": 5.0,
     "frames_without_airway": 0,
+    "tongue_volume_min_ml": 66.0,
+    "tongue_volume_max_ml": 66.0,
     "tongue_pharynx_before_mm": 0.0,
 }
 

@@ -91,7 +91,8 @@ MEASURES: dict[str, MeasureSpec] = {
     "tongue_lower_front_mm": MeasureSpec(
         "mm", "max", True, "tongue depth in the lower front teeth (sustained)"),
     "tongue_behind_incisors_mm": MeasureSpec(
-        "mm", "min", True, "tongue front behind the lower incisors' lingual face (median)"),
+        "mm", "min", True, "free tongue's front behind the lower incisors' lingual face "
+        "(median)"),
     "tongue_back_v_deg": MeasureSpec(
         "deg", "max", True, "sharpest concave (V) bend of the tongue's back midline, T3 to "
         "the root (sustained; not counted)"),
@@ -212,6 +213,11 @@ def _sites(model: FaceModel) -> _Sites:
     tongue = np.asarray(model.regions.get("tongue", []), np.int64)
     if tongue.size == 0:
         raise MissingDataError("the face model has no tongue region")
+    # the free tongue (the part the pellets move fully: its upper surface and tip), which
+    # shows between the teeth; the floor of the mouth, hung from the mandible, reaches
+    # forward under the lower incisors and would hide a tongue pulled back
+    free = tongue[np.asarray(model.fields["tongue_follow"])[tongue] > 0.999]
+    tongue = free if free.size else tongue
     return _Sites(
         upper_tip=model.landmarks["upper_incisor_tip"],
         lower_tip=model.landmarks["lower_incisor_tip"],
