@@ -471,13 +471,21 @@ def smooth_canthus(grid, sweeps=400):
         u, up, low = lid_margins(abs(zs[a, b]))
         return abs(u) < 1.0 and low + 0.05 < ys[a, b] < up - 0.05
 
-    nbs = [[(a, b) for a, b in ((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1))
-            if not open_eye(a, b)] for i, j in idx]
+    def corner_x(a, b):
+        """x of a grid point, or for one in the fissure that of the lid margins beside it
+        in its column (the skin slopes into the inner corner, not into the eyeball)."""
+        if not open_eye(a, b):
+            return x[a, b]
+        up = next(k for k in range(a, -1, -1) if not open_eye(k, b))
+        low = next(k for k in range(a, grid.shape[0]) if not open_eye(k, b))
+        return 0.5 * (x[up, b] + x[low, b])
+
+    nbs = [((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1)) for i, j in idx]
     for _ in range(sweeps):
         for (i, j), nb in zip(idx, nbs, strict=True):
             w = np.array([1.0 / max(np.hypot(ys[a, b] - ys[i, j], zs[a, b] - zs[i, j]), 0.5) ** 2
                           for a, b in nb])
-            x[i, j] = sum(wk * x[a, b] for wk, (a, b) in zip(w, nb, strict=True)) / w.sum()
+            x[i, j] = sum(wk * corner_x(a, b) for wk, (a, b) in zip(w, nb, strict=True)) / w.sum()
 
 
 def smooth_cheeks(grid, phis, sigma=6.0, lo=-12.0, hi=100.0, cols=(45.0, 60.0, 110.0, 135.0)):
