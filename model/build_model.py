@@ -450,6 +450,7 @@ def smooth_glabella(grid):
 # The nose's side between the nose ridge and the inner eye corners, from below the eyes
 # to the glabella (y range, mm; columns off the midline and inside the inner corner).
 CANTHUS_Y, CANTHUS_Z = (54.0, 82.0), 16.5
+CANTHUS_BULGE = 0.012  # the fill's curvature (-Laplacian of x, 1/mm): gently convex
 
 
 def smooth_canthus(grid, sweeps=400):
@@ -485,7 +486,8 @@ def smooth_canthus(grid, sweeps=400):
         for (i, j), nb in zip(idx, nbs, strict=True):
             w = np.array([1.0 / max(np.hypot(ys[a, b] - ys[i, j], zs[a, b] - zs[i, j]), 0.5) ** 2
                           for a, b in nb])
-            x[i, j] = sum(wk * corner_x(a, b) for wk, (a, b) in zip(w, nb, strict=True)) / w.sum()
+            x[i, j] = (sum(wk * corner_x(a, b) for wk, (a, b) in zip(w, nb, strict=True))
+                       + CANTHUS_BULGE) / w.sum()
 
 
 def smooth_cheeks(grid, phis, sigma=6.0, lo=-12.0, hi=100.0, cols=(45.0, 60.0, 110.0, 135.0)):
