@@ -447,6 +447,49 @@ def smooth_glabella(grid):
         grid[i, cols, 0] = x + wy * fade * (upper_hull(z, x) - x)
 
 
+# The nose's side between the nose ridge and the inner eye corners, from below the eyes
+# to the glabella (y range, mm; columns off the midline and inside the inner corner).
+CANTHUS_Y, CANTHUS_Z = (54.0, 82.0), 16.5
+CANTHUS_BULGE = 0.012  # the fill's curvature (-Laplacian of x, 1/mm): gently convex
+
+
+def smooth_canthus(grid, sweeps=400):
+    """The nose's side wall beside the inner eye corners made smooth (in place): x of the
+    points there becomes the harmonic (membrane) fill of the points around it, weighted
+    by their distances across the surface (y, z). The lids' pull toward the eyeball and
+    the rows bending to the inner corner left a kink along each side of the nasal root,
+    rising from the inner corner toward the glabella, that read as a frown."""
+    lo, hi = CANTHUS_Y
+    ys, zs = grid[:, :, 1], grid[:, :, 2]
+    free = np.zeros(grid.shape[:2], bool)
+    free[1:-1, 1:-1] = (ys[1:-1, 1:-1] > lo) & (ys[1:-1, 1:-1] < hi) & (zs[1:-1, 1:-1] < CANTHUS_Z)
+    free[:, 0] = False
+    idx = np.argwhere(free)
+    x = grid[:, :, 0]
+
+    def open_eye(a, b):
+        """Whether grid point (a, b) lies in the fissure (on the eyeball, not skin)."""
+        u, up, low = lid_margins(abs(zs[a, b]))
+        return abs(u) < 1.0 and low + 0.05 < ys[a, b] < up - 0.05
+
+    def corner_x(a, b):
+        """x of a grid point, or for one in the fissure that of the lid margins beside it
+        in its column (the skin slopes into the inner corner, not into the eyeball)."""
+        if not open_eye(a, b):
+            return x[a, b]
+        up = next(k for k in range(a, -1, -1) if not open_eye(k, b))
+        low = next(k for k in range(a, grid.shape[0]) if not open_eye(k, b))
+        return 0.5 * (x[up, b] + x[low, b])
+
+    nbs = [((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1)) for i, j in idx]
+    for _ in range(sweeps):
+        for (i, j), nb in zip(idx, nbs, strict=True):
+            w = np.array([1.0 / max(np.hypot(ys[a, b] - ys[i, j], zs[a, b] - zs[i, j]), 0.5) ** 2
+                          for a, b in nb])
+            x[i, j] = (sum(wk * corner_x(a, b) for wk, (a, b) in zip(w, nb, strict=True))
+                       + CANTHUS_BULGE) / w.sum()
+
+
 def smooth_cheeks(grid, phis, sigma=6.0, lo=-12.0, hi=100.0, cols=(45.0, 60.0, 110.0, 135.0)):
     """The side of the face (columns from 45 to 135 degrees, rows from below the lower
     lip to the forehead) smoothed over height, in place: x and z of each point become a
@@ -528,6 +571,7 @@ def build_skin():
     grid[:, 0, 2] = 0.0
     grid[:, -1, 2] = 0.0
     smooth_glabella(grid)
+    smooth_canthus(grid)
     smooth_cheeks(grid, phis)
     # the jaw angle's flare into the neck (a notch in three-quarter views)
     smooth_cheeks(grid, phis, sigma=7.0, lo=-80.0, hi=-8.0, cols=(55.0, 75.0, 140.0, 165.0))

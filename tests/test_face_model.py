@@ -100,3 +100,25 @@ def test_lips_at_rest_have_adult_proportions():
     assert m["sto-li"] > m["ls-sto"]  # the lower lip's red is the taller
     assert 1.0 <= m["incisor show"] <= 3.5
     assert 0.0 < m["lip gap"] < 2.0  # parted, yet within evaluate's "lips touch" range
+
+
+def test_nasal_root_beside_the_inner_eye_corners_has_no_crease():
+    """The skin between the nose ridge and the inner eye corners (both sides, from below
+    the eyes to the glabella) bends smoothly: no two neighbouring skin triangles there
+    meet at more than 25 degrees. Before the side wall was filled, the lids' pull dug a
+    bowl there whose rim met at about 51 degrees and read as a frown."""
+    f = np.asarray(MODEL.faces)[np.asarray(MODEL.face_material) == MATERIALS.index("skin")]
+    c = V[f]
+    inside = ((c[:, :, 1] > 56) & (c[:, :, 1] < 82) & (np.abs(c[:, :, 2]) > 3)
+              & (np.abs(c[:, :, 2]) < 16.5)).all(axis=1)
+    f = f[inside]
+    n = np.cross(V[f[:, 1]] - V[f[:, 0]], V[f[:, 2]] - V[f[:, 0]])
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    edges: dict[tuple[int, int], list[int]] = {}
+    for k, t in enumerate(f):
+        for a in range(3):
+            edges.setdefault(tuple(sorted((int(t[a]), int(t[(a + 1) % 3])))), []).append(k)
+    pairs = [p for p in edges.values() if len(p) == 2]
+    assert len(pairs) > 20  # both sides' walls are in the region
+    angles = [np.degrees(np.arccos(np.clip(n[p] @ n[q], -1.0, 1.0))) for p, q in pairs]
+    assert max(angles) < 25.0
