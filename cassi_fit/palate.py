@@ -51,7 +51,7 @@ from jaxtyping import Array, Float, Int
 
 from .errors import DegenerateGeometryError
 from .face_model import FaceModel
-from .pharynx import slab_faces
+from .pharynx import concrete_points, slab_faces
 
 #: Upper lingual cervical stations per side of the model's arch (7 crowns, 2 each).
 N_STATIONS = 14
@@ -83,17 +83,8 @@ DEFAULT_OUTLINE = np.array([
 
 def _check_outline(outline):
     """Reject outlines for which no palate exists (only when the values are concrete)."""
-    shape = jnp.shape(outline)
-    if len(shape) != 2 or shape[1] != 2 or shape[0] < 2:
-        raise DegenerateGeometryError(
-            f"palate outline must be an (n >= 2, 2) array of x, y in mm, got shape {shape}")
-    try:
-        values = np.asarray(outline, dtype=float)
-    except Exception:  # a tracer under jit: checked by the caller's concrete run
-        return
-    if not np.all(np.isfinite(values)):
-        raise DegenerateGeometryError("palate outline contains non-finite values")
-    if np.sum(np.linalg.norm(np.diff(values, axis=0), axis=1)) <= 0.0:
+    values = concrete_points(outline, "palate outline")
+    if values is not None and np.sum(np.linalg.norm(np.diff(values, axis=0), axis=1)) <= 0.0:
         raise DegenerateGeometryError("palate outline has zero length (all points coincide)")
 
 

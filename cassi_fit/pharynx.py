@@ -51,18 +51,26 @@ THICKNESS_MM = 4.0
 DEFAULT_WALL = np.array([(-74.0, 18.5), (-70.0, -30.0)])
 
 
-def _check_points(points):
+def concrete_points(points, what: str) -> np.ndarray | None:
+    """An ``(n >= 2, 2)`` array of x, y mm as numpy, None under ``jit`` (a tracer: checked
+    by the caller's concrete run); ``DegenerateGeometryError`` naming ``what`` for another
+    shape or a non-finite value. Shared by the pharyngeal wall and the palate."""
     shape = jnp.shape(points)
     if len(shape) != 2 or shape[1] != 2 or shape[0] < 2:
         raise DegenerateGeometryError(
-            f"pharyngeal wall must be an (n >= 2, 2) array of x, y in mm, got shape {shape}")
+            f"{what} must be an (n >= 2, 2) array of x, y in mm, got shape {shape}")
     try:
         values = np.asarray(points, dtype=float)
     except Exception:  # a tracer under jit
-        return
+        return None
     if not np.all(np.isfinite(values)):
-        raise DegenerateGeometryError("pharyngeal wall contains non-finite values")
-    if abs(values[0, 1] - values[-1, 1]) < 1.0:
+        raise DegenerateGeometryError(f"{what} contains non-finite values")
+    return values
+
+
+def _check_points(points):
+    values = concrete_points(points, "pharyngeal wall")
+    if values is not None and abs(values[0, 1] - values[-1, 1]) < 1.0:
         raise DegenerateGeometryError(
             "the pharyngeal wall's points must span at least 1 mm in height (the wall runs "
             f"down behind the tongue), got y {values[0, 1]:.1f} and {values[-1, 1]:.1f}")
