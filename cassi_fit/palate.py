@@ -245,6 +245,13 @@ def model_arch(model: FaceModel) -> Float[Array, "k 3"] | None:
     return jnp.asarray(model.vertices)[np.asarray(index)]
 
 
+@eqx.filter_jit
+def _palate_vertices(outline, arch, wall, **shape):
+    """``build_palate``'s vertices, compiled once per shape (op by op, its few hundred
+    small operations cost seconds of dispatch and compilation per subject)."""
+    return build_palate(outline, arch=arch, wall=wall, **shape)[0]
+
+
 def with_palate(
     model: FaceModel, outline_mm: Float[np.ndarray, "n 2"] | Float[Array, "n 2"], **shape: float
 ) -> FaceModel:
@@ -253,8 +260,9 @@ def with_palate(
     pharyngeal wall (when the model has them)."""
     from .pharynx import model_wall_midline
 
-    verts, _ = build_palate(outline_mm, arch=model_arch(model),
-                            wall=model_wall_midline(model), **shape)
+    _check_outline(outline_mm)  # on the concrete values: the compiled build cannot
+    verts = _palate_vertices(jnp.asarray(outline_mm, jnp.asarray(model.vertices).dtype),
+                             model_arch(model), model_wall_midline(model), **shape)
     index = np.asarray(model.regions["palate"])
     if len(index) != verts.shape[0]:
         raise DegenerateGeometryError(

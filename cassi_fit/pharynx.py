@@ -179,12 +179,22 @@ def model_wall_midline(model: FaceModel) -> Float[Array, "h 2"] | None:
     return sheet[:, N_ACROSS // 2, :2]
 
 
+@eqx.filter_jit
+def _pharynx_vertices(points):
+    """``build_pharynx``'s vertices, compiled once per shape (op by op, its many small
+    operations cost a second or more of dispatch and compilation per subject)."""
+    return build_pharynx(points)[0]
+
+
 def with_pharynx(
     model: FaceModel, points_mm: Float[np.ndarray, "n 2"] | Float[Array, "n 2"] | None = None,
 ) -> FaceModel:
     """The model with its pharynx region rebuilt from ``points_mm`` (None: the default
     wall), same topology."""
-    verts, _ = build_pharynx(points_mm)
+    if points_mm is not None:
+        _check_points(points_mm)  # on the concrete values: the compiled build cannot
+        points_mm = jnp.asarray(points_mm, jnp.asarray(model.vertices).dtype)
+    verts = _pharynx_vertices(points_mm)
     if not has_pharynx(model):
         raise DegenerateGeometryError(
             "the face model has no pharynx region: rebuild it with model/build_model.py")
