@@ -412,7 +412,7 @@ def animation_frames(
     model_sites = np.asarray(animation.pellets_model)
     shown = np.isfinite(measured).all(axis=(0, 2))
     section = "midsagittal" in getattr(renderer, "views", ())
-    trail = max(2, round(TRAIL_S / (FRAME_STEP_S * animation.stride)))
+    trail = max(2, round(TRAIL_S / (FRAME_STEP_S * animation.stride))) if section else 0
     current = (labels.at(np.asarray(animation.times, np.float64)) if labels is not None
                else np.full(animation.n_frames, "", dtype=str))
     indices = range(animation.n_frames) if indices is None else indices

@@ -99,12 +99,13 @@ class Plan:
     n_subjects: int
     tasks: tuple[str, ...]
     noise_subjects: int
+    stride: int = 1  # the evaluation's and the penetration's every stride-th data line
 
 
 FULL = Plan(n_subjects=15, tasks=("tp106", "tp040", "tp020_2"), noise_subjects=15)
-SMALL = Plan(n_subjects=2, tasks=("tp106", "tp040"), noise_subjects=2)
+SMALL = Plan(n_subjects=2, tasks=("tp106", "tp040"), noise_subjects=2, stride=5)
 #: the notebook: one subject, one task, every step of the run
-TINY = Plan(n_subjects=1, tasks=("tp106",), noise_subjects=1)
+TINY = Plan(n_subjects=1, tasks=("tp106",), noise_subjects=1, stride=5)
 
 
 # ------------------------------------------------------------------ pure helpers
@@ -270,7 +271,7 @@ def noise_study(workdir, plan: Plan, model) -> list[dict]:
 
 
 def evaluate_both(root, calibrations: dict, model, tasks=None, progress=False,
-                  settings=tuple(SETTINGS)) -> dict:
+                  settings=tuple(SETTINGS), stride: int = 1) -> dict:
     """Step 3: folder name (``settings``, names of ``SETTINGS``) -> ``EvaluationResult``."""
     from cassi_fit.evaluate import evaluate_dataset
 
@@ -280,11 +281,11 @@ def evaluate_both(root, calibrations: dict, model, tasks=None, progress=False,
         cal = calibration if calibration == "cassi" else calibrations[calibration]
         out[name] = evaluate_dataset(root, calibrations=cal, collisions=collisions, tasks=tasks,
                                      subjects=list(calibrations[METHODS[0]]), jaw=JAW,
-                                     model=model, progress=progress)
+                                     model=model, progress=progress, stride=stride)
     return out
 
 
-def penetration_rows(root, calibrations: dict, model, tasks=None) -> list[dict]:
+def penetration_rows(root, calibrations: dict, model, tasks=None, stride: int = 1) -> list[dict]:
     """Per recording and setting, ``depth_percentiles`` of the animation: CASSI-like (no
     projection) and calibrated before and after projection. A recording that cannot be
     animated gets a row with its error as ``status`` (as in the evaluation)."""
@@ -305,9 +306,9 @@ def penetration_rows(root, calibrations: dict, model, tasks=None) -> list[dict]:
                     warnings.simplefilter("ignore", UserWarning)
                     rec = ds.load(subject, task)
                 state = initialize(rec, model, calibration="cassi")
-                plain = animate(state, rec, jaw=JAW, collisions="off")
+                plain = animate(state, rec, jaw=JAW, collisions="off", stride=stride)
                 state = initialize(rec, model, calibration=cal)
-                fitted = animate(state, rec, jaw=JAW, collisions="project")
+                fitted = animate(state, rec, jaw=JAW, collisions="project", stride=stride)
             except CassiError as exc:
                 rows.append({**row, "status": f"error: {exc}"})
                 continue
@@ -667,8 +668,9 @@ def _run_synthetic(plan, out, force, model, clock, docs=None):
         atomic_write(out / "lip_noise.csv", csv_text(noise), overwrite=force)
         plot_noise(noise, out / "lip_noise.png", overwrite=force)
         clock(f"lip thickness vs noise ({len(NOISE_SCALES)} corpora x both methods)")
-        results = evaluate_both(root, cals, model, progress=sys.stderr.isatty())
-        penetration = penetration_rows(root, cals, model)
+        results = evaluate_both(root, cals, model, progress=sys.stderr.isatty(),
+                                stride=plan.stride)
+        penetration = penetration_rows(root, cals, model, stride=plan.stride)
         write_evaluation(results, penetration, out, force)
         clock(f"evaluation ({len(SETTINGS)} settings) and penetration")
     if docs is not None:
@@ -683,7 +685,7 @@ def _run_synthetic(plan, out, force, model, clock, docs=None):
     return summary_lines(recovery, noise, results, penetration)
 
 
-def _run_dataset(root, tasks, out, force, model, clock):
+def _run_dataset(root, tasks, out, force, model, clock, stride=1):
     from cassi_fit._io import atomic_write
     from cassi_fit.dataset import Dataset
     from cassi_fit.errors import MissingDataError
@@ -697,8 +699,8 @@ def _run_dataset(root, tasks, out, force, model, clock):
     rows = recovery_rows(cals)
     atomic_write(out / "calibration_residuals.csv", csv_text(rows), overwrite=force)
     clock("calibration")
-    results = evaluate_both(ds, cals, model, tasks=tasks, progress=progress)
-    penetration = penetration_rows(root, cals, model, tasks)
+    results = evaluate_both(ds, cals, model, tasks=tasks, progress=progress, stride=stride)
+    penetration = penetration_rows(root, cals, model, tasks, stride=stride)
     write_evaluation(results, penetration, out, force)
     clock("evaluation")
     lines = []
@@ -714,12 +716,15 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="experiments/output", help="folder for the outputs")
     parser.add_argument("--small", action="store_true",
-                        help=f"{SMALL.n_subjects} subjects, tasks {','.join(SMALL.tasks)} "
-                        f"(default {FULL.n_subjects} subjects, {','.join(FULL.tasks)})")
+                        help=f"{SMALL.n_subjects} subjects, tasks {','.join(SMALL.tasks)}, "
+                        f"every {SMALL.stride}th line evaluated (default {FULL.n_subjects} "
+                        f"subjects, {','.join(FULL.tasks)}, every line)")
     parser.add_argument("--dataset", metavar="DIR",
                         help="run on this dataset instead (no truth: calibration residuals "
                         "and the evaluation only)")
     parser.add_argument("--tasks", help="with --dataset: comma-separated tasks (default all)")
+    parser.add_argument("--stride", type=int, default=1,
+                        help="with --dataset: evaluate every STRIDE-th data line (default 1)")
     parser.add_argument("--docs", metavar="DIR",
                         help="also write the documentation's Markdown tables (DOC_TABLES) "
                         "into DIR (synthetic runs only; make experiments: docs/generated)")
@@ -759,7 +764,8 @@ def main(argv=None) -> int:
     try:
         if args.dataset:
             tasks = [t.strip().lower() for t in args.tasks.split(",")] if args.tasks else None
-            lines = _run_dataset(args.dataset, tasks, out, args.force, model, clock)
+            lines = _run_dataset(args.dataset, tasks, out, args.force, model, clock,
+                                 args.stride)
         else:
             lines = _run_synthetic(SMALL if args.small else FULL, out, args.force, model, clock,
                                    args.docs)

@@ -258,7 +258,7 @@ def test_dataset_run_has_residuals_but_no_truth(tmp_path, capsys):
     summary, _ = _documented()
     corpus = sf.make_corpus(tmp_path / "corpus", sf.Plan(1, ("tp106", "tp040"), 1))
     out = tmp_path / "out"
-    assert sf.main(["--dataset", str(corpus), "--out", str(out)]) == 0
+    assert sf.main(["--dataset", str(corpus), "--out", str(out), "--stride", "5"]) == 0
     for name in sf.output_names(synthetic=False):
         assert (out / name).is_file(), name
     assert not (out / "calibration_recovery.csv").exists()
