@@ -51,7 +51,7 @@ from jaxtyping import Array, Float, Int
 
 from .errors import DegenerateGeometryError
 from .face_model import FaceModel
-from .pharynx import concrete_points, slab_faces
+from .pharynx import concrete_points, replace_region, slab_faces
 
 #: Upper lingual cervical stations per side of the model's arch (7 crowns, 2 each).
 N_STATIONS = 14
@@ -263,10 +263,5 @@ def with_palate(
     _check_outline(outline_mm)  # on the concrete values: the compiled build cannot
     verts = _palate_vertices(jnp.asarray(outline_mm, jnp.asarray(model.vertices).dtype),
                              model_arch(model), model_wall_midline(model), **shape)
-    index = np.asarray(model.regions["palate"])
-    if len(index) != verts.shape[0]:
-        raise DegenerateGeometryError(
-            f"the model's palate region has {len(index)} vertices, build_palate makes "
-            f"{verts.shape[0]}: the model was not built with cassi_fit.palate")
-    new = jnp.asarray(model.vertices).at[index].set(verts.astype(model.vertices.dtype))
-    return eqx.tree_at(lambda m: m.vertices, model, new)
+    return replace_region(model, "palate", verts, "build_palate",
+                          ": the model was not built with cassi_fit.palate")

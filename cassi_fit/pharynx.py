@@ -198,10 +198,19 @@ def with_pharynx(
     if not has_pharynx(model):
         raise DegenerateGeometryError(
             "the face model has no pharynx region: rebuild it with model/build_model.py")
-    index = np.asarray(model.regions["pharynx"])
+    return replace_region(model, "pharynx", verts, "build_pharynx", "")
+
+
+def replace_region(
+    model: FaceModel, region: str, verts: Float[Array, "P 3"], builder: str, why: str
+) -> FaceModel:
+    """``model`` with the vertices of ``region`` replaced by ``verts`` (same topology);
+    ``DegenerateGeometryError`` (naming ``builder``, then ``why``) if the counts differ.
+    Shared by ``with_pharynx`` and ``palate.with_palate``."""
+    index = np.asarray(model.regions[region])
     if len(index) != verts.shape[0]:
         raise DegenerateGeometryError(
-            f"the model's pharynx region has {len(index)} vertices, build_pharynx makes "
-            f"{verts.shape[0]}")
+            f"the model's {region} region has {len(index)} vertices, {builder} makes "
+            f"{verts.shape[0]}{why}")
     new = jnp.asarray(model.vertices).at[index].set(verts.astype(model.vertices.dtype))
     return eqx.tree_at(lambda m: m.vertices, model, new)
