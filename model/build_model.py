@@ -136,13 +136,19 @@ def _nape(rows):
 def _under_jaw_rows(rows):
     """Extra rows halfway between those from the menton down the throat: the jaw's weights
     fall from 1 to 0.5 there, and with rows 10-20 mm apart the skin folded along them
-    when the jaw opened wide; twice as many rows spread the stretch."""
+    when the jaw opened wide; twice as many rows spread the stretch. The new rows' height
+    and front (y0, xf) follow the 4-point subdivision scheme (Dyn, Levin & Gregory 1987)
+    rather than the chord, so the chin-throat corner is rounded over three rows instead of
+    bent 50 degrees at one."""
     names = [r[0] for r in rows]
     top, bottom = names.index("menton"), names.index("neck1")
     out = list(rows[:top + 1])
-    for r0, r1 in zip(rows[top:bottom], rows[top + 1:bottom + 1], strict=True):
-        out.append((f"{r0[0]}_{r1[0]}",
-                    *[0.5 * (p + q) for p, q in zip(r0[1:8], r1[1:8], strict=True)], r0[8]))
+    for k in range(top, bottom):
+        r_, r0, r1, r2 = rows[k - 1], rows[k], rows[k + 1], rows[k + 2]
+        mid = [0.5 * (p + q) for p, q in zip(r0[1:8], r1[1:8], strict=True)]
+        for c in (0, 1):  # y0, xf: the 4-point scheme (the profile rounds its corners)
+            mid[c] = (9.0 * (r0[c + 1] + r1[c + 1]) - r_[c + 1] - r2[c + 1]) / 16.0
+        out.append((f"{r0[0]}_{r1[0]}", *mid, r0[8]))
         out.append(r1)
     return out + list(rows[bottom + 1:])
 
@@ -523,23 +529,28 @@ def smooth_cheeks(grid, phis, sigma=6.0, lo=-12.0, hi=100.0, cols=(45.0, 60.0, 1
 # constant x: the inside view, which removes the near half of the skin, sees them edge
 # on (side walls would show face-on behind the tongue there). Static, weights 0.
 MOUTH_BACK = {"x": -100.0, "y": (-45.0, 30.0), "z": 32.0}
-MOUTH_CURTAINS = ({"x": -46.0, "y": (-35.0, 25.0), "z": (27.0, 48.0), "gap": 4.0},
-                  {"x": -75.0, "y": (-40.0, 28.0), "z": (24.0, 50.0), "gap": 4.0})
+# "follow": the curtain moves with the cheek beside it (the jaw weights and fields of the
+# nearest skin); the others are static.
+MOUTH_CURTAINS = ({"x": -22.0, "y": (-30.0, 20.0), "z": (25.0, 52.0), "gap": 3.0, "follow": True},
+                  {"x": -46.0, "y": (-35.0, 25.0), "z": (27.0, 48.0), "gap": 4.0, "follow": False},
+                  {"x": -75.0, "y": (-40.0, 28.0), "z": (24.0, 50.0), "gap": 4.0, "follow": False})
 
 
 def build_mouth_wall(skin, n=6):
     """Vertices and faces (wound like the skin grid, before the flip in ``build``) of the
-    back wall and the curtains of the mouth, all facing +x."""
+    back wall and the curtains of the mouth, all facing +x, and which vertices follow
+    the cheek (``MOUTH_CURTAINS``' "follow")."""
     from scipy.interpolate import LinearNDInterpolator
 
     side = skin[(skin[:, 2] > 20.0) & (skin[:, 1] > -70.0) & (skin[:, 1] < 60.0)]
     head_z = LinearNDInterpolator(side[:, :2], side[:, 2])
-    verts, faces = [], []
+    verts, faces, follow = [], [], []
 
-    def sheet(x, ys, zs):
+    def sheet(x, ys, zs, moves=False):
         """A sheet in the plane x at heights ys, zs[i] ascending across at ys[i]."""
         base, k = len(verts), zs.shape[1]
         verts.extend([x, y, z] for y, row in zip(ys, zs, strict=True) for z in row)
+        follow.extend([moves] * (len(verts) - base))
         for i in range(len(ys) - 1):
             for j in range(k - 1):
                 a, b = base + i * k + j, base + i * k + j + 1
@@ -555,9 +566,9 @@ def build_mouth_wall(skin, n=6):
         if not np.all(np.isfinite(outer) & (outer > c["z"][0] + 2.0)):
             raise ValueError("a mouth curtain does not fit inside the cheek")
         zs = np.array([np.linspace(c["z"][0], o, 4) for o in outer])
-        sheet(c["x"], y, zs)
-        sheet(c["x"], y, -zs[:, ::-1])
-    return np.array(verts), np.array(faces)
+        sheet(c["x"], y, zs, c["follow"])
+        sheet(c["x"], y, -zs[:, ::-1], c["follow"])
+    return np.array(verts), np.array(faces), np.array(follow)
 
 
 def build_skin():
@@ -626,6 +637,16 @@ def skin_faces(n_r, n_c, index, corner):
     return faces
 
 
+# dy (mm below the jaw line) where the lower face's weight falls from one of Parke's
+# plateaus to the next (jaw 1 -> under chin 0.75 -> neck 0.5 -> 0): spread over the whole
+# submental skin, and to 0 above the neck's base. (The first model fell 1 -> 0.75 within
+# 6.5 mm below the jaw line; the skin folded along it when the jaw opened.)
+JAW_RAMPS = ((0.0, 8.8), (10.0, 20.0), (22.0, 70.0))
+
+# |z| (mm) within which the upper lip stays still when the jaw moves (Parke's upper lip)
+UPPER_LIP_STILL = 8
+
+
 def skin_weights(verts, ids, corner_z):
     """Per-vertex fraction of the jaw rotation (Parke's values) and the region cores.
 
@@ -633,24 +654,29 @@ def skin_weights(verts, ids, corner_z):
     the upper and lower rows except across the mouth opening, so the skin stretches
     instead of tearing: chin and lower lip 1.00, beside the mouth the cheeks 0.35 (fading
     to 0 toward the cheekbones and the ears), under the chin 0.75, upper neck 0.50, 0 on
-    the lower neck, the ears and the back of the head. Inside the mouth both lips blend
-    to the corner value (0.35) over the outer third of the mouth.
+    the lower neck, the ears and the back of the head. Inside the mouth the lips blend to
+    the corner value (0.35): the lower lip from the midline, so that with the jaw open
+    wide it hangs in a curve, the upper lip from UPPER_LIP_STILL mm out (blends over the
+    mouth's outer third folded the lower lip's triangles over at the corners, and bent
+    the upper lip's edge 39 degrees where its blend began).
     """
     x, y = verts[:, 0], verts[:, 1]
     lower = np.array([ROWS[i][8] == "l" for i in ids[:, 0]])
     phis = column_angles()
     phi = phis[ids[:, 1]]
     phi_c = phis[FRONT_Z.index(MOUTH_HALF_WIDTH)]
-    phi_in = phis[FRONT_Z.index(16)]
+    phi_in = phis[FRONT_Z.index(UPPER_LIP_STILL)]
     p = PARKE
     # jaw line from menton to gonion; dy > 0 below it
     y_line = np.interp(x, [-86.0, -4.0], [-34.0, -49.5])
     dy = y_line - y
-    vert = (p["jaw"] + (p["under_chin"] - p["jaw"]) * ramp(dy, 0.5, 7.0)
-            + (p["neck"] - p["under_chin"]) * ramp(dy, 9.5, 18.0)
-            - p["neck"] * ramp(dy, 20.0, 80.0))
+    vert = (p["jaw"] + (p["under_chin"] - p["jaw"]) * ramp(dy, *JAW_RAMPS[0])
+            + (p["neck"] - p["under_chin"]) * ramp(dy, *JAW_RAMPS[1])
+            - p["neck"] * ramp(dy, *JAW_RAMPS[2]))
     back = 1.0 - ramp(-x, 60.0, 140.0)
-    lat = ramp(phi, phi_in, phi_c)            # 0 in the middle of the mouth, 1 at the corners
+    # 0 in the middle of the mouth, 1 at the corners: the lower lip from the midline, the
+    # upper lip from UPPER_LIP_STILL mm out
+    lat = np.where(lower, ramp(phi, phis[0], phi_c), ramp(phi, phi_in, phi_c))
     lat = np.where(phi > np.pi / 2, 1.0, lat)
     below = ramp(-y, 4.0, 30.0)               # mouth level -> mandible
     side_low = p["cheek"] * (1.0 - below) + vert * below
@@ -923,7 +949,7 @@ def build():
     lip_row = np.isin(names, ["ul_red", "ul_low", "A", "A_in", "B_in", "B", "ll_high",
                               "ll_red"])
     in_mouth = (np.abs(sv[:, 2]) < corner_z + 1e-9) & (sv[:, 0] > -30.0)
-    mouth_core = (np.abs(sv[:, 2]) < 16.0 + 1e-6) & (sv[:, 0] > -30.0)  # lips' jaw weight flat
+    mouth_core = (np.abs(sv[:, 2]) < 16.0 + 1e-6) & (sv[:, 0] > -30.0)  # the lips' middle
     lip_vertex = lip_row & in_mouth
     skin_mat = np.where(lip_vertex[np.array(sf)].all(axis=1), MAT["lips"], MAT["skin"])
     n_grid = len(sv)
@@ -942,12 +968,18 @@ def build():
     skin_mat = np.concatenate([skin_mat, np.full(len(af), MAT["skin"])])
     sv = np.concatenate([sv, av])
     # the mouth's walls (static, weights and fields 0): after the ears
-    wv, wf = build_mouth_wall(sv[:n_grid])
-    w_parke = np.concatenate([w_parke, np.zeros(len(wv))])
-    fields = {k: np.concatenate([f, np.zeros(len(wv))]) for k, f in fields.items()}
-    jaw_shape = np.concatenate([jaw_shape, np.zeros(len(wv))])
+    # the mouth's walls: static (weights and fields 0) but for the front curtains, which
+    # take the cheek's like the ears; drawn as the lining of the mouth (the mucosa colour
+    # of the pharyngeal wall), not as skin
+    wv, wf, follows = build_mouth_wall(sv[:n_grid])
+    dist, near = cKDTree(sv[:n_grid]).query(wv, k=4)
+    inv = 1.0 / np.maximum(dist, 1e-6)
+    cheek = lambda f: np.where(follows, (f[:n_grid][near] * inv).sum(axis=1) / inv.sum(axis=1), 0.0)
+    w_parke = np.concatenate([w_parke, cheek(w_parke)])
+    fields = {k: np.concatenate([f, cheek(f)]) for k, f in fields.items()}
+    jaw_shape = np.concatenate([jaw_shape, cheek(jaw_shape)])
     sf = np.concatenate([sf, wf + len(sv)])
-    skin_mat = np.concatenate([skin_mat, np.full(len(wf), MAT["skin"])])
+    skin_mat = np.concatenate([skin_mat, np.full(len(wf), MAT["pharynx"])])
     sv = np.concatenate([sv, wv])
     parts = [("skin", sv, sf, skin_mat)]
     ev, ef = [], []

@@ -48,8 +48,14 @@ def test_jaw_weights_match_the_table(region):
 
 def test_upper_face_does_not_move_with_the_jaw():
     w = np.asarray(MODEL.jaw_weights["cassi"])
-    for name in ("upper_teeth", "palate", "eyes", "nose", "upper_lip", "tongue"):
+    for name in ("upper_teeth", "palate", "eyes", "nose", "tongue"):
         assert np.all(w[MODEL.regions[name]] == 0.0), name
+    # the upper lip: still within 8 mm of the midline; beyond, it is drawn down toward the
+    # mouth corners' (cheek) value, never further
+    lip = np.asarray(MODEL.regions["upper_lip"])
+    middle = np.abs(V[lip, 2]) < 8.0 + 1e-6
+    assert middle.sum() >= 10 and np.all(w[lip[middle]] == 0.0)
+    assert np.all(w[lip] <= CASSI["cheek"] + 0.006)
 
 
 def test_pellet_sites_sit_where_real_pellets_sit():
@@ -102,6 +108,22 @@ def test_lips_at_rest_have_adult_proportions():
     assert 0.0 < m["lip gap"] < 2.0  # parted, yet within evaluate's "lips touch" range
 
 
+def _bends(vertices, faces):
+    """Angle (degrees) between the normals of every two triangles sharing an edge, and
+    the shared edge's midpoint."""
+    n = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
+                 vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    edges: dict[tuple[int, int], list[int]] = {}
+    for k, t in enumerate(faces):
+        for a in range(3):
+            edges.setdefault(tuple(sorted((int(t[a]), int(t[(a + 1) % 3])))), []).append(k)
+    shared = [(e, p) for e, p in edges.items() if len(p) == 2]
+    pairs = np.array([p for _, p in shared])
+    angles = np.degrees(np.arccos(np.clip((n[pairs[:, 0]] * n[pairs[:, 1]]).sum(1), -1.0, 1.0)))
+    return angles, vertices[np.array([e for e, _ in shared])].mean(axis=1)
+
+
 def test_nasal_root_beside_the_inner_eye_corners_has_no_crease():
     """The skin between the nose ridge and the inner eye corners (both sides, from below
     the eyes to the glabella) bends smoothly: no two neighbouring skin triangles there
@@ -111,14 +133,97 @@ def test_nasal_root_beside_the_inner_eye_corners_has_no_crease():
     c = V[f]
     inside = ((c[:, :, 1] > 56) & (c[:, :, 1] < 82) & (np.abs(c[:, :, 2]) > 3)
               & (np.abs(c[:, :, 2]) < 16.5)).all(axis=1)
-    f = f[inside]
-    n = np.cross(V[f[:, 1]] - V[f[:, 0]], V[f[:, 2]] - V[f[:, 0]])
-    n /= np.linalg.norm(n, axis=1)[:, None]
-    edges: dict[tuple[int, int], list[int]] = {}
-    for k, t in enumerate(f):
-        for a in range(3):
-            edges.setdefault(tuple(sorted((int(t[a]), int(t[(a + 1) % 3])))), []).append(k)
-    pairs = [p for p in edges.values() if len(p) == 2]
-    assert len(pairs) > 20  # both sides' walls are in the region
-    angles = [np.degrees(np.arccos(np.clip(n[p] @ n[q], -1.0, 1.0))) for p, q in pairs]
-    assert max(angles) < 25.0
+    angles, _ = _bends(V, f[inside])
+    assert len(angles) > 20  # both sides' walls are in the region
+    assert angles.max() < 25.0
+
+
+def _jaw_open(theta=0.25):
+    """The rest mesh with the jaw turned ``theta`` rad about the model's condyle (CASSI's
+    weights): the pose of model/pictures/face_jaw_open_*.png."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    from cassi_fit import rigid
+    from cassi_fit.deform import default_params, deform
+
+    pivot = jnp.array([MODEL.measures["jaw_pivot_x"], MODEL.measures["jaw_pivot_y"]])
+    moved = rigid.from_pivot(jnp.asarray(theta), pivot)
+    p = eqx.tree_at(lambda q: (q.jaw_theta, q.jaw_translation), default_params(MODEL), moved)
+    return np.asarray(deform(MODEL, p))
+
+
+def _outer_skin_faces():
+    """The skin's and lips' triangles, without the mouth's walls and without the zero-area
+    triangles where the grid's rows close at the crown."""
+    f = np.asarray(MODEL.faces)
+    wall = np.zeros(len(V), bool)
+    wall[np.asarray(MODEL.regions["mouth_wall"])] = True
+    skin = np.isin(np.asarray(MODEL.face_material), [MATERIALS.index("skin"), MATERIALS.index("lips")])
+    area = np.linalg.norm(np.cross(V[f[:, 1]] - V[f[:, 0]], V[f[:, 2]] - V[f[:, 0]]), axis=1)
+    return f[skin & ~wall[f].any(axis=1) & (area > 1e-9)]
+
+
+def test_jaw_open_wide_folds_no_skin():
+    """Issue 14: no creases in the jaw-open pose. With the jaw turned 0.25 rad (the incisors
+    about 28 mm apart), no two neighbouring skin or lip triangles bend more than 25 degrees
+    further than at rest. The first face's jaw weights fell 1 -> 0.75 within 6.5 mm below
+    the jaw line and folded the skin there by 27 degrees, and the lower lip's corners,
+    blended over the mouth's outer third, folded over by up to 154."""
+    f = _outer_skin_faces()
+    rest, _ = _bends(V, f)
+    opened, where = _bends(_jaw_open(), f)
+    assert rest.shape == opened.shape
+    worst = int(np.argmax(opened - rest))
+    assert opened[worst] - rest[worst] < 25.0, where[worst]
+
+
+def _first_hits(vertices, faces, origins, direction):
+    """For rays origin + t * direction (t > 0): the index of the first triangle hit (-1
+    for none), Moller-Trumbore on all triangles at once."""
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    e1, e2 = b - a, c - a
+    p = np.cross(direction, e2)
+    det = (e1 * p).sum(1)
+    ok = np.abs(det) > 1e-12
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    q_all = np.cross(origins[:, None, :] - a[None], e1[None])  # (R, F, 3)
+    s = origins[:, None, :] - a[None]
+    u = (s * p[None]).sum(2) * inv
+    v = (q_all @ direction) * inv
+    t = (q_all * e2[None]).sum(2) * inv
+    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+    t = np.where(hit, t, np.inf)
+    first = np.argmin(t, axis=1)
+    return np.where(np.isfinite(t[np.arange(len(origins)), first]), first, -1)
+
+
+@pytest.mark.parametrize("turn", [35.0, -35.0])
+def test_open_mouth_seen_from_three_quarters_shows_no_background(turn):
+    """Looking into the wide-open mouth from three-quarters (either side), every line of
+    sight through the opening ends on something drawn from the front: the teeth, the
+    tongue, the mouth's lining, or skin facing the eye. Before the front curtains it
+    passed out through the far cheek from inside (a culled back face: a white sliver of
+    background at the far mouth corner)."""
+    verts = _jaw_open()
+    faces = np.asarray(MODEL.faces)
+    a = np.radians(turn)
+    direction = np.array([-np.cos(a), 0.0, np.sin(a)])  # from a camera in front, turned
+    # points across the opening: between the two lips' edges, column by column
+    upper = verts[np.asarray(MODEL.collision["upper_lip_columns"])[:, 0]]
+    lower = verts[np.asarray(MODEL.collision["lower_lip_columns"])[:, 0]]
+    share = np.linspace(0.1, 0.9, 9)[:, None, None]
+    aim = (upper + share * (lower - upper)).reshape(-1, 3)
+    # and toward each corner from the outermost columns' middle
+    for corner in ("mouth_corner_left", "mouth_corner_right"):
+        c = verts[MODEL.landmarks[corner]]
+        outer = np.argmax(upper[:, 2] * np.sign(c[2]))
+        mid = 0.5 * (upper[outer] + lower[outer])
+        aim = np.vstack([aim, mid + np.array([0.25, 0.5, 0.75])[:, None] * (c - mid)])
+    assert np.ptp(aim[:, 2]) > 40.0 and np.ptp(aim[:, 1]) > 20.0  # corner to corner, open
+    hits = _first_hits(verts, faces, aim - 400.0 * direction, direction)
+    assert np.all(hits >= 0)
+    normals = np.cross(verts[faces[:, 1]] - verts[faces[:, 0]], verts[faces[:, 2]] - verts[faces[:, 0]])
+    skin = np.isin(np.asarray(MODEL.face_material), [MATERIALS.index("skin"), MATERIALS.index("lips")])
+    seen_from_behind = skin[hits] & (normals[hits] @ direction > 0)
+    assert not seen_from_behind.any(), aim[seen_from_behind]
