@@ -35,9 +35,10 @@ LANDMARKS = ("upper_incisor_tip", "lower_incisor_tip", "MNI", "MNM", "UL", "LL",
              "mouth_corner_right", "zygion_left", "zygion_right")
 MEASURES = ("face_width", "jaw_width", "mouth_width", "upper_lip_thickness",
             "lower_lip_thickness", "nose_protrusion")
-# Per-vertex deformation fields stored beside the positions (see model/README.md).
+# Per-vertex deformation fields stored beside the positions (see model/README.md), and
+# one colour field ("hair": the share of the hair colour, drawn by cassi_fit.render).
 FIELDS = ("upper_lip", "lower_lip", "upper_vermilion", "lower_vermilion", "mouth", "nose",
-          "nose_rise", "jaw_shape", "tongue_s", "tongue_jaw", "tongue_follow")
+          "nose_rise", "jaw_shape", "tongue_s", "tongue_jaw", "tongue_follow", "hair")
 VERTEX_COLUMNS = ("x", "y", "z", "w_cassi", "w_parke") + FIELDS
 _ONE_IF_ABSENT = ("tongue_follow",)
 

@@ -909,6 +909,52 @@ def build_eye(centre, radius=12.0, n_lon=20):
     return np.array(verts), np.array(faces)
 
 
+# ---------------------------------------------------------------------------- hair
+# The hairline: height (y mm) above which the scalp is hair, by azimuth about the head's
+# vertical axis (x = HAIR_AXIS_X, z = 0; 0 degrees front, 90 at the side, 180 at the
+# back): the forehead's hairline about 58 mm above the glabella (trichion-glabella,
+# Farkas' adult norms 55-65 mm), the temples, a sideburn down to the ear's middle in
+# front of it, the hair's edge over the ear, and down to the nape behind it.
+HAIRLINE = ((0.0, 142.0), (35.0, 140.0), (55.0, 128.0), (70.0, 100.0), (80.0, 60.0),
+            (90.0, 48.0), (96.0, 72.0), (104.0, 80.0), (114.0, 74.0), (125.0, 40.0),
+            (145.0, 5.0), (180.0, -12.0))
+HAIR_AXIS_X, HAIR_RADIUS = -90.0, 75.0  # mm; the radius turns azimuth into arc length
+# The eyebrows: centre line (|z|, y) mm, about 21 mm above the eyes' centres from above
+# the inner eye corner to beyond the outer one, and half height (mm) along it (thick at
+# the head, thin at the tail). Near the glabella row (84 mm): the rows above and below
+# are 8-10 mm away, and the drawn edge is the interpolated distance's zero.
+BROW = ((14.0, 84.5, 4.5), (24.0, 85.5, 4.2), (36.0, 86.0, 3.5), (46.0, 85.5, 2.6),
+        (52.0, 84.5, 1.6))
+HAIR_EAR = -50.0  # mm: the ears' value (bare skin, far from any hair)
+
+
+def _polyline_distance(points, line):
+    """Distance (n,) from 2-D points (n,2) to a polyline (m,2)."""
+    a, b = line[:-1], line[1:]
+    ab = b - a
+    t = np.clip(((points[:, None] - a) * ab).sum(2) / (ab * ab).sum(1), 0.0, 1.0)
+    return np.linalg.norm(points[:, None] - (a + t[..., None] * ab), axis=2).min(axis=1)
+
+
+def hair_distance(verts):
+    """The ``hair`` field of the skin grid's vertices: signed distance (mm) to the edge of
+    the hair, positive on it: the scalp above the ``HAIRLINE`` (distance in the plane of
+    arc length round the head and height) and the eyebrows (``BROW``: half height minus
+    the distance from the centre line). The renderer interpolates it across each triangle
+    and colours where it is positive, so the edge follows these curves, not the grid."""
+    az = np.arctan2(np.abs(verts[:, 2]), verts[:, 0] - HAIR_AXIS_X)
+    a, h = np.array(HAIRLINE).T
+    line = np.column_stack([np.radians(a) * HAIR_RADIUS, h])
+    dist = _polyline_distance(np.column_stack([az * HAIR_RADIUS, verts[:, 1]]), line)
+    scalp = np.where(verts[:, 1] > np.interp(np.degrees(az), a, h), dist, -dist)
+    z, y = np.abs(verts[:, 2]), verts[:, 1]
+    bz, by, half = np.array(BROW).T
+    # distance from the centre line, plus the distance past its ends
+    off = np.abs(y - np.interp(z, bz, by)) + np.maximum(bz[0] - z, 0) + np.maximum(z - bz[-1], 0)
+    brow = np.where(verts[:, 0] > -60.0, np.interp(z, bz, half) - off, -off)
+    return np.maximum(scalp, brow)
+
+
 # ---------------------------------------------------------------------------- assembly
 def skin_fields(verts, ids, lower, corner_z, nose_tip):
     """Deformation fields of the skin vertices (see model/README.md)."""
@@ -931,6 +977,7 @@ def skin_fields(verts, ids, lower, corner_z, nose_tip):
     rise_v = np.where(y >= ROWS[ROW_INDEX["subnasale"]][1] - 0.5, 1.0 - ramp(y, 45.0, 66.0), 0.0)
     rise_v = np.where([n == "philtrum" for n in names], 1.0 - 0.55, rise_v)
     f["nose_rise"] = rise_v * (1.0 - ramp(z, 20.0, 34.0))
+    f["hair"] = hair_distance(verts)
     return f
 
 
@@ -961,7 +1008,8 @@ def build():
     inv = 1.0 / np.maximum(dist, 1e-6)
     blend = lambda f: (f[near] * inv).sum(axis=1) / inv.sum(axis=1)
     w_parke = np.concatenate([w_parke, blend(w_parke)])
-    fields = {k: np.concatenate([f, blend(f)]) for k, f in fields.items()}
+    fields = {k: np.concatenate([f, blend(f) if k != "hair" else np.full(len(av), HAIR_EAR)])
+              for k, f in fields.items()}  # fmt: skip
     jaw_shape = jaw_shape_field(sv)
     jaw_shape = np.concatenate([jaw_shape, blend(jaw_shape)])
     sf = np.concatenate([np.array(sf), af + n_grid])
@@ -1023,7 +1071,8 @@ def build():
     wp[regions["lower_teeth"]] = PARKE["lower_teeth"]
     full = {k: np.zeros(n) for k in ("upper_lip", "lower_lip", "upper_vermilion",
                                      "lower_vermilion", "mouth", "nose", "nose_rise",
-                                     "jaw_shape", "tongue_s", "tongue_jaw", "tongue_follow")}
+                                     "jaw_shape", "tongue_s", "tongue_jaw", "tongue_follow",
+                                     "hair")}
     for k, v in fields.items():
         full[k][: len(sv)] = v
     full["jaw_shape"][: len(sv)] = jaw_shape

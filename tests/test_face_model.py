@@ -227,3 +227,31 @@ def test_open_mouth_seen_from_three_quarters_shows_no_background(turn):
     skin = np.isin(np.asarray(MODEL.face_material), [MATERIALS.index("skin"), MATERIALS.index("lips")])
     seen_from_behind = skin[hits] & (normals[hits] @ direction > 0)
     assert not seen_from_behind.any(), aim[seen_from_behind]
+
+
+def test_hair_and_eyebrows_sit_where_an_adults_do():
+    """The ``hair`` field (signed distance to the hair's edge, mm; drawn by the renderer):
+    the front hairline 55-65 mm above the glabella (trichion-glabella, Farkas' adult
+    norms), the crown and the back of the head covered, the face from the brows to the
+    chin bare but for the eyebrows, which lie 15-28 mm above the eyes' centres from above
+    the inner to beyond the outer eye corner on both sides."""
+    hair = np.asarray(MODEL.fields["hair"])
+    skin = np.asarray(MODEL.regions["skin"])
+    p, h = V[skin], hair[skin]
+    front = (np.abs(p[:, 2]) < 1e-6) & (p[:, 0] > -40.0) & (p[:, 1] > 90.0)
+    order = np.argsort(p[front, 1])
+    trichion = np.interp(0.0, h[front][order], p[front, 1][order])
+    glabella = 84.0  # the model's glabella row (model/build_model.py ROWS)
+    assert 55.0 <= trichion - glabella <= 65.0, trichion
+    assert np.all(h[p[:, 1] > 150.0] > 0)  # the crown
+    back = (p[:, 0] < -170.0) & (p[:, 1] > 30.0)
+    assert back.sum() > 10 and np.all(h[back] > 0)
+    face = (p[:, 0] > -45.0) & (p[:, 1] < 78.0) & (p[:, 1] > -50.0)
+    assert face.sum() > 500 and np.all(h[face] < 0)
+    eye_y = 64.0
+    for side in (1.0, -1.0):
+        brow = (h > 0) & (p[:, 0] > -40.0) & (p[:, 1] < 100.0) & (p[:, 2] * side > 0)
+        assert brow.sum() >= 4
+        assert np.all((p[brow, 1] - eye_y >= 15.0) & (p[brow, 1] - eye_y <= 28.0))
+        z = np.abs(p[brow, 2])
+        assert z.min() < 18.0 and z.max() > 46.0  # inner corner 17.5, outer 46.5 mm out

@@ -468,3 +468,45 @@ def test_antialiasing_softens_edges_only(model, views):
         smooth = r.render(model.vertices)
     changed = np.any(smooth != views["side"], axis=-1)
     assert 0 < changed.mean() < 0.1  # the silhouette's pixels, not the picture
+
+
+def _with_hair(model, edge_y):
+    """The stand-in with a ``hair`` field: hair above ``edge_y`` mm (signed distance)."""
+    return SimpleNamespace(**vars(model), fields={"hair": np.asarray(model.vertices)[:, 1] - edge_y})
+
+
+def test_hair_field_darkens_the_skin_above_its_edge_with_a_sharp_line(model):
+    """The model's ``hair`` field (signed distance to the hair's edge, mm) colours the skin:
+    dark above the edge, unchanged below, and the edge is a line a few pixels wide at its
+    height, not the triangles' staircase (the stand-in's triangles are 15-25 mm across)."""
+    with render.Renderer(model, size=SIZE, views=("front",), colours=TEST_COLOURS) as r:
+        bare = r.render(model.vertices).astype(int)
+    edges = []
+    for edge_y in (40.0, 70.0):
+        hairy = _with_hair(model, edge_y)
+        with render.Renderer(hairy, size=SIZE, views=("front",), colours=TEST_COLOURS) as r:
+            img = r.render(model.vertices).astype(int)
+        changed = np.abs(img - bare).sum(axis=-1) > 30
+        rows = np.nonzero(changed.any(axis=1))[0]
+        assert rows.size > 10
+        below = rows.max()  # the edge: the lowest changed image row (image y grows down)
+        above = img[: below - 3][blue(bare[: below - 3])]
+        assert above.size and above[:, 2].mean() < 0.6 * bare[: below - 3][blue(bare[: below - 3])][:, 2].mean()
+        np.testing.assert_array_equal(img[below + 3 :], bare[below + 3 :])  # bare skin below
+        # the edge is level across the head: its row varies by a pixel or two
+        cols = np.nonzero(changed[below])[0]
+        lowest = [np.nonzero(changed[:, c])[0].max() for c in range(cols.min(), cols.max() + 1)
+                  if changed[:, c].any()]
+        assert np.ptp(lowest) <= 3
+        edges.append(below)
+    assert edges[0] > edges[1] + 10  # the edge 30 mm lower is lower in the image
+
+
+def test_a_model_without_hair_is_drawn_as_before(model, views):
+    """No ``hair`` field, or one without a positive value: the skin keeps its colour."""
+    no_hair = SimpleNamespace(**vars(model), fields={"hair": np.full(len(model.vertices), -5.0)})
+    with render.Renderer(no_hair, size=SIZE, colours=TEST_COLOURS) as r:
+        np.testing.assert_array_equal(r.render(model.vertices), r.render(model.vertices))
+        img = r.render_views(model.vertices)
+    for name in views:
+        np.testing.assert_array_equal(img[name], views[name])

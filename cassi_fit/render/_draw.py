@@ -73,7 +73,11 @@ void main() {
     // lit as if facing the camera, darker, as a cavity.
     float shade = n.z < 0.0 ? 0.6 : 1.0;
     n = n.z < 0.0 ? -n : n;
-    vec3 base = shade * material.base_color_factor.rgb * frag_colour.rgb;
+    // The per-vertex colour factor applies by its share in the fourth component, clipped
+    // here per pixel: 1 for the iris and the height scale, the interpolated signed
+    // distance to the hair's edge on the skin (a sharp hairline within a triangle).
+    vec3 factor = mix(vec3(1.0), frag_colour.rgb, clamp(frag_colour.a, 0.0, 1.0));
+    vec3 base = shade * material.base_color_factor.rgb * factor;
     float light = 0.20 + 0.66 * n.z + 0.30 * max(dot(n, FILL), 0.0);
     float highlight = 0.25 * (1.0 - material.roughness_factor) * pow(n.z, 24.0);
     vec3 c = base * light + vec3(highlight) + material.emissive_factor;

@@ -34,6 +34,8 @@ MATERIAL_COLOURS = {
 MARKER_COLOURS = {"measured": (0.90, 0.08, 0.08), "model": (0.10, 0.72, 0.22)}
 _EXTRA_MARKER_COLOURS = ((0.15, 0.35, 0.95), (0.98, 0.60, 0.05), (0.60, 0.20, 0.80))
 _IRIS_COLOUR = (0.33, 0.22, 0.13)
+_HAIR_COLOUR = (0.20, 0.14, 0.10)  # dark brown
+_HAIR_EDGE_MM = 3.0  # the hair's edge blends into the skin over this width
 _PUPIL_COLOUR = (0.03, 0.03, 0.03)
 
 # Rows: image right, image up, toward the camera, in model axes. The model frame (x front,
@@ -147,6 +149,24 @@ def _iris_factors(vertices: np.ndarray, faces: np.ndarray, face_material, eye: i
     return factors
 
 
+def _hair_factors(n_vertices: int, fields) -> np.ndarray | None:
+    """Per-vertex colour (V,4) for the skin from the model's ``hair`` field (signed distance
+    in mm to the edge of the hair, positive on it): the hair's colour relative to the
+    default skin colour, and in the fourth column the share of it, 0.5 + distance /
+    ``_HAIR_EDGE_MM``, left unclipped so that the shader clips it per pixel (a sharp edge
+    along the interpolated line, not along the triangles). None if the model has no hair
+    (no positive value)."""
+    if not fields or "hair" not in fields:
+        return None
+    distance = np.asarray(fields["hair"], np.float64)
+    if distance.shape != (n_vertices,) or not np.any(distance > 0):
+        return None
+    factors = np.empty((n_vertices, 4))
+    factors[:, :3] = np.array(_linear(_HAIR_COLOUR)) / np.array(_linear(MATERIAL_COLOURS["skin"]))
+    factors[:, 3] = 0.5 + distance / _HAIR_EDGE_MM
+    return factors
+
+
 class _Piece:
     """The triangles of one material on one side of z = 0: one instanced pyrender primitive.
 
@@ -235,9 +255,11 @@ def height_colours(
     return out
 
 
-def _split_pieces(vertices, faces, face_material, materials, views, skin, cull) -> list[_Piece]:
+def _split_pieces(vertices, faces, face_material, materials, views, skin, cull,
+                  fields=None) -> list[_Piece]:  # fmt: skip
     """Split the mesh by material and by side of the midsagittal plane (triangle centroid);
-    "near" is the inside view's camera side.
+    "near" is the inside view's camera side. The eyes carry their iris and pupil and the
+    skin its hair (the model's ``hair`` field, ``fields``) as per-vertex colour factors.
 
     With ``cull``, a material with a clear winding hides its back faces wherever they
     cannot be seen, the far half of a cut material in the inside view (whose inside shows)
@@ -247,6 +269,7 @@ def _split_pieces(vertices, faces, face_material, materials, views, skin, cull) 
     near_side = vertices[faces].mean(axis=1) @ toward_camera > 0
     eye = materials.index("eye") if "eye" in materials else -1
     iris = _iris_factors(vertices, faces, face_material, eye) if eye >= 0 else None
+    hair = _hair_factors(len(vertices), fields)
     pieces = []
     for m, name in enumerate(materials):
         winding = triangle_winding(vertices, faces[face_material == m]) if cull else 0
@@ -259,9 +282,8 @@ def _split_pieces(vertices, faces, face_material, materials, views, skin, cull) 
                 if not mask.any() or not shown:
                     continue
                 index, local = np.unique(faces[mask], return_inverse=True)
-                static = (
-                    iris[index] if (m == eye and iris is not None) else np.zeros((len(index), 0))
-                )
+                colour = iris if m == eye else (hair if name == "skin" else None)
+                static = colour[index] if colour is not None else np.zeros((len(index), 0))
                 args = (name, near, glass, index, local.reshape(-1, 3), static)
                 if name in _HEIGHT_COLOURED and "top" in shown:  # its own, recoloured piece
                     height = _Piece(name, near, glass, index, local.reshape(-1, 3),

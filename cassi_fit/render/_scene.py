@@ -51,7 +51,10 @@ Markers = Mapping[str, Float[Any, "k d"]]
 class MeshModel(Protocol):
     """What a Renderer reads of a model (a :class:`~cassi_fit.FaceModel` has it):
     ``vertices (V, 3)`` mm at rest, ``faces (F, 3)`` and ``face_material (F,)`` indices
-    into ``face_model.MATERIALS``."""
+    into ``face_model.MATERIALS``; if the model has them, also ``fields["hair"]`` (V,)
+    (signed distance in mm to the edge of the hair: the skin is drawn in the hair's colour
+    where it is positive) and, for the midsagittal view, ``regions``, ``landmarks`` and
+    ``measures``."""
 
     vertices: Float[Any, "v 3"]
     faces: Integer[Any, "f 3"]
@@ -153,7 +156,8 @@ class Renderer:
         self._faces = faces
         self._incidence = _incidence(faces, len(rest))
         self._pieces = _split_pieces(
-            rest, faces, face_material, materials, self.views, skin, bool(cull)
+            rest, faces, face_material, materials, self.views, skin, bool(cull),
+            fields=getattr(model, "fields", None),
         )
         self._section = None
         if SECTION_VIEW in self.views:
