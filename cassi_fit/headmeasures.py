@@ -71,21 +71,21 @@ SOFT_TISSUE_THICKNESS_MM = {"gnathion": 7.0, "gonion": 12.0}
 
 #: The face model at rest, used when a dataset has no measures for a subject, so that a
 #: subject whose row equals these leaves the face unchanged (tests/test_cassi_mode.py).
-#: Bony gonion and gnathion: the model's skin landmarks (-84, -36.5) and (-4, -49.5) mm
+#: Bony gonion and gnathion: the model's skin landmarks (-84.3, -35.0) and (-4, -49.5) mm
 #: moved inwards by the thicknesses above along the skin normal (their sagittal parts
-#: (-0.274, -0.120) and (0.352, -0.936)); they agree with adult bone: gnathion 43 mm below
+#: (-0.115, -0.183) and (0.377, -0.926)); they agree with adult bone: gnathion 43 mm below
 #: the incisor tip (anterior lower face height 40-45 mm), gonion 81 mm behind and 35 mm
 #: below it. The rest are the model's own measures (model/model.json "measures": face
 #: width, jaw width, mouth width, lip thickness, nose), which sit in the adult ranges of
 #: Farkas' norms (bizygomatic 130-140, bigonial 95-105, mouth 45-55, nose 17-23 mm).
 #: Rebuilding the model with other proportions means updating these.
 DEFAULT_HEAD_MEASURES = HeadMeasures(
-    gonion_x=-82.912,
-    gonion_y=-32.785,
-    gnathion_x=-6.633,
-    gnathion_y=-43.014,
+    gonion_x=-82.946,
+    gonion_y=-32.808,
+    gnathion_x=-6.641,
+    gnathion_y=-43.017,
     face_width=131.557,
-    jaw_width=103.478,
+    jaw_width=103.47,
     mouth_width=48.913,
     upper_lip_thickness=14.9,
     lower_lip_thickness=15.004,

@@ -153,6 +153,25 @@ def _under_jaw_rows(rows):
     return out + list(rows[bottom + 1:])
 
 
+def _crown_rows(rows):
+    """Extra rows halfway between those from the vertex down to the forehead, on the
+    4-point subdivision curve (Dyn, Levin & Gregory 1987) in height, front, half width
+    and back (y0, xf, w, xb): the crown's rows were 5-18 mm apart and its outline showed
+    their corners in front and side views."""
+    names = [r[0] for r in rows]
+    top, bottom = names.index("vertex"), names.index("forehead2")
+    out = []
+    for k in range(top, bottom):
+        r0, r1 = rows[k], rows[k + 1]
+        r_ = rows[k - 1] if k > top else r0
+        r2 = rows[k + 2]
+        mid = [0.5 * (p + q) for p, q in zip(r0[1:8], r1[1:8], strict=True)]
+        for c in (0, 1, 3, 4):  # y0, xf, w, xb
+            mid[c] = (9.0 * (r0[c + 1] + r1[c + 1]) - r_[c + 1] - r2[c + 1]) / 16.0
+        out += [r0, (f"{r0[0]}_{r1[0]}", *mid, r0[8])]
+    return out + list(rows[bottom:])
+
+
 def _smooth_sides(rows, lo=-25.0, hi=125.0, sigma=7.0):
     """Section centre (cx) and half width (w) of the rows from the forehead down to the
     chin smoothed over height (Gaussian kernel, sigma mm, locally linear): their slopes
@@ -177,7 +196,7 @@ def _smooth_sides(rows, lo=-25.0, hi=125.0, sigma=7.0):
     return out
 
 
-ROWS = _smooth_sides(_nape(_under_jaw_rows(_eye_rows())))
+ROWS = _smooth_sides(_nape(_under_jaw_rows(_crown_rows(_eye_rows()))))
 ROW_INDEX = {r[0]: i for i, r in enumerate(ROWS)}
 EYE_ROWS = {r[0] for r in ROWS[ROW_INDEX["nasion"] + 1:ROW_INDEX["eyes_low"]]}
 # Front z targets (on the mouth row) of the columns; the mouth corner is one of them.
