@@ -79,7 +79,11 @@ void main() {
     vec3 factor = mix(vec3(1.0), frag_colour.rgb, clamp(frag_colour.a, 0.0, 1.0));
     vec3 base = shade * material.base_color_factor.rgb * factor;
     float light = 0.20 + 0.66 * n.z + 0.30 * max(dot(n, FILL), 0.0);
-    float highlight = 0.25 * (1.0 - material.roughness_factor) * pow(n.z, 24.0);
+    // (weaker where a colour factor darkens the material: a white sheen on dark hair read
+    // as a bald patch)
+    float dark = clamp(1.0 - dot(factor, vec3(1.0 / 3.0)), 0.0, 1.0);
+    float highlight = 0.25 * (1.0 - material.roughness_factor) * pow(n.z, 24.0)
+                      * mix(1.0, 0.4, dark);
     vec3 c = base * light + vec3(highlight) + material.emissive_factor;
     frag_color = vec4(pow(clamp(c, 0.0, 1.0), vec3(1.0 / 2.2)), material.base_color_factor.a);
 }
