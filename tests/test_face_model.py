@@ -1,5 +1,6 @@
 """The model files and the rest mesh: loadable, symmetric, finite, the documented weights."""
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -138,6 +139,7 @@ def test_nasal_root_beside_the_inner_eye_corners_has_no_crease():
     assert angles.max() < 25.0
 
 
+@functools.cache
 def _jaw_open(theta=0.25):
     """The rest mesh with the jaw turned ``theta`` rad about the model's condyle (CASSI's
     weights): the pose of model/pictures/face_jaw_open_*.png."""
@@ -150,7 +152,9 @@ def _jaw_open(theta=0.25):
     pivot = jnp.array([MODEL.measures["jaw_pivot_x"], MODEL.measures["jaw_pivot_y"]])
     moved = rigid.from_pivot(jnp.asarray(theta), pivot)
     p = eqx.tree_at(lambda q: (q.jaw_theta, q.jaw_translation), default_params(MODEL), moved)
-    return np.asarray(deform(MODEL, p))
+    out = np.asarray(deform(MODEL, p))
+    out.flags.writeable = False  # shared between tests
+    return out
 
 
 def _outer_skin_faces():
