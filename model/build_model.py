@@ -542,17 +542,19 @@ def smooth_cheeks(grid, phis, sigma=6.0, lo=-12.0, hi=100.0, cols=(45.0, 60.0, 1
 # The walls of the oral cavity (a pocket of the skin, which has no inside otherwise: the
 # background showed through the open mouth): a back wall far behind the tongue and the
 # pharynx (x, y range, half width in z, mm) and, for views from the side of the front,
-# two pairs of curtains across the cheeks (x, y range, inner |z|, largest |z|, least gap
-# to the skin), outside the teeth and the tongue. All face the front (the skin's
+# three pairs of curtains across the cheeks (x, y range, inner |z|, largest |z|, least
+# gap to the skin), outside the teeth and the tongue. All face the front (the skin's
 # outside), so the renderer's culling of the skin keeps them, and all lie in planes of
 # constant x: the inside view, which removes the near half of the skin, sees them edge
-# on (side walls would show face-on behind the tongue there). Static, weights 0.
+# on (side walls would show face-on behind the tongue there). The back wall is static
+# (weights and fields 0); the curtains move with the cheek (see "follow").
 MOUTH_BACK = {"x": -100.0, "y": (-45.0, 30.0), "z": 32.0}
 # "follow": the curtain moves with the cheek beside it (the jaw weights and fields of the
-# nearest skin); the others are static.
+# nearest skin), so that the jaw's opening, a calibrated jaw shape or a narrower mouth
+# does not push the cheek in through it.
 MOUTH_CURTAINS = ({"x": -22.0, "y": (-30.0, 20.0), "z": (25.0, 52.0), "gap": 3.0, "follow": True},
-                  {"x": -46.0, "y": (-35.0, 25.0), "z": (27.0, 48.0), "gap": 4.0, "follow": False},
-                  {"x": -75.0, "y": (-40.0, 28.0), "z": (24.0, 50.0), "gap": 4.0, "follow": False})
+                  {"x": -46.0, "y": (-35.0, 25.0), "z": (27.0, 48.0), "gap": 4.0, "follow": True},
+                  {"x": -75.0, "y": (-40.0, 28.0), "z": (24.0, 50.0), "gap": 4.0, "follow": True})
 
 
 def build_mouth_wall(skin, n=6):
@@ -1034,10 +1036,9 @@ def build():
     sf = np.concatenate([np.array(sf), af + n_grid])
     skin_mat = np.concatenate([skin_mat, np.full(len(af), MAT["skin"])])
     sv = np.concatenate([sv, av])
-    # the mouth's walls (static, weights and fields 0): after the ears
-    # the mouth's walls: static (weights and fields 0) but for the front curtains, which
-    # take the cheek's like the ears; drawn as the lining of the mouth (the mucosa colour
-    # of the pharyngeal wall), not as skin
+    # the mouth's walls, after the ears: the back wall static (weights and fields 0), the
+    # curtains with the cheek's weights and fields (like the ears); drawn as the lining of
+    # the mouth (the mucosa colour of the pharyngeal wall), not as skin
     wv, wf, follows = build_mouth_wall(sv[:n_grid])
     dist, near = cKDTree(sv[:n_grid]).query(wv, k=4)
     inv = 1.0 / np.maximum(dist, 1e-6)

@@ -259,3 +259,41 @@ def test_hair_and_eyebrows_sit_where_an_adults_do():
         assert np.all((p[brow, 1] - eye_y >= 15.0) & (p[brow, 1] - eye_y <= 28.0))
         z = np.abs(p[brow, 2])
         assert z.min() < 18.0 and z.max() > 46.0  # inner corner 17.5, outer 46.5 mm out
+
+
+@pytest.mark.parametrize("scale, turn, mouth, theta", [
+    ((1 / 1.3, 1 / 1.3), -0.17, 0.85, 0.0),
+    ((1 / 1.3, 1.3), 0.17, 0.85, 0.25),
+    ((1.3, 1 / 1.3), -0.17, 1.15, 0.25),
+    ((1.3, 1.3), 0.17, 1.15, 0.0),
+])
+def test_mouth_curtains_stay_inside_the_cheeks(scale, turn, mouth, theta):
+    """The curtains that close the open mouth stay under the skin for a subject's jaw at
+    the calibration's bounds (scaled 1.3 either way, turned 10 degrees), a mouth 15 %
+    narrower or wider and the jaw shut or open wide: from each curtain's outer edge the
+    way out (away from the midline) crosses the skin. Static curtains poked out through
+    the lower cheeks of a calibrated subject, drawn in the mouth's lining colour."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    from cassi_fit import rigid
+    from cassi_fit.deform import default_params, deform
+
+    pivot = jnp.array([MODEL.measures["jaw_pivot_x"], MODEL.measures["jaw_pivot_y"]])
+    jaw = rigid.from_pivot(jnp.asarray(theta), pivot)
+    p = eqx.tree_at(lambda q: (q.jaw_theta, q.jaw_translation, q.mouth_width, q.jaw_shape_theta),
+                    default_params(MODEL), (*jaw, jnp.asarray(mouth), jnp.asarray(turn)))
+    p = eqx.tree_at(lambda q: q.jaw_shape_scale, p, jnp.asarray(scale), is_leaf=lambda x: x is None)
+    verts = np.asarray(deform(MODEL, p))
+    wall = np.asarray(MODEL.regions["mouth_wall"])
+    rest = V[wall]
+    curtain = wall[rest[:, 0] > MODEL.measures["jaw_pivot_x"]]  # not the back wall
+    outer = [i for i in curtain  # each row's outermost curtain vertex
+             if np.abs(V[i, 2]) >= np.abs(V[curtain][np.isclose(V[curtain, 0], V[i, 0])
+                                                       & np.isclose(V[curtain, 1], V[i, 1])
+                                                       & (np.sign(V[curtain, 2]) == np.sign(V[i, 2])), 2]).max()]
+    assert len(outer) >= 24
+    skin = _outer_skin_faces()
+    for i in outer:
+        out = np.array([0.0, 0.0, np.sign(V[i, 2])])
+        assert _first_hits(verts, skin, verts[i][None], out)[0] >= 0, V[i]

@@ -30,7 +30,11 @@ MATERIAL_COLOURS = {
     "tongue": (0.93, 0.52, 0.58),
     "palate": (0.42, 0.17, 0.20),
     "pharynx": (0.62, 0.34, 0.36),  # the pharyngeal wall: mucosa, lighter than the palate
+    # the walls of the mouth (a model's "mouth_wall" region; the model gives them a material
+    # of its own, the face model the pharynx's), drawn in the front and side views only
+    "mouth_wall": (0.62, 0.34, 0.36),
 }
+_MOUTH_WALL = "mouth_wall"
 MARKER_COLOURS = {"measured": (0.90, 0.08, 0.08), "model": (0.10, 0.72, 0.22)}
 _EXTRA_MARKER_COLOURS = ((0.15, 0.35, 0.95), (0.98, 0.60, 0.05), (0.60, 0.20, 0.80))
 _IRIS_COLOUR = (0.33, 0.22, 0.13)
@@ -52,8 +56,10 @@ _VIEW_AXES = {
     "top": ((1, 0, 0), (0, 0, 1), (0, 1, 0)),
 }
 _SHOWN = {
-    "front": set(_MATERIALS),
-    "side": set(_MATERIALS),
+    # the mouth's walls close the view through the open mouth; the inside view, which
+    # removes the near half of the skin, would see them edge on as stray lines
+    "front": set(_MATERIALS) | {_MOUTH_WALL},
+    "side": set(_MATERIALS) | {_MOUTH_WALL},
     "inside": set(_MATERIALS) - {"eye"},  # an eyeball floating in the cut head distracts
     "top": {"teeth", "tongue", "palate"},
     "midsagittal": set(),  # drawn in 2D by _section, not by OpenGL
@@ -272,7 +278,10 @@ def _split_pieces(vertices, faces, face_material, materials, views, skin, cull,
     hair = _hair_factors(len(vertices), fields)
     pieces = []
     for m, name in enumerate(materials):
-        winding = triangle_winding(vertices, faces[face_material == m]) if cull else 0
+        # (the mouth's walls are open sheets: their signed volume says nothing of which
+        # side faces out, so they are drawn double-sided)
+        clear = cull and name != _MOUTH_WALL
+        winding = triangle_winding(vertices, faces[face_material == m]) if clear else 0
         face = _cull_face(winding)
         opened = name in _CUT and (skin == "cut" or name in _GLASS)  # inside shows at the cut
         for near in (False, True):
@@ -302,6 +311,20 @@ def _split_pieces(vertices, faces, face_material, materials, views, skin, cull,
                 if shown:
                     pieces.append(_Piece(*args, shown, cull=face))
     return pieces
+
+
+def _with_mouth_wall(faces, face_material, materials, regions):
+    """(face_material, materials) with the triangles of the model's ``mouth_wall`` region
+    (all three vertices in it) given a drawing material of their own, ``"mouth_wall"``."""
+    wall = np.asarray((regions or {}).get(_MOUTH_WALL, ()), dtype=np.int64)
+    if wall.size == 0:
+        return face_material, materials
+    inside = np.zeros(int(faces.max()) + 1, bool)
+    inside[wall[wall < len(inside)]] = True
+    on_wall = inside[faces].all(axis=1)
+    if not on_wall.any():
+        return face_material, materials
+    return np.where(on_wall, len(materials), face_material), (*materials, _MOUTH_WALL)
 
 
 def _model_arrays(model):

@@ -39,6 +39,7 @@ from ._pieces import (
     _model_arrays,
     _split_pieces,
     _vertex_normals,
+    _with_mouth_wall,
     height_colours,
 )
 from ._section import SECTION_VIEW, Section
@@ -155,8 +156,11 @@ class Renderer:
         self._n_vertices = len(rest)
         self._faces = faces
         self._incidence = _incidence(faces, len(rest))
+        drawn, drawn_materials = _with_mouth_wall(
+            faces, face_material, materials, getattr(model, "regions", None)
+        )
         self._pieces = _split_pieces(
-            rest, faces, face_material, materials, self.views, skin, bool(cull),
+            rest, faces, drawn, drawn_materials, self.views, skin, bool(cull),
             fields=getattr(model, "fields", None),
         )
         self._section = None
