@@ -36,7 +36,8 @@ LANDMARKS = ("upper_incisor_tip", "lower_incisor_tip", "MNI", "MNM", "UL", "LL",
 MEASURES = ("face_width", "jaw_width", "mouth_width", "upper_lip_thickness",
             "lower_lip_thickness", "nose_protrusion")
 # Per-vertex deformation fields stored beside the positions (see model/README.md), and
-# one colour field ("hair": the share of the hair colour, drawn by cassi_fit.render).
+# one colour field ("hair": signed distance in mm to the edge of the hair, positive on
+# it; cassi_fit.render draws the skin in the hair's colour there).
 FIELDS = ("upper_lip", "lower_lip", "upper_vermilion", "lower_vermilion", "mouth", "nose",
           "nose_rise", "jaw_shape", "tongue_s", "tongue_jaw", "tongue_follow", "hair")
 VERTEX_COLUMNS = ("x", "y", "z", "w_cassi", "w_parke") + FIELDS

@@ -133,6 +133,16 @@ def _nape(rows):
     return out
 
 
+def _midway_row(r_, r0, r1, r2, curved):
+    """The row halfway between rows r0 and r1 (named r0_r1, in r0's group): columns
+    ``curved`` (indices into y0, xf, cx, w, xb, e, lift) on the 4-point subdivision curve
+    through r_, r0, r1, r2 (Dyn, Levin & Gregory 1987), the others halfway."""
+    mid = [0.5 * (p + q) for p, q in zip(r0[1:8], r1[1:8], strict=True)]
+    for c in curved:
+        mid[c] = (9.0 * (r0[c + 1] + r1[c + 1]) - r_[c + 1] - r2[c + 1]) / 16.0
+    return (f"{r0[0]}_{r1[0]}", *mid, r0[8])
+
+
 def _under_jaw_rows(rows):
     """Extra rows halfway between those from the menton down the throat: the jaw's weights
     fall from 1 to 0.5 there, and with rows 10-20 mm apart the skin folded along them
@@ -144,12 +154,8 @@ def _under_jaw_rows(rows):
     top, bottom = names.index("menton"), names.index("neck1")
     out = list(rows[:top + 1])
     for k in range(top, bottom):
-        r_, r0, r1, r2 = rows[k - 1], rows[k], rows[k + 1], rows[k + 2]
-        mid = [0.5 * (p + q) for p, q in zip(r0[1:8], r1[1:8], strict=True)]
-        for c in (0, 1):  # y0, xf: the 4-point scheme (the profile rounds its corners)
-            mid[c] = (9.0 * (r0[c + 1] + r1[c + 1]) - r_[c + 1] - r2[c + 1]) / 16.0
-        out.append((f"{r0[0]}_{r1[0]}", *mid, r0[8]))
-        out.append(r1)
+        out.append(_midway_row(rows[k - 1], rows[k], rows[k + 1], rows[k + 2], (0, 1)))
+        out.append(rows[k + 1])
     return out + list(rows[bottom + 1:])
 
 
@@ -162,13 +168,8 @@ def _crown_rows(rows):
     top, bottom = names.index("vertex"), names.index("forehead2")
     out = []
     for k in range(top, bottom):
-        r0, r1 = rows[k], rows[k + 1]
-        r_ = rows[k - 1] if k > top else r0
-        r2 = rows[k + 2]
-        mid = [0.5 * (p + q) for p, q in zip(r0[1:8], r1[1:8], strict=True)]
-        for c in (0, 1, 3, 4):  # y0, xf, w, xb
-            mid[c] = (9.0 * (r0[c + 1] + r1[c + 1]) - r_[c + 1] - r2[c + 1]) / 16.0
-        out += [r0, (f"{r0[0]}_{r1[0]}", *mid, r0[8])]
+        before = rows[k - 1] if k > top else rows[k]
+        out += [rows[k], _midway_row(before, rows[k], rows[k + 1], rows[k + 2], (0, 1, 3, 4))]
     return out + list(rows[bottom:])
 
 
@@ -543,35 +544,34 @@ def smooth_cheeks(grid, phis, sigma=6.0, lo=-12.0, hi=100.0, cols=(45.0, 60.0, 1
 # background showed through the open mouth): a back wall far behind the tongue and the
 # pharynx (x, y range, half width in z, mm) and, for views from the side of the front,
 # three pairs of curtains across the cheeks (x, y range, inner |z|, largest |z|, least
-# gap to the skin), outside the teeth and the tongue. All face the front (the skin's
-# outside), so the renderer's culling of the skin keeps them, and all lie in planes of
-# constant x: the inside view, which removes the near half of the skin, sees them edge
-# on (side walls would show face-on behind the tongue there). The back wall is static
-# (weights and fields 0); the curtains move with the cheek (see "follow").
+# gap to the skin), outside the teeth and the tongue. All face the front and lie in planes
+# of constant x at rest (side walls would show face-on behind the tongue in the inside
+# view); the renderer draws the "mouth_wall" region double-sided, in the front and side
+# views only. The back wall is static (weights and fields 0); the curtains move with the
+# cheek beside them (the jaw weights and fields of the nearest skin), so that the jaw's
+# opening, a calibrated jaw shape or a narrower mouth does not push the cheek in through
+# them.
 MOUTH_BACK = {"x": -100.0, "y": (-45.0, 30.0), "z": 32.0}
-# "follow": the curtain moves with the cheek beside it (the jaw weights and fields of the
-# nearest skin), so that the jaw's opening, a calibrated jaw shape or a narrower mouth
-# does not push the cheek in through it.
-MOUTH_CURTAINS = ({"x": -22.0, "y": (-30.0, 20.0), "z": (25.0, 52.0), "gap": 3.0, "follow": True},
-                  {"x": -46.0, "y": (-35.0, 25.0), "z": (27.0, 48.0), "gap": 4.0, "follow": True},
-                  {"x": -75.0, "y": (-40.0, 28.0), "z": (24.0, 50.0), "gap": 4.0, "follow": True})
+MOUTH_CURTAINS = ({"x": -22.0, "y": (-30.0, 20.0), "z": (25.0, 52.0), "gap": 3.0},
+                  {"x": -46.0, "y": (-35.0, 25.0), "z": (27.0, 48.0), "gap": 4.0},
+                  {"x": -75.0, "y": (-40.0, 28.0), "z": (24.0, 50.0), "gap": 4.0})
 
 
 def build_mouth_wall(skin, n=6):
     """Vertices and faces (wound like the skin grid, before the flip in ``build``) of the
-    back wall and the curtains of the mouth, all facing +x, and which vertices follow
-    the cheek (``MOUTH_CURTAINS``' "follow")."""
+    back wall and the curtains of the mouth, all facing +x, and which vertices are the
+    curtains' (they follow the cheek)."""
     from scipy.interpolate import LinearNDInterpolator
 
     side = skin[(skin[:, 2] > 20.0) & (skin[:, 1] > -70.0) & (skin[:, 1] < 60.0)]
     head_z = LinearNDInterpolator(side[:, :2], side[:, 2])
-    verts, faces, follow = [], [], []
+    verts, faces, curtain = [], [], []
 
-    def sheet(x, ys, zs, moves=False):
+    def sheet(x, ys, zs, is_curtain):
         """A sheet in the plane x at heights ys, zs[i] ascending across at ys[i]."""
         base, k = len(verts), zs.shape[1]
         verts.extend([x, y, z] for y, row in zip(ys, zs, strict=True) for z in row)
-        follow.extend([moves] * (len(verts) - base))
+        curtain.extend([is_curtain] * (len(verts) - base))
         for i in range(len(ys) - 1):
             for j in range(k - 1):
                 a, b = base + i * k + j, base + i * k + j + 1
@@ -580,16 +580,16 @@ def build_mouth_wall(skin, n=6):
 
     y = np.linspace(*MOUTH_BACK["y"], n + 2)
     z = np.linspace(-MOUTH_BACK["z"], MOUTH_BACK["z"], n + 1)
-    sheet(MOUTH_BACK["x"], y, np.tile(z, (len(y), 1)))
+    sheet(MOUTH_BACK["x"], y, np.tile(z, (len(y), 1)), False)
     for c in MOUTH_CURTAINS:
         y = np.linspace(*c["y"], n + 2)
         outer = np.array([min(c["z"][1], float(head_z(c["x"], a)) - c["gap"]) for a in y])
         if not np.all(np.isfinite(outer) & (outer > c["z"][0] + 2.0)):
             raise ValueError("a mouth curtain does not fit inside the cheek")
         zs = np.array([np.linspace(c["z"][0], o, 4) for o in outer])
-        sheet(c["x"], y, zs, c["follow"])
-        sheet(c["x"], y, -zs[:, ::-1], c["follow"])
-    return np.array(verts), np.array(faces), np.array(follow)
+        sheet(c["x"], y, zs, True)
+        sheet(c["x"], y, -zs[:, ::-1], True)
+    return np.array(verts), np.array(faces), np.array(curtain)
 
 
 def build_skin():
@@ -977,6 +977,17 @@ def hair_distance(verts):
 
 
 # ---------------------------------------------------------------------------- assembly
+def nearest_skin_blend(skin, points, k=4):
+    """A function taking a per-vertex field of ``skin`` (n,) to its values at ``points``
+    (m,): the inverse-distance blend of the ``k`` nearest skin vertices (the ears' and the
+    mouth curtains' weights and fields, so that they move with the skin beside them)."""
+    from scipy.spatial import cKDTree
+
+    dist, near = cKDTree(skin).query(points, k=k)
+    inv = 1.0 / np.maximum(dist, 1e-6)
+    return lambda f: (f[near] * inv).sum(axis=1) / inv.sum(axis=1)
+
+
 def skin_fields(verts, ids, lower, corner_z, nose_tip):
     """Deformation fields of the skin vertices (see model/README.md)."""
     y, z = verts[:, 1], np.abs(verts[:, 2])
@@ -1023,11 +1034,7 @@ def build():
     n_grid = len(sv)
     av, af = build_ears(sv)
     # the ears follow the skin they sit on: weights and fields of the nearest skin vertices
-    from scipy.spatial import cKDTree
-
-    dist, near = cKDTree(sv).query(av, k=4)
-    inv = 1.0 / np.maximum(dist, 1e-6)
-    blend = lambda f: (f[near] * inv).sum(axis=1) / inv.sum(axis=1)
+    blend = nearest_skin_blend(sv, av)
     w_parke = np.concatenate([w_parke, blend(w_parke)])
     fields = {k: np.concatenate([f, blend(f) if k != "hair" else np.full(len(av), HAIR_EAR)])
               for k, f in fields.items()}  # fmt: skip
@@ -1039,10 +1046,9 @@ def build():
     # the mouth's walls, after the ears: the back wall static (weights and fields 0), the
     # curtains with the cheek's weights and fields (like the ears); drawn as the lining of
     # the mouth (the mucosa colour of the pharyngeal wall), not as skin
-    wv, wf, follows = build_mouth_wall(sv[:n_grid])
-    dist, near = cKDTree(sv[:n_grid]).query(wv, k=4)
-    inv = 1.0 / np.maximum(dist, 1e-6)
-    cheek = lambda f: np.where(follows, (f[:n_grid][near] * inv).sum(axis=1) / inv.sum(axis=1), 0.0)
+    wv, wf, curtain = build_mouth_wall(sv[:n_grid])
+    from_cheek = nearest_skin_blend(sv[:n_grid], wv)
+    cheek = lambda f: np.where(curtain, from_cheek(f[:n_grid]), 0.0)
     w_parke = np.concatenate([w_parke, cheek(w_parke)])
     fields = {k: np.concatenate([f, cheek(f)]) for k, f in fields.items()}
     jaw_shape = np.concatenate([jaw_shape, cheek(jaw_shape)])

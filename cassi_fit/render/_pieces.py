@@ -30,11 +30,11 @@ MATERIAL_COLOURS = {
     "tongue": (0.93, 0.52, 0.58),
     "palate": (0.42, 0.17, 0.20),
     "pharynx": (0.62, 0.34, 0.36),  # the pharyngeal wall: mucosa, lighter than the palate
-    # the walls of the mouth (a model's "mouth_wall" region; the model gives them a material
-    # of its own, the face model the pharynx's), drawn in the front and side views only
-    "mouth_wall": (0.62, 0.34, 0.36),
 }
+# the walls of the mouth (a model's "mouth_wall" region, whatever its material): drawn
+# as mucosa, in the front and side views only
 _MOUTH_WALL = "mouth_wall"
+MATERIAL_COLOURS[_MOUTH_WALL] = MATERIAL_COLOURS["pharynx"]
 MARKER_COLOURS = {"measured": (0.90, 0.08, 0.08), "model": (0.10, 0.72, 0.22)}
 _EXTRA_MARKER_COLOURS = ((0.15, 0.35, 0.95), (0.98, 0.60, 0.05), (0.60, 0.20, 0.80))
 _IRIS_COLOUR = (0.33, 0.22, 0.13)
@@ -317,11 +317,7 @@ def _with_mouth_wall(faces, face_material, materials, regions):
     """(face_material, materials) with the triangles of the model's ``mouth_wall`` region
     (all three vertices in it) given a drawing material of their own, ``"mouth_wall"``."""
     wall = np.asarray((regions or {}).get(_MOUTH_WALL, ()), dtype=np.int64)
-    if wall.size == 0:
-        return face_material, materials
-    inside = np.zeros(int(faces.max()) + 1, bool)
-    inside[wall[wall < len(inside)]] = True
-    on_wall = inside[faces].all(axis=1)
+    on_wall = np.isin(faces, wall).all(axis=1)
     if not on_wall.any():
         return face_material, materials
     return np.where(on_wall, len(materials), face_material), (*materials, _MOUTH_WALL)
