@@ -33,7 +33,7 @@ subject for per-subject work such as calibration) and collects one summary row p
   of workers, the scheduler or the completion order.
 
 :func:`jaw_task` is ``cassi jaw DATASET``'s task; :func:`write_table` writes a corpus
-table as CSV, and as Parquet when pyarrow is importable.
+table as CSV, and as Parquet when pyarrow is importable (``cassi_fit.tables``).
 """
 
 # jaxtyping's shape strings (" n") are not Python expressions:
@@ -41,9 +41,7 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import hashlib
-import io
 import json
-import math
 import os
 import re
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -54,6 +52,8 @@ from typing import TYPE_CHECKING, Any
 from ._io import atomic_write
 from .errors import CassiError, OutputExistsError
 from .status import Status
+from .tables import FLOAT_DIGITS, ID_COLUMNS, csv_text, parquet_available, table_columns  # noqa: F401
+from .tables import write_table as _write_table
 
 if TYPE_CHECKING:
     import numpy as np
@@ -67,8 +67,6 @@ if TYPE_CHECKING:
     from .txy import PelletTrack
 
 MARKER_DIR = ".cassi-corpus"
-ID_COLUMNS = ("subject", "task", "status", "error")
-FLOAT_DIGITS = 6  # decimals written for floats: um, micro-degrees, us
 
 
 # ------------------------------------------------------------------------ items
@@ -539,70 +537,11 @@ def _alone(pool, submit, item, broken) -> ItemResult:
         single.shutdown(wait=True)
 
 
-# ----------------------------------------------------------------------- tables
-def _cell(value) -> str:
-    if value is None:
-        return ""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        if math.isnan(value):
-            return "nan"
-        return f"{value:.{FLOAT_DIGITS}f}"
-    return str(value)
-
-
-def table_columns(rows: Sequence[Mapping]) -> list[str]:
-    """``ID_COLUMNS`` first (those present), then the others in first-seen order."""
-    seen = dict.fromkeys(c for c in ID_COLUMNS if any(c in r for r in rows))
-    for row in rows:
-        seen.update(dict.fromkeys(row))
-    return list(seen)
-
-
-def csv_text(rows: Sequence[Mapping], columns: Sequence[str] | None = None) -> str:
-    """The rows as CSV text: floats with ``FLOAT_DIGITS`` decimals, None as empty."""
-    import csv
-
-    columns = table_columns(rows) if columns is None else list(columns)
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(columns)
-    for row in rows:
-        writer.writerow([_cell(row.get(c)) for c in columns])
-    return buffer.getvalue()
-
-
-def _parquet_bytes(rows, columns) -> bytes:
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    table = pa.Table.from_pylist([{c: r.get(c) for c in columns} for r in rows])
-    buffer = io.BytesIO()
-    pq.write_table(table, buffer)
-    return buffer.getvalue()
-
-
-def parquet_available() -> bool:
-    try:
-        import pyarrow.parquet  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
 def write_table(rows: Sequence[Mapping], path: str | os.PathLike, *,
-                columns: Sequence[str] | None = None, parquet: bool | None = None,
-                overwrite: bool = False) -> list[Path]:
-    """Write ``rows`` to ``path`` (``.csv``) and, when pyarrow is importable (or
-    ``parquet=True``), beside it with the suffix ``.parquet``. Atomic. Returns the paths."""
-    path = Path(path)
-    columns = table_columns(rows) if columns is None else list(columns)
-    written = [atomic_write(path, csv_text(rows, columns), overwrite=overwrite)]
-    if parquet_available() if parquet is None else parquet:
-        written.append(atomic_write(path.with_suffix(".parquet"), _parquet_bytes(rows, columns),
-                                    overwrite=overwrite))
-    return written
+                columns: Sequence[str] | None = None, overwrite: bool = False) -> list[Path]:
+    """A corpus table: ``tables.write_table`` as CSV, and as Parquet beside it when pyarrow
+    is importable."""
+    return _write_table(rows, path, columns=columns, overwrite=overwrite, parquet=None)
 
 
 # ------------------------------------------------------------- per-worker model
