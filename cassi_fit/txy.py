@@ -87,6 +87,15 @@ class PelletTrack:
         return int(self.times.shape[0])
 
     @property
+    def frame_step_s(self) -> float:
+        """Seconds between data lines: the median time step (XRMB's nominal
+        ``FRAME_STEP_US`` for a track of fewer than two frames). The one home of a
+        recording's line period: nothing else assumes XRMB's 6866 us."""
+        if self.n_frames < 2:
+            return FRAME_STEP_US * 1e-6
+        return float(np.median(np.diff(self.times)))
+
+    @property
     def duration(self) -> float:
         """Seconds from the first to the last frame (0 for fewer than two frames)."""
         return float(self.times[-1] - self.times[0]) if self.n_frames > 1 else 0.0
