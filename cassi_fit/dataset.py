@@ -243,8 +243,10 @@ def _ema_track(path: Path, *, fmt: str | None = None, sensor_map: SensorMapLike 
     raw = read_ema(path, format=fmt, layout=layout, rate=rate)
     smap = _sensor_map_for(path, sensor_map)
     bite_path = _bite_for(path, bite_plane)
-    bite = None if bite_path is None else read_ema(bite_path, rate=rate)
-    return ema_to_track(raw, smap, bite=bite)
+    if bite_path is None:
+        return ema_to_track(raw, smap)
+    bite = read_ema(bite_path, rate=rate)
+    return ema_to_track(raw, smap, bite=bite, bite_map=_sensor_map_for(bite_path, sensor_map))
 
 
 def _split_ema_stem(stem: str, folder_name: str, subject_folder: bool):

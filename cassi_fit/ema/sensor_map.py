@@ -78,7 +78,7 @@ SYNONYMS: dict[str, str] = {
     **dict.fromkeys(("ll", "lowerlip", "llip", "lolip", "liplower"), "LL"),
     **dict.fromkeys(("li", "lowerincisor", "lowerincisors", "jaw", "mandible", "mand", "mni",
                      "lowerjaw"), "MNI"),
-    **dict.fromkeys(("mnm", "lowermolar", "jawmolar", "molar", "jaw2"), "MNM"),
+    **dict.fromkeys(("mnm", "lowermolar", "lmol", "jawmolar", "molar", "jaw2"), "MNM"),
     **dict.fromkeys(_TONGUE_RANK, "tongue"),
     **dict.fromkeys(("ui", "upperincisor", "upperincisors", "uinc", "maxilla"),
                     "ref:upper_incisor"),
@@ -104,7 +104,7 @@ BUILTIN_MAPS: dict[str, dict[str, str]] = {
               "MNI": "jaw"},
     "sparc": {"UL": "UL", "LL": "LL", "T1": "TT", "T2": "TB", "T3": "TD", "MNI": "LI"},
     "synthetic": {"UL": "UL", "LL": "LL", "T1": "TT", "T2": "TB", "T3": "TD", "T4": "TR",
-                  "MNI": "LI", "MNM": "LM"},
+                  "MNI": "LI", "MNM": "LMOL"},
 }
 _TABLES = {"channels", "roles", "references", "bite_plane", "midline", "file"}
 _SIGN_AXIS = re.compile(r"^([+-]?)([xyz])$")

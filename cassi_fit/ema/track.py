@@ -176,8 +176,8 @@ def _anatomy_2d(med, assign, origin) -> head.Frame:
 
 
 def _occlusal_frame(where, raw: RawEma, corrected: _Corrected, assign: Assignment,
-                    smap: SensorMap, bite: RawEma | None, scale: float
-                    ) -> tuple[head.Frame, list[str]]:
+                    smap: SensorMap, bite: RawEma | None, scale: float,
+                    bite_smap: SensorMap) -> tuple[head.Frame, list[str]]:
     dims = raw.dims
     med = _median(corrected.positions)
     notes: list[str] = []
@@ -189,7 +189,7 @@ def _occlusal_frame(where, raw: RawEma, corrected: _Corrected, assign: Assignmen
     origin_words = (f"origin at the upper-incisor sensor {ui}" if ui_pos is not None
                     else "origin: the file's (no upper-incisor sensor)")
     if bite is not None:
-        points, note = _bite_points(bite, smap, corrected, scale)
+        points, note = _bite_points(bite, bite_smap, corrected, (bite_smap.scale_mm or 1.0))
         if note:
             notes.append(note)
         lateral = None
@@ -268,19 +268,22 @@ def _check_anatomy(where, track: PelletTrack, frame: head.Frame) -> None:
 
 
 def ema_to_track(raw: RawEma, smap: SensorMap | str | os.PathLike | None = None, *,
-                 bite: RawEma | None = None, check: bool = True
+                 bite: RawEma | None = None,
+                 bite_map: SensorMap | str | os.PathLike | None = None, check: bool = True
                  ) -> tuple[PelletTrack, SensorReport]:
     """The toolkit's pellet track of an articulograph recording, and how it was made
     (module docstring). ``smap``: a :class:`SensorMap`, a built-in map name, a ``.toml``
-    path, or None (the built-in names); ``bite``: a bite-plane recording (same format
-    family, same sensor map); ``check``: refuse implausible anatomy or units."""
+    path, or None (the built-in names); ``bite``: a bite-plane recording, read with
+    ``bite_map`` (default ``smap``); ``check``: refuse implausible anatomy or units."""
     smap = sensor_map(smap)
+    bite_smap = smap if bite_map is None else sensor_map(bite_map)
     where = raw.path
     scale = smap.scale_mm or 1.0
     positions = raw.positions * scale
     assign = resolve(raw.names, smap, where)
     corrected = _correct(where, positions, assign)
-    frame, frame_notes = _occlusal_frame(where, raw, corrected, assign, smap, bite, scale)
+    frame, frame_notes = _occlusal_frame(where, raw, corrected, assign, smap, bite, scale,
+                                         bite_smap)
     toolkit = frame.apply(corrected.positions)
     n = raw.n_frames
     index = {s: j for j, s in enumerate(assign.names)}
