@@ -110,6 +110,15 @@ def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return r
 
 
+def tracked_mean(points: Float[np.ndarray, "n m d"]) -> Float[np.ndarray, "n d"]:
+    """Per frame, the mean of the tracked points (every coordinate finite); NaN for a
+    frame with none (no warning)."""
+    tracked = np.isfinite(points).all(-1)
+    count = tracked.sum(1)[:, None]
+    total = np.where(tracked[..., None], points, 0.0).sum(1)
+    return np.where(count > 0, total / np.where(count > 0, count, 1), np.nan)
+
+
 def reference_level(dims: int, n_refs: int) -> str:
     """What the references can remove: ``"full"``, ``"two"`` (3D, two references),
     ``"translation"`` or ``"none"``."""
@@ -134,8 +143,7 @@ def fit_references(refs: Float[np.ndarray, "n m d"], config: Float[np.ndarray, "
     if level == "full":
         ok = tracked.sum(1) >= (3 if d == 3 else 2)
         if d == 3:
-            centred = np.where(tracked[..., None], refs - np.nanmean(np.where(
-                tracked[..., None], refs, np.nan), axis=1, keepdims=True), 0.0)
+            centred = np.where(tracked[..., None], refs - tracked_mean(refs)[:, None], 0.0)
             sv = np.linalg.svd(np.nan_to_num(centred), compute_uv=False)
             ok &= sv[:, 1] > COLLINEAR_RATIO * np.where(sv[:, 0] > 0, sv[:, 0], 1.0)
         rotation, translation = kabsch(refs, config, tracked.astype(float))
@@ -155,10 +163,10 @@ def fit_references(refs: Float[np.ndarray, "n m d"], config: Float[np.ndarray, "
     else:
         ok = np.ones(n, bool)
     moved = np.einsum("nij,nmj->nmi", rotation, refs) + translation[:, None]
-    sq = np.where(tracked, ((moved - config[None]) ** 2).sum(-1), np.nan)
-    with np.errstate(invalid="ignore"):
-        residual = np.sqrt(np.nanmean(np.where(tracked.any(1)[:, None], sq, 0.0), axis=1))
-    residual = np.where(ok & (level != "none"), residual, np.nan)
+    sq = np.where(tracked, ((moved - config[None]) ** 2).sum(-1), 0.0)
+    count = tracked.sum(1)
+    residual = np.sqrt(sq.sum(1) / np.where(count > 0, count, 1))
+    residual = np.where(ok & (count > 0) & (level != "none"), residual, np.nan)
     return RigidFits(rotation=rotation, translation=translation, residual=residual, ok=ok)
 
 

@@ -311,8 +311,7 @@ def ema_to_track(raw: RawEma, smap: SensorMap | str | os.PathLike | None = None,
         residual = fits.residual
         rotation = np.where(fits.ok, head.rotation_angle_deg(fits.rotation), np.nan)
         refs = positions[:, [index[r] for r in corrected.references]]
-        with np.errstate(invalid="ignore"):
-            centroid = np.nanmean(refs, axis=1) if refs.shape[1] else np.zeros((n, d))
+        centroid = head.tracked_mean(refs)
         shift = np.linalg.norm(centroid - corrected.config.mean(0), axis=-1)
         translation = np.where(fits.ok, shift, np.nan)
         lost = int((~fits.ok).sum())
