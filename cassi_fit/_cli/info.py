@@ -117,7 +117,8 @@ def collect(path: Path, list_only: bool = False, *, sensor_map=None, layout=None
         raise MissingDataError(f"{path}: no such file or folder")
     ds = Dataset(path, sensor_map=sensor_map)
     if not ds.subjects():
-        raise MissingDataError(f"{path}: no recordings (.txy, .ema, .pos, .tsv, .mat) found")
+        raise MissingDataError(f"{path}: no pellet files or articulograph recordings (.txy, "
+                               ".ema, .pos, .tsv, .mat) found")
     subjects = {}
     for subject in ds.subjects():
         tasks = {}

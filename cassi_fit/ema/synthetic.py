@@ -6,7 +6,8 @@ folder) as an articulograph would record them, in one of :data:`FORMATS`:
 
 1. each XRMB pellet track (the measured one: noise, dropouts and mistracks included) is
    resampled to the format's usual rate (linear interpolation; a value next to an
-   untracked one is untracked);
+   untracked one is untracked; a pellet with one coordinate untracked is an untracked
+   sensor, since a 3D position is tracked as a whole);
 2. lifted to 3D in the toolkit's frame: the eight pellets on the midline (z = 0), a left
    lip corner ``LC`` 25 mm to the left of the lips' midpoint (a sensor with no CASSI role),
    and reference sensors fixed to the skull (upper incisor ``UI``, nasion ``NAS``,
@@ -261,12 +262,15 @@ def write_ema_corpus(out_dir: str | os.PathLike, *, format: str, n_subjects: int
                      seed: int = 0, tasks: str | Sequence[str] | None = None,
                      noise_scale: float = 1.0, audio: bool = True, overwrite: bool = False,
                      jaw_kinematics: str | Sequence[str] | None = None,
-                     noise_family: str = "realistic") -> Path:
+                     noise_family: str = "realistic",
+                     from_corpus: str | os.PathLike | None = None) -> Path:
     """Write the synthetic EMA corpus (module docstring) in ``format`` (one of
     :data:`FORMATS`) to ``out_dir``; the other arguments are
-    :func:`cassi_fit.synth.generate_corpus`'s. Written into a temporary sibling folder and
-    moved into place, ``README.txt`` (its last line marks a complete corpus) last; an
-    existing corpus is refused unless ``overwrite``."""
+    :func:`cassi_fit.synth.generate_corpus`'s, or ``from_corpus`` names a complete
+    synthetic XRMB corpus to measure instead (its own subjects, tasks and seed; ``seed``
+    then only draws the recording frames and head movements). Written into a temporary
+    sibling folder and moved into place, ``README.txt`` (its last line marks a complete
+    corpus) last; an existing corpus is refused unless ``overwrite``."""
     from ..synth import generate_corpus
 
     if format not in FORMATS:
@@ -280,9 +284,16 @@ def write_ema_corpus(out_dir: str | os.PathLike, *, format: str, n_subjects: int
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
     try:
-        xrmb = generate_corpus(work / "xrmb", n_subjects=n_subjects, seed=seed, tasks=tasks,
-                               noise_scale=noise_scale, audio=audio,
-                               jaw_kinematics=jaw_kinematics, noise_family=noise_family)
+        if from_corpus is None:
+            xrmb = generate_corpus(work / "xrmb", n_subjects=n_subjects, seed=seed,
+                                   tasks=tasks, noise_scale=noise_scale, audio=audio,
+                                   jaw_kinematics=jaw_kinematics, noise_family=noise_family)
+        else:
+            xrmb = Path(from_corpus)
+            text = (xrmb / "README.txt").read_text(encoding="utf-8") if (
+                xrmb / "README.txt").is_file() else ""
+            if not text.rstrip().endswith(COMPLETE_LINE):
+                raise MissingDataError(f"{xrmb}: not a complete synthetic XRMB corpus")
         ema = work / "ema"
         ema.mkdir()
         subjects = sorted(p for p in xrmb.iterdir() if p.is_dir())
