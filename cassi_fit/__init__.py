@@ -48,11 +48,11 @@ if TYPE_CHECKING:
     from .dataset import Recording as Recording
     from .dataset import load_recording as load_recording
     from .dataset import recording_from_array as recording_from_array
-    from .ema import SensorReport as SensorReport
     from .deform import FaceParams as FaceParams
     from .deform import default_params as default_params
     from .deform import model_pellets as model_pellets
     from .deform import vertex_normals as vertex_normals
+    from .ema import SensorReport as SensorReport
     from .errors import CassiError as CassiError
     from .errors import DataFormatError as DataFormatError
     from .errors import DegenerateGeometryError as DegenerateGeometryError

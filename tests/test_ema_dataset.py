@@ -129,7 +129,7 @@ def test_real_jw11_recording_through_mocha_layout(tmp_path):
     path = tmp_path / "jw11_005.txt"
     path.write_text("\n".join(lines) + "\n")
     rec = _quiet(load_recording, path)
-    for sensor, role in roles.items():
+    for role in roles.values():
         j = PELLET_NAMES.index(role)
         want = xrmb.positions[:, j]
         ok = np.isfinite(want).all(-1)
