@@ -58,6 +58,8 @@ def test_toml_map_for_numbered_channels():
     ("[channels]\nfirst = 'A'\n", "channel number"),
     ("[bite_plane]\nmiddle = 'X'\n", "unknown key 'middle'"),
     ("[roles\nUL = 'A'\n", "not a TOML sensor map"),
+    ("[file]\nanterior = 5\nup = '+y'\n", "anterior must be text"),
+    ("[references]\nsensors = 3\n", "must be a name or a list"),
 ])
 def test_toml_refusals_name_the_file(tmp_path, text, message):
     path = tmp_path / "map.toml"

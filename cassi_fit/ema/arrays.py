@@ -102,7 +102,11 @@ def raw_from_array(
     docstring). ``rate`` Hz or ``times (n,)`` s (one of them); ``units`` one of
     :data:`UNITS` (default the layout's, else mm); a ``"normalised"`` array needs
     ``mean_mm`` and ``sd_mm`` (per column, mm)."""
-    values = np.asarray(values, dtype=np.float64)
+    try:
+        values = np.asarray(values, dtype=np.float64)
+    except (ValueError, TypeError):
+        raise DataFormatError(path, None, f"the array holds {np.asarray(values).dtype} values, "
+                              "not numbers") from None
     columns, layout_units = layout_columns(layout)
     if values.ndim != 2 or values.shape[1] != len(columns):
         raise DataFormatError(path, None, f"array of shape {values.shape}: the layout has "

@@ -98,8 +98,15 @@ def read_mview(path: str | os.PathLike, *, variable: str | None = None) -> RawEm
         name = _text(entry["NAME"])
         if not name:
             raise DataFormatError(path, None, f"{key}({i + 1}) has no NAME")
-        signal = np.asarray(entry["SIGNAL"], dtype=np.float64)
-        rate = _scalar(entry["SRATE"])
+        try:
+            signal = np.asarray(entry["SIGNAL"], dtype=np.float64)
+            rate = _scalar(entry["SRATE"])
+        except (ValueError, TypeError, IndexError):
+            raise DataFormatError(path, None, f"{key}({i + 1}) {name}: SIGNAL or SRATE is not "
+                                  "numeric") from None
+        if not (np.isfinite(rate) and rate > 0):
+            raise DataFormatError(path, None, f"{key}({i + 1}) {name}: SRATE {rate!r} is not a "
+                                  "rate")
         if signal.ndim == 1 or (signal.ndim == 2 and min(signal.shape) == 1):
             kind = "sound" if rate >= AUDIO_RATE_MIN_HZ else "a scalar channel"
             notes.append(f"{name}: {kind} at {rate:g} Hz, not a sensor (not used)")

@@ -225,8 +225,13 @@ def read_sensor_map(path: str | os.PathLike) -> SensorMap:
     facts = data.get("file", {})
     _check_keys(path, "file", facts, ("scale_mm", "anterior", "up"))
     scale = facts.get("scale_mm")
-    if scale is not None and not isinstance(scale, int | float):
+    if scale is not None and (isinstance(scale, bool) or not isinstance(scale, int | float)):
         raise DataFormatError(path, None, "[file] scale_mm must be a number")
+    for table, key, value in (("file", "anterior", facts.get("anterior")),
+                              ("file", "up", facts.get("up")),
+                              ("references", "upper_incisor", refs.get("upper_incisor"))):
+        if value is not None and not isinstance(value, str):
+            raise DataFormatError(path, None, f"[{table}] {key} must be text, got {value!r}")
     return SensorMap(
         roles=roles,
         channels=channels,
