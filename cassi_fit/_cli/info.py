@@ -146,6 +146,9 @@ def _print_file(report: dict, out) -> None:
     print(f"{report['subject']} {report['task']}  {report['path']}", file=out)
     paper = q.get("first_complete_frame")
     moved = f" (moved from {paper}: mistracked)" if paper is not None and paper != first else ""
+    never = [p for p in ("MNI", "MNM") if not q["valid_fraction"].get(p)]
+    if first is None and never:  # e.g. an articulograph with one jaw sensor
+        moved = f" (jaw pellet {', '.join(never)} never tracked)"
     print(f"  frames {q['n_frames']}  duration {q['duration_s']:.3f} s  first valid frame "
           f"{'-' if first is None else first}{moved}  first jaw frame "
           f"{'-' if q['first_jaw_frame'] is None else q['first_jaw_frame']}", file=out)  # fmt: skip
