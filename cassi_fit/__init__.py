@@ -44,10 +44,12 @@ if TYPE_CHECKING:
     from .dataset import DefaultHeadMeasuresWarning as DefaultHeadMeasuresWarning
     from .dataset import Recording as Recording
     from .dataset import load_recording as load_recording
+    from .dataset import recording_from_array as recording_from_array
     from .deform import FaceParams as FaceParams
     from .deform import default_params as default_params
     from .deform import model_pellets as model_pellets
     from .deform import vertex_normals as vertex_normals
+    from .ema import SensorReport as SensorReport
     from .errors import CassiError as CassiError
     from .errors import DataFormatError as DataFormatError
     from .errors import DegenerateGeometryError as DegenerateGeometryError
@@ -191,7 +193,10 @@ _PUBLIC = {
     "Dataset": "dataset",
     "Recording": "dataset",
     "load_recording": "dataset",
+    "recording_from_array": "dataset",
     "DefaultHeadMeasuresWarning": "dataset",
+    # ema (data): articulograph files
+    "SensorReport": "ema",
     # quality (data)
     "QualityReport": "quality",
     "quality_report": "quality",
@@ -325,7 +330,8 @@ __all__ = [
     "load_recording", "load_truth", "make_subject", "midsagittal_figure",
     "model_pellets", "pellet_index",
     "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
-    "read_outline", "read_textgrid", "read_txy", "repair", "require_tracked", "rigid",
+    "read_outline", "read_textgrid", "read_txy", "recording_from_array", "repair",
+    "require_tracked", "rigid", "SensorReport",
     "run_corpus", "segment_summary", "subject_traces", "synth", "synth_recording",
     "tongue_volume", "tongue_volumes", "vertex_normals", "with_palate", "build_pharynx",
     "with_pharynx",
