@@ -6,9 +6,18 @@ Each subcommand lives in its own module under ``cassi_fit/_cli/`` and exposes
 
 Errors: a :class:`~cassi_fit.errors.CassiError` (and any other exception) is printed as one
 line, ``cassi: error: ...``, with exit code 2 (1 for unexpected exceptions); the
-traceback is shown only with ``--debug``. Ctrl-C and SIGTERM (which the command turns into
-``KeyboardInterrupt``, so that every writer removes its temporary files) print
-``cassi: interrupted`` and exit 130; a closed output pipe exits 141 quietly.
+traceback is shown only with ``--debug``. Ctrl-C (SIGINT) and SIGTERM at any moment print
+``cassi: interrupted`` and exit 130: the command turns them into ``KeyboardInterrupt``
+where that is safe (``cassi_fit._io.interruptible``), so that every writer removes its
+temporary files, ffmpeg and the corpus workers are stopped and the OpenGL context is
+released; the program then ends without the interpreter's shutdown (``os._exit``), where
+JAX's and Mesa's threads could crash it. A closed output pipe exits 141 quietly.
+
+Compilation: the commands that compute keep what JAX compiles in the persistent
+compilation cache (``cassi_fit.corpus._process``: ``CASSI_COMPILE_CACHE=DIR|off``, else
+``JAX_COMPILATION_CACHE_DIR``, else ``$XDG_CACHE_HOME/cassi_fit/jax`` or
+``~/.cache/cassi_fit/jax``), so a second run loads instead of compiling;
+``--no-compile-cache`` turns it off for one command.
 """
 
 from __future__ import annotations
@@ -19,6 +28,8 @@ import os
 import sys
 
 # (module under cassi_fit._cli, one-line help). Order = order in --help.
+#: Subcommands that do not compute with JAX (no compilation cache, no --no-compile-cache).
+NO_JAX = ("info", "synth")
 SUBCOMMANDS = (
     "demo",
     "info",
@@ -43,11 +54,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser.epilog = (
         "JAX runs on the CPU: the command sets JAX_PLATFORMS=cpu for itself unless "
         "JAX_PLATFORMS is already set (e.g. JAX_PLATFORMS=cuda to use a GPU). Importing "
-        "cassi_fit as a library leaves that choice to you."
+        "cassi_fit as a library leaves that choice to you. What JAX compiles is kept in "
+        "$CASSI_COMPILE_CACHE (a folder, or 'off'), else $JAX_COMPILATION_CACHE_DIR, else "
+        "$XDG_CACHE_HOME/cassi_fit/jax (~/.cache/cassi_fit/jax), so that the next command "
+        "loads it instead of compiling again. Ctrl-C or SIGTERM: exit status 130."
     )
     parser.add_argument(
         "--debug", action="store_true", help="show the full traceback when something fails"
     )
+    parser.add_argument("--no-compile-cache", action="store_true", help=_NO_CACHE_HELP)
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in SUBCOMMANDS:
         try:
@@ -57,31 +72,40 @@ def build_parser() -> argparse.ArgumentParser:
                 raise
             continue
         module.register(subparsers)
+    for name, sub in subparsers.choices.items():
+        if name not in NO_JAX:  # also after the command's name; SUPPRESS: no default
+            sub.add_argument("--no-compile-cache", action="store_true",
+                             default=argparse.SUPPRESS, help=_NO_CACHE_HELP)
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    # The command (not the library) picks the CPU, before anything imports JAX, so that
-    # JAX does not probe for accelerators; a platform the user set wins.
-    os.environ.setdefault("JAX_PLATFORMS", "cpu")
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not getattr(args, "func", None):
-        parser.print_help()
-        return 2
-    from ._io import terminate_as_interrupt
+_NO_CACHE_HELP = ("compile everything afresh and keep nothing (default: JAX's persistent "
+                  "compilation cache, see 'cassi --help')")
 
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the ``cassi`` command with ``argv`` (default: the process's arguments); the
+    exit status. ``argv`` None is the program itself: after an interruption (or a signal
+    while it exits) the process ends at once with status 130 (see the module's doc);
+    with an ``argv`` list, as from Python, 130 is returned."""
+    from ._io import INTERRUPT_EXIT_STATUS, exit_on_signal, interruptible
+
+    program = argv is None
+    if program:  # what a signal does outside the command's own handling: end at once
+        exit_on_signal()
+    args = None
     try:
-        with terminate_as_interrupt():  # SIGTERM cleans up as Ctrl-C does
-            return int(args.func(args) or 0)
+        with interruptible():  # before anything else: parsing may be interrupted too
+            args = _parse(argv)
+            status = 2 if args is None else int(args.func(args) or 0)
     except KeyboardInterrupt:
         print("cassi: interrupted", file=sys.stderr)
-        return 130
+        status = INTERRUPT_EXIT_STATUS
     except BrokenPipeError:  # e.g. `cassi info DATA | head`: the reader left; say nothing
         _silence_stdout()
-        return 141
+        status = 141
     except Exception as exc:  # one line for the user; the traceback only under --debug
-        if args.debug:
+        if args is not None and args.debug:
             raise
         from .errors import CassiError
 
@@ -89,7 +113,30 @@ def main(argv: list[str] | None = None) -> int:
         if not isinstance(exc, CassiError):
             message = f"{type(exc).__name__}: {message}"
         print(f"cassi: error: {message}", file=sys.stderr)
-        return 2 if isinstance(exc, CassiError) else 1
+        status = 2 if isinstance(exc, CassiError) else 1
+    if program and status == INTERRUPT_EXIT_STATUS:
+        from ._io import _flush_and_exit
+
+        _flush_and_exit(status, None)  # no interpreter shutdown after an interrupt
+    return status
+
+
+def _parse(argv: list[str] | None) -> argparse.Namespace | None:
+    """The parsed command line, with the process set up for it (JAX on the CPU unless
+    chosen, the compilation cache); None (after printing the help) if no command."""
+    # The command (not the library) picks the CPU, before anything imports JAX, so that
+    # JAX does not probe for accelerators; a platform the user set wins.
+    os.environ.setdefault("JAX_PLATFORMS", "cpu")
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return None
+    if args.command not in NO_JAX:
+        from .corpus._process import default_compile_cache, use_compile_cache
+
+        use_compile_cache(None if args.no_compile_cache else default_compile_cache())
+    return args
 
 
 def _silence_stdout() -> None:

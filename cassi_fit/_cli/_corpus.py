@@ -16,7 +16,11 @@ def add_run_arguments(parser: argparse.ArgumentParser, *, force: bool = True) ->
                         "cores; 1: in this process)")
     parser.add_argument("--scheduler", metavar="ADDRESS",
                         help="send the recordings to a running dask.distributed cluster "
-                        "(e.g. tcp://host:8786) instead of local processes")
+                        "(e.g. tcp://host:8786) instead of local processes (needs the "
+                        "'corpus' extra)")
+    parser.add_argument("--scheduler-timeout", type=float, metavar="SECONDS",
+                        help="time allowed to reach the --scheduler (default: "
+                        "$CASSI_SCHEDULER_TIMEOUT or 10 s)")
     parser.add_argument("--resume", action="store_true",
                         help="skip recordings whose outputs an earlier run of the same "
                         "settings completed (checked by their markers), run the rest")
@@ -34,8 +38,17 @@ def run_options(args: argparse.Namespace) -> dict:
     if args.jobs is not None and args.scheduler:
         raise CassiError("--jobs and --scheduler exclude each other (the cluster decides "
                          "its workers)")
-    return {"jobs": args.jobs, "scheduler": args.scheduler, "resume": args.resume,
-            "overwrite": args.force, "progress": not getattr(args, "quiet", False)}
+    timeout = getattr(args, "scheduler_timeout", None)
+    if args.scheduler is not None:  # a malformed address fails before any work
+        from cassi_fit.corpus import parse_scheduler_address, scheduler_timeout
+
+        parse_scheduler_address(args.scheduler)
+        scheduler_timeout(timeout)
+    elif timeout is not None:
+        raise CassiError("--scheduler-timeout is for --scheduler")
+    return {"jobs": args.jobs, "scheduler": args.scheduler, "scheduler_timeout": timeout,
+            "resume": args.resume, "overwrite": args.force,
+            "progress": not getattr(args, "quiet", False)}
 
 
 def finish(run) -> int:

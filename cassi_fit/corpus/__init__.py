@@ -10,8 +10,11 @@ subject for per-subject work such as calibration) and collects one summary row p
   takes any Executor (or a Dask ``Client``), and ``jobs=1`` runs in this process with no
   pool. Workers live for the whole run, so what JAX compiles (cached by ``jax.jit`` /
   ``eqx.filter_jit`` in the worker process) and the face model (:func:`worker_model`) are
-  paid once per worker, not once per recording; ``compilation_cache=DIR`` lets workers
-  and later runs load compiled code from JAX's persistent cache instead.
+  paid once per worker, not once per recording; and by default every worker loads what
+  any earlier process compiled from JAX's persistent compilation cache (``_process``:
+  ``compilation_cache=`` a folder, or False for none). With ``jobs=N`` each worker
+  computes on its share of the cores (XLA's threads limited before JAX starts), and
+  ``scheduler=`` is checked and reached within a time limit (``_cluster``).
 * **Task functions** are module-level (picklable) functions
   ``task(item, out_dir, *, overwrite, **options) -> TaskResult`` taking plain arguments:
   they read the item's files, write their outputs under ``out_dir`` atomically, and return
@@ -32,8 +35,9 @@ subject for per-subject work such as calibration) and collects one summary row p
   setting; :func:`item_rng` seeds per item. Tables are byte-identical whatever the number
   of workers, the scheduler or the completion order.
 
-This package holds only the executor (``_executor``), the items (``_items``) and the
-resume markers (``_markers``). Each command's task lives beside the command:
+This package holds only the executor (``_executor``), the items (``_items``), the
+resume markers (``_markers``), the set-up of a computing process (``_process``) and the
+connection to a Dask cluster (``_cluster``). Each command's task lives beside the command:
 ``evaluate.evaluate_corpus``, ``calibrate.calibrate_corpus``, ``video.animate_corpus``
 (``cassi jaw DATASET``'s in ``jaw_corpus``);
 :func:`write_table` writes a corpus table as CSV, and as Parquet when pyarrow is importable
@@ -41,6 +45,12 @@ resume markers (``_markers``). Each command's task lives beside the command:
 """
 
 from ..tables import csv_text as csv_text
+from ._cluster import DEFAULT_TIMEOUT_S as DEFAULT_TIMEOUT_S
+from ._cluster import SchedulerError as SchedulerError
+from ._cluster import check_scheduler as check_scheduler
+from ._cluster import connect_scheduler as connect_scheduler
+from ._cluster import parse_scheduler_address as parse_scheduler_address
+from ._cluster import scheduler_timeout as scheduler_timeout
 from ._executor import WORKER_DIED as WORKER_DIED
 from ._executor import CorpusRun as CorpusRun
 from ._executor import ItemResult as ItemResult
@@ -65,3 +75,7 @@ from ._markers import MARKER_DIR as MARKER_DIR
 from ._markers import completed_row as completed_row
 from ._markers import marker_path as marker_path
 from ._markers import task_fingerprint as task_fingerprint
+from ._process import COMPILE_CACHE_ENV as COMPILE_CACHE_ENV
+from ._process import default_compile_cache as default_compile_cache
+from ._process import use_compile_cache as use_compile_cache
+from ._process import worker_thread_env as worker_thread_env

@@ -7,17 +7,20 @@ import concurrent.futures as cf
 import hashlib
 import os
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
-from dataclasses import dataclass
+from contextlib import contextmanager, nullcontext
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from .._io import defer_interrupts, end_worker, in_task, is_worker, signals_blocked
 from ..errors import CassiError, OutputExistsError
 from ..status import Status
 from ..tables import ID_COLUMNS
 from ..tables import write_table as _write_table
+from ._cluster import connect_scheduler
 from ._items import CorpusItem, ItemResult, TaskResult, _order
 from ._markers import MARKER_DIR, _write_marker, completed_row, marker_path, task_fingerprint
+from ._process import default_compile_cache, limit_threads, threads_per_worker, use_compile_cache
 
 if TYPE_CHECKING:
     from ..face_model import FaceModel
@@ -34,26 +37,46 @@ def _one_line(exc: BaseException) -> str:
 @dataclass(frozen=True)
 class JaxSettings:
     """What every worker sets before a task: ``x64`` (float64; None leaves JAX's
-    default) and ``compilation_cache`` (a folder for JAX's persistent compilation cache,
-    shared by the workers and by later runs, so that a worker loads what another one or
-    an earlier run compiled; None: no cache)."""
+    default); the persistent compilation cache: ``compilation_cache`` (a folder, shared
+    by the workers and by later runs, so that a worker loads what another one or an
+    earlier run compiled) or, with ``default_cache``, the worker's own default folder
+    (``_process.default_compile_cache``: a Dask worker on another machine uses its own);
+    neither: no cache. ``threads``: the worker's share of the cores (set before JAX
+    starts, in a process pool's workers only; None: no limit)."""
 
     x64: bool | None = None
     compilation_cache: str | None = None
+    default_cache: bool = False
+    threads: int | None = None
+
+    def cache_folder(self) -> str | None:
+        """The cache folder to use in this process, or None."""
+        if self.compilation_cache is not None:
+            return self.compilation_cache
+        if self.default_cache:
+            folder = default_compile_cache()
+            return None if folder is None else os.fspath(folder)
+        return None
 
 
-def _configure_jax(settings: JaxSettings) -> None:
-    if settings.x64 is None and settings.compilation_cache is None:
+def _configure_jax(settings: JaxSettings, *, inherit: bool = False) -> None:
+    """Apply ``settings`` in this process; ``inherit``: through the environment too (a
+    pool's worker before JAX starts), else through ``jax.config`` only (this process's
+    environment, which the caller owns, is left alone)."""
+    cache = settings.cache_folder()
+    if settings.x64 is None and cache is None:
         return
-    import jax
+    if cache is not None and _CONFIGURED.get("cache") != cache:
+        use_compile_cache(cache, inherit=inherit)
+        _CONFIGURED["cache"] = cache
+    if settings.x64 is not None:
+        import jax
 
-    if settings.x64 is not None and bool(jax.config.jax_enable_x64) != settings.x64:
-        jax.config.update("jax_enable_x64", settings.x64)
-    cache = settings.compilation_cache
-    if cache is not None and jax.config.jax_compilation_cache_dir != cache:
-        jax.config.update("jax_compilation_cache_dir", cache)
-        # the jaw fits compile in seconds: keep every entry, not only slow ones
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+        if bool(jax.config.jax_enable_x64) != settings.x64:
+            jax.config.update("jax_enable_x64", settings.x64)
+
+
+_CONFIGURED: dict[str, str] = {}  # what _configure_jax last set in this process
 
 
 def run_item(task: Callable[..., TaskResult], item: CorpusItem, out_dir: str | None,
@@ -61,25 +84,40 @@ def run_item(task: Callable[..., TaskResult], item: CorpusItem, out_dir: str | N
              ) -> ItemResult:
     """Run ``task`` on one item (in a worker): ``ItemResult`` OK with the row after the
     marker is written, or FAILED with the one-line error. KeyboardInterrupt and SystemExit
-    pass through: an interrupted run stops, and its finished items stay marked."""
+    pass through: an interrupted run stops, and its finished items stay marked (in a pool
+    worker, SIGTERM interrupts the task, its writers clean up, and the worker ends)."""
     try:
-        # a marker says the latest attempt succeeded: an attempt that fails leaves none
-        if out_dir is not None:
-            marker_path(out_dir, item).unlink(missing_ok=True)
-        _configure_jax(jax_settings)  # a Dask worker is long-lived and shared: every task
-        result = task(item, out_dir, **options)
-        if not isinstance(result, TaskResult):
-            raise TypeError(f"{task.__qualname__} returned {type(result).__name__}, "
-                            "not a TaskResult")
-        if out_dir is not None:
-            _write_marker(out_dir, item, fingerprint, result)
+        with in_task():
+            # a marker says the latest attempt succeeded: an attempt that fails leaves none
+            if out_dir is not None:
+                marker_path(out_dir, item).unlink(missing_ok=True)
+            _configure_jax(jax_settings)  # a Dask worker is long-lived and shared: every task
+            result = task(item, out_dir, **options)
+            if not isinstance(result, TaskResult):
+                raise TypeError(f"{task.__qualname__} returned {type(result).__name__}, "
+                                "not a TaskResult")
+            if out_dir is not None:
+                _write_marker(out_dir, item, fingerprint, result)
     except Exception as exc:  # noqa: BLE001 -- isolation: one bad recording, one FAILED row
         return ItemResult(item, Status.FAILED, _one_line(exc))
+    except KeyboardInterrupt:
+        if is_worker():  # its clean-up has run; the pool sees a worker that ended
+            end_worker()
+        raise
     return ItemResult(item, Status.OK, "", result.row)
 
 
 def _init_worker(jax_settings: JaxSettings) -> None:
-    _configure_jax(jax_settings)
+    """A local pool's worker, before any task (and before JAX starts): its share of the
+    threads, the signals (:func:`cassi_fit._io.worker_signals`: Ctrl-C is the parent's to
+    handle; SIGTERM ends a task as an interrupt, with its clean-up, and the worker
+    quietly), the compilation cache and float64."""
+    from .._io import worker_signals
+
+    if jax_settings.threads is not None:
+        limit_threads(jax_settings.threads)
+    worker_signals()
+    _configure_jax(jax_settings, inherit=True)
 
 
 # ---------------------------------------------------------------- the executor
@@ -109,8 +147,14 @@ class _Pool:
             max_workers=n, mp_context=multiprocessing.get_context("spawn"),
             initializer=_init_worker, initargs=(self.settings,))
 
-    def close(self) -> None:
+    def close(self, *, interrupted: bool = False) -> None:
+        """Shut our own pool down (``interrupted``: its workers told to stop now, by
+        SIGTERM, rather than after their current item) and close our Dask client."""
         if self.settings is not None and self.executor is not None:
+            if interrupted:
+                for process in list(getattr(self.executor, "_processes", {}).values()):
+                    if process.is_alive():
+                        process.terminate()
             self.executor.shutdown(wait=True, cancel_futures=True)
         if self.client is not None:
             self.client.close()
@@ -122,23 +166,22 @@ def _dask_pool(client, own: bool) -> _Pool:
     return _Pool(client.get_executor(pure=False), threads, client=client if own else None)
 
 
-def _open_pool(executor, jobs, scheduler, n_items: int, jax_settings) -> _Pool:
+def _open_pool(executor, jobs, scheduler, n_items: int, jax_settings,
+               scheduler_timeout=None) -> _Pool:
     if executor is not None:
         if hasattr(executor, "get_executor"):  # a dask.distributed.Client
             return _dask_pool(executor, own=False)
         workers = getattr(executor, "_max_workers", None) or 0
         return _Pool(executor, int(workers))
     if scheduler is not None:
-        from distributed import Client
-
-        return _dask_pool(Client(scheduler), own=True)
+        return _dask_pool(connect_scheduler(scheduler, scheduler_timeout), own=True)
     jobs = default_jobs() if jobs is None else int(jobs)
     if jobs < 1:
         raise CassiError(f"jobs must be at least 1, got {jobs}")
     jobs = min(jobs, max(n_items, 1))
     if jobs == 1:
         return _Pool(None, 1)
-    pool = _Pool(None, jobs, settings=jax_settings)
+    pool = _Pool(None, jobs, settings=replace(jax_settings, threads=threads_per_worker(jobs)))
     pool.executor = pool.new_executor(jobs)
     return pool
 
@@ -199,7 +242,8 @@ def run_corpus(
     resume: bool = False,
     overwrite: bool = False,
     x64: bool | None = None,
-    compilation_cache: str | os.PathLike | None = None,
+    compilation_cache: str | os.PathLike | bool | None = True,
+    scheduler_timeout: float | None = None,
     progress: bool = True,
     desc: str = "corpus",
 ) -> CorpusRun:
@@ -210,7 +254,13 @@ def run_corpus(
     without ``resume`` or ``overwrite`` a folder holding markers of an earlier run is
     refused (OutputExistsError). ``x64``: float64 in the workers (default: as in this
     process; with ``jobs=1`` the setting is made in this process); ``compilation_cache``:
-    a folder for JAX's persistent compilation cache in every worker (:class:`JaxSettings`).
+    JAX's persistent compilation cache in every worker (and in this process with
+    ``jobs=1``): True (default) the worker's default folder
+    (``corpus._process.default_compile_cache``: ``CASSI_COMPILE_CACHE``, else
+    ``JAX_COMPILATION_CACHE_DIR``, else the user's cache folder), a folder, or
+    False/None for none (:class:`JaxSettings`). With ``jobs`` > 1 each worker computes
+    on its share of the cores. ``scheduler_timeout``: seconds allowed to reach
+    ``scheduler`` (default ``CASSI_SCHEDULER_TIMEOUT`` or 10; ``corpus._cluster``).
     Returns every item's result, failed ones included; raises only for the run itself
     (bad arguments, an interruption). ``out_dir`` None: a run that writes no files and
     keeps no markers (the library's in-memory forms, e.g. ``evaluate_dataset``; no
@@ -234,16 +284,21 @@ def run_corpus(
             todo.append(item)
         else:
             done.append(ItemResult(item, Status.OK, "", row, resumed=True))
+    own_cache = compilation_cache not in (None, True, False)
     jax_settings = JaxSettings(
         _current_x64() if x64 is None else bool(x64),
-        None if compilation_cache is None else os.path.abspath(compilation_cache))
-    pool = (_open_pool(executor, jobs, scheduler, len(todo), jax_settings) if todo
-            else _Pool(None, 1))
+        os.path.abspath(compilation_cache) if own_cache else None,
+        default_cache=compilation_cache is True)
+    pool = (_open_pool(executor, jobs, scheduler, len(todo), jax_settings, scheduler_timeout)
+            if todo else _Pool(None, 1))
     try:
         results = _collect(pool, task, todo, None if out is None else str(out), options,
                            fingerprint, jax_settings, progress, desc, len(items), len(done))
-    finally:
-        pool.close()
+    except BaseException:
+        with defer_interrupts():
+            pool.close(interrupted=True)
+        raise
+    pool.close()
     return CorpusRun(sorted(done + results, key=lambda r: _order(r.item)), pool.workers)
 
 
@@ -268,7 +323,10 @@ def _collect(pool, task, todo, out, options, fingerprint, jax_settings, progress
             bar.set_postfix_str(f"{failed} failed")
 
     def submit(executor, item):
-        return executor.submit(run_item, task, item, out, options, fingerprint, jax_settings)
+        # our own pool: a worker started here sets its handlers before any signal
+        with signals_blocked() if pool.settings is not None else nullcontext():
+            return executor.submit(run_item, task, item, out, options, fingerprint,
+                                   jax_settings)
 
     try:
         if pool.executor is None:
