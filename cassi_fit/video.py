@@ -24,9 +24,11 @@ at the end (``cassi_fit._io``); an input file is never replaced.
 from __future__ import annotations
 
 import os
+import queue
 import re
 import subprocess
 import tempfile
+import threading
 import wave
 from collections.abc import Iterable, Iterator, Sequence
 from fractions import Fraction
@@ -189,6 +191,9 @@ class VideoWriter:
         self._proc: subprocess.Popen | None = None
         self._errfile: IO[bytes] | None = None
         self._gif: list[np.ndarray] | None = None
+        self._frames: queue.Queue = queue.Queue(maxsize=PIPELINE_DEPTH)
+        self._pipe: threading.Thread | None = None
+        self._pipe_error: BaseException | None = None
 
     # -- frames
     def append(self, frame: UInt8[np.ndarray, "h w 3"]) -> None:
@@ -213,10 +218,8 @@ class VideoWriter:
         if self._gif is not None:
             self._gif.append(frame)
         else:
-            try:
-                self._proc.stdin.write(frame.tobytes())
-            except BrokenPipeError:
-                raise VideoError(f"{self.path}: ffmpeg stopped: {self._stderr()}") from None
+            self._check_pipe()
+            self._frames.put(frame.tobytes())  # waits while the queue is full
         self.count += 1
 
     def _open(self) -> None:
@@ -231,7 +234,46 @@ class VideoWriter:
         cmd += ["-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-c:v", "libx264", "-pix_fmt", "yuv420p"]
         cmd += ["-preset", "veryfast", "-crf", "20", "-an", "-f", "mp4", str(self.tmp)]
         self._errfile = tempfile.TemporaryFile()
-        self._proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=self._errfile)
+        # its own session: a Ctrl-C at the terminal reaches this process, which then stops
+        # ffmpeg itself (_discard), rather than ffmpeg ending the file on its own first
+        self._proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=self._errfile,
+                                      start_new_session=True)
+        self._pipe = threading.Thread(target=self._feed, name="cassi-video-writer",
+                                      daemon=True)
+        self._pipe.start()
+
+    def _feed(self) -> None:
+        """The writer thread: frames from the queue into ffmpeg's input, so that the
+        caller draws the next frame while ffmpeg takes this one; stops at ``None``. A
+        failed write is kept for the caller (:meth:`_check_pipe`) and the rest dropped."""
+        while True:
+            data = self._frames.get()
+            if data is None:
+                return
+            if self._pipe_error is None:
+                try:
+                    self._proc.stdin.write(data)
+                except (BrokenPipeError, OSError, ValueError) as exc:
+                    self._pipe_error = exc
+
+    def _check_pipe(self) -> None:
+        if self._pipe_error is not None:
+            raise VideoError(f"{self.path}: ffmpeg stopped: {self._stderr()}") from None
+
+    def _stop_pipe(self) -> None:
+        """End the writer thread (after the frames queued so far; at once if ffmpeg is
+        gone) and wait for it."""
+        if self._pipe is None:
+            return
+        while True:
+            try:
+                self._frames.put(None, timeout=0.1)
+                break
+            except queue.Full:
+                if self._proc.poll() is not None:  # nobody reads: drop what is queued
+                    _drain(self._frames)
+        self._pipe.join()
+        self._pipe = None
 
     def _stderr(self) -> str:
         self._errfile.seek(0)
@@ -257,6 +299,8 @@ class VideoWriter:
         if self._gif is not None:
             self._write_gif()
             return
+        self._stop_pipe()
+        self._check_pipe()
         self._proc.stdin.close()
         if self._proc.wait() != 0:
             raise VideoError(f"{self.path}: ffmpeg failed: {self._stderr()}")
@@ -302,6 +346,7 @@ class VideoWriter:
             if self._proc is not None and self._proc.poll() is None:
                 self._proc.kill()
                 self._proc.wait()
+            self._stop_pipe()
         finally:
             remove_quietly(self.tmp)
             if self._errfile is not None:
@@ -421,9 +466,9 @@ def animation_frames(
     current = (labels.at(np.asarray(animation.times, np.float64)) if labels is not None
                else np.full(animation.n_frames, "", dtype=str))
     indices = range(animation.n_frames) if indices is None else indices
-    for k in tqdm(
-        indices, desc="rendering", unit="frame", file=sys.stderr, disable=not progress, leave=False
-    ):
+
+    def frame(k):
+        """(vertices, render keywords) of frame ``k``."""
         kwargs = {}
         if section:
             kwargs["trails"] = {"measured": measured[max(k - trail, 0) : k + 1, shown]}
@@ -434,11 +479,100 @@ def animation_frames(
                 "model": _in_3d(model_sites[k][shown]),
             }
         status = Status(int(animation.frame_status[k])).label
-        caption = frame_caption(
+        kwargs["caption"] = frame_caption(
             subject, task, float(animation.times[k]), int(animation.frame_index[k]), status,
             str(current[k]),
         )
-        yield renderer.render(vertices[k], caption=caption, **kwargs)
+        return vertices[k], kwargs
+
+    shown_indices = tqdm(indices, desc="rendering", unit="frame", file=sys.stderr,
+                         disable=not progress, leave=False)
+    if not hasattr(renderer, "render_gl"):  # any object with render(): one step
+        for k in shown_indices:
+            points, kwargs = frame(k)
+            yield renderer.render(points, **kwargs)
+        return
+    yield from _two_step(renderer, (frame(k) for k in shown_indices))
+
+
+#: Frames drawn ahead of the one being finished (bounded: each is an image in memory).
+PIPELINE_DEPTH = 3
+
+
+def _two_step(renderer: Any, frames: Iterator[tuple]) -> Iterator[np.ndarray]:
+    """Each frame's OpenGL views in this thread (the context's), its 2D drawing
+    (midsagittal view, caption: ``renderer.finish_frame``) in a helper thread while the
+    next frame's OpenGL views are drawn; the finished frames in order. Any error or
+    interrupt stops the helper before it passes on."""
+    import queue
+    import threading
+
+    todo: queue.Queue = queue.Queue(maxsize=PIPELINE_DEPTH)
+    done: queue.Queue = queue.Queue(maxsize=PIPELINE_DEPTH)
+    stop = threading.Event()
+
+    def finish() -> None:
+        while not stop.is_set():
+            job = todo.get()
+            if job is None:
+                return
+            image, points, kwargs = job
+            try:
+                result = (renderer.finish_frame(image, points, **kwargs), None)
+            except BaseException as exc:  # noqa: BLE001 -- passed to the main thread
+                result = (None, exc)
+            _put(done, result, stop)
+            if result[1] is not None:
+                return
+
+    def take() -> np.ndarray:
+        image, error = done.get()
+        if error is not None:
+            raise error
+        return image
+
+    helper = threading.Thread(target=finish, name="cassi-finish-frames", daemon=True)
+    helper.start()
+    pending = 0
+    try:
+        for points, kwargs in frames:
+            image, checked = renderer.render_gl(points, markers=kwargs.get("markers"))
+            if pending == PIPELINE_DEPTH:  # the helper is that far behind: wait for it
+                yield take()
+                pending -= 1
+            todo.put((image, checked, kwargs))
+            pending += 1
+        for _ in range(pending):
+            yield take()
+        pending = 0
+    finally:
+        stop.set()
+        _drain(done)
+        _put(todo, None, None)
+        helper.join()
+
+
+def _put(q, item, stop) -> None:
+    """``q.put(item)``, giving up when ``stop`` is set (the reader has left)."""
+    import queue
+
+    while stop is None or not stop.is_set():
+        try:
+            q.put(item, timeout=0.1)
+            return
+        except queue.Full:
+            if stop is None:
+                _drain(q)
+
+
+def _drain(q) -> None:
+    import queue
+
+    while True:
+        try:
+            q.get_nowait()
+        except queue.Empty:
+            return
 
 
 def subject_traces(recording: Any, scale: float) -> dict[str, Float[np.ndarray, "n 2"] | None]:

@@ -38,6 +38,9 @@ DEFAULT_PORT = 8786  # Dask's scheduler port (its dashboard is 8787, HTTP)
 #: Schemes Dask's client speaks over TCP; only ``tcp`` handshakes are checked byte-wise
 #: (the others are encrypted or framed before Dask's first message).
 SCHEMES = ("tcp", "tls", "ws", "wss")
+#: Dask's other transports (one process's own cluster, UCX networks): passed to Dask as
+#: they are, with its connection bounded by the time limit.
+OTHER_SCHEMES = ("inproc", "ucx")
 _LARGEST_HANDSHAKE = 1 << 20  # bytes: a scheduler's first message is a few hundred
 
 
@@ -54,6 +57,8 @@ class SchedulerAddress:
     port: int
 
     def __str__(self) -> str:
+        if self.scheme in OTHER_SCHEMES:
+            return f"{self.scheme}://{self.host}"
         host = f"[{self.host}]" if ":" in self.host else self.host
         return f"{self.scheme}://{host}:{self.port}"
 
@@ -85,6 +90,8 @@ def parse_scheduler_address(address: str) -> SchedulerAddress:
     if not sep:
         scheme, rest = "tcp", text
     scheme = scheme.lower()
+    if scheme in OTHER_SCHEMES and rest:
+        return SchedulerAddress(scheme, rest, 0)
     if scheme not in SCHEMES:
         raise SchedulerError(f"{address}: not a Dask scheduler address (scheme {scheme!r}; "
                              f"use {', '.join(s + '://' for s in SCHEMES)}, e.g. "
@@ -116,6 +123,8 @@ def check_scheduler(address: str, timeout: float | None = None) -> SchedulerAddr
     :class:`SchedulerError` naming it (see the module's doc)."""
     where = parse_scheduler_address(address)
     limit = scheduler_timeout(timeout)
+    if where.scheme in OTHER_SCHEMES:
+        return where
     try:
         sock = socket.create_connection((where.host, where.port), timeout=limit)
     except socket.gaierror as exc:

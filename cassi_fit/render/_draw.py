@@ -10,9 +10,19 @@ platform at first import).
 from __future__ import annotations
 
 import numpy as np
-import pyrender
-from OpenGL import GL as gl
-from pyrender.shader_program import ShaderProgram
+import OpenGL
+
+# PyOpenGL calls glGetError after every call by default, and its wrappers then convert the
+# result: with about a hundred calls a frame that was a large share of a frame's Python
+# time. Errors are checked once a frame instead, after the read-back (_read_main_framebuffer).
+# (Set before OpenGL.GL is first imported, by pyrender below.)
+OpenGL.ERROR_CHECKING = False
+
+import pyrender  # noqa: E402
+from OpenGL import GL as gl  # noqa: E402
+from pyrender.shader_program import ShaderProgram  # noqa: E402
+
+from ..errors import RenderingUnavailableError  # noqa: E402
 
 # Shading, in the camera's frame (orthographic, looking along -z; the lights are fixed to
 # the camera): ambient + a key light from the camera + a fill light from the upper left +
@@ -193,6 +203,10 @@ class ColourOnlyRenderer(pyrender.Renderer):
             buffer = self._cassi_pixels = np.empty((height, width, 3), np.uint8)
         gl.glPixelStorei(gl.GL_PACK_ALIGNMENT, 1)
         gl.glReadPixels(0, 0, width, height, gl.GL_RGB, gl.GL_UNSIGNED_BYTE, buffer)
+        error = gl.glGetError()  # the frame's one error check (ERROR_CHECKING is off)
+        if error != gl.GL_NO_ERROR:
+            raise RenderingUnavailableError(f"OpenGL error {int(error):#x} while drawing a "
+                                            "frame")
         return buffer[::-1].copy(), None
 
 

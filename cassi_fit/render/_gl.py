@@ -83,7 +83,8 @@ def probe_gl_platform(platform: str) -> str | None:
     """
     try:
         proc = subprocess.run(
-            [sys.executable, "-c", _PROBES[platform]], capture_output=True, text=True, timeout=120
+            [sys.executable, "-c", _PROBES[platform]], capture_output=True, text=True,
+            timeout=120, start_new_session=True,  # a Ctrl-C is this process's to handle
         )
     except (OSError, subprocess.TimeoutExpired) as exc:
         return f"{type(exc).__name__}: {exc}"

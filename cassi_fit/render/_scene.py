@@ -401,9 +401,38 @@ class Renderer:
         ``{label: (T, k, 2) mm}``, each point's last T positions (oldest first; the last
         is drawn as a dot when ``markers`` lacks the label) and ``time`` in seconds.
         """
+        image, frame = self.render_gl(vertices, markers=markers)
+        return self.finish_frame(image, frame, markers=markers, caption=caption,
+                                 trails=trails, time=time)
+
+    def render_gl(
+        self, vertices: Float[Any, "v 3"], *, markers: Markers | None = None
+    ) -> tuple[UInt8[np.ndarray, "h w 3"], Float[np.ndarray, "v 3"]]:
+        """The first of :meth:`render`'s two steps: the OpenGL views of the grid.
+
+        Returns ``(image, frame)``: a new (H, W, 3) uint8 image (the midsagittal cell and
+        the caption not drawn yet) and the checked (V, 3) float64 vertices, both for
+        :meth:`finish_frame`. Must run in the thread that made the renderer (the OpenGL
+        context's)."""
         frame = _as_frame(vertices, self._n_vertices)
         self._set_layout("grid")
-        image = self._draw_gl(frame, markers)
+        return self._draw_gl(frame, markers), frame
+
+    def finish_frame(
+        self,
+        image: UInt8[np.ndarray, "h w 3"],
+        frame: Float[np.ndarray, "v 3"],
+        *,
+        markers: Markers | None = None,
+        caption: str | None = None,
+        trails: Mapping[str, Float[Any, "t k 2"]] | None = None,
+        time: float | None = None,
+    ) -> UInt8[np.ndarray, "h w 3"]:
+        """The second of :meth:`render`'s steps, on :meth:`render_gl`'s ``(image,
+        frame)``: the midsagittal view drawn into its cell (in place) and the caption.
+        numpy and Pillow only, no OpenGL: it may run in another thread while the next
+        frame's OpenGL views are drawn (one thread at a time), and gives the same bytes
+        as :meth:`render`."""
         self._draw_section(image, frame, markers, trails, time)
         return add_caption(image, caption) if caption else image
 
