@@ -58,6 +58,7 @@ from ._executor import JaxSettings as JaxSettings
 from ._executor import TaskResult as TaskResult
 from ._executor import default_jobs as default_jobs
 from ._executor import model_digest as model_digest
+from ._executor import process_pool as process_pool
 from ._executor import refuse_existing as refuse_existing
 from ._executor import replaces as replaces
 from ._executor import run_corpus as run_corpus

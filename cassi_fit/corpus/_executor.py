@@ -186,6 +186,20 @@ def _open_pool(executor, jobs, scheduler, n_items: int, jax_settings,
     return pool
 
 
+def process_pool(jobs: int, *, x64: bool | None = None,
+                 compilation_cache: str | os.PathLike | bool | None = True
+                 ) -> cf.ProcessPoolExecutor:
+    """The pool ``run_corpus(jobs=N)`` makes, to keep between runs (its workers stay warm:
+    what they compiled and loaded is kept): ``jobs`` 'spawn' worker processes, each on its
+    share of the cores, with ``x64`` and the ``compilation_cache`` as :func:`run_corpus`
+    takes them. Pass it as ``run_corpus(executor=...)``; shut it down when done."""
+    own_cache = compilation_cache not in (None, True, False)
+    settings = JaxSettings(x64, os.path.abspath(compilation_cache) if own_cache else None,
+                           default_cache=compilation_cache is True,
+                           threads=threads_per_worker(jobs))
+    return _Pool(None, jobs, settings=settings).new_executor(jobs)
+
+
 def _current_x64() -> bool | None:
     import sys
 
