@@ -1,0 +1,93 @@
+"""Rendering and encoding in step (issue 23, part 3): the two-step frame loop (OpenGL in
+this thread, each frame's midsagittal drawing and caption in a helper thread) gives the
+same frames, byte for byte, as drawing each frame whole; errors in the helper reach the
+caller; the video writer's thread hands ffmpeg every frame."""
+
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cassi_fit import synth, video
+from cassi_fit.animate import animate
+from cassi_fit.dataset import Recording
+from cassi_fit.initialize import initialize
+from cassi_fit.options import VIEWS
+from cassi_fit.render import Renderer
+
+pytestmark = pytest.mark.render
+
+
+class OneStep:
+    """The renderer seen through ``render`` alone: each frame drawn whole (the old path)."""
+
+    def __init__(self, renderer):
+        self.views = renderer.views
+        self.render = renderer.render
+
+
+@pytest.fixture(scope="module")
+def run():
+    # the recording tests/test_animate.py animates: the same shapes, compiled once
+    anatomy = synth.make_subject("JWT", np.random.default_rng(3))
+    track, _ = synth.synth_recording(anatomy, synth.SENTENCE_TASK, seed=3, duration_s=1.0)
+    recording = Recording(subject="JWT", task=synth.SENTENCE_TASK, track=track,
+                          palate=anatomy.palate, pharynx=anatomy.pharynx, head=anatomy.head,
+                          head_is_default=False, audio=None, path=Path("/data/JWT/tp040.txy"))
+    state = initialize(recording)
+    return recording, state, animate(state, recording)
+
+
+@pytest.fixture(scope="module")
+def renderer(run):
+    recording, state, _ = run
+    with Renderer(state.model, size=(200, 120), views=VIEWS,
+                  traces=video.subject_traces(recording, state.scale)) as r:
+        yield r
+
+
+def test_two_steps_give_the_same_frames_byte_for_byte(run, renderer):
+    _, _, animation = run
+    options = {"subject": "JWT", "task": "sentence", "markers": True, "progress": False,
+               "indices": range(0, animation.n_frames, 9)}
+    two = list(video.animation_frames(animation, renderer, **options))
+    one = list(video.animation_frames(animation, OneStep(renderer), **options))
+    assert len(two) == len(one) == len(options["indices"]) > video.PIPELINE_DEPTH
+    for a, b in zip(two, one, strict=True):
+        assert a.dtype == np.uint8 and a.shape == b.shape
+        assert a.tobytes() == b.tobytes()
+    # the frames differ from each other (the caption's time at least): not one frame
+    assert len({f.tobytes() for f in two}) == len(two)
+
+
+def test_an_error_in_the_helper_thread_reaches_the_caller(run, renderer, monkeypatch):
+    _, _, animation = run
+    calls = []
+
+    def broken(*args, **kwargs):
+        calls.append(threading.current_thread().name)
+        raise ValueError("the 2D drawing failed")
+
+    monkeypatch.setattr(renderer, "finish_frame", broken)
+    with pytest.raises(ValueError, match="the 2D drawing failed"):
+        list(video.animation_frames(animation, renderer, progress=False, indices=range(8)))
+    assert calls and calls[0] != threading.main_thread().name
+    assert not [t for t in threading.enumerate() if t.name == "cassi-finish-frames"]
+
+
+def test_a_consumer_that_stops_early_stops_the_helper(run, renderer):
+    _, _, animation = run
+    frames = video.animation_frames(animation, renderer, progress=False)
+    next(frames)
+    frames.close()
+    assert not [t for t in threading.enumerate() if t.name == "cassi-finish-frames"]
+
+
+def test_the_writer_thread_hands_ffmpeg_every_frame(tmp_path):
+    rng = np.random.default_rng(1)
+    frames = [rng.integers(0, 256, (48, 64, 3), dtype=np.uint8) for _ in range(23)]
+    path = video.write_video(tmp_path / "v.mp4", iter(frames), 25)
+    assert video.count_frames(path) == 23
+    assert not [t for t in threading.enumerate() if t.name == "cassi-video-writer"]
+    assert [p.name for p in tmp_path.iterdir()] == ["v.mp4"]
