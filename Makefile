@@ -32,6 +32,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_jaw.py
 	$(BIN)/python benchmarks/bench_render.py --docs docs/generated
 	$(BIN)/python benchmarks/bench_animation.py --docs docs/generated
+	$(BIN)/python benchmarks/bench_startup.py --docs docs/generated
 	$(BIN)/python benchmarks/bench_corpus.py --write docs/generated/bench_corpus.md
 	$(BIN)/python experiments/quote_tables.py
 

@@ -160,7 +160,9 @@ class VideoWriter:
     (:func:`check_wav`) before anything is written. Frames are ``uint8 (H, W, 3)``, all
     the same size. Nothing appears at ``path`` until the writer closes without error;
     on any error or interrupt (``KeyboardInterrupt`` included) the hidden temporary file
-    is removed.
+    is removed. ``writer_thread`` (MP4): frames go to ffmpeg from a writer thread fed by
+    a bounded queue, so the caller draws the next frame while ffmpeg takes this one
+    (False: the caller writes and waits, as before issue 23).
     """
 
     def __init__(
@@ -171,8 +173,10 @@ class VideoWriter:
         audio: str | os.PathLike | None = None,
         audio_start: float = 0.0,
         overwrite: bool = False,
+        writer_thread: bool = True,
     ):
         self.path = Path(path)
+        self.writer_thread = bool(writer_thread)
         self.suffix = self.path.suffix.lower()
         if self.suffix not in VIDEO_SUFFIXES:
             raise CassiError(f"{self.path}: video must be one of {', '.join(VIDEO_SUFFIXES)}")
@@ -217,6 +221,11 @@ class VideoWriter:
             )
         if self._gif is not None:
             self._gif.append(frame)
+        elif self._pipe is None:  # no writer thread: the caller waits for ffmpeg
+            try:
+                self._proc.stdin.write(frame.tobytes())
+            except BrokenPipeError:
+                raise VideoError(f"{self.path}: ffmpeg stopped: {self._stderr()}") from None
         else:
             self._check_pipe()
             self._frames.put(frame.tobytes())  # waits while the queue is full
@@ -238,9 +247,10 @@ class VideoWriter:
         # ffmpeg itself (_discard), rather than ffmpeg ending the file on its own first
         self._proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=self._errfile,
                                       start_new_session=True)
-        self._pipe = threading.Thread(target=self._feed, name="cassi-video-writer",
-                                      daemon=True)
-        self._pipe.start()
+        if self.writer_thread:
+            self._pipe = threading.Thread(target=self._feed, name="cassi-video-writer",
+                                          daemon=True)
+            self._pipe.start()
 
     def _feed(self) -> None:
         """The writer thread: frames from the queue into ffmpeg's input, so that the
