@@ -41,7 +41,6 @@ if TYPE_CHECKING:
     from .corpus import calibrate_corpus as calibrate_corpus
     from .corpus import dataset_items as dataset_items
     from .corpus import evaluate_corpus as evaluate_corpus
-    from .corpus import jaw_corpus as jaw_corpus
     from .corpus import run_corpus as run_corpus
     from .dataset import Dataset as Dataset
     from .dataset import DefaultHeadMeasuresWarning as DefaultHeadMeasuresWarning
@@ -96,6 +95,7 @@ if TYPE_CHECKING:
     from .jaw_fit import jaw_from_track as jaw_from_track
     from .jaw_fit import jaw_method as jaw_method
     from .jaw_fit import jaw_solver as jaw_solver
+    from .jaw_table import jaw_corpus as jaw_corpus
     from .labels import Labels as Labels
     from .labels import labels_for as labels_for
     from .labels import read_lab as read_lab
@@ -125,7 +125,7 @@ if TYPE_CHECKING:
     from .render import midsagittal_figure as midsagittal_figure
     from .reports import jaw_comparison_plot as jaw_comparison_plot
     from .reports import write_penetration_csv as write_penetration_csv
-    from .status import STATUS_LABELS as STATUS_LABELS
+    from .status import SolverResult as SolverResult
     from .status import Status as Status
     from .synth import TASKS as TASKS
     from .synth import JawTruth as JawTruth
@@ -158,7 +158,7 @@ _PUBLIC = {
     "InvalidChoiceError": "errors",
     # status (base)
     "Status": "status",
-    "STATUS_LABELS": "status",
+    "SolverResult": "status",
     # options (base)
     "JAW_METHODS": "options",
     "SOLVERS": "options",
@@ -287,7 +287,7 @@ _PUBLIC = {
     "compare": "evaluate",
     # corpus (runs)
     "run_corpus": "corpus",
-    "jaw_corpus": "corpus",
+    "jaw_corpus": "jaw_table",
     "evaluate_corpus": "corpus",
     "calibrate_corpus": "corpus",
     "animate_corpus": "corpus",
@@ -306,7 +306,7 @@ __all__ = [
     "JAW_PELLETS", "JawDiagnostics", "JawFit", "JawMethod", "JawTruth", "Labels",
     "LevenbergMarquardt", "MATERIALS", "MissingDataError", "MistrackedFirstLineWarning", "Mode",
     "OutputExistsError", "PELLET_NAMES", "PelletTrack", "QualityReport", "Recording", "Renderer",
-    "RenderingUnavailableError", "SOLVERS", "STATUS_LABELS", "SmoothPivot", "Solver", "Status",
+    "RenderingUnavailableError", "SOLVERS", "SmoothPivot", "Solver", "SolverResult", "Status",
     "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning", "Topology", "animate",
     "animate_corpus", "animate_recording", "build_palate", "calibrate_corpus", "calibrate_dataset",
     "calibrate_subject", "calibration_choice", "closed_form", "closed_form_paper", "compare",

@@ -405,7 +405,7 @@ def animation_frames(
 
     from tqdm import tqdm
 
-    from .status import STATUS_LABELS
+    from .status import Status
 
     vertices = np.asarray(animation.vertices)
     measured = np.asarray(animation.pellets_measured)
@@ -428,7 +428,7 @@ def animation_frames(
                 "measured": _in_3d(measured[k][shown]),
                 "model": _in_3d(model_sites[k][shown]),
             }
-        status = STATUS_LABELS[int(animation.frame_status[k])]
+        status = Status(int(animation.frame_status[k])).label
         caption = frame_caption(
             subject, task, float(animation.times[k]), int(animation.frame_index[k]), status,
             str(current[k]),
