@@ -467,7 +467,9 @@ def test_default_corpus_location_and_ensure(tmp_path, monkeypatch):
     assert synth.default_corpus_dir().parent == tmp_path / "cache" / "cassi_fit"
     monkeypatch.setenv("CASSI_SYNTH_DIR", str(tmp_path / "corpus"))
     assert synth.default_corpus_dir() == tmp_path / "corpus"
-    monkeypatch.setattr(synth, "_DEFAULT_CORPUS_ARGS", {"n_subjects": 1, "seed": 0})
+    from cassi_fit.synth import _corpus  # the stage module that reads the default's arguments
+
+    monkeypatch.setattr(_corpus, "_DEFAULT_CORPUS_ARGS", {"n_subjects": 1, "seed": 0})
     root = synth.ensure_default_corpus()
     assert root == tmp_path / "corpus" and (root / "S01" / "TP106.TXY").is_file()
     stamp = (root / "README.txt").stat().st_mtime_ns
