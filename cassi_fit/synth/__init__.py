@@ -58,6 +58,7 @@ from ._kinematics import (
     condyle_offset,
     condyle_slide_mm,
     eminence_path,
+    speech_protrusion_mm,
     thrust_protrusion_mm,
 )
 from ._kinematics import _jaw_motion as _jaw_motion
@@ -65,6 +66,7 @@ from ._measurement import (
     DEFAULT_NOISE_MM,
     MAX_NOISE_SCALE,
     NOISE_FAMILIES,
+    XRMB_NOISE_MM,
     synth_recording,
 )
 from ._tasks import (
@@ -99,12 +101,14 @@ __all__ = [
     "DEFAULT_JAW_KINEMATICS_CYCLE",
     "NOISE_FAMILIES",
     "MAX_NOISE_SCALE",
+    "XRMB_NOISE_MM",
     "NORMS",
     "COMPLETE_LINE",
     "default_jaw_kinematics",
     "eminence_path",
     "condyle_slide_mm",
     "thrust_protrusion_mm",
+    "speech_protrusion_mm",
     "condyle_offset",
     "corpus_status",
     "default_corpus_dir",

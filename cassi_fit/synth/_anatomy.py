@@ -19,8 +19,12 @@ _TONGUE = slice(_T1, _T4 + 1)
 #: ``physiological`` the condyle glides down and forward along a curved articular-eminence
 #: path, by an amount coupled to the rotation (little at speech angles, 10-20 mm at wide
 #: opening); ``thrust`` rotation about the condyle plus an independent, piecewise
-#: constant protrusion (jumps within one frame): a translation no smooth prior expects.
-JAW_KINEMATICS = ("fixed-condyle", "physiological", "thrust")
+#: constant protrusion (jumps within one frame): a translation no smooth prior expects;
+#: ``speech`` the glide along the eminence is linear in the rotation from the first degree
+#: (``speech_slide_mm_per_deg``) plus a smooth protrusion of its own at the pace of
+#: syllables (``speech_protrusion_sd_mm``): rotation and translation correlated but
+#: separately controlled, as measured in speech (docs/SYNTHETIC.md, "Speech-like jaw").
+JAW_KINEMATICS = ("fixed-condyle", "physiological", "thrust", "speech")
 #: The default corpus's families, cycled over subjects S01, S02, S03, S04, ...
 DEFAULT_JAW_KINEMATICS_CYCLE = ("physiological", "fixed-condyle", "thrust")
 
@@ -56,7 +60,11 @@ class SubjectAnatomy:
     ``eminence_angle_deg`` below the forward horizontal and flattens with radius
     ``eminence_radius_mm``; for ``thrust`` the condyle protrudes along that initial
     direction by independent steps (``thrust_rate_hz`` of them per second, levels up to
-    ``thrust_max_mm``). ``f0_hz`` the synthetic voice pitch.
+    ``thrust_max_mm``); for ``speech`` the condyle glides ``speech_slide_mm_per_deg`` mm
+    per degree of opening plus a smooth protrusion of SD ``speech_protrusion_sd_mm``.
+    ``jaw_yaw_per_deg`` (degrees of yaw per degree of opening, signed) and
+    ``mnm_lateral_mm`` (the molar pellet's distance from the midsagittal plane) give the
+    out-of-plane error of the ``xrmb`` noise family. ``f0_hz`` the synthetic voice pitch.
     """
 
     name: str
@@ -80,6 +88,10 @@ class SubjectAnatomy:
     eminence_radius_mm: float = 20.0
     thrust_rate_hz: float = 0.8
     thrust_max_mm: float = 3.0
+    speech_slide_mm_per_deg: float = 0.55
+    speech_protrusion_sd_mm: float = 0.7
+    jaw_yaw_per_deg: float = 0.2
+    mnm_lateral_mm: float = 21.0
 
     @property
     def jaw_pellet_distance(self) -> float:
@@ -215,6 +227,11 @@ def make_subject(
         eminence_radius_mm=float(r(15.0, 25.0)),
         thrust_rate_hz=float(r(0.6, 1.2)),
         thrust_max_mm=float(r(2.0, 4.0)),
+        # drawn last, so every draw above is as in generator version 4
+        speech_slide_mm_per_deg=float(r(0.6, 1.2)),
+        speech_protrusion_sd_mm=float(r(0.4, 1.0)),
+        jaw_yaw_per_deg=float(rng.choice([-1.0, 1.0]) * r(0.15, 0.35)),
+        mnm_lateral_mm=float(r(18.0, 24.0)),
     )
 
 

@@ -20,6 +20,7 @@ FRAME_STEP_S = FRAME_STEP_US * 1e-6
 _TONGUE_JAW_SHARE = np.array([0.75, 0.65, 0.55, 0.45])
 _PALATE_MARGIN_MM = 1.0  # the tongue pellets stay at least this far below the palate ...
 _PALATE_SOFTNESS_MM = 0.7  # ... approached smoothly (a soft minimum of this width)
+_SPEECH_PROTRUSION_S = 0.12  # time scale of the speech family's own protrusion, s
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,17 +104,37 @@ def thrust_protrusion_mm(
     return level
 
 
+def speech_protrusion_mm(
+    anatomy: SubjectAnatomy, n: int, n_lead: int, rng: np.random.Generator
+) -> Float[np.ndarray, " n"]:
+    """``(n,)`` mm: the speech family's own protrusion, a smooth random wander of SD
+    ``speech_protrusion_sd_mm`` at the pace of syllables (white noise smoothed by a
+    Gaussian of ``_SPEECH_PROTRUSION_S``); 0 in the leading rows and starting from 0."""
+    from scipy.ndimage import gaussian_filter1d
+
+    sigma = _SPEECH_PROTRUSION_S / FRAME_STEP_S
+    wander = gaussian_filter1d(rng.normal(size=n), sigma, mode="nearest")
+    wander *= np.sqrt(2.0 * np.sqrt(np.pi) * sigma)  # unit SD (as the drift noise)
+    wander = anatomy.speech_protrusion_sd_mm * (wander - wander[min(n_lead, n - 1)])
+    wander[:n_lead] = 0.0
+    return wander
+
+
 def condyle_offset(
     anatomy: SubjectAnatomy,
     theta: Float[np.ndarray, " n"],
     protrusion: Float[np.ndarray, " n"],
 ) -> Float[np.ndarray, "n 2"]:
-    """``(n, 2)`` mm: where the condyle is, relative to its rest, in each frame."""
+    """``(n, 2)`` mm: where the condyle is, relative to its rest, in each frame;
+    ``protrusion`` (n,) mm is the thrust or speech family's own protrusion."""
     family = anatomy.jaw_kinematics
     if family == "fixed-condyle":
         return np.zeros((theta.shape[0], 2))
     if family == "physiological":
         slide = condyle_slide_mm(anatomy, theta)
+        return eminence_path(slide, anatomy.eminence_angle_deg, anatomy.eminence_radius_mm)
+    if family == "speech":  # linear in the rotation, plus its own protrusion
+        slide = anatomy.speech_slide_mm_per_deg * np.rad2deg(theta) + protrusion
         return eminence_path(slide, anatomy.eminence_angle_deg, anatomy.eminence_radius_mm)
     angle = np.deg2rad(anatomy.eminence_angle_deg)  # thrust: along the eminence's slope
     return protrusion[:, None] * np.array([np.cos(angle), -np.sin(angle)])

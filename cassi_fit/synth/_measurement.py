@@ -11,18 +11,32 @@ import numpy as np
 
 from ..errors import CassiError
 from ..txy import FRAME_STEP_US, PelletTrack
-from ._anatomy import SubjectAnatomy, _check_family
-from ._kinematics import FRAME_STEP_S, JawTruth, _kinematics, thrust_protrusion_mm
+from ._anatomy import _MNM, SubjectAnatomy, _check_family
+from ._kinematics import (
+    FRAME_STEP_S,
+    JawTruth,
+    _kinematics,
+    speech_protrusion_mm,
+    thrust_protrusion_mm,
+)
 from ._tasks import control_trajectories, get_task, task_duration
 
 # Each coordinate's noise SD (mm), white and drift contributing equal variance; the jaw
 # inter-pellet distance then has SD sqrt(2) * 0.212 = 0.3 mm, as in real files.
 DEFAULT_NOISE_MM = 0.3 / np.sqrt(2.0)
 _DRIFT_S = 0.4  # time scale of the drifting noise component, s
+_BAND_S = 0.03  # the xrmb family's band limit: a Gaussian of 30 ms (half power near 6 Hz)
+#: The xrmb family's noise per coordinate at noise scale 1, mm: the jaw pellet distance
+#: then varies by 0.2 mm SD from noise alone (JW11 task 5: 0.17 mm once the part that
+#: follows the jaw opening is taken out; one speaker; docs/SYNTHETIC.md).
+XRMB_NOISE_MM = 0.14
 #: Measurement noise per coordinate: ``realistic`` white plus drift of equal variance (the
 #: default: the jaw pellet distance then varies by 0.3 mm SD as in real files); ``white``;
-#: ``drift`` (white noise low-pass filtered over ``_DRIFT_S``, rescaled to the same SD).
-NOISE_FAMILIES = ("realistic", "white", "drift")
+#: ``drift`` (white noise low-pass filtered over ``_DRIFT_S``, rescaled to the same SD);
+#: ``xrmb`` what a real XRMB file shows (docs/SYNTHETIC.md, "Measurement like XRMB"):
+#: band-limited noise (no power above about 15 Hz) plus drift, of SD ``XRMB_NOISE_MM``
+#: at noise scale 1, and the projection of the jaw's out-of-plane yaw on the molar pellet.
+NOISE_FAMILIES = ("realistic", "white", "drift", "xrmb")
 MAX_NOISE_SCALE = 10.0  # noise_scale above this (> 2 mm per coordinate) is refused
 
 
@@ -31,8 +45,10 @@ def _noise(rng: np.random.Generator, n: int, noise_mm: float, family: str) -> np
 
     ``family`` (:data:`NOISE_FAMILIES`): ``white`` independent per frame; ``drift`` white
     noise smoothed by a Gaussian of ``_DRIFT_S`` (a slow wander, rescaled to unit SD);
-    ``realistic`` the two added with equal variance. The same rng draws the same numbers
-    for every family, so families differ only in how the numbers are combined.
+    ``realistic`` the two added with equal variance; ``xrmb`` the white noise smoothed by
+    a Gaussian of ``_BAND_S`` instead, plus the drift, of SD ``noise_mm * XRMB_NOISE_MM /
+    DEFAULT_NOISE_MM``. The same rng draws the same numbers for every family, so families
+    differ only in how the numbers are combined.
     """
     from scipy.ndimage import gaussian_filter1d
 
@@ -44,7 +60,27 @@ def _noise(rng: np.random.Generator, n: int, noise_mm: float, family: str) -> np
         return noise_mm * white
     if family == "drift":
         return noise_mm * drift
+    if family == "xrmb":
+        band = gaussian_filter1d(white, _BAND_S / FRAME_STEP_S, axis=0)
+        band *= np.sqrt(2.0 * np.sqrt(np.pi) * _BAND_S / FRAME_STEP_S)
+        return noise_mm * XRMB_NOISE_MM / DEFAULT_NOISE_MM / np.sqrt(2.0) * (band + drift)
     return noise_mm / np.sqrt(2.0) * (white + drift)
+
+
+def _out_of_plane(anatomy: SubjectAnatomy, theta: np.ndarray, scale: float) -> np.ndarray:
+    """``(n, 8, 2)`` mm: what the jaw's yaw adds to the pellets seen in projection.
+
+    The jaw yaws with the opening (``jaw_yaw_per_deg`` degrees per degree, a few degrees at
+    most in speech); MNI sits on the midsagittal plane and does not move with it, MNM
+    ``mnm_lateral_mm`` beside it moves forward or back by ``lateral * sin(yaw)``. The
+    sagittal truth (a rigid motion) does not hold this: to a 2D method it is an error that
+    follows the jaw, as the real MNI-MNM distance does. ``scale`` (noise_mm over the
+    default) scales it with the noise, so noise scale 0 gives ideal data.
+    """
+    out = np.zeros((theta.shape[0], 8, 2))
+    yaw = np.deg2rad(anatomy.jaw_yaw_per_deg * np.rad2deg(theta))
+    out[:, _MNM, 0] = scale * anatomy.mnm_lateral_mm * np.sin(yaw)
+    return out
 
 
 def _dropouts(rng: np.random.Generator, n: int, n_lead: int) -> np.ndarray:
@@ -115,8 +151,8 @@ def _simulate(anatomy, task, seed, noise_mm, duration_s, dropouts, mistracks, no
             f" got {noise_mm!r}"
         )
     _check_family(noise_family, NOISE_FAMILIES, "noise family")
-    # A sixth stream for the thrust family: spawned children do not depend on how many
-    # are spawned, so the other five streams are those of generator version 3.
+    # A sixth stream for the thrust and speech families: spawned children do not depend on
+    # how many are spawned, so the other five streams are those of generator version 3.
     task_rng, noise_rng, drop_rng, jump_rng, lead_rng, thrust_rng = (
         np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(6)
     )
@@ -129,9 +165,14 @@ def _simulate(anatomy, task, seed, noise_mm, duration_s, dropouts, mistracks, no
     controls = control_trajectories(spec, keyframes, n - n_lead, FRAME_STEP_S, task_rng)
     controls = np.concatenate([np.repeat(controls[:1], n_lead, axis=0), controls])
     times = np.arange(n) * FRAME_STEP_US / 1e6  # as read_txy gives them (us / 1e6)
-    protrusion = thrust_protrusion_mm(anatomy, n, n_lead, thrust_rng)
+    if anatomy.jaw_kinematics == "speech":
+        protrusion = speech_protrusion_mm(anatomy, n, n_lead, thrust_rng)
+    else:
+        protrusion = thrust_protrusion_mm(anatomy, n, n_lead, thrust_rng)
     truth = _kinematics(anatomy, controls, times, protrusion)
     measured = truth.pellets_true + _noise(noise_rng, n, noise_mm, noise_family)
+    if noise_family == "xrmb":
+        measured += _out_of_plane(anatomy, truth.theta, noise_mm / DEFAULT_NOISE_MM)
     dropped = _dropouts(drop_rng, n, n_lead) if dropouts else np.zeros((n, 8, 2), bool)
     dropped[:n_lead] = True
     jumps, flags = _mistracks(jump_rng, n, n_lead) if mistracks else (0.0, np.zeros((n, 8), bool))

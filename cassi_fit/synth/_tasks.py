@@ -121,10 +121,11 @@ def _phone_targets(phone: str) -> tuple[dict, str]:
 class TaskSpec:
     """One task of the library.
 
-    ``kind`` is one of jaw_wagging, vcv, words, sentence, paragraph, swallow, protrusion.
+    ``kind`` is one of jaw_wagging, syllables, vcv, words, sentence, paragraph, swallow, protrusion.
     ``text`` is the phone string of speech tasks ('|' = pause, ' ' = word boundary),
     ``prompt`` what the subject reads, ``duration_s`` the nominal length (s) of tasks that
-    are not phone strings, ``audio`` whether the corpus writes a synthetic ``.wav``.
+    are not phone strings, ``audio`` whether the corpus writes a synthetic ``.wav``,
+    ``tempo`` how much longer than the default each phone lasts (slow syllable repetition).
     """
 
     name: str
@@ -133,11 +134,14 @@ class TaskSpec:
     text: str = ""
     duration_s: float = 4.0
     audio: bool = False
+    tempo: float = 1.0
 
 
 TASKS: dict[str, TaskSpec] = {
     t.name: t
     for t in (
+        TaskSpec("tp005", "syllables", "sa sa sa sa sa sa sa sa sa sa (slow repetition)",
+                 "| sa sa sa sa sa sa sa sa sa sa |", audio=True, tempo=2.0),
         TaskSpec("tp011", "vcv", "aba ada aga ibi idi igi ufu usu",
                  "| aba | ada | aga | ibi | idi | igi | ufu | usu |", audio=True),
         TaskSpec("tp020", "words", "bad, pit, cat, seed, food, goal, sun",
@@ -253,7 +257,7 @@ def _protrusion_keyframes(rng: np.random.Generator) -> list[tuple[float, dict]]:
 
 def _keyframes(spec: TaskSpec, rng) -> list[tuple[float, dict]] | None:
     if spec.text:
-        return _speech_keyframes(spec.text, rng)
+        return [(d * spec.tempo, t) for d, t in _speech_keyframes(spec.text, rng)]
     builders: dict[str, Callable] = {
         "swallow": _swallow_keyframes,
         "protrusion": _protrusion_keyframes,
