@@ -521,7 +521,7 @@ def _blame_pair(reasons, reason, a, b, v, tongue_count) -> None:
     flagged = reasons != 0
     only_a = flagged[:, a] & ~flagged[:, b]
     only_b = flagged[:, b] & ~flagged[:, a]
-    if reason == Reason.LIP_INCISOR:  # LL rides on MNI: LL unless MNI alone is flagged
+    if (a, b) == (LL, MNI):  # LL rides on MNI: LL, unless MNI alone is flagged
         blame_a, blame_b = ~only_b, only_b
     else:
         ca, cb = tongue_count[:, a], tongue_count[:, b]
