@@ -22,18 +22,24 @@ untracked for the rest of the toolkit); the range test also looks at a lone coor
    or more consecutive frames while most other tracked pellets move. XRMB values are
    integer micrometres and carry measurement noise: in JW11 task 5 (one recording of
    one speaker) no pellet repeats its x and y even once on consecutive frames, and one
-   coordinate alone repeats on at most 4. A noise-free recording in which every pellet
-   is still at once (the synthetic corpus with ``noise_mm=0``) is not a plateau.
+   coordinate alone repeats on at most 4. Where repeats are ordinary the test stands
+   down: when every pellet is still at once, or when the pellet repeats a value on
+   shorter runs at least 3 times and on ``PLATEAU_QUANTISED`` = 0.5 % of its frames (its
+   values are coarser than its noise: the synthetic corpus without noise, or with its
+   slow "drift" noise alone).
 4. kinematics, on the values that passed 1-3, per pellet:
    ``jump``: a value further from the running median of ``MEDIAN_WINDOW`` = 11 frames
    than a pellet moving at ``MAX_SPEED_MM_S`` could be (isolated excursions of up to five
    frames), or a one-frame spike whose deviation from its neighbours' midpoint needs an
    acceleration beyond ``MAX_ACCELERATION_MM_S2`` (the spike's second difference at
-   least ``SPIKE_RATIO`` times its neighbours'). ``persistent-jump``: the track is cut
+   least ``SPIKE_RATIO`` times its neighbours'), or a short excursion: a jump out and a
+   jump back within five frames, each a step that departs from its neighbours' velocity
+   by more than that acceleration allows. ``persistent-jump``: the track is cut
    where a step needs more than ``MAX_SPEED_MM_S``; starting from the longest stretch
    whose geometry holds (5), a stretch is kept when it can be reached from the kept
-   stretch before it at that speed, else it is rejected (an excursion that comes back,
-   of any length; ``jump`` when it lasts at most five frames). A rejected stretch that
+   stretch before it at that speed (a stretch of at most five frames, cut off on both
+   sides, only when nothing was rejected in between), else it is rejected (an excursion that comes back, of any
+   length; ``jump`` when it lasts at most five frames). A rejected stretch that
    never comes back (it runs to a gap or the end) is rejected only when it lasts at most
    five frames or its geometry fails on most of its frames: a lasting jump whose
    geometry holds is taken for true movement. ``swap``: a rejected stretch that begins
@@ -43,28 +49,37 @@ untracked for the rest of the toolkit); the range test also looks at a lone coor
    Every limit adds ``NOISE_SDS`` = 4 times the pellet's own noise (the robust SD of its
    second differences, x and y together): real XRMB data are smooth (0.04-0.06 mm on
    JW11), synthetic data with white noise are not (about 0.5 mm).
-5. geometry, on the values that passed 1-4: ``order``: the anatomical order, frame by
-   frame: T1 in front of T2, T2 of T3, T3 of T4 (x); MNI in front of MNM; UL above LL;
-   UL in front of the upper incisor tip (x > 0); LL in front of MNI. ``jaw-distance``:
-   MNI and MNM are on one bone, so their distance is constant up to noise (SD 0.30 mm on
-   JW11); a frame further than ``max(JAW_ROBUST_SDS = 5 robust SD, 2 mm)`` from its
-   median. ``tongue-spacing``: the distance between neighbouring tongue pellets, beyond
-   ``max(5 robust SD, TONGUE_SPACING_MIN_MM = 5 mm)`` (the tongue stretches: T3-T4 spans
-   5.7 mm on JW11). ``lip-incisor``: UL's distance to the upper incisor tip and LL's to
-   MNI (the lips ride on their teeth), beyond ``max(5 robust SD, LIP_MIN_MM = 6 mm)``.
-   A pair's violation is blamed on the pellet the other tests already flag, else on the
-   tongue pellet with more violated neighbours, else on both (UL alone for UL's, LL for
-   LL-MNI unless MNI is the one flagged). Robust SD = 1.4826 x median absolute
-   deviation, over the frames that passed 1-4.
-6. ``drift``: a value flagged only by the distances of 5, on at least
-   ``DRIFT_MIN_FRAMES`` = 6 consecutive frames: it slid away without a jump.
+5. geometry, on the values that passed 1-4 (a value flagged there takes no part):
+   ``jaw-distance``: MNI and MNM are on one bone, so their distance is constant up to
+   noise (SD 0.30 mm on JW11): a frame further than ``max(JAW_ROBUST_SDS = 5 robust SD,
+   JAW_MIN_DEVIATION_MM = 2 mm)`` from its median flags both (the distance cannot say
+   which moved). ``tongue-spacing``: the distance between neighbouring tongue pellets,
+   beyond ``max(5 robust SD, TONGUE_SPACING_MIN_MM = 6 mm)`` (the tongue stretches: on
+   JW11 T3-T4 spans 5.7 mm, on the synthetic corpus a spacing moves up to 4.3 mm from its
+   median); blamed on the pellet with more violated neighbours, else on both.
+   ``lip-incisor``: UL's distance to the upper incisor tip (the origin) beyond
+   ``max(5 robust SD, UPPER_LIP_MIN_MM = 6 mm)``, LL's to MNI beyond ``max(5 robust SD,
+   LOWER_LIP_MIN_MM = 12 mm)`` (the lower lip moves on the jaw by up to 8.6 mm in the
+   synthetic labiodentals and bilabials, 4 mm on JW11); blamed on the lip (on MNI instead
+   when the jaw distance has just flagged MNI alone). ``order``: the anatomical order,
+   frame by frame, violated by more than ``ORDER_MARGIN_MM`` = 5 mm: T1 in front of T2,
+   T2 of T3, T3 of T4, MNI of MNM, UL of the upper incisor tip, LL of MNI (x); UL above
+   LL (y). Real gaps are 8-15 mm (JW11: at least 9.9 mm between tongue pellets, 8 mm
+   from LL to MNI); the margin lets a bunched or curled tongue stack its pellets.
+   Robust SD = 1.4826 x median absolute deviation, over the values that passed 1-4.
+6. ``drift``: a value flagged only by test 5's distances (and perhaps its order), on at
+   least ``DRIFT_MIN_FRAMES`` = 6 consecutive frames: it slid away without a jump.
 
 **The limits' basis.** The fastest pellet in JW11 task 5 moves at 262 mm/s (T1) and
 accelerates at 5.6 m/s²; the synthetic corpus stays below about 290 mm/s and, outside its
 deliberately non-physical "thrust" jaw, 9 m/s². ``MAX_SPEED_MM_S`` = 500 mm/s and
-``MAX_ACCELERATION_MM_S2`` = 20 m/s² are about twice and three times those. I found no
-published maximum I could verify; the limits rest on these recordings (docs/FORMATS.md,
-"Mistracks", says what the detector cannot see).
+``MAX_ACCELERATION_MM_S2`` = 20 m/s² are about twice and three times those. No published
+maximum could be verified with the sources at hand (the abstracts of McClean 2000, JSLHR
+43:205-216, and of Tasko & Westbury, "Defining and measuring speech movement events",
+JSLHR, an XRMB study, say that they measure peak speeds; their numbers were not
+reachable), so the limits rest on these recordings: one real speaker.
+docs/FORMATS.md ("Mistracks") gives the measured detection and false-alarm rates and
+what the detector cannot see.
 
 This module is numpy only.
 """
@@ -101,6 +116,7 @@ SPIKE_RATIO = 1.5
 EDGE_RATIO = 3.0
 NOISE_SDS = 4.0
 PLATEAU_FRAMES = 8
+PLATEAU_QUANTISED = 0.005
 SHORT_FRAMES = MEDIAN_WINDOW // 2  # an excursion this short is a "jump"
 JAW_ROBUST_SDS = 5.0
 JAW_MIN_DEVIATION_MM = 2.0
@@ -268,7 +284,11 @@ def _plateaus(positions: np.ndarray, tracked: np.ndarray, times: np.ndarray,
     same[1:] = tracked[1:] & tracked[:-1] & (positions[1:] == positions[:-1]).all(axis=-1)
     out = np.zeros(tracked.shape, bool)
     for p in range(tracked.shape[1]):
-        for start, stop in _runs(same[:, p]):
+        runs = _runs(same[:, p])
+        short = sum(stop - start for start, stop in runs if stop - start + 1 < PLATEAU_FRAMES)
+        if short >= max(3, PLATEAU_QUANTISED * same[:, p].size):
+            continue  # values coarser than their noise: a still pellet repeats them
+        for start, stop in runs:
             if stop - start + 1 < PLATEAU_FRAMES:
                 continue
             frames = slice(start, stop)  # the steps of the run (frame k vs k - 1)
@@ -361,6 +381,42 @@ def _spikes(positions: np.ndarray, noise: np.ndarray, step_s: float) -> tuple[np
     return spike, edge_first | edge_last
 
 
+def _excursions(positions: np.ndarray, noise: np.ndarray, step_s: float) -> np.ndarray:
+    """``(n, 8)``: short excursions, out and back within ``SHORT_FRAMES`` frames.
+
+    A step's jump ``J[k] = (p[k] - p[k-1]) - ((p[k-1] - p[k-2]) + (p[k+1] - p[k])) / 2``
+    (the step less its neighbours' mean) is near 0 for smooth motion; a
+    value that jumps by ``h`` and comes back ``m`` frames later gives ``J = h`` at the way
+    out and ``-h`` at the way back. Both beyond ``MAX_ACCELERATION_MM_S2 dt^2`` plus
+    ``NOISE_SDS`` times the pellet's noise, and opposite within half their size: the
+    values between are flagged.
+    """
+    n, k = positions.shape[:2]
+    out = np.zeros((n, k), bool)
+    if n < 4:
+        return out
+    jump = np.full(positions.shape, np.nan)
+    step = positions[1:] - positions[:-1]  # step[k - 1] = p[k] - p[k - 1]
+    jump[2:-1] = step[1:-1] - 0.5 * (step[:-2] + step[2:])
+    size = _norm(jump)
+    limit = MAX_ACCELERATION_MM_S2 * step_s**2 + NOISE_SDS * noise  # (8,)
+    filled = np.where(np.isfinite(size), size, 0.0)
+    with np.errstate(invalid="ignore"):
+        # a jump's neighbours see half of it (side lobes): only local maxima count
+        big = (size > limit) & (filled >= np.maximum(_shift(filled, 1, 0.0),
+                                                     _shift(filled, -1, 0.0)))
+    for p in range(k):
+        for way_out in np.flatnonzero(big[:, p]):
+            for back in range(way_out + 1, min(way_out + SHORT_FRAMES + 1, n)):
+                if not big[back, p]:
+                    continue
+                gap = _norm(jump[way_out, p] + jump[back, p])
+                if gap <= 0.5 * max(size[way_out, p], size[back, p]):
+                    out[way_out:back, p] = True
+                    break
+    return out
+
+
 def _reachable(pa: np.ndarray, ta: float, pb: np.ndarray, tb: float, allow: float) -> bool:
     """Can a pellet at ``pa`` (time ``ta``) be at ``pb`` (time ``tb``)?"""
     return bool(_norm(pb - pa) <= MAX_SPEED_MM_S * abs(tb - ta) + allow)
@@ -396,7 +452,11 @@ def _stretches(positions: np.ndarray, times: np.ndarray, p: int, allow: float,
         while 0 <= q < len(pieces):
             piece = pieces[q]
             near = piece[0] if direction == 1 else piece[-1]
-            if _reachable(xy[ref], t[ref], xy[near], t[near], allow):
+            # across rejected pieces, a short piece is no new reference: it may be one
+            # more wrong value that the generous reach over a few frames lets through
+            outermost = not 0 <= q + direction < len(pieces)
+            across = bool(pending) and piece.size <= SHORT_FRAMES and not outermost
+            if not across and _reachable(xy[ref], t[ref], xy[near], t[near], allow):
                 keep[q] = True
                 pending = []
                 ref = piece[-1] if direction == 1 else piece[0]
@@ -561,7 +621,7 @@ def detect(track: PelletTrackLike) -> MistrackReport:
     noise = _noise(usable)
     reasons[_median_jumps(usable, times, step_s)] |= np.uint16(Reason.JUMP)
     spike, edge = _spikes(usable, noise, step_s)
-    reasons[spike] |= np.uint16(Reason.JUMP)
+    reasons[spike | _excursions(usable, noise, step_s)] |= np.uint16(Reason.JUMP)
     reasons[edge] |= np.uint16(Reason.EDGE)
     geometry_bad = _geometry_bad(usable)
     for p in range(k):

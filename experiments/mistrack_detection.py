@@ -1,8 +1,8 @@
 """Mistrack detection: per shape, how many injected wrong values the detector flags, and
 how many clean values it flags, on synthetic recordings and on the real JW11 recording.
 
-    python experiments/mistrack_detection.py [--docs docs/generated] [--trials 40]
-        [--real ../shared/data/xrmb_jw11] [--figure DIR] [--force]
+    python experiments/mistrack_detection.py [--docs docs/generated] [--trials 60]
+        [--real DIR] [--figure DIR] [--small] [--force]
 
 Each trial takes a clean recording, injects one labelled mistrack of one shape
 (:data:`SHAPES`, :func:`inject`) into a random pellet at a random place, runs the
@@ -27,7 +27,8 @@ jumps of 4-10 mm lasting 1-5 frames) are measured as a further row, against the 
 writes (``JawTruth.mistracked``). Real part (when ``--real`` holds ``jw11_tp005.txy``):
 the same injections into JW11 task 5 of the Wisconsin XRMB database (Westbury 1994):
 one recording of one speaker. ``--figure DIR`` draws the untouched real recording's
-pellets with every flagged value marked, and one example of each shape.
+pellets with every flagged value marked, and one example of each shape. ``--small``
+(for the tests): one subject, one task.
 """
 
 from __future__ import annotations
@@ -138,7 +139,8 @@ def inject(track, shape: str, rng: np.random.Generator):
 
 
 # ------------------------------------------------------------------ measurement
-def synthetic_recordings(subjects: int = SUBJECTS, tasks=TASKS, *, own_mistracks=False):
+def synthetic_recordings(subjects: int = SUBJECTS, tasks=TASKS, *, own_mistracks=False
+                         ) -> list[tuple[str, object, object]]:
     """``[(name, track, truth)]``: clean synthetic recordings (dropouts, no mistracks), or
     with the generator's own mistracks (``own_mistracks``)."""
     from cassi_fit import synth
@@ -206,9 +208,10 @@ def false_alarms(tracks, detect: Callable, truths=None) -> dict:
     return row
 
 
-def own_mistracks_row(detect: Callable) -> tuple[dict, dict]:
+def own_mistracks_row(detect: Callable, subjects: int = SUBJECTS, tasks=TASKS
+                      ) -> tuple[dict, dict]:
     """The generator's own mistracks: ``(shape row, false-alarm row)``."""
-    recs = synthetic_recordings(own_mistracks=True)
+    recs = synthetic_recordings(subjects, tasks, own_mistracks=True)
     hit = total = 0
     for _, track, truth in recs:
         flags = detect(track).flags
@@ -281,7 +284,8 @@ HEADERS = {"shape": "Shape", "trials": "Trials", "values": "Injected values",
            "reasons": "Main reasons (% of injected values)"}
 
 
-def document(synthetic_rows, real_rows, fa_rows, real_name: str | None) -> str:
+def document(synthetic_rows, real_rows, fa_rows, real_name: str | None,
+             size: tuple[int, int] = (SUBJECTS, len(TASKS))) -> str:
     from cassi_fit.pellets import PELLET_NAMES
     from cassi_fit.tables import markdown_text
 
@@ -298,7 +302,7 @@ def document(synthetic_rows, real_rows, fa_rows, real_name: str | None) -> str:
         "flagged: values flagged in the injected recording that are neither injected nor "
         "flagged in the untouched one (e.g. the other jaw pellet when one drifts).",
         "",
-        f"## Synthetic recordings ({SUBJECTS} subjects x {len(TASKS)} speech tasks)",
+        f"## Synthetic recordings ({size[0]} subjects x {size[1]} speech tasks)",
         "",
         markdown_text(synthetic_rows, list(HEADERS), headers=HEADERS, digits=1),
     ]
@@ -324,6 +328,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--trials", type=int, default=60, help="injections per shape and part")
     ap.add_argument("--real", help="folder holding jw11_tp005.txy (default: shared/data/xrmb_jw11 in a folder above)")
     ap.add_argument("--figure", help="write the real recording's figures into this folder")
+    ap.add_argument("--small", action="store_true", help="one subject, one task (tests)")
     ap.add_argument("--force", action="store_true", help="replace an existing output")
     args = ap.parse_args(argv)
 
@@ -335,10 +340,12 @@ def main(argv: list[str] | None = None) -> int:
     if out is not None and out.exists() and not args.force:
         print(f"{out} exists (use --force)", file=sys.stderr)
         return 1
-    recs = synthetic_recordings()
+    size = (1, 1) if args.small else (SUBJECTS, len(TASKS))
+    tasks = TASKS[-1:] if args.small else TASKS
+    recs = synthetic_recordings(size[0], tasks)
     tracks = [t for _, t, _ in recs]
     synthetic_rows = measure(tracks, args.trials, np.random.default_rng([SEED, 24, 1]), detect)
-    own_row, own_fa = own_mistracks_row(detect)
+    own_row, own_fa = own_mistracks_row(detect, size[0], tasks)
     synthetic_rows.append(own_row)
     fa_rows = [{"data": f"synthetic, {len(tracks)} recordings", **false_alarms(tracks, detect)},
                {"data": "synthetic with the generator's jumps, not counting them", **own_fa}]
@@ -354,7 +361,7 @@ def main(argv: list[str] | None = None) -> int:
                                detect):
                 print(f"wrote {path}")
     text = document(synthetic_rows, real_rows, fa_rows,
-                    None if real_path is None else f"{real_path.name} (JW11 task 5)")
+                    None if real_path is None else f"{real_path.name} (JW11 task 5)", size)
     if out is not None:
         atomic_write(out, text, overwrite=args.force)
         print(f"wrote {out}")
