@@ -239,3 +239,43 @@ def test_degenerate_tracks_do_not_fail():
             warnings.simplefilter("error")
             report = detect(PelletTrack(t, pos, np.ones((n, 8, 2), bool)))
         assert report.reasons.shape == (n, 8)
+
+
+# ----------------------------------------------------------------- reports and the experiment
+def test_cassi_info_counts_per_pellet_and_reason(tmp_path, capsys, synthetic):
+    import json
+    import wave
+
+    from cassi_fit.cli import main
+    from cassi_fit.txy import write_txy
+
+    pos = synthetic.positions.copy()
+    pos[200:220, MNI] = 0.0
+    pos[300:340, T3] = pos[300, T3]
+    path = write_txy(tmp_path / "S01_tp040.txy", _with(synthetic, pos))
+    with wave.open(str(tmp_path / "S01_tp040.wav"), "wb") as out:  # 1.8 s: a 44.1 kHz header
+        out.setnchannels(1), out.setsampwidth(2), out.setframerate(44100)
+        out.writeframes(np.zeros(int(16000 * synthetic.times[-1]), np.int16).tobytes())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # default head measures
+        assert main(["info", str(path)]) == 0
+        text = capsys.readouterr().out
+        assert main(["info", str(path), "--json"]) == 0
+    lines = {line.split()[0]: line for line in text.splitlines() if line.startswith("  ")}
+    assert lines["MNI"].split()[2:] == ["20", "dropout", "20"]
+    assert lines["T3"].split()[2:] == ["40", "plateau", "40"]
+    assert lines["UL"].split()[2:] == ["0"]
+    assert "the header's rate is likely wrong: the samples fill the recording at 16000 Hz" in text
+    report = json.loads(capsys.readouterr().out)
+    assert report["quality"]["mistrack_reasons"]["MNI"] == {"dropout": 20}
+    assert report["sound"]["status"] == "rate"
+
+
+def test_the_experiment_writes_its_tables(tmp_path):
+    assert experiment.main(["--small", "--trials", "2", "--docs", str(tmp_path)]) == 0
+    text = (tmp_path / experiment.DOCS_NAME).read_text()
+    assert text.startswith(f"<!-- written by `{experiment.MAKE_COMMAND}`")
+    assert "| zero-dropout | 2 | 40 | 100.0 |" in text
+    assert ("one recording of one speaker" in text) == (JW11 is not None)
+    assert "## False alarms" in text
+    assert experiment.main(["--small", "--trials", "2", "--docs", str(tmp_path)]) == 1  # exists
