@@ -183,8 +183,9 @@ class MistrackReport:
     def counts(self) -> dict[str, dict[str, int]]:
         """``{pellet: {reason label: values}}`` for every pellet (``PELLET_NAMES`` order)
         and every reason found for it; a value with two reasons counts under both."""
-        return {p: {r.label: int(self.has(r)[:, i].sum()) for r in REASONS
-                    if self.has(r)[:, i].any()} for i, p in enumerate(PELLET_NAMES)}
+        per_reason = {r.label: self.has(r).sum(axis=0) for r in REASONS}  # (8,) each
+        return {p: {label: int(c[i]) for label, c in per_reason.items() if c[i]}
+                for i, p in enumerate(PELLET_NAMES)}
 
     def frame_labels(self) -> list[str]:
         """One string per frame: ``""`` when nothing is mistracked, else the pellets and
