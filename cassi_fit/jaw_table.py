@@ -13,7 +13,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ._io import atomic_write
-from .corpus import CorpusItem, CorpusRun, TaskResult, dataset_items, run_corpus, write_table
+from .corpus import (
+    CorpusItem,
+    CorpusRun,
+    TaskResult,
+    dataset_items,
+    require_items,
+    run_corpus,
+    write_table,
+)
 from .errors import OutputExistsError
 from .status import Status
 from .tables import csv_text
@@ -252,7 +260,8 @@ def jaw_corpus(
         options["jaw_sensors"] = sensors
     if method == "smooth-pivot":
         options["smoothness"] = float(smoothness)
-    run = run_corpus(jaw_task, dataset_items(dataset, subjects=subjects, tasks=tasks),
-                     out_dir, options=options, **run_options)
+    items = require_items(dataset_items(dataset, subjects=subjects, tasks=tasks), dataset,
+                          subjects, tasks)
+    run = run_corpus(jaw_task, items, out_dir, options=options, **run_options)
     written = write_table(run.rows(), table, overwrite=replace)
     return run, written

@@ -18,7 +18,6 @@ from cassi_fit.corpus import (
     item_rng,
     load_item,
     marker_path,
-    parquet_available,
     run_corpus,
     worker_model,
 )
@@ -27,6 +26,7 @@ from cassi_fit.jaw_table import jaw_corpus, jaw_corpus_path, jaw_output_path, se
 from cassi_fit.labels import Labels, write_lab
 from cassi_fit.status import Status
 from cassi_fit.synth import generate_corpus
+from cassi_fit.tables import parquet_available
 
 TASKS = ("tp040", "tp106")  # the synthetic corpus's two shortest speech tasks
 
