@@ -179,11 +179,9 @@ class RunSpec:
         with two and ``CoupledRotation`` (rotation coupled to the incisor's displacement,
         learned from two-sensor recordings; docs/JAW.md) with one. A method that cannot run
         with those sensors is refused with its reason (``InvalidChoiceError``)."""
-        from .jaw_fit import ClosedForm, CoupledRotation, check_sensors
+        from .jaw_fit import method_for_sensors
 
-        method = self.jaw or (ClosedForm() if len(sensors) == 2 else CoupledRotation())
-        check_sensors(method, tuple(sensors))
-        return method
+        return method_for_sensors(self.jaw, tuple(sensors))
 
     def calibration_for(self, subject: str) -> Any:
         """The calibration for ``subject``'s recordings, as ``initialize`` takes it: None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -241,7 +242,7 @@ def load_recording_args(words, args: argparse.Namespace | None = None):
         from cassi_fit.dataset import load_recording
 
         path = Path(words[0])
-        if not path.is_file():
+        if not os.path.lexists(path):  # anything else load_recording names (a pipe, ...)
             raise CassiError(f"{path}: no such recording file")
         return load_recording(path, **options)
     if len(words) == 3:
