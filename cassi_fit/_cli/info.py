@@ -116,9 +116,7 @@ def collect(path: Path, list_only: bool = False, *, sensor_map=None, layout=None
     if not path.is_dir():
         raise MissingDataError(f"{path}: no such file or folder")
     ds = Dataset(path, sensor_map=sensor_map)
-    if not ds.subjects():
-        raise MissingDataError(f"{path}: no pellet files or articulograph recordings (.txy, "
-                               ".ema, .pos, .tsv, .mat) found")
+    ds.check_selection()  # nothing found: one line naming the folder and what was looked for
     subjects = {}
     for subject in ds.subjects():
         tasks = {}

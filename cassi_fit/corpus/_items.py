@@ -108,13 +108,19 @@ def dataset_items(dataset: Dataset | str | os.PathLike, *, subjects: Iterable[st
 def require_items(items: list[CorpusItem], dataset: object,
                   subjects: Iterable[str] | None = None, tasks: Iterable[str] | None = None
                   ) -> list[CorpusItem]:
-    """``items`` if there are any; else a ``MissingDataError`` naming the folder and what
-    was looked for (the subjects and tasks asked for, or any recording at all)."""
+    """``items`` if there are any and every subject and task asked for is there
+    (``dataset.Dataset.check_selection``); else a ``MissingDataError`` naming the folder
+    and what was looked for (the subjects and tasks asked for, or any recording at all)."""
+    from ..dataset import Dataset
+
+    ds = dataset if isinstance(dataset, Dataset) else Dataset(os.path.abspath(dataset))
+    ds.check_selection(None if subjects is None else list(subjects),
+                       None if tasks is None else list(tasks))
     if items:
         return items
     from ..errors import MissingDataError
 
-    root = getattr(dataset, "root", dataset)
+    root = ds.root  # (a Path's own .root is "/" or "")
     wanted = []
     if tasks is not None:
         wanted.append("the task(s) " + ", ".join(str(t) for t in tasks))
