@@ -199,9 +199,9 @@ def load_recording_args(words):
         from cassi_fit.dataset import load_recording
 
         path = Path(words[0])
-        if not path.is_file():
+        if not path.exists() and not path.is_symlink():
             raise CassiError(f"{path}: no such pellet file")
-        return load_recording(path)
+        return load_recording(path)  # a pipe, device or folder: one line saying which
     if len(words) == 3:
         from cassi_fit.dataset import Dataset
 
