@@ -497,6 +497,13 @@ class Dataset:
         """`` ; found no ...`` for messages about an empty dataset, else ``""``."""
         return "" if self._index else f"; found no recordings: looked for {LOOKED_FOR}"
 
+    def _skipped_note(self) -> str:
+        """``; skipped 1 special file(s): S01/TP040.TXY (a named pipe (FIFO))`` or ``""``."""
+        if not self.skipped:
+            return ""
+        names = [f"{p.relative_to(self.root)} ({kind})" for p, kind in self.skipped]
+        return f"; skipped {len(names)} special file(s), never opened: {_names(names)}"
+
     def _skipped_as(self, subject: str, task: str) -> str:
         """``; S01/TP999.TXY is a named pipe ...`` if a skipped special file would have
         been ``subject``'s ``task``, else ``""``."""
@@ -525,7 +532,8 @@ class Dataset:
         asked for is held by none of the chosen subjects (all subjects when ``subjects``
         is None). Names in any case; None means all."""
         if not self._index:
-            raise MissingDataError(f"{self.root}: found no recordings: looked for {LOOKED_FOR}")
+            raise MissingDataError(f"{self.root}: found no recordings: looked for "
+                                   f"{LOOKED_FOR}{self._skipped_note()}")
         chosen = self.subjects() if subjects is None else [self._subject(s) for s in subjects]
         if not chosen:
             raise MissingDataError(f"{self.root}: no subject chosen (an empty list); "

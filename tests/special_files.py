@@ -65,10 +65,14 @@ def make_socket(path: os.PathLike | str) -> Path:
     """A Unix socket node at ``path`` (bound, then closed: the node stays)."""
     import socket
 
-    path = Path(path)
+    path = Path(path).absolute()
+    path.parent.mkdir(parents=True, exist_ok=True)
     sock = socket.socket(socket.AF_UNIX)
-    try:
-        sock.bind(str(path))
+    cwd = os.getcwd()
+    try:  # by a relative name: a socket's path may hold at most 107 bytes
+        os.chdir(path.parent)
+        sock.bind(path.name)
     finally:
+        os.chdir(cwd)
         sock.close()
     return path
