@@ -130,6 +130,22 @@ def check_output(
     return path
 
 
+def check_output_folder(path: str | os.PathLike) -> Path:
+    """``path`` as a ``Path`` if it is a folder or absent (a writer may create it), else
+    one :class:`CassiError` saying what it is (a file, a pipe, a device, a broken link, a
+    path under a file): for commands whose output is a folder (``--out DIR``), before
+    any work, not once per file at the end."""
+    path = Path(path)
+    special = special_kind(path)
+    if special is not None:
+        raise CassiError(f"{path}: is {special}, not a folder; give a folder for the outputs")
+    if path.exists() and not path.is_dir():
+        raise CassiError(f"{path}: is a file, not a folder; give a folder for the outputs")
+    if any(parent.exists() and not parent.is_dir() for parent in path.parents):
+        raise CassiError(f"{path}: cannot be a folder, a parent is a file, not a folder")
+    return path
+
+
 def check_outputs(
     paths: Iterable[str | os.PathLike | None], *, overwrite: bool = False
 ) -> list[Path]:

@@ -689,6 +689,27 @@ def test_outputs_never_replace_a_special_file_or_an_input(corpus, tmp_path, caps
     assert snapshot(base.root) == before and snapshot(outside) == nodes
 
 
+def test_an_output_folder_that_is_a_pipe_or_a_file(corpus, tmp_path, capsys):
+    """`--out DIR` onto a FIFO or a file: the dataset commands failed every recording with
+    a raw NotADirectoryError (evaluate) or worked and then refused the table (jaw); now
+    one line naming it, before any work."""
+    base = synthetic_base(tmp_path, corpus)
+    fifo = make_fifo(tmp_path / "fifo-out")
+    plain = tmp_path / "file-out"
+    plain.write_text("mine\n")
+    before, nodes = snapshot(base.root), snapshot(tmp_path / "data")
+    with FifoGuard(fifo) as guard:
+        for out in (fifo, plain):
+            for name in ("jaw", "animate", "evaluate", "calibrate"):
+                code, stdout, err = _cli(capsys, *DATASET_COMMANDS[name](base.root, out))
+                assert code == 2 and err.count("\n") == 1, (name, code, stdout, err)
+                assert re.match(rf"cassi: error: \S*{out.name}\S*: (is a (named pipe|file)"
+                                r"|cannot be written, a parent is a file)", err), (name, err)
+    assert guard.opened == [] and special_kind(fifo) == "a named pipe (FIFO)"
+    assert plain.read_text() == "mine\n"
+    assert snapshot(base.root) == before == nodes
+
+
 # ------------------------------------------------------------ a couple of cases that animate
 ANIMATE = ["--stride", "40", "--size", "64x48", "--quiet"]
 

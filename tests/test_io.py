@@ -1,5 +1,7 @@
 """Atomic writing: never a half-written file, never an overwritten input."""
 
+import re
+
 import pytest
 
 from cassi_fit import _io
@@ -289,3 +291,18 @@ def test_the_real_recording_is_foreign_data():
     names = {p.name for p in _io.foreign_data(jw11)}
     assert {"jw11_tp005.txy", "jw11_pal.dat", "jw11_pha.dat", "jw11_tp005.wav",
             "jw11_tp005.lab"} <= names
+
+
+def test_an_output_folder_that_is_not_a_folder(tmp_path):
+    (tmp_path / "file").write_text("x")
+    assert _io.check_output_folder(tmp_path) == tmp_path
+    assert _io.check_output_folder(tmp_path / "new" / "deeper") == tmp_path / "new" / "deeper"
+    for path, kind in _special_nodes(tmp_path):
+        with pytest.raises(CassiError, match=f"^{re.escape(str(path))}: is {re.escape(kind)}, not a "
+                           "folder") as info:
+            _io.check_output_folder(path)
+        assert "\n" not in str(info.value)
+    with pytest.raises(CassiError, match="is a file, not a folder"):
+        _io.check_output_folder(tmp_path / "file")
+    with pytest.raises(CassiError, match="a parent is a file"):
+        _io.check_output_folder(tmp_path / "file" / "out")
