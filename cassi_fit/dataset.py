@@ -553,14 +553,17 @@ class Dataset:
 
     def load(self, subject: str, task: str) -> Recording:
         """Read one recording with its subject's palate, pharynx, head measures, audio.
-        The file must still be a regular file (never opened otherwise)."""
+        The file must still be a regular file (never opened otherwise); its format is
+        detected by content, as :func:`load_recording` does (a pellet file named ``.ema``
+        is read as the pellet file it is)."""
         path = self.pellet_path(subject, task)
         _regular(path)
         subject, task = self._subject(subject), str(task).lower()
         own = self._index[(subject, task)][1]
         # a root that is itself a subject folder: look one folder up, as load_recording does
         shared = [self.root, self.root.parent] if own == self.root else [self.root]
-        ema = None if path.suffix.lower() == PELLET_SUFFIX else {"sensor_map": self.sensor_map}
+        xrmb = path.suffix.lower() == PELLET_SUFFIX or detect_format(path) == "xrmb"
+        ema = None if xrmb else {"sensor_map": self.sensor_map}
         return _assemble(path, subject, task, own=own, shared=shared, ema=ema)
 
     def __len__(self) -> int:

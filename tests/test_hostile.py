@@ -250,6 +250,21 @@ def _spaces_and_bom(b: Base) -> Path:
     return b.pellets
 
 
+def _named_ema(b: Base) -> Path:
+    """The pellet file renamed ``.ema``: read by content as the pellet file it is."""
+    renamed = b.pellets.with_suffix(".ema")
+    b.pellets.rename(renamed)
+    b.pellets = renamed
+    return renamed
+
+
+def _articulograph_named_txy(b: Base) -> Path:
+    from ema_files import mocha_binary
+
+    b.pellets.write_bytes(mocha_binary(40))
+    return b.pellets
+
+
 def _palate_mm(b: Base) -> Path:
     pts = [[int(t) for t in line.split()] for line in _lines(b.palate) if line.strip()]
     _points(b.palate, [(round(x / 1000), round(y / 1000)) for x, y in pts])
@@ -376,7 +391,10 @@ CASES = [
          folder_match=SKIPPED + "link that loops"),
     Case("device", _pellets_device, "error", r": is a character device",
          folder_match=SKIPPED + "character device"),
+    Case("an EST Track file named .txy", _articulograph_named_txy, "error",
+         r"(:\d+)?: (not a text file|expected 17 fields)"),
     Case("LF line ends", _lf, "same"),
+    Case("the pellet file named .ema", _named_ema, "same"),
     Case("spaces, BOM, blank lines", _spaces_and_bom, "same"),
     # the palate
     Case("palate in mm", _palate_mm, "error", "look like millimetres"),
@@ -491,11 +509,14 @@ def check_library(base: Base, case: Case, target: Path, original) -> None:
         if recording is not None and case.extra.get("absent"):
             assert getattr(recording, case.extra["absent"]) is None
         return
-    recording, _ = _quiet_load(load_recording, base.pellets)
-    np.testing.assert_array_equal(recording.track.positions, original.track.positions)
-    np.testing.assert_array_equal(recording.track.times, original.track.times)
-    assert [recording.palate.tolist(), recording.pharynx.tolist()] == [
-        original.palate.tolist(), original.pharynx.tolist()]
+    ds, _ = _quiet_load(Dataset, base.root)
+    for recording in (_quiet_load(load_recording, base.pellets)[0],
+                      _quiet_load(ds.load, base.subject, base.task)[0]):
+        np.testing.assert_array_equal(recording.track.positions, original.track.positions)
+        np.testing.assert_array_equal(recording.track.times, original.track.times)
+        assert [recording.palate.tolist(), recording.pharynx.tolist()] == [
+            original.palate.tolist(), original.pharynx.tolist()]
+        assert recording.head == original.head and recording.sensors is None
 
 
 def check_commands(base: Base, case: Case, target: Path, capsys, tmp_path: Path) -> None:
