@@ -159,7 +159,7 @@ def _regular(path: Path) -> None:
     one); :class:`MissingDataError` if it does not exist. Never opens it."""
     kind = special_kind(path)
     if kind is not None:
-        raise DataFormatError(path, None, f"is {kind}, not a regular file; not read")
+        raise DataFormatError(path, None, f"not a regular file but {kind}; not read")
     if path.is_dir():
         raise DataFormatError(path, None, "is a folder, not a recording file")
     if not path.is_file():

@@ -143,7 +143,7 @@ def test_special_files_are_skipped_with_a_warning_and_never_opened(folder_layout
         rec = ds.load("jw11", "tp106")  # its palate and sound are FIFOs: absent, not read
         assert rec.palate is None and rec.audio is None
         for path in (fifos[0], s01 / "tp998.txy", s01 / "tp997.txy"):
-            with pytest.raises(DataFormatError, match="not a regular file; not read") as info:
+            with pytest.raises(DataFormatError, match="not a regular file but a (named pipe|socket|broken link)") as info:
                 load_recording(path)
             assert info.value.path == str(path)
     assert guard.opened == []
