@@ -12,7 +12,12 @@ on the folder (and, for a few cases, ``cassi jaw``). Every case must end in one 
   (exit 1) and never 0;
 - ``warn``: a documented warning (its category and words), the data still loaded;
 - ``same``: a harmless change of form (line ends, white space, a BOM): the loaded data
-  are the original's, value for value (silently OK is right here, and checked).
+  are the original's, value for value (silently OK is right here, and checked);
+- ``status``: a mistrack of a shape real trackers produce (issue 24 part 1: a dropout to
+  the incisor tip, a value stuck, a slow drift along the jaw, a spike on the first or last
+  line, two pellets trading places): every injected frame is flagged ``mistracked`` with
+  one of the expected reasons, in the loaders, in ``cassi info`` (per pellet and reason)
+  and, for the jaw pellets, in ``cassi jaw``'s table.
 
 Always: every input file is byte-for-byte the same afterwards (hashes before and after;
 special files are compared by their ``lstat`` node, never opened), no FIFO was opened
@@ -70,6 +75,7 @@ class Base:
     sound: Path
     subject: str
     task: str
+    injected: tuple[str, list[int], set[str]] | None = None  # pellet, frames, reasons
 
 
 def synthetic_base(tmp_path: Path, corpus: Path) -> Base:
@@ -265,6 +271,67 @@ def _articulograph_named_txy(b: Base) -> Path:
     return b.pellets
 
 
+def _inject(b: Base, pellet: str, reasons: set[str], change) -> Path:
+    """Apply ``change(rows, k) -> frames`` to the pellet file's ``(n, 17)`` integers
+    (``k``: the middle line) and remember what was injected."""
+    from cassi_fit.pellets import PELLET_NAMES
+
+    rows = np.array([[int(t) for t in line.split()] for line in _lines(b.pellets)
+                     if line.strip()])
+    x = 1 + 2 * PELLET_NAMES.index(pellet)
+    frames = change(rows, len(rows) // 2, x)
+    b.pellets.write_text("".join("\t".join(str(v) for v in row) + "\r\n" for row in rows),
+                         newline="")
+    b.injected = (pellet, list(frames), reasons)
+    return b.pellets
+
+
+def _dropout_to_origin(b: Base) -> Path:
+    def change(rows, k, x):
+        rows[k:k + 20, x:x + 2] = 0  # "at" the upper incisor tip
+        return range(k, k + 20)
+    return _inject(b, "MNI", {"dropout"}, change)
+
+
+def _stuck(b: Base) -> Path:
+    def change(rows, k, x):
+        rows[k:k + 40, x:x + 2] = rows[k, x:x + 2]
+        return range(k + 1, k + 40)
+    return _inject(b, "MNI", {"plateau"}, change)
+
+
+def _drift_along_the_jaw(b: Base) -> Path:
+    def change(rows, k, x):
+        along = rows[k, x:x + 2] - rows[k, x + 2:x + 4]  # MNM follows MNI in the file
+        along = along / np.hypot(*along)
+        bump = 10_000 * np.sin(np.linspace(0.0, np.pi, 100))  # 10 mm out and back
+        rows[k:k + 100, x:x + 2] += np.round(bump[:, None] * along).astype(rows.dtype)
+        return range(k + 25, k + 75)  # the part more than 7 mm out
+    return _inject(b, "MNI", {"drift", "jaw-distance"}, change)
+
+
+def _spike_on_the_first_line(b: Base) -> Path:
+    def change(rows, k, x):
+        first = int(np.argmax((rows[:, x:x + 2] != 1_000_000).all(1)))
+        rows[first, x + 1] += 15_000
+        return [first]
+    return _inject(b, "T1", {"edge", "jump"}, change)
+
+
+def _spike_on_the_last_line(b: Base) -> Path:
+    def change(rows, k, x):
+        rows[-1, x + 1] += 15_000
+        return [len(rows) - 1]
+    return _inject(b, "T1", {"edge", "jump"}, change)
+
+
+def _tongue_pellets_swapped(b: Base) -> Path:
+    def change(rows, k, x):  # T2 (x) and T3 (x + 2) trade places for 20 frames
+        rows[k:k + 20, x:x + 4] = rows[k:k + 20, np.r_[x + 2:x + 4, x:x + 2]]
+        return range(k, k + 20)
+    return _inject(b, "T2", {"swap", "persistent-jump"}, change)
+
+
 def _palate_mm(b: Base) -> Path:
     pts = [[int(t) for t in line.split()] for line in _lines(b.palate) if line.strip()]
     _points(b.palate, [(round(x / 1000), round(y / 1000)) for x, y in pts])
@@ -397,6 +464,14 @@ CASES = [
     Case("LF line ends", _lf, "same"),
     Case("the pellet file named .ema", _named_ema, "same"),
     Case("spaces, BOM, blank lines", _spaces_and_bom, "same"),
+    # mistracks of the shapes real trackers produce (the detector: cassi_fit.mistracks)
+    Case("MNI at the incisor tip for 20 frames", _dropout_to_origin, "status", jaw=True),
+    Case("MNI stuck for 40 frames", _stuck, "status", jaw=True),
+    Case("MNI drifting 10 mm along the jaw and back", _drift_along_the_jaw, "status",
+         jaw=True),
+    Case("a spike on the first line", _spike_on_the_first_line, "status"),
+    Case("a spike on the last line", _spike_on_the_last_line, "status"),
+    Case("T2 and T3 swapped for 20 frames", _tongue_pellets_swapped, "status"),
     # the palate
     Case("palate in mm", _palate_mm, "error", "look like millimetres"),
     Case("palate reversed", _palate_reversed, "error", "reversed"),
@@ -510,6 +585,9 @@ def check_library(base: Base, case: Case, target: Path, original) -> None:
         if recording is not None and case.extra.get("absent"):
             assert getattr(recording, case.extra["absent"]) is None
         return
+    if case.expect == "status":
+        check_mistracks(base)
+        return
     ds, _ = _quiet_load(Dataset, base.root)
     for recording in (_quiet_load(load_recording, base.pellets)[0],
                       _quiet_load(ds.load, base.subject, base.task)[0]):
@@ -520,6 +598,31 @@ def check_library(base: Base, case: Case, target: Path, original) -> None:
         assert recording.head == original.head and recording.sensors is None
 
 
+def check_mistracks(base: Base) -> None:
+    """Every injected frame is mistracked, for a reason expected of its shape, whichever
+    loader reads it."""
+    from cassi_fit.mistracks import reason_label
+    from cassi_fit.pellets import PELLET_NAMES
+
+    pellet, frames, reasons = base.injected
+    j = PELLET_NAMES.index(pellet)
+    ds, _ = _quiet_load(Dataset, base.root)
+    for recording in (_quiet_load(load_recording, base.pellets)[0],
+                      _quiet_load(ds.load, base.subject, base.task)[0]):
+        report = recording.track.mistracks
+        assert report.flags[frames, j].all(), (pellet, np.flatnonzero(~report.flags[frames, j]))
+        for k in frames:
+            said = set(reason_label(int(report.reasons[k, j])).split("+"))
+            assert said & reasons, (pellet, k, said, reasons)
+
+
+def _jaw_status(csv: Path) -> list[str]:
+    import csv as csv_module
+
+    with open(csv, newline="") as fh:
+        return [row["status"] for row in csv_module.DictReader(fh)]
+
+
 def check_commands(base: Base, case: Case, target: Path, capsys, tmp_path: Path) -> None:
     code, out, err = _cli(capsys, "info", base.pellets)
     if case.expect == "error":
@@ -528,6 +631,10 @@ def check_commands(base: Base, case: Case, target: Path, capsys, tmp_path: Path)
         one_line_naming(err[len("cassi: error: "):], target, case)
     else:
         assert code == 0 and err == "", (code, err)
+    if case.expect == "status":  # the pellet's row counts its mistracks, with the reasons
+        pellet, frames, reasons = base.injected
+        row = next(line for line in out.splitlines() if line.split()[:1] == [pellet])
+        assert int(row.split()[2]) >= len(frames) and any(r in row for r in reasons), row
     code, out, err = _cli(capsys, "info", base.root)
     if case.expect == "error":
         # the folder's listing names the file's error on the recording's row; a folder
@@ -546,6 +653,9 @@ def check_commands(base: Base, case: Case, target: Path, capsys, tmp_path: Path)
         if case.expect == "error":
             assert err.startswith("cassi: error: ") and str(target) in err
             assert not csv.exists()
+        if case.expect == "status":  # the jaw table says so on every injected frame
+            status = _jaw_status(csv)
+            assert {status[k] for k in base.injected[1]} == {"mistracked"}
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
@@ -561,6 +671,121 @@ REAL_CASES = [c for c in CASES if c.real]
 def test_real_jw11(case, tmp_path, capsys):
     """The same mutations of the real recording (JW11 task 5: one speaker)."""
     run_case(real_base(tmp_path), case, capsys, tmp_path)
+
+
+# ------------------------------------------------------------ labels and sound that do not fit
+def _bases(request_param: str, tmp_path: Path, corpus: Path) -> Base:
+    if request_param == "real":
+        if JW11 is None:
+            pytest.skip(NO_JW11)
+        return real_base(tmp_path)
+    return synthetic_base(tmp_path, corpus)
+
+
+def _recording_s(base: Base) -> float:
+    from cassi_fit.sound import recording_seconds
+
+    return recording_seconds(_quiet_load(load_recording, base.pellets)[0].track.times)
+
+
+LABEL_CASES = {  # name -> (time scale, shift s, outcome, what the message says)
+    "in milliseconds": (1000.0, 0.0, "error", "milliseconds"),
+    "in samples at 16 kHz": (16000.0, 0.0, "error", "samples at 16000 Hz"),
+    "running past the end": (1.0, 3.0, "warn", r"\(\d+ start after its end\)"),
+}
+
+
+@pytest.mark.parametrize("which", ["synthetic", "real"])
+@pytest.mark.parametrize("name", list(LABEL_CASES))
+def test_labels_that_do_not_fit(name, which, corpus, tmp_path, capsys):
+    """A `.lab` in milliseconds or in samples gave empty or shifted labels with no word:
+    `cassi jaw` (which reads the labels beside the file) fails in one line naming the
+    file and the likely unit; labels past the end are a LabelMismatchWarning."""
+    from cassi_fit.labels import LabelMismatchWarning, labels_for
+
+    base = _bases(which, tmp_path, corpus)
+    seconds = _recording_s(base)
+    scale, shift, outcome, said = LABEL_CASES[name]
+    lab = base.pellets.with_suffix(".lab")
+    edges = np.linspace(0.0, seconds, 11)
+    lab.write_text("".join(f"{(a + shift) * scale:.6g} {(b + shift) * scale:.6g} p{i}\n"
+                           for i, (a, b) in enumerate(zip(edges[:-1], edges[1:], strict=True))))
+    before = snapshot(base.root)
+    csv = tmp_path / "out" / "jaw.csv"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code = cli.main(["jaw", str(base.pellets), "--csv", str(csv)])
+    err = capsys.readouterr().err
+    if outcome == "error":
+        assert code == 2 and err.startswith(f"cassi: error: {lab}: "), (code, err)
+        assert re.search(said, err) and err.count("\n") == 1, err
+        assert not csv.exists()
+        with pytest.raises(CassiError, match=said):
+            labels_for(base.pellets)
+    else:
+        assert code == 0, err
+        found = [str(w.message) for w in caught if issubclass(w.category, LabelMismatchWarning)]
+        assert any(m.startswith(str(lab)) and re.search(said, m) for m in found), found
+    assert snapshot(base.root) == before
+
+
+def _rewrite_wav(path: Path, *, rate: int | None = None, keep: float = 1.0) -> None:
+    import wave
+
+    with wave.open(str(path), "rb") as src:
+        params = src.getparams()
+        data = src.readframes(int(round(params.nframes * keep)))
+    with wave.open(str(path), "wb") as dst:
+        dst.setparams(params)
+        dst.setframerate(rate or params.framerate)
+        dst.writeframes(data)
+
+
+SOUND_CASES = {  # name -> (header rate, share kept, outcome, what is said)
+    "a header rate of 44.1 kHz": (44100, 1.0, "error", "the header's rate is likely wrong"),
+    "a header rate of 8 kHz": (8000, 1.0, "error", "the header's rate is likely wrong"),
+    "cut in half": (None, 0.5, "error", "(likely wrong|cut)"),
+    "0.1 s of sound": (None, 0.02, "error", "looks cut"),
+    "a quarter longer": (None, None, "warn", r"s of sound .* a video keeps the first"),
+}
+
+
+@pytest.mark.parametrize("which", ["synthetic", "real"])
+@pytest.mark.parametrize("name", list(SOUND_CASES))
+def test_sound_that_does_not_fit(name, which, corpus, tmp_path, capsys):
+    """A `.wav` whose length disagrees with the pellets went into the video padded or cut:
+    `sound.check_sound` says the numbers and the likely cause (an error, or a warning for
+    more sound than pellets), naming the file, and `cassi info` shows it on the
+    recording's report. (`cassi animate` acting on it: test_animating_a_dataset_...)"""
+    from cassi_fit.sound import SoundMismatchWarning, check_sound
+
+    base = _bases(which, tmp_path, corpus)
+    seconds = _recording_s(base)
+    rate, keep, outcome, said = SOUND_CASES[name]
+    if keep is None:  # a quarter more samples than the pellets last
+        import wave
+
+        with wave.open(str(base.sound), "rb") as src:
+            params, data = src.getparams(), src.readframes(src.getnframes())
+        extra = int(params.framerate * seconds * 0.25) * params.sampwidth * params.nchannels
+        with wave.open(str(base.sound), "wb") as dst:
+            dst.setparams(params)
+            dst.writeframes(data + bytes(extra))
+    else:
+        _rewrite_wav(base.sound, rate=rate, keep=keep)
+    before = snapshot(base.root)
+    if outcome == "error":
+        with pytest.raises(CassiError, match=said) as info:
+            check_sound(base.sound, seconds)
+        assert str(info.value).startswith(str(base.sound)) and "\n" not in str(info.value)
+    else:
+        with pytest.warns(SoundMismatchWarning, match=said):
+            check_sound(base.sound, seconds)
+    code, out, err = _cli(capsys, "info", base.pellets)
+    assert code == 0, err
+    line = next(ln for ln in out.splitlines() if ln.strip().startswith("sound:"))
+    assert re.search(said, line), line
+    assert snapshot(base.root) == before
 
 
 # ------------------------------------------------------------ datasets with nothing in them
@@ -732,54 +957,50 @@ def test_an_output_folder_that_is_a_pipe_or_a_file(corpus, tmp_path, capsys):
     assert snapshot(base.root) == before == nodes
 
 
-# ------------------------------------------------------------ a couple of cases that animate
+# ------------------------------------------------------------ one case that animates
 ANIMATE = ["--stride", "40", "--size", "64x48", "--quiet"]
 
 
 @pytest.mark.slow
 @pytest.mark.render
-def test_animating_beside_special_files(corpus, tmp_path, capsys):
-    """The recording is animated with a FIFO for its pharyngeal wall and a socket for a
-    second task beside it: the wall is the default one (a SpecialFileWarning says why),
-    the FIFO is never opened, the inputs are unchanged. (Synthetic, with the same shapes
-    as the other animating tests, so that the animation compiles once.)"""
-    base = synthetic_base(tmp_path, corpus)
-    _pharynx_fifo(base)
-    make_socket(base.pellets.with_name("tp106.txy"))
-    before = snapshot(base.root)
-    still = tmp_path / "still.png"
-    with FifoGuard(*fifos(base.root)) as guard, pytest.warns(SpecialFileWarning,
-                                                             match="never opened"):
-        code = cli.main([str(w) for w in ("animate", base.root, base.subject, base.task,
-                                          "--out", still, *ANIMATE)])
-    out, err = capsys.readouterr()
-    assert code == 0, (code, err)
-    assert still.is_file() and still.read_bytes().startswith(b"\x89PNG")
-    assert guard.opened == [] and snapshot(base.root) == before
-
-
-@pytest.mark.slow
-@pytest.mark.render
 def test_animating_a_dataset_skips_what_it_cannot_read(corpus, tmp_path, capsys):
-    """`cassi animate DATASET`: a good recording is animated, a degenerate pharynx in a
-    second subject is that recording's one-line failure row (exit 1, the documented
-    status of a corpus run), a FIFO named like a pellet file is skipped with a warning."""
+    """`cassi animate DATASET`: a good recording is animated, though its pharyngeal wall
+    is a FIFO (the default wall, a SpecialFileWarning; the FIFO never opened); a
+    degenerate pharynx in a second subject, and a sound whose header says 44.1 kHz for
+    16 kHz samples in a third (it went into the video at the wrong speed), are those
+    recordings' one-line failure rows (exit 1, the documented status of a corpus run); a
+    FIFO named like a pellet file and a socket are skipped with the warning. The one
+    test here that animates (small, every 40th line), the inputs hashed around it."""
     base = synthetic_base(tmp_path, corpus)
-    bad = base.root / "S02"
-    bad.mkdir()
-    for name in ("TP040.TXY", "PAL.DAT"):
-        shutil.copyfile(base.root / "S01" / name, bad / name)
-    _points(bad / "PHA.DAT", [(-75000, 15000), (-75000, 15000)])
+    for subject in ("S02", "S03"):
+        (base.root / subject).mkdir()
+        for name in ("TP040.TXY", "PAL.DAT", "PHA.DAT", "TP040.WAV"):
+            shutil.copyfile(base.root / "S01" / name, base.root / subject / name)
+    _points(base.root / "S02" / "PHA.DAT", [(-75000, 15000), (-75000, 15000)])
+    _rewrite_wav(base.root / "S03" / "TP040.WAV", rate=44100)
+    (base.root / "Headmeasures.txt").write_text(
+        "\n".join(r for r in _head_rows(base.head) if not r.startswith("S0"))
+        + "".join("\n" + r.replace("S01", s, 1) for s in ("S01", "S02", "S03")
+                  for r in _head_rows(base.head) if r.startswith("S01\t")) + "\n")
     make_fifo(base.root / "S01" / "TP999.TXY")
+    make_socket(base.root / "S01" / "tp106.txy")
+    _pharynx_fifo(base)
     before = snapshot(base.root)
     out = tmp_path / "videos"
-    with FifoGuard(*fifos(base.root)) as guard, pytest.warns(SpecialFileWarning):
+    with FifoGuard(*fifos(base.root)) as guard, pytest.warns(
+            SpecialFileWarning, match=r"PHA\.DAT \(a named pipe .*TP999\.TXY \(a named "
+            r"pipe .*tp106\.txy \(a socket\)"):
         code = cli.main([str(w) for w in ("animate", base.root, "--out", out, "--jobs", 1,
                                           *ANIMATE)])
     stdout, err = capsys.readouterr()
     assert code == 1, (code, stdout, err)
     assert "Traceback" not in stdout + err
     assert re.search(r"S02 +tp040 *: .*S02/PHA\.DAT: all 2 points coincide", stdout + err)
+    assert re.search(r"S03 +tp040 *: .*S03/TP040\.WAV: .*44100 Hz.* the header's rate is "
+                     "likely wrong", stdout + err), stdout + err
     assert [p.name for p in (out / "S01").iterdir()] == ["tp040.mp4"]
-    assert not (out / "S02").exists() or not any((out / "S02").iterdir())
+    table = (out / "animate_corpus.csv").read_text().splitlines()
+    assert table[1].startswith("S01,tp040,ok,,"), table
+    for subject in ("S02", "S03"):
+        assert not (out / subject).exists() or not any((out / subject).iterdir())
     assert guard.opened == [] and snapshot(base.root) == before
