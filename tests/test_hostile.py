@@ -1004,3 +1004,84 @@ def test_animating_a_dataset_skips_what_it_cannot_read(corpus, tmp_path, capsys)
     for subject in ("S02", "S03"):
         assert not (out / subject).exists() or not any((out / subject).iterdir())
     assert guard.opened == [] and snapshot(base.root) == before
+
+
+# ------------------------------------------------------------ random hostile folders
+def _random_tree_strategy():
+    from hypothesis import strategies as st
+
+    names = st.sampled_from([
+        "tp005.txy", "TP005.TXY", "tp020_2.txy", "jw11_tp005.txy", "s01_tp101.txy", "PAL.DAT",
+        "pal.dat", "jw11_pal.dat", "PHA.DAT", "jw11_pha.dat", "Headmeasures.txt",
+        "tp005.wav", "tp005.lab", "tp005.ema", "bite.pos", "sensors.toml", "README.txt",
+        "notes.txt"])
+    kinds = st.sampled_from(["pellets", "palate", "pharynx", "head", "garbage", "empty", "fifo",
+                             "socket", "broken link", "folder"])
+    folders = st.sampled_from(["", "S01", "s01", "JW11", "S01/deeper"])
+    return st.lists(st.tuples(folders, names, kinds), min_size=1, max_size=10)
+
+
+def _build(root: Path, entries) -> None:
+    fixtures = _HERE.parent / "fixtures"
+    content = {"pellets": "sample.txy", "palate": "PAL.DAT", "pharynx": "PHA.DAT",
+               "head": "Headmeasures.txt"}
+    for folder, name, kind in entries:
+        path = root / folder / name
+        if os.path.lexists(path) or (path.parent.exists() and not path.parent.is_dir()):
+            continue
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if kind in content:
+            shutil.copyfile(fixtures / content[kind], path)
+        elif kind == "garbage":
+            path.write_bytes(np.random.default_rng(len(entries)).bytes(300))
+        elif kind == "empty":
+            path.write_bytes(b"")
+        elif kind == "fifo":
+            make_fifo(path)
+        elif kind == "socket":
+            make_socket(path)
+        elif kind == "broken link":
+            path.symlink_to(path.with_name("absent"))
+        else:
+            path.mkdir()
+
+
+def test_random_hostile_folders(tmp_path_factory):
+    """Folders built at random from the names a dataset uses, each a good file, garbage,
+    an empty file, a FIFO, a socket, a broken link or a folder: discovery, every load,
+    the selection check and `cassi info` give recordings, toolkit errors or warnings,
+    never another exception, never exit 1, never a FIFO opened, never a changed input."""
+    from hypothesis import HealthCheck, given, settings
+
+    @settings(max_examples=40, deadline=None, derandomize=True,
+              suppress_health_check=[HealthCheck.function_scoped_fixture])
+    @given(entries=_random_tree_strategy())
+    def check(entries):
+        root = tmp_path_factory.mktemp("tree")
+        _build(root, entries)
+        before = snapshot(root)
+        with FifoGuard(*fifos(root)) as guard, warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                ds = Dataset(root)
+                for subject in ds.subjects():
+                    for task in ds.tasks(subject):
+                        try:
+                            ds.load(subject, task)
+                        except CassiError as exc:
+                            assert "\n" not in str(exc).strip()
+                ds.check_selection()
+            except CassiError as exc:
+                assert "\n" not in str(exc).strip()
+            import contextlib
+            import io
+
+            with contextlib.redirect_stdout(io.StringIO()), \
+                    contextlib.redirect_stderr(io.StringIO()) as err:
+                code = cli.main(["info", str(root)])
+            assert code in (0, 2), err.getvalue()
+            assert "Traceback" not in err.getvalue()
+        assert guard.opened == []
+        assert snapshot(root) == before
+
+    check()
