@@ -244,7 +244,7 @@ def load_recording_args(words, args: argparse.Namespace | None = None):
         path = Path(words[0])
         if not os.path.lexists(path):  # anything else load_recording names (a pipe, ...)
             raise CassiError(f"{path}: no such recording file")
-        return load_recording(path, **options)
+        return load_recording(path, **options)  # a pipe, device or folder: one line saying which
     if len(words) == 3:
         from cassi_fit.dataset import Dataset
 
