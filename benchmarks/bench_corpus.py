@@ -46,7 +46,7 @@ def _task(command: str, method: str, solver: str):
         from cassi_fit.run_spec import run_spec
 
         return evaluate_task, {"spec": run_spec("improved")}, None
-    from cassi_fit.jaw_corpus import jaw_task
+    from cassi_fit.jaw_table import jaw_task
 
     return jaw_task, {"method": method, "solver": solver}, True  # cassi jaw: float64
 
