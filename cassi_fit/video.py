@@ -453,6 +453,7 @@ def animation_frames(
     progress: bool = True,
     indices: Iterable[int] | None = None,
     labels: Labels | None = None,
+    helper_thread: bool = False,
 ) -> Iterator[UInt8[np.ndarray, "h w 3"]]:
     """Render the frames ``indices`` (default all) of an ``animate.Animation`` with
     ``renderer`` (a ``render.Renderer``); yields ``uint8 (H, W, 3)`` images. ``markers``:
@@ -460,6 +461,11 @@ def animation_frames(
     out); ``labels`` (``labels.Labels``): the label at each frame's time is captioned.
     A renderer with the ``midsagittal`` view gets, whatever ``markers`` says, the
     measured pellets with a trail of their last ``TRAIL_S`` seconds and the time.
+    ``helper_thread``: draw each frame's OpenGL views in this thread and its 2D
+    part (midsagittal view, caption) in a helper thread while the next frame's views are
+    drawn (the same bytes); it pays only where a core is free: on 2 cores OpenGL's own
+    threads and ffmpeg keep both busy and the helper thread was slower in
+    ``benchmarks/bench_animation.py``, so the default is one step.
     The progress bar goes to stderr."""
     import sys
 
@@ -501,7 +507,7 @@ def animation_frames(
 
     shown_indices = tqdm(indices, desc="rendering", unit="frame", file=sys.stderr,
                          disable=not progress, leave=False)
-    if not hasattr(renderer, "render_gl"):  # any object with render(): one step
+    if not (helper_thread and hasattr(renderer, "render_gl")):  # one step
         for k in shown_indices:
             points, kwargs = frame(k)
             yield renderer.render(points, **kwargs)

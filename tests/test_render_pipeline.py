@@ -1,7 +1,7 @@
 """Rendering and encoding in step (issue 23, part 3): the two-step frame loop (OpenGL in
-this thread, each frame's midsagittal drawing and caption in a helper thread) gives the
-same frames, byte for byte, as drawing each frame whole; errors in the helper reach the
-caller; the video writer's thread hands ffmpeg every frame."""
+this thread, each frame's midsagittal drawing and caption in a helper thread, an option)
+gives the same frames, byte for byte, as drawing each frame whole (the default); errors
+in the helper reach the caller; the video writer's thread hands ffmpeg every frame."""
 
 import threading
 from pathlib import Path
@@ -17,14 +17,6 @@ from cassi_fit.options import VIEWS
 from cassi_fit.render import Renderer
 
 pytestmark = pytest.mark.render
-
-
-class OneStep:
-    """The renderer seen through ``render`` alone: each frame drawn whole (the old path)."""
-
-    def __init__(self, renderer):
-        self.views = renderer.views
-        self.render = renderer.render
 
 
 @pytest.fixture(scope="module")
@@ -51,8 +43,8 @@ def test_two_steps_give_the_same_frames_byte_for_byte(run, renderer):
     _, _, animation = run
     options = {"subject": "JWT", "task": "sentence", "markers": True, "progress": False,
                "indices": range(0, animation.n_frames, 9)}
-    two = list(video.animation_frames(animation, renderer, **options))
-    one = list(video.animation_frames(animation, OneStep(renderer), **options))
+    two = list(video.animation_frames(animation, renderer, helper_thread=True, **options))
+    one = list(video.animation_frames(animation, renderer, **options))  # the default
     assert len(two) == len(one) == len(options["indices"]) > video.PIPELINE_DEPTH
     for a, b in zip(two, one, strict=True):
         assert a.dtype == np.uint8 and a.shape == b.shape
@@ -71,14 +63,15 @@ def test_an_error_in_the_helper_thread_reaches_the_caller(run, renderer, monkeyp
 
     monkeypatch.setattr(renderer, "finish_frame", broken)
     with pytest.raises(ValueError, match="the 2D drawing failed"):
-        list(video.animation_frames(animation, renderer, progress=False, indices=range(8)))
+        list(video.animation_frames(animation, renderer, progress=False, indices=range(8),
+                                    helper_thread=True))
     assert calls and calls[0] != threading.main_thread().name
     assert not [t for t in threading.enumerate() if t.name == "cassi-finish-frames"]
 
 
 def test_a_consumer_that_stops_early_stops_the_helper(run, renderer):
     _, _, animation = run
-    frames = video.animation_frames(animation, renderer, progress=False)
+    frames = video.animation_frames(animation, renderer, progress=False, helper_thread=True)
     next(frames)
     frames.close()
     assert not [t for t in threading.enumerate() if t.name == "cassi-finish-frames"]
