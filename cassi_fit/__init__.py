@@ -30,11 +30,12 @@ if TYPE_CHECKING:
     from .animate import Animation as Animation
     from .calibrate import calibrate_dataset as calibrate_dataset
     from .calibrate import calibrate_subject as calibrate_subject
-    from .calibrate import calibration_choice as calibration_choice
-    from .calibrate import load_calibrations as load_calibrations
-    from .calibrate import read_calibration as read_calibration
-    from .calibrate import write_calibration as write_calibration
-    from .conformation import Calibration as Calibration
+    from .calibration import Calibration as Calibration
+    from .calibration import CalibrationWarning as CalibrationWarning
+    from .calibration import calibration_choice as calibration_choice
+    from .calibration import load_calibrations as load_calibrations
+    from .calibration import read_calibration as read_calibration
+    from .calibration import write_calibration as write_calibration
     from .corpus import CorpusItem as CorpusItem
     from .corpus import CorpusRun as CorpusRun
     from .corpus import animate_corpus as animate_corpus
@@ -252,15 +253,16 @@ _PUBLIC = {
     "Solver": "jaw_fit",
     "jaw_diagnostics": "jaw_fit",
     "JawDiagnostics": "jaw_fit",
-    # conformation (fitting)
-    "Calibration": "conformation",
+    # calibration (fitting): the record and its file
+    "Calibration": "calibration",
+    "CalibrationWarning": "calibration",
+    "read_calibration": "calibration",
+    "write_calibration": "calibration",
+    "load_calibrations": "calibration",
+    "calibration_choice": "calibration",
     # calibrate (fitting)
     "calibrate_subject": "calibrate",
     "calibrate_dataset": "calibrate",
-    "read_calibration": "calibrate",
-    "write_calibration": "calibrate",
-    "load_calibrations": "calibrate",
-    "calibration_choice": "calibrate",
     # initialize (pipeline)
     "initialize": "initialize",
     "SubjectState": "initialize",
@@ -299,7 +301,8 @@ _PUBLIC = {
 _MODULES = ("animate", "deform", "rigid", "synth")
 
 __all__ = [
-    "Animation", "Calibration", "CassiError", "ClosedForm", "CorpusItem", "CorpusRun",
+    "Animation", "Calibration", "CalibrationWarning", "CassiError", "ClosedForm", "CorpusItem",
+    "CorpusRun",
     "DEFAULT_HEAD_MEASURES", "DataFormatError", "Dataset", "DefaultHeadMeasuresWarning",
     "DegenerateGeometryError", "Dogleg", "EvaluationResult", "FaceModel", "FaceParams",
     "FixedPivot", "FrameFit", "GaussNewton", "HeadMeasures", "InvalidChoiceError", "JAW_METHODS",
