@@ -379,10 +379,9 @@ def _pressing_on_a_bound(x, gradient, free):
     (``BOUND_HIT_FRACTION`` of) their bound while the cost still falls outwards (the
     gradient's sign opposite to the unknown's: the constrained optimum is on the bound)."""
     theta, log_scale = (np.asarray(a, np.float64) for a in bounded_jaw(x))
-    zero = jax.tree.map(np.zeros_like, Unknowns.zeros(np.float64))
-    near = eqx.tree_at(lambda u: (u.jaw_theta, u.log_jaw_scale), zero,
-                       (np.abs(theta) / JAW_TURN_BOUND_RAD,
-                        np.abs(log_scale) / math.log(JAW_SCALE_BOUND)))
+    zero = np.zeros(())
+    near = Unknowns(zero, zero, zero, zero, np.abs(theta) / JAW_TURN_BOUND_RAD,
+                    np.abs(log_scale) / math.log(JAW_SCALE_BOUND))
     near = np.asarray(ravel_pytree(near)[0]) >= BOUND_HIT_FRACTION
     u = np.asarray(ravel_pytree(x)[0], np.float64)
     outwards = np.asarray(gradient, np.float64) * u < 0
@@ -571,8 +570,9 @@ def calibrate_dataset(
     model: FaceModel | None = None, progress: bool = False,
 ) -> dict[str, Calibration]:
     """Calibrate every subject of a ``dataset.Dataset`` (or its folder): subject ->
-    Calibration. ``tasks``: the tasks whose first valid lines are used (default: all the
-    subject's tasks)."""
+    Calibration. ``tasks``: the tasks whose first valid lines are used, matched
+    case-insensitively (default: all the subject's tasks). Each subject's problems are
+    warned (``CalibrationWarning``) as :func:`calibrate_subject` does."""
     import warnings
 
     from .dataset import Dataset
@@ -590,7 +590,8 @@ def calibrate_dataset(
 
         iterator = tqdm(names, desc="calibrating", unit="subject")
     for subject in iterator:
-        wanted = ds.tasks(subject) if tasks is None else [t for t in tasks if t in ds.tasks(subject)]
+        have = ds.tasks(subject)  # tasks match case-insensitively, as cassi calibrate's
+        wanted = have if tasks is None else [t for t in have if t in {x.lower() for x in tasks}]
         if not wanted:
             raise MissingDataError(f"{ds.root}: subject {subject} has none of the tasks {tasks}")
         with warnings.catch_warnings():

@@ -157,9 +157,10 @@ class Calibration:
                            if name in self.bounds_hit)
             out.append(f"{self.subject}: the jaw shape reached its anatomical bound ({at}; "
                        f"bounds {1 / JAW_SCALE_BOUND:.3f}..{JAW_SCALE_BOUND:.3f}, +-"
-                       f"{math.degrees(JAW_TURN_BOUND_RAD):.0f} deg): its Headmeasures "
-                       "gonion and gnathion ask for more than an adult jaw of the model's "
-                       "proportions (check them); the jaw is drawn at the bound")
+                       f"{math.degrees(JAW_TURN_BOUND_RAD):.0f} deg, flagged from "
+                       f"{BOUND_HIT_FRACTION:.0%} of them): its Headmeasures gonion and "
+                       "gnathion ask for a jaw at or beyond the edge of adult proportions for "
+                       "the model (check them); the jaw is drawn within the bound")
         return out
 
     def caveats(self) -> list[str]:

@@ -147,6 +147,31 @@ def test_separate_calibration_reproduces_the_documented_recovery(corpus, separat
         assert cal.bounds_hit == ()  # the synthetic jaws are adult jaws (issue 14 bounds)
 
 
+LIMITS = ROOT / "docs" / "generated" / "calibration_limits.md"
+
+
+def test_the_documented_limits_are_this_calibrations(corpus, separate):
+    """docs/generated/calibration_limits.md (experiments/calibration_limits.py), rows
+    S01-S03: the jaw stage as solved now, the lower lip's error and its reported range,
+    to their printed precision; so a change to the calibration not followed by ``make
+    experiments`` fails here."""
+    jaw, _, lower = _doc_tables(LIMITS)
+    jaw, lower = {r["subject"]: r for r in jaw}, {r["subject"]: r for r in lower}
+    model = load_model()
+    for cal in separate.values():
+        row = jaw[cal.subject]
+        assert row["now: converged"] == "true" and row["now: bounds hit"] == ""
+        assert cal.params["jaw_shape_scale"][0] == pytest.approx(
+            float(row["now: x scale"]), abs=_half_unit(row["now: x scale"]))
+        row = lower[cal.subject]
+        error = _errors(corpus, cal, model)["lower_mm"]
+        assert error == pytest.approx(float(row["error mm"]), abs=0.006)
+        low, high = cal.lower_lip_bias
+        assert low == pytest.approx(float(row["range low mm"]), abs=0.006)
+        assert high == pytest.approx(float(row["range high mm"]), abs=0.006)
+        assert (low <= error <= high) == (row["error inside"] == "true")
+
+
 def test_separate_scale_is_p_over_the_median_first_line_jaw_pellet_distance(corpus, separate):
     model = load_model()
     v = np.asarray(model.vertices)[:, :2]

@@ -305,6 +305,19 @@ def test_calibration_choice_needs_a_subject_for_a_folder(tmp_path):
     assert calibration_path(tmp_path, "s01").name == "S01.calibration.json"
 
 
+def test_the_documented_schema_is_the_codes():
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    sys.path.insert(0, str(root / "experiments"))
+    import calibration_limits
+
+    documented = (root / "docs" / "generated" / "calibration_schema.md").read_text(
+        encoding="utf-8")
+    assert calibration_limits.schema_markdown() == documented
+
+
 # ---- the command line: cassi calibrate's exit status -------------------------------------
 
 
