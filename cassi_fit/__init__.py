@@ -30,6 +30,7 @@ if TYPE_CHECKING:
     from .animate import Animation as Animation
     from .calibrate import calibrate_dataset as calibrate_dataset
     from .calibrate import calibrate_subject as calibrate_subject
+    from .calibrate_corpus import calibrate_corpus as calibrate_corpus
     from .calibration import Calibration as Calibration
     from .calibration import CalibrationWarning as CalibrationWarning
     from .calibration import calibration_choice as calibration_choice
@@ -38,20 +39,18 @@ if TYPE_CHECKING:
     from .calibration import write_calibration as write_calibration
     from .corpus import CorpusItem as CorpusItem
     from .corpus import CorpusRun as CorpusRun
-    from .corpus import animate_corpus as animate_corpus
-    from .corpus import calibrate_corpus as calibrate_corpus
     from .corpus import dataset_items as dataset_items
-    from .corpus import evaluate_corpus as evaluate_corpus
-    from .corpus import jaw_corpus as jaw_corpus
     from .corpus import run_corpus as run_corpus
     from .dataset import Dataset as Dataset
     from .dataset import DefaultHeadMeasuresWarning as DefaultHeadMeasuresWarning
     from .dataset import Recording as Recording
     from .dataset import load_recording as load_recording
+    from .dataset import recording_from_array as recording_from_array
     from .deform import FaceParams as FaceParams
     from .deform import default_params as default_params
     from .deform import model_pellets as model_pellets
     from .deform import vertex_normals as vertex_normals
+    from .ema import SensorReport as SensorReport
     from .errors import CassiError as CassiError
     from .errors import DataFormatError as DataFormatError
     from .errors import DegenerateGeometryError as DegenerateGeometryError
@@ -61,6 +60,7 @@ if TYPE_CHECKING:
     from .errors import RenderingUnavailableError as RenderingUnavailableError
     from .evaluate import EvaluationResult as EvaluationResult
     from .evaluate import compare as compare
+    from .evaluate import evaluate_corpus as evaluate_corpus
     from .evaluate import evaluate_dataset as evaluate_dataset
     from .evaluate import evaluate_recording as evaluate_recording
     from .evaluate import write_report as write_report
@@ -74,11 +74,8 @@ if TYPE_CHECKING:
     from .headmeasures import HeadMeasures as HeadMeasures
     from .headmeasures import read_headmeasures as read_headmeasures
     from .headmeasures import write_headmeasures as write_headmeasures
-    from .initialize import Mode as Mode
     from .initialize import SubjectState as SubjectState
-    from .initialize import animate_recording as animate_recording
     from .initialize import initialize as initialize
-    from .initialize import mode_named as mode_named
     from .jaw import closed_form as closed_form
     from .jaw import closed_form_paper as closed_form_paper
     from .jaw_fit import ClosedForm as ClosedForm
@@ -97,6 +94,7 @@ if TYPE_CHECKING:
     from .jaw_fit import jaw_from_track as jaw_from_track
     from .jaw_fit import jaw_method as jaw_method
     from .jaw_fit import jaw_solver as jaw_solver
+    from .jaw_table import jaw_corpus as jaw_corpus
     from .labels import Labels as Labels
     from .labels import labels_for as labels_for
     from .labels import read_lab as read_lab
@@ -105,6 +103,8 @@ if TYPE_CHECKING:
     from .labels import segment_summary as segment_summary
     from .labels import write_lab as write_lab
     from .labels import write_textgrid as write_textgrid
+    from .mistracks import MistrackReport as MistrackReport
+    from .mistracks import mistrack_report as mistrack_report
     from .options import JAW_METHODS as JAW_METHODS
     from .options import SOLVERS as SOLVERS
     from .outlines import read_outline as read_outline
@@ -114,11 +114,12 @@ if TYPE_CHECKING:
     from .pellets import JAW_PELLETS as JAW_PELLETS
     from .pellets import PELLET_NAMES as PELLET_NAMES
     from .pellets import MistrackedFirstLineWarning as MistrackedFirstLineWarning
-    from .pellets import first_clean_line as first_clean_line
     from .pellets import first_valid_line as first_valid_line
     from .pellets import pellet_index as pellet_index
     from .pharynx import build_pharynx as build_pharynx
     from .pharynx import with_pharynx as with_pharynx
+    from .pipeline import RecordingRun as RecordingRun
+    from .pipeline import run_recording as run_recording
     from .quality import QualityReport as QualityReport
     from .quality import detect_mistracks as detect_mistracks
     from .quality import quality_report as quality_report
@@ -126,7 +127,10 @@ if TYPE_CHECKING:
     from .render import midsagittal_figure as midsagittal_figure
     from .reports import jaw_comparison_plot as jaw_comparison_plot
     from .reports import write_penetration_csv as write_penetration_csv
-    from .status import STATUS_LABELS as STATUS_LABELS
+    from .run_spec import CalibrationFiles as CalibrationFiles
+    from .run_spec import RunSpec as RunSpec
+    from .run_spec import run_spec as run_spec
+    from .status import SolverResult as SolverResult
     from .status import Status as Status
     from .synth import TASKS as TASKS
     from .synth import JawTruth as JawTruth
@@ -141,12 +145,13 @@ if TYPE_CHECKING:
     from .tongue import tongue_volumes as tongue_volumes
     from .txy import PelletTrack as PelletTrack
     from .txy import TimeGapWarning as TimeGapWarning
-    from .txy import first_valid_frame as first_valid_frame
     from .txy import read_txy as read_txy
     from .txy import require_tracked as require_tracked
     from .txy import write_txy as write_txy
+    from .video import animate_corpus as animate_corpus
     from .video import subject_traces as subject_traces
     from .video import write_animation as write_animation
+    from .video import write_recording_video as write_recording_video
 
 _PUBLIC = {
     # errors (base)
@@ -159,7 +164,7 @@ _PUBLIC = {
     "InvalidChoiceError": "errors",
     # status (base)
     "Status": "status",
-    "STATUS_LABELS": "status",
+    "SolverResult": "status",
     # options (base)
     "JAW_METHODS": "options",
     "SOLVERS": "options",
@@ -168,13 +173,11 @@ _PUBLIC = {
     "JAW_PELLETS": "pellets",
     "pellet_index": "pellets",
     "first_valid_line": "pellets",
-    "first_clean_line": "pellets",
     "MistrackedFirstLineWarning": "pellets",
     # txy (data)
     "PelletTrack": "txy",
     "read_txy": "txy",
     "write_txy": "txy",
-    "first_valid_frame": "txy",
     "require_tracked": "txy",
     "TimeGapWarning": "txy",
     # outlines (data)
@@ -189,11 +192,17 @@ _PUBLIC = {
     "Dataset": "dataset",
     "Recording": "dataset",
     "load_recording": "dataset",
+    "recording_from_array": "dataset",
     "DefaultHeadMeasuresWarning": "dataset",
+    # ema (data): articulograph files
+    "SensorReport": "ema",
     # quality (data)
     "QualityReport": "quality",
     "quality_report": "quality",
     "detect_mistracks": "quality",
+    # mistracks (data)
+    "MistrackReport": "mistracks",
+    "mistrack_report": "mistracks",
     # gaps (data)
     "repair": "gaps",
     # labels (data)
@@ -266,9 +275,12 @@ _PUBLIC = {
     # initialize (pipeline)
     "initialize": "initialize",
     "SubjectState": "initialize",
-    "animate_recording": "initialize",
-    "Mode": "initialize",
-    "mode_named": "initialize",
+    # run_spec and pipeline: one run's every choice, and the one runner
+    "RunSpec": "run_spec",
+    "run_spec": "run_spec",
+    "CalibrationFiles": "run_spec",
+    "run_recording": "pipeline",
+    "RecordingRun": "pipeline",
     # animate (pipeline)
     "Animation": "animate",
     # render (outputs)
@@ -276,6 +288,7 @@ _PUBLIC = {
     "midsagittal_figure": "render",
     # video (outputs)
     "write_animation": "video",
+    "write_recording_video": "video",
     "subject_traces": "video",
     # reports (outputs)
     "write_penetration_csv": "reports",
@@ -289,10 +302,10 @@ _PUBLIC = {
     "compare": "evaluate",
     # corpus (runs)
     "run_corpus": "corpus",
-    "jaw_corpus": "corpus",
-    "evaluate_corpus": "corpus",
-    "calibrate_corpus": "corpus",
-    "animate_corpus": "corpus",
+    "jaw_corpus": "jaw_table",
+    "evaluate_corpus": "evaluate",
+    "calibrate_corpus": "calibrate_corpus",
+    "animate_corpus": "video",
     "dataset_items": "corpus",
     "CorpusItem": "corpus",
     "CorpusRun": "corpus",
@@ -307,24 +320,28 @@ __all__ = [
     "DegenerateGeometryError", "Dogleg", "EvaluationResult", "FaceModel", "FaceParams",
     "FixedPivot", "FrameFit", "GaussNewton", "HeadMeasures", "InvalidChoiceError", "JAW_METHODS",
     "JAW_PELLETS", "JawDiagnostics", "JawFit", "JawMethod", "JawTruth", "Labels",
-    "LevenbergMarquardt", "MATERIALS", "MissingDataError", "MistrackedFirstLineWarning", "Mode",
+    "LevenbergMarquardt", "MATERIALS", "MissingDataError", "MistrackReport",
+    "MistrackedFirstLineWarning",
     "OutputExistsError", "PELLET_NAMES", "PelletTrack", "QualityReport", "Recording", "Renderer",
-    "RenderingUnavailableError", "SOLVERS", "STATUS_LABELS", "SmoothPivot", "Solver", "Status",
+    "RenderingUnavailableError", "SOLVERS", "SmoothPivot", "Solver", "SolverResult", "Status",
     "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning", "Topology", "animate",
-    "animate_corpus", "animate_recording", "build_palate", "calibrate_corpus", "calibrate_dataset",
+    "animate_corpus", "build_palate", "calibrate_corpus", "calibrate_dataset",
     "calibrate_subject", "calibration_choice", "closed_form", "closed_form_paper", "compare",
     "dataset_items", "default_params", "deform", "detect_mistracks", "ensure_default_corpus",
-    "evaluate_corpus", "evaluate_dataset", "evaluate_recording", "first_clean_line",
-    "first_valid_frame", "first_valid_line", "fit_jaw", "generate_corpus", "initialize",
+    "evaluate_corpus", "evaluate_dataset", "evaluate_recording", "first_valid_line", "fit_jaw",
+    "generate_corpus", "initialize",
     "jaw_comparison_plot", "jaw_corpus", "jaw_diagnostics", "jaw_from_track", "jaw_method",
     "jaw_solver", "labels_for", "load_anatomy", "load_calibrations", "load_model",
-    "load_recording", "load_truth", "make_subject", "midsagittal_figure", "mode_named",
+    "load_recording", "load_truth", "make_subject", "midsagittal_figure", "mistrack_report",
     "model_pellets", "pellet_index",
     "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
-    "read_outline", "read_textgrid", "read_txy", "repair", "require_tracked", "rigid",
+    "read_outline", "read_textgrid", "read_txy", "recording_from_array", "repair",
+    "require_tracked", "rigid", "SensorReport",
     "run_corpus", "segment_summary", "subject_traces", "synth", "synth_recording",
     "tongue_volume", "tongue_volumes", "vertex_normals", "with_palate", "build_pharynx",
     "with_pharynx",
+    "RunSpec", "run_spec", "CalibrationFiles", "run_recording", "RecordingRun",
+    "write_recording_video",
     "write_animation", "write_calibration", "write_headmeasures", "write_lab", "write_outline",
     "write_penetration_csv", "write_report", "write_table", "write_textgrid", "write_txy",
 ]

@@ -570,11 +570,13 @@ def calibrate_dataset(
     model: FaceModel | None = None, progress: bool = False,
 ) -> dict[str, Calibration]:
     """Calibrate every subject of a ``dataset.Dataset`` (or its folder): subject ->
-    Calibration. ``tasks``: the tasks whose first valid lines are used, matched
-    case-insensitively (default: all the subject's tasks). Each subject's problems are
-    warned (``CalibrationWarning``) as :func:`calibrate_subject` does."""
+    Calibration. ``tasks``: the tasks whose first valid lines are used, chosen as every
+    dataset run chooses them (``corpus.chosen_tasks``; default: all the subject's tasks).
+    Each subject's problems are warned (``CalibrationWarning``) as
+    :func:`calibrate_subject` does."""
     import warnings
 
+    from .corpus import chosen_tasks
     from .dataset import Dataset
     from .face_model import load_model
 
@@ -590,8 +592,7 @@ def calibrate_dataset(
 
         iterator = tqdm(names, desc="calibrating", unit="subject")
     for subject in iterator:
-        have = ds.tasks(subject)  # tasks match case-insensitively, as cassi calibrate's
-        wanted = have if tasks is None else [t for t in have if t in {x.lower() for x in tasks}]
+        wanted = chosen_tasks(ds, subject, tasks)  # the one rule of every dataset run
         if not wanted:
             raise MissingDataError(f"{ds.root}: subject {subject} has none of the tasks {tasks}")
         with warnings.catch_warnings():

@@ -322,12 +322,13 @@ def test_the_documented_schema_is_the_codes():
 
 
 def _fake_corpus_run(monkeypatch, tmp_path, cals):
-    """``cassi calibrate`` with ``corpus.calibrate_corpus`` replaced by one returning
-    ``cals`` (its exit status and printing are what is tested, not the fit)."""
-    from cassi_fit import corpus
+    """``cassi calibrate`` with ``calibrate_corpus`` replaced by one returning ``cals``
+    (its exit status and printing are what is tested, not the fit)."""
+    import importlib
 
+    module = importlib.import_module("cassi_fit.calibrate_corpus")  # the name is a function too
     run = SimpleNamespace(workers=1, resumed=0, results=[], failure_summary=lambda: "")
-    monkeypatch.setattr(corpus, "calibrate_corpus", lambda *a, **k: (run, cals))
+    monkeypatch.setattr(module, "calibrate_corpus", lambda *a, **k: (run, cals))
     (tmp_path / "data").mkdir()
     return ["calibrate", str(tmp_path / "data"), "--out", str(tmp_path / "out"),
             "--subjects", ",".join(cals), "--quiet"]

@@ -56,8 +56,8 @@ def _words(text):
 def run(args) -> int:
     import warnings
 
+    from cassi_fit.calibrate_corpus import calibrate_corpus
     from cassi_fit.calibration import CalibrationWarning, calibration_path
-    from cassi_fit.corpus import calibrate_corpus
     from cassi_fit.dataset import Dataset
     from cassi_fit.errors import CassiError, OutputExistsError
 

@@ -4,12 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .animate import (
-    add_model_arguments,
-    add_recording_argument,
-    animate_recording,
-    load_recording_args,
-)
+from .animate import add_model_arguments, add_recording_argument, load_recording_args, run_args
 
 SUFFIXES = (".glb", ".obj", ".ply")
 
@@ -66,10 +61,10 @@ def run(args) -> int:
         raise CassiError(f"--out {out}: must end in {', '.join(SUFFIXES)}")
     if args.max_keyframes < 0 or args.max_keyframes == 1:
         raise CassiError(f"--max-keyframes must be 0 or at least 2, got {args.max_keyframes}")
-    recording = load_recording_args(args.recording)
+    recording = load_recording_args(args.recording, args)
     check_outputs([out], overwrite=args.force)  # before any work: never an input or data file
-    state, animation = animate_recording(recording, args)
-    model = state.model
+    run = run_args(recording, args)
+    animation, model = run.animation, run.state.model
     if suffix == ".glb":
         written = export_glb(
             out,
