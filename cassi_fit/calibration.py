@@ -15,7 +15,7 @@ plausible ranges, the calibration's own bounds among them); the folder layout
 subject's conformation in ``cassi_fit.conformation``. docs/CALIBRATION.md, "The file".
 
 A file that is not a calibration gets one line naming the file, the line where the JSON
-has one, and the field: ``S01.calibration.json:5: scale: 1000 is outside the plausible
+has one, and the field: ``S01.calibration.json:4: scale: 1000 is outside the plausible
 range 0.5 to 2 (model mm per subject mm)``. Any encoding a text editor writes is read:
 UTF-8 with or without a byte-order mark, UTF-16 with one (``_io.read_json``).
 """
