@@ -37,6 +37,7 @@ bench: $(STAMP)
 
 experiments: $(STAMP)
 	$(BIN)/python experiments/jaw_comparison.py --out experiments/output --docs docs/generated --force
+	$(BIN)/python experiments/single_sensor_jaw.py --out experiments/output --docs docs/generated --force
 	$(BIN)/python experiments/synthetic_realism.py --out experiments/output --docs docs/generated --force
 	$(BIN)/python experiments/subject_fitting.py --out experiments/output --docs docs/generated --force
 	$(BIN)/python experiments/calibration_limits.py --out experiments/output --docs docs/generated --force

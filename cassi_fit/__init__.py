@@ -44,6 +44,7 @@ if TYPE_CHECKING:
     from .dataset import Dataset as Dataset
     from .dataset import DefaultHeadMeasuresWarning as DefaultHeadMeasuresWarning
     from .dataset import Recording as Recording
+    from .dataset import SpecialFileWarning as SpecialFileWarning
     from .dataset import load_recording as load_recording
     from .dataset import recording_from_array as recording_from_array
     from .deform import FaceParams as FaceParams
@@ -79,14 +80,17 @@ if TYPE_CHECKING:
     from .jaw import closed_form as closed_form
     from .jaw import closed_form_paper as closed_form_paper
     from .jaw_fit import ClosedForm as ClosedForm
+    from .jaw_fit import CoupledRotation as CoupledRotation
     from .jaw_fit import Dogleg as Dogleg
     from .jaw_fit import FixedPivot as FixedPivot
     from .jaw_fit import FrameFit as FrameFit
     from .jaw_fit import GaussNewton as GaussNewton
+    from .jaw_fit import JawCoupling as JawCoupling
     from .jaw_fit import JawDiagnostics as JawDiagnostics
     from .jaw_fit import JawFit as JawFit
     from .jaw_fit import JawMethod as JawMethod
     from .jaw_fit import LevenbergMarquardt as LevenbergMarquardt
+    from .jaw_fit import PivotPrior as PivotPrior
     from .jaw_fit import SmoothPivot as SmoothPivot
     from .jaw_fit import Solver as Solver
     from .jaw_fit import fit_jaw as fit_jaw
@@ -94,6 +98,7 @@ if TYPE_CHECKING:
     from .jaw_fit import jaw_from_track as jaw_from_track
     from .jaw_fit import jaw_method as jaw_method
     from .jaw_fit import jaw_solver as jaw_solver
+    from .jaw_fit import learn_jaw_coupling as learn_jaw_coupling
     from .jaw_table import jaw_corpus as jaw_corpus
     from .labels import Labels as Labels
     from .labels import labels_for as labels_for
@@ -194,6 +199,7 @@ _PUBLIC = {
     "load_recording": "dataset",
     "recording_from_array": "dataset",
     "DefaultHeadMeasuresWarning": "dataset",
+    "SpecialFileWarning": "dataset",
     # ema (data): articulograph files
     "SensorReport": "ema",
     # quality (data)
@@ -262,6 +268,10 @@ _PUBLIC = {
     "Solver": "jaw_fit",
     "jaw_diagnostics": "jaw_fit",
     "JawDiagnostics": "jaw_fit",
+    "CoupledRotation": "jaw_fit",
+    "PivotPrior": "jaw_fit",
+    "JawCoupling": "jaw_fit",
+    "learn_jaw_coupling": "jaw_fit",
     # calibration (fitting): the record and its file
     "Calibration": "calibration",
     "CalibrationWarning": "calibration",
@@ -315,7 +325,7 @@ _MODULES = ("animate", "deform", "rigid", "synth")
 
 __all__ = [
     "Animation", "Calibration", "CalibrationWarning", "CassiError", "ClosedForm", "CorpusItem",
-    "CorpusRun",
+    "CorpusRun", "CoupledRotation", "JawCoupling", "PivotPrior", "learn_jaw_coupling",
     "DEFAULT_HEAD_MEASURES", "DataFormatError", "Dataset", "DefaultHeadMeasuresWarning",
     "DegenerateGeometryError", "Dogleg", "EvaluationResult", "FaceModel", "FaceParams",
     "FixedPivot", "FrameFit", "GaussNewton", "HeadMeasures", "InvalidChoiceError", "JAW_METHODS",
@@ -324,7 +334,8 @@ __all__ = [
     "MistrackedFirstLineWarning",
     "OutputExistsError", "PELLET_NAMES", "PelletTrack", "QualityReport", "Recording", "Renderer",
     "RenderingUnavailableError", "SOLVERS", "SmoothPivot", "Solver", "SolverResult", "Status",
-    "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning", "Topology", "animate",
+    "SpecialFileWarning", "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning",
+    "Topology", "animate",
     "animate_corpus", "build_palate", "calibrate_corpus", "calibrate_dataset",
     "calibrate_subject", "calibration_choice", "closed_form", "closed_form_paper", "compare",
     "dataset_items", "default_params", "deform", "detect_mistracks", "ensure_default_corpus",

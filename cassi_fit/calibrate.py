@@ -158,6 +158,10 @@ def _first_line(recording):
     """``(first index, pellets (8, 2) mm with NaN for pellets never tracked)``."""
     source = recording_source(recording)
     first, tracked = first_valid_line(recording.track, source)
+    missing = [name for name in ("MNI", "MNM") if name not in tracked]
+    if missing:  # one jaw sensor starts an animation, but p/d is the two sensors' distance
+        raise MissingDataError(f"{source}: calibration needs both jaw pellets (the scale p/d "
+                               f"is their distance); {', '.join(missing)} is never tracked")
     pellets = np.array(recording.track.positions[first], np.float64)
     for j, name in enumerate(PELLET_NAMES):
         if name not in tracked:

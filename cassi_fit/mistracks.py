@@ -192,9 +192,15 @@ class MistrackReport:
         their reasons, e.g. ``"MNI:dropout T2:swap+order"`` (for a table's column)."""
         out = [""] * self.reasons.shape[0]
         for k in np.flatnonzero(self.flags.any(axis=1)):
-            out[k] = " ".join(f"{PELLET_NAMES[p]}:{reason_label(self.reasons[k, p])}"
-                              for p in np.flatnonzero(self.reasons[k]))
+            out[k] = mistrack_labels(self.reasons[k])
         return out
+
+
+def mistrack_labels(reasons: UInt[np.ndarray, " 8"]) -> str:
+    """One frame's mistracks as words: ``"MNI:dropout T2:swap+order"`` (``reasons``: the
+    frame's ``(8,)`` :class:`Reason` bits); ``""`` when none."""
+    return " ".join(f"{PELLET_NAMES[p]}:{reason_label(reasons[p])}"
+                    for p in np.flatnonzero(reasons))
 
 
 def mistrack_report(track: PelletTrackLike) -> MistrackReport:

@@ -55,7 +55,8 @@ OUTPUTS = ("calibration_jaw_stage.csv", "calibration_stall.csv", "calibration_lo
 DOC_TABLES = ("calibration_limits.md", "calibration_schema.md")
 JAW_FREE = ("jaw_theta", "log_jaw_scale")
 #: The real recordings' folder used when present (``--real``).
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "xrmb_jw11"
+REAL = next((p for p in (Path(__file__).resolve().parents[k] / "shared/data/xrmb_jw11"
+                         for k in (2, 3)) if p.is_dir()), None)
 JAW_HEADERS = {"scale": "p/d", "asked_x": "asked x", "once_converged": "once: converged",
                "once_u": "once: u", "once_x_scale": "once: x scale",
                "once_cost_mm2": "once: cost mm^2", "now_converged": "now: converged",
@@ -334,7 +335,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="experiments/output", help="folder for the CSVs")
     parser.add_argument("--docs", metavar="DIR", help="also write the documentation's "
                         "Markdown tables (DOC_TABLES) into DIR")
-    parser.add_argument("--real", metavar="DIR", default=str(REAL) if REAL.is_dir() else None,
+    parser.add_argument("--real", metavar="DIR", default=None if REAL is None else str(REAL),
                         help="a real dataset folder to calibrate too (default: the shared "
                         "JW11 recording when present); writes calibration_real.csv (and "
                         "calibration_real.md with --docs)")

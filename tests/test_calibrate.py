@@ -224,6 +224,18 @@ def test_the_penalty_keeps_an_implausible_lip_out_of_the_teeth(corpus):
     assert held.upper_lip_thickness > free.upper_lip_thickness
 
 
+def test_one_jaw_sensor_cannot_give_the_scale_and_is_refused_in_one_line(corpus):
+    rec = _recordings(corpus, "S01")[0]
+    valid = np.array(rec.track.valid)
+    valid[:, MNM] = False  # an articulograph's one jaw sensor: enough to animate, not to scale
+    positions = np.where(valid, np.asarray(rec.track.positions), np.nan)
+    one = dataclasses.replace(rec, track=dataclasses.replace(rec.track, valid=valid,
+                                                             positions=positions))
+    with pytest.raises(MissingDataError, match=r"calibration needs both jaw pellets .*MNM is "
+                                               "never tracked"):
+        calibrate.calibrate_subject([one])
+
+
 def test_a_jaw_beyond_its_bound_is_held_there_and_the_fit_converges(corpus, monkeypatch):
     """S09's stall, made on purpose: S01's Headmeasures gonion moved 20 mm back asks for a
     jaw longer than JAW_SCALE_BOUND allows. The bounded jaw-shape stage then walks out along
