@@ -52,6 +52,7 @@ if TYPE_CHECKING:
     from .deform import model_pellets as model_pellets
     from .deform import vertex_normals as vertex_normals
     from .ema import SensorReport as SensorReport
+    from .ema.synthetic import write_ema_corpus as write_ema_corpus
     from .errors import CassiError as CassiError
     from .errors import DataFormatError as DataFormatError
     from .errors import DegenerateGeometryError as DegenerateGeometryError
@@ -198,6 +199,7 @@ _PUBLIC = {
     "Recording": "dataset",
     "load_recording": "dataset",
     "recording_from_array": "dataset",
+    "write_ema_corpus": "ema.synthetic",
     "DefaultHeadMeasuresWarning": "dataset",
     "SpecialFileWarning": "dataset",
     # ema (data): articulograph files
@@ -346,7 +348,7 @@ __all__ = [
     "load_recording", "load_truth", "make_subject", "midsagittal_figure", "mistrack_report",
     "model_pellets", "pellet_index",
     "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
-    "read_outline", "read_textgrid", "read_txy", "recording_from_array", "repair",
+    "read_outline", "read_textgrid", "read_txy", "recording_from_array", "write_ema_corpus", "repair",
     "require_tracked", "rigid", "SensorReport",
     "run_corpus", "segment_summary", "subject_traces", "synth", "synth_recording",
     "tongue_volume", "tongue_volumes", "vertex_normals", "with_palate", "build_pharynx",
