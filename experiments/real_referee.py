@@ -45,8 +45,8 @@ reference frame excluded:
 Statistics: the median and 95th percentile of the per-frame errors, per recording and
 pooled over a dataset's recordings (frames pooled), each with a 95 % percentile-bootstrap
 interval: ``BOOTSTRAP`` resamples; within a recording a moving-block bootstrap over frames
-(blocks of ``BLOCK_FRAMES`` consecutive frames: neighbouring frames share movement and
-noise); pooled, subjects resampled with replacement (all of a chosen subject's recordings)
+(blocks of ``BLOCK_S`` seconds of consecutive scored frames: neighbouring frames share
+movement and noise); pooled, subjects resampled with replacement (all of a chosen subject's recordings)
 and then blocks within each recording. Paired comparisons: a method's statistic minus a
 baseline's on the same resampled frames, with its interval; ``better``/``worse`` only where
 the interval excludes 0, else ``tie``. Every resample is seeded from the names (dataset,
@@ -68,10 +68,17 @@ import zlib
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
+from cassi_fit import rigid
+
 BOOTSTRAP = 1000
-BLOCK_FRAMES = 50  # 0.34 s at 145.6 Hz
+BLOCK_S = 0.34  # bootstrap block length, s (50 frames at 145.6 Hz)
+PAD_FRAMES = 512  # tracks padded (untracked) to a multiple of this many frames
+TONGUE_STRIDE = 3  # every 3rd line animated for the tongue (48.5 Hz)
+TONGUE_METRICS = ("surface", "site", "along")
 LEVEL = 95.0
 STATISTICS = {"median": 50.0, "p95": 95.0}
 JAW = ("MNI", "MNM")
@@ -81,7 +88,7 @@ HIDDEN_TONGUE = ("T2", "T3")
 TONGUE_MODELS = {"thick tongue (improved)": "improved", "flat tongue (cassi)": "cassi"}
 #: The lower lip's jaw weight of each weight set (``options.JAW_WEIGHTS``), as labels.
 LIP_MODELS = {"jaw weight (cassi)": "cassi", "jaw weight (parke)": "parke"}
-SYNTHETIC_TASKS = ("tp011", "tp020", "tp020_2", "tp040")  # the speech tasks
+SYNTHETIC_TASKS = ("tp011", "tp020", "tp040")  # the speech tasks (vcv, words, sentence)
 SYNTHETIC_LABEL = "synthetic"
 #: The issue's hand measurements on JW11 (issue 20): MNM from MNI, median and p95 (mm).
 ISSUE_JW11 = {
@@ -152,16 +159,18 @@ def angle_about(pivot: np.ndarray, reference: np.ndarray, current: np.ndarray) -
 def apply_motion(theta: np.ndarray, translation: np.ndarray, point: np.ndarray,
                  weight: float = 1.0) -> np.ndarray:
     """The point (2,) mm moved by the fraction ``weight`` of each motion ``p' = R(theta) p
-    + t`` (theta (n,) rad, translation (n, 2) mm; ``rigid.fractional``): (n, 2) mm."""
-    import jax
-    import jax.numpy as jnp
+    + t`` (theta (n,) rad, translation (n, 2) mm; ``rigid.fractional``, Parke's region
+    weights): (n, 2) mm. Compiled once per n (pass padded arrays)."""
+    return np.asarray(_moved(jnp.asarray(theta, float), jnp.asarray(translation, float),
+                             jnp.asarray(point, float), jnp.asarray(weight, float)))
 
-    from cassi_fit import rigid
 
+@jax.jit
+def _moved(theta, translation, point, weight):
     def one(th, t):
-        return rigid.apply(*rigid.fractional((th, t), weight), jnp.asarray(point, float))
+        return rigid.apply(*rigid.fractional((th, t), weight), point)
 
-    return np.asarray(jax.vmap(one)(jnp.asarray(theta, float), jnp.asarray(translation, float)))
+    return jax.vmap(one)(theta, translation)
 
 
 # -------------------------------------------------------------------------- recordings
@@ -182,39 +191,76 @@ def _ever(clean: np.ndarray, names: Iterable[str]) -> bool:
     return all(clean[:, _col(n)].sum() >= 2 for n in names)
 
 
+def padded(track, multiple: int = PAD_FRAMES):
+    """The track with untracked frames appended up to a multiple of ``multiple`` frames.
+
+    Fits and animations compile once per frame count; padding gives recordings of
+    similar length one count. The appended frames are never used (untracked) nor scored.
+    """
+    from cassi_fit.txy import PelletTrack
+
+    n = track.n_frames
+    extra = -n % multiple
+    step = float(np.median(np.diff(track.times))) if n > 1 else 6866e-6
+    shape = (extra, *track.positions.shape[1:])
+    return PelletTrack(np.concatenate([track.times, track.times[-1] + step * np.arange(1, extra + 1)]),
+                       np.concatenate([track.positions, np.full(shape, np.nan)]),
+                       np.concatenate([track.valid, np.zeros(shape, bool)]), track.path)
+
+
+def _frame_step(track) -> float:
+    return float(np.median(np.diff(track.times)))
+
+
 class PartResult:
     """One held-out test on one recording: per-frame errors (n,) mm of every predictor
-    (NaN where not scored), their roles, and the frames scored by all of them."""
+    (NaN where not scored), their roles, the frames scored by all of them, and the time
+    step (s) between those frames' neighbours (for the bootstrap's block length)."""
 
     def __init__(self, part: str, metric: str, errors: dict[str, np.ndarray],
-                 roles: dict[str, str]):
-        self.part, self.metric, self.roles = part, metric, roles
+                 roles: dict[str, str], step_s: float):
+        self.part, self.metric, self.roles, self.step_s = part, metric, roles, step_s
         stacked = np.stack([np.asarray(e, float) for e in errors.values()])
         self.frames = np.flatnonzero(np.isfinite(stacked).all(axis=0))
         self.errors = {k: np.asarray(v, float)[self.frames] for k, v in errors.items()}
 
+    @property
+    def block(self) -> int:
+        """Frames per bootstrap block: ``BLOCK_S`` seconds of this part's frames."""
+        return max(1, int(round(BLOCK_S / self.step_s)))
 
-def jaw_part(track, seen: str, single_sensor: Callable | None = None) -> list[PartResult]:
-    """The hidden-sensor test: ``seen`` jaw sensor in, the other predicted (mm)."""
+
+def two_pellet_fit(track):
+    """The fixed pivot fitted to both jaw pellets (``jaw_from_track`` on the padded track,
+    ``n_pad`` frames): ``(theta (n_pad,), translation (n_pad, 2), pivot (2,), ok (n,) bool
+    (usable frames of the track), reference_frame)``."""
     from cassi_fit.jaw_fit import jaw_from_track
     from cassi_fit.status import Status
 
+    n = track.n_frames
+    fit = jaw_from_track(padded(track), method="fixed-pivot")
+    ok = np.asarray(fit.status)[:n] <= Status.PIVOT_UNDEFINED
+    return fit.theta[:n], fit.translation[:n], fit.pivot[fit.reference_frame], ok, \
+        fit.reference_frame
+
+
+def jaw_part(track, seen: str, fit=None, single_sensor: Callable | None = None) -> list[PartResult]:
+    """The hidden-sensor test: ``seen`` jaw sensor in, the other predicted (mm).
+    ``fit``: :func:`two_pellet_fit` of the track (computed when None)."""
     hidden = JAW[1 - JAW.index(seen)]
     s, h = _col(seen), _col(hidden)
     clean = clean_values(track)
-    fit = jaw_from_track(track, method="fixed-pivot")
-    f0 = fit.reference_frame
-    usable = clean[:, s] & clean[:, h] & (np.asarray(fit.status) <= Status.PIVOT_UNDEFINED)
+    theta, translation, pivot, ok, f0 = two_pellet_fit(track) if fit is None else fit
+    usable = clean[:, s] & clean[:, h] & ok
     usable[f0] = False
     pos = track.positions
     predicted = {
         "static": np.broadcast_to(pos[f0, h], pos[:, h].shape),
         "translate": pos[f0, h] + pos[:, s] - pos[f0, s],
-        "two-pellet fixed pivot": apply_motion(fit.theta, fit.translation, pos[f0, h]),
+        "two-pellet fixed pivot": apply_motion(theta, translation, pos[f0, h])[:len(ok)],
+        "two-pellet pivot, seen angle": rotate_about(
+            pivot, angle_about(pivot, pos[f0, s], pos[:, s]), pos[f0, h]),
     }
-    pivot = fit.pivot[f0]
-    predicted["two-pellet pivot, seen angle"] = rotate_about(
-        pivot, angle_about(pivot, pos[f0, s], pos[:, s]), pos[f0, h])
     roles = {"static": "baseline", "translate": "baseline",
              "two-pellet fixed pivot": "reference (saw both)",
              "two-pellet pivot, seen angle": "reference (saw both)"}
@@ -224,14 +270,14 @@ def jaw_part(track, seen: str, single_sensor: Callable | None = None) -> list[Pa
     errors = {k: np.where(usable, point_errors(v, pos[:, h]), np.nan) for k, v in predicted.items()}
     order = [k for k in roles if roles[k] == "method"] + [k for k in roles if roles[k] != "method"]
     return [PartResult(f"jaw: {hidden} from {seen}", "position", {k: errors[k] for k in order},
-                       {k: roles[k] for k in order})]
+                       {k: roles[k] for k in order}, _frame_step(track))]
 
 
 def _hide(recording, name: str):
-    """The recording with pellet ``name`` never tracked (its values NaN)."""
+    """The recording, padded (:func:`padded`), with pellet ``name`` never tracked."""
     from cassi_fit.txy import PelletTrack
 
-    track = recording.track
+    track = padded(recording.track)
     valid = track.valid.copy()
     valid[:, _col(name)] = False
     masked = PelletTrack(track.times, track.positions, valid, track.path)
@@ -246,53 +292,59 @@ def tongue_contour(model) -> np.ndarray:
     return np.unique(tongue_midline(model)[1])
 
 
-def tongue_part(recording, hidden: str, model=None) -> list[PartResult]:
-    """The hidden tongue pellet test (``hidden`` in T2, T3): three metrics."""
+def tongue_part(recording, hidden: str, model=None,
+                models: dict[str, str] | None = None) -> list[PartResult]:
+    """The hidden tongue pellet test (``hidden`` in T2, T3): one result per metric.
+    ``models``: label -> mode of the tongue models to run (default ``TONGUE_MODELS``)."""
     from cassi_fit.initialize import animate_recording
 
+    models = TONGUE_MODELS if models is None else models
     i = TONGUE.index(hidden)
     before, after = TONGUE[i - 1], TONGUE[i + 1]
     track = recording.track
-    clean = clean_values(track)
-    used = clean[:, [_col(n) for n in TONGUE]].all(axis=1)
+    n = track.n_frames
+    used = clean_values(track)[:, [_col(k) for k in TONGUE]].all(axis=1)
     pos = track.positions
-    errors = {m: {} for m in ("surface", "site", "along")}
-    fraction = None
-    for label, mode in TONGUE_MODELS.items():
-        state, anim = animate_recording(_hide(recording, hidden), model, mode=mode)
+    errors = {m: {} for m in TONGUE_METRICS}
+    fraction, scored = None, np.zeros(n, bool)
+    for label, mode in models.items():
+        state, anim = animate_recording(_hide(recording, hidden), model, mode=mode,
+                                        stride=TONGUE_STRIDE)
         rows = np.asarray(anim.frame_index)
+        keep = rows < n
+        rows = rows[keep]
         contour_idx = tongue_contour(state.model)
-        contour = np.asarray(anim.vertices)[:, contour_idx, :2] / state.scale
-        site = np.asarray(anim.pellets_model)[:, _col(hidden)] / state.scale
+        contour = np.asarray(anim.vertices)[keep][:, contour_idx, :2] / state.scale
+        site = np.asarray(anim.pellets_model)[keep][:, _col(hidden)] / state.scale
         observed = pos[rows, _col(hidden)]
         dist, arc = polyline_distance(observed, contour)
         k_site = int(np.searchsorted(contour_idx, state.model.landmarks[hidden]))
         along = np.abs(arc - arc_lengths(contour)[:, k_site])
         ok = used[rows] & (rows != state.first_frame)
+        scored[rows[ok]] = True
         for metric, value in (("surface", dist), ("site", point_errors(site, observed)),
                               ("along", along)):
-            full = np.full(track.n_frames, np.nan)
+            full = np.full(n, np.nan)
             full[rows] = np.where(ok, value, np.nan)
             errors[metric][label] = full
         if fraction is None:
             s = np.asarray(state.model.fields["tongue_s"])
-            site_s = [s[state.model.landmarks[n]] for n in (before, hidden, after)]
+            site_s = [s[state.model.landmarks[k]] for k in (before, hidden, after)]
             fraction = (site_s[1] - site_s[0]) / (site_s[2] - site_s[0])
     a, b = pos[:, _col(before)], pos[:, _col(after)]
     observed = pos[:, _col(hidden)]
     chord_dist, chord_arc = polyline_distance(observed, np.stack([a, b], axis=1))
-    chord_point = a + fraction * (b - a)
     chord_len = np.linalg.norm(b - a, axis=-1)
-    scored = np.isfinite(errors["surface"][next(iter(TONGUE_MODELS))])
-    baseline = {"surface": chord_dist, "site": point_errors(chord_point, observed),
+    baseline = {"surface": chord_dist,
+                "site": point_errors(a + fraction * (b - a), observed),
                 "along": np.abs(chord_arc - fraction * chord_len)}
     part = f"tongue: {hidden} from {before}, {after} and the others"
+    roles = {k: "method" for k in models} | {"linear interpolation": "baseline"}
     out = []
-    for metric in ("surface", "site", "along"):
+    for metric in TONGUE_METRICS:
         errs = dict(errors[metric])
         errs["linear interpolation"] = np.where(scored, baseline[metric], np.nan)
-        roles = {k: "method" for k in TONGUE_MODELS} | {"linear interpolation": "baseline"}
-        out.append(PartResult(part, metric, errs, roles))
+        out.append(PartResult(part, metric, errs, roles, TONGUE_STRIDE * _frame_step(track)))
     return out
 
 
@@ -305,25 +357,26 @@ def lips_part(track, model=None) -> list[PartResult]:
     from cassi_fit.status import Status
 
     model = load_model() if model is None else model
+    n = track.n_frames
     clean = clean_values(track)
     ll, mni = _col("LL"), _col("MNI")
     f0 = first_clean_line(track, ("MNI", "MNM", "LL"))
-    fit = jaw_from_track(track, method=IMPROVED.jaw, reference_frame=f0)
+    fit = jaw_from_track(padded(track), method=IMPROVED.jaw, reference_frame=f0)
     usable = clean[:, [ll, mni, _col("MNM")]].all(axis=1)
-    usable &= np.asarray(fit.status) <= Status.PIVOT_UNDEFINED
+    usable &= np.asarray(fit.status)[:n] <= Status.PIVOT_UNDEFINED
     usable[f0] = False
     pos = track.positions
     predicted = {}
     for label, weights in LIP_MODELS.items():
         w = float(np.asarray(model.jaw_weights[weights])[model.landmarks["LL"]])
         predicted[f"{label}, w = {w:.2f}"] = apply_motion(fit.theta, fit.translation,
-                                                          pos[f0, ll], w)
+                                                          pos[f0, ll], w)[:n]
     roles = {k: "method" for k in predicted}
     predicted["static"] = np.broadcast_to(pos[f0, ll], pos[:, ll].shape)
     predicted["moves with MNI"] = pos[f0, ll] + pos[:, mni] - pos[f0, mni]
     roles |= {"static": "baseline", "moves with MNI": "baseline"}
     errors = {k: np.where(usable, point_errors(v, pos[:, ll]), np.nan) for k, v in predicted.items()}
-    return [PartResult("lips: LL from the jaw", "position", errors, roles)]
+    return [PartResult("lips: LL from the jaw", "position", errors, roles, _frame_step(track))]
 
 
 def single_sensor_methods() -> Callable | None:
@@ -344,8 +397,9 @@ def recording_parts(recording, model=None, single_sensor: Callable | None = None
     clean = clean_values(track)
     parts: list[PartResult] = []
     if _ever(clean, JAW):
+        fit = two_pellet_fit(track)
         for seen in JAW:
-            parts += jaw_part(track, seen, single_sensor)
+            parts += jaw_part(track, seen, fit, single_sensor)
     if _ever(clean, TONGUE + JAW):
         for hidden in HIDDEN_TONGUE:
             parts += tongue_part(recording, hidden, model)
@@ -360,14 +414,14 @@ def _rng(*names: object) -> np.random.Generator:
     return np.random.default_rng(zlib.crc32("/".join(map(str, names)).encode()))
 
 
-def block_starts(n: int, rng: np.random.Generator, n_boot: int = BOOTSTRAP,
-                 block: int = BLOCK_FRAMES) -> np.ndarray:
+def block_starts(n: int, rng: np.random.Generator, block: int,
+                 n_boot: int = BOOTSTRAP) -> np.ndarray:
     """Start indices (n_boot, ceil(n / block)) of a moving-block bootstrap of n frames."""
     block = max(1, min(block, n))
     return rng.integers(0, n - block + 1, size=(n_boot, -(-n // block)))
 
 
-def resample_index(starts: np.ndarray, n: int, block: int = BLOCK_FRAMES) -> np.ndarray:
+def resample_index(starts: np.ndarray, n: int, block: int) -> np.ndarray:
     """Frame indices (..., n) of resamples given by their block starts (..., n_blocks)."""
     block = max(1, min(block, n))
     index = starts[..., None] + np.arange(block)
@@ -424,7 +478,8 @@ def recording_rows(dataset: str, subject: str, task: str, result: PartResult) ->
             "metric": result.metric, "recordings": 1, "subjects": 1}
     if n == 0:
         return []
-    index = resample_index(block_starts(n, _rng(dataset, subject, task, result.part)), n)
+    starts = block_starts(n, _rng(dataset, subject, task, result.part), result.block)
+    index = resample_index(starts, n, result.block)
     values = {k: _percentiles(v) for k, v in result.errors.items()}
     boot = {k: _percentiles(v[index]) for k, v in result.errors.items()}
     return _stat_rows(base, values, boot, result.roles, n)
@@ -439,7 +494,8 @@ def pooled_rows(dataset: str, results: Sequence[tuple[str, str, PartResult]]) ->
         return []
     first = results[0][2]
     subjects = sorted({s for s, _, _ in results})
-    starts = [block_starts(len(r.frames), _rng(dataset, s, t, r.part)) for s, t, r in results]
+    starts = [block_starts(len(r.frames), _rng(dataset, s, t, r.part), r.block)
+              for s, t, r in results]
     by_subject = {s: [k for k, (sub, _, _) in enumerate(results) if sub == s] for s in subjects}
     rng = _rng(dataset, "pooled", first.part)
     names = list(first.roles)
@@ -448,7 +504,8 @@ def pooled_rows(dataset: str, results: Sequence[tuple[str, str, PartResult]]) ->
     for b in range(BOOTSTRAP):
         chosen = rng.choice(len(subjects), size=len(subjects), replace=True)
         picks = [k for c in chosen for k in by_subject[subjects[c]]]
-        index = [resample_index(starts[k][b], len(results[k][2].frames)) for k in picks]
+        index = [resample_index(starts[k][b], len(results[k][2].frames), results[k][2].block)
+                 for k in picks]
         for name in names:
             sample = np.concatenate([results[k][2].errors[name][i] for k, i in zip(picks, index,
                                                                                   strict=True)])
@@ -501,6 +558,24 @@ def run_dataset(label: str, root, subjects=None, tasks=None, model=None,
 
 
 # ---------------------------------------------------------------------------- tables
+INTEGER_COLUMNS = ("frames", "recordings", "subjects")
+TEXT_COLUMNS = ("dataset", "subject", "task", "part", "metric", "predictor", "role", "versus",
+                "median_verdict", "p95_verdict")
+
+
+def parse_rows(text: str) -> list[dict]:
+    """Rows of ``real_referee.csv`` text, numbers as numbers (the inverse of
+    ``tables.csv_text`` up to its 6 decimals)."""
+    import csv
+    import io
+
+    rows = []
+    for raw in csv.DictReader(io.StringIO(text)):
+        rows.append({k: v if k in TEXT_COLUMNS else int(v) if k in INTEGER_COLUMNS
+                     else float(v) for k, v in raw.items()})
+    return rows
+
+
 def _cell(row: dict | None, key: str, verdict: bool = False) -> str:
     if row is None or not np.isfinite(row[f"{key}_mm"]):
         return "-"
@@ -600,6 +675,24 @@ PART_TEXT = {
 }
 
 
+def _dataset_note(rows, dataset) -> str:
+    recordings = sorted({(r["subject"], r["task"]) for r in rows
+                         if r["dataset"] == dataset and r["subject"] != "pooled"})
+    subjects = sorted({s for s, _ in recordings})
+    if dataset == SYNTHETIC_LABEL:
+        tasks = sorted({t for _, t in recordings})
+        return (f"`{dataset}`: the toolkit's synthetic corpus, {len(recordings)} recordings of "
+                f"{len(subjects)} subjects (tasks {', '.join(tasks)}). Its generator shares "
+                "assumptions with the models scored here: it is no referee, only a comparison "
+                "of how the two behave.")
+    if len(recordings) == 1:
+        (subject, task), = recordings
+        return (f"`{dataset}`: real, one recording of one speaker ({subject}, task {task}). "
+                "Its numbers say what this speaker did in this task, not what speakers do.")
+    return (f"`{dataset}`: real, {len(recordings)} recordings of {len(subjects)} speakers "
+            f"({', '.join(subjects)}).")
+
+
 def markdown(rows, command: str) -> str:
     """The whole Markdown report; its first line names the command that wrote it."""
     datasets = _datasets(rows)
@@ -611,18 +704,14 @@ def markdown(rows, command: str) -> str:
         "Written by `experiments/real_referee.py` (its docstring says exactly what is held "
         "out and how each error is measured). Each model predicts a pellet it never saw, "
         "and the measured pellet is the referee. Datasets side by side: "
-        + ", ".join(f"`{d}`" for d in datasets) + ". "
-        + "".join(f"`{d}` is real: {_dataset_title(rows, d).split('(')[1][:-1]}; where that "
-                  "is one recording of one speaker, its numbers say what this speaker did in "
-                  "this task, not what speakers do. " for d in real)
-        + f"`{SYNTHETIC_LABEL}` is the toolkit's synthetic corpus (speech tasks), whose "
-        "generator shares assumptions with the models scored here; it is no referee, only "
-        "a comparison of how the two behave.",
+        + ", ".join(f"`{d}`" for d in datasets) + ".",
+        "",
+        *(f"- {_dataset_note(rows, d)}" for d in datasets),
         "",
         f"Statistics: the median and 95th percentile of the per-frame errors, frames pooled "
         f"over a dataset's recordings, with 95 % percentile-bootstrap intervals ({BOOTSTRAP} "
         f"resamples: subjects resampled with all their recordings, then blocks of "
-        f"{BLOCK_FRAMES} consecutive frames, 0.34 s, within each recording; with one subject "
+        f"{BLOCK_S} s of consecutive frames within each recording; with one subject "
         "the interval reflects only the frames of its recordings). Paired rows: a predictor's "
         "statistic minus another's on the same resampled frames; `better`/`worse` only where "
         "the interval excludes 0, else `tie`. Per-recording rows are in `real_referee.csv`.",
@@ -697,8 +786,9 @@ def main(argv=None) -> int:
             else synth.subject_names(args.synthetic_subjects)
         rows += run_dataset(SYNTHETIC_LABEL, corpus, names, args.synthetic_tasks,
                             progress=progress)
-    text = markdown(rows, _command(argv))
     table = csv_text(rows, COLUMNS)
+    rows = parse_rows(table)  # the Markdown shows exactly what the CSV holds
+    text = markdown(rows, _command(argv))
     for path in outputs:
         atomic_write(path, table if path.suffix == ".csv" else text, overwrite=args.force)
     print(issue_check(rows, label))
