@@ -115,8 +115,9 @@ def main(argv=None) -> int:
     import numpy as np
 
     from cassi_fit import video
-    from cassi_fit.animate import animate, geometry
+    from cassi_fit.animate import animate
     from cassi_fit.face_model import load_model
+    from cassi_fit.frames import geometry
     from cassi_fit.initialize import initialize
     from cassi_fit.render import PAPER_VIEWS, VIEWS, Renderer
 

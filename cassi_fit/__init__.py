@@ -34,23 +34,22 @@ if TYPE_CHECKING:
     from .calibrate import load_calibrations as load_calibrations
     from .calibrate import read_calibration as read_calibration
     from .calibrate import write_calibration as write_calibration
+    from .calibrate_corpus import calibrate_corpus as calibrate_corpus
     from .conformation import Calibration as Calibration
     from .corpus import CorpusItem as CorpusItem
     from .corpus import CorpusRun as CorpusRun
-    from .corpus import animate_corpus as animate_corpus
-    from .corpus import calibrate_corpus as calibrate_corpus
     from .corpus import dataset_items as dataset_items
-    from .corpus import evaluate_corpus as evaluate_corpus
-    from .corpus import jaw_corpus as jaw_corpus
     from .corpus import run_corpus as run_corpus
     from .dataset import Dataset as Dataset
     from .dataset import DefaultHeadMeasuresWarning as DefaultHeadMeasuresWarning
     from .dataset import Recording as Recording
     from .dataset import load_recording as load_recording
+    from .dataset import recording_from_array as recording_from_array
     from .deform import FaceParams as FaceParams
     from .deform import default_params as default_params
     from .deform import model_pellets as model_pellets
     from .deform import vertex_normals as vertex_normals
+    from .ema import SensorReport as SensorReport
     from .errors import CassiError as CassiError
     from .errors import DataFormatError as DataFormatError
     from .errors import DegenerateGeometryError as DegenerateGeometryError
@@ -60,6 +59,7 @@ if TYPE_CHECKING:
     from .errors import RenderingUnavailableError as RenderingUnavailableError
     from .evaluate import EvaluationResult as EvaluationResult
     from .evaluate import compare as compare
+    from .evaluate import evaluate_corpus as evaluate_corpus
     from .evaluate import evaluate_dataset as evaluate_dataset
     from .evaluate import evaluate_recording as evaluate_recording
     from .evaluate import write_report as write_report
@@ -73,13 +73,11 @@ if TYPE_CHECKING:
     from .headmeasures import HeadMeasures as HeadMeasures
     from .headmeasures import read_headmeasures as read_headmeasures
     from .headmeasures import write_headmeasures as write_headmeasures
-    from .initialize import Mode as Mode
     from .initialize import SubjectState as SubjectState
-    from .initialize import animate_recording as animate_recording
     from .initialize import initialize as initialize
-    from .initialize import mode_named as mode_named
     from .jaw import closed_form as closed_form
     from .jaw import closed_form_paper as closed_form_paper
+    from .jaw_corpus import jaw_corpus as jaw_corpus
     from .jaw_fit import ClosedForm as ClosedForm
     from .jaw_fit import Dogleg as Dogleg
     from .jaw_fit import FixedPivot as FixedPivot
@@ -118,6 +116,8 @@ if TYPE_CHECKING:
     from .pellets import pellet_index as pellet_index
     from .pharynx import build_pharynx as build_pharynx
     from .pharynx import with_pharynx as with_pharynx
+    from .pipeline import RecordingRun as RecordingRun
+    from .pipeline import run_recording as run_recording
     from .quality import QualityReport as QualityReport
     from .quality import detect_mistracks as detect_mistracks
     from .quality import quality_report as quality_report
@@ -125,6 +125,9 @@ if TYPE_CHECKING:
     from .render import midsagittal_figure as midsagittal_figure
     from .reports import jaw_comparison_plot as jaw_comparison_plot
     from .reports import write_penetration_csv as write_penetration_csv
+    from .run_spec import CalibrationFiles as CalibrationFiles
+    from .run_spec import RunSpec as RunSpec
+    from .run_spec import run_spec as run_spec
     from .status import STATUS_LABELS as STATUS_LABELS
     from .status import Status as Status
     from .synth import TASKS as TASKS
@@ -144,8 +147,10 @@ if TYPE_CHECKING:
     from .txy import read_txy as read_txy
     from .txy import require_tracked as require_tracked
     from .txy import write_txy as write_txy
+    from .video import animate_corpus as animate_corpus
     from .video import subject_traces as subject_traces
     from .video import write_animation as write_animation
+    from .video import write_recording_video as write_recording_video
 
 _PUBLIC = {
     # errors (base)
@@ -188,7 +193,10 @@ _PUBLIC = {
     "Dataset": "dataset",
     "Recording": "dataset",
     "load_recording": "dataset",
+    "recording_from_array": "dataset",
     "DefaultHeadMeasuresWarning": "dataset",
+    # ema (data): articulograph files
+    "SensorReport": "ema",
     # quality (data)
     "QualityReport": "quality",
     "quality_report": "quality",
@@ -264,9 +272,12 @@ _PUBLIC = {
     # initialize (pipeline)
     "initialize": "initialize",
     "SubjectState": "initialize",
-    "animate_recording": "initialize",
-    "Mode": "initialize",
-    "mode_named": "initialize",
+    # run_spec and pipeline: one run's every choice, and the one runner
+    "RunSpec": "run_spec",
+    "run_spec": "run_spec",
+    "CalibrationFiles": "run_spec",
+    "run_recording": "pipeline",
+    "RecordingRun": "pipeline",
     # animate (pipeline)
     "Animation": "animate",
     # render (outputs)
@@ -274,6 +285,7 @@ _PUBLIC = {
     "midsagittal_figure": "render",
     # video (outputs)
     "write_animation": "video",
+    "write_recording_video": "video",
     "subject_traces": "video",
     # reports (outputs)
     "write_penetration_csv": "reports",
@@ -287,10 +299,10 @@ _PUBLIC = {
     "compare": "evaluate",
     # corpus (runs)
     "run_corpus": "corpus",
-    "jaw_corpus": "corpus",
-    "evaluate_corpus": "corpus",
-    "calibrate_corpus": "corpus",
-    "animate_corpus": "corpus",
+    "jaw_corpus": "jaw_corpus",
+    "evaluate_corpus": "evaluate",
+    "calibrate_corpus": "calibrate_corpus",
+    "animate_corpus": "video",
     "dataset_items": "corpus",
     "CorpusItem": "corpus",
     "CorpusRun": "corpus",
@@ -304,24 +316,27 @@ __all__ = [
     "DegenerateGeometryError", "Dogleg", "EvaluationResult", "FaceModel", "FaceParams",
     "FixedPivot", "FrameFit", "GaussNewton", "HeadMeasures", "InvalidChoiceError", "JAW_METHODS",
     "JAW_PELLETS", "JawDiagnostics", "JawFit", "JawMethod", "JawTruth", "Labels",
-    "LevenbergMarquardt", "MATERIALS", "MissingDataError", "MistrackedFirstLineWarning", "Mode",
+    "LevenbergMarquardt", "MATERIALS", "MissingDataError", "MistrackedFirstLineWarning",
     "OutputExistsError", "PELLET_NAMES", "PelletTrack", "QualityReport", "Recording", "Renderer",
     "RenderingUnavailableError", "SOLVERS", "STATUS_LABELS", "SmoothPivot", "Solver", "Status",
     "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning", "Topology", "animate",
-    "animate_corpus", "animate_recording", "build_palate", "calibrate_corpus", "calibrate_dataset",
+    "animate_corpus", "build_palate", "calibrate_corpus", "calibrate_dataset",
     "calibrate_subject", "calibration_choice", "closed_form", "closed_form_paper", "compare",
     "dataset_items", "default_params", "deform", "detect_mistracks", "ensure_default_corpus",
     "evaluate_corpus", "evaluate_dataset", "evaluate_recording", "first_clean_line",
     "first_valid_frame", "first_valid_line", "fit_jaw", "generate_corpus", "initialize",
     "jaw_comparison_plot", "jaw_corpus", "jaw_diagnostics", "jaw_from_track", "jaw_method",
     "jaw_solver", "labels_for", "load_anatomy", "load_calibrations", "load_model",
-    "load_recording", "load_truth", "make_subject", "midsagittal_figure", "mode_named",
+    "load_recording", "load_truth", "make_subject", "midsagittal_figure",
     "model_pellets", "pellet_index",
     "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
-    "read_outline", "read_textgrid", "read_txy", "repair", "require_tracked", "rigid",
+    "read_outline", "read_textgrid", "read_txy", "recording_from_array", "repair",
+    "require_tracked", "rigid", "SensorReport",
     "run_corpus", "segment_summary", "subject_traces", "synth", "synth_recording",
     "tongue_volume", "tongue_volumes", "vertex_normals", "with_palate", "build_pharynx",
     "with_pharynx",
+    "RunSpec", "run_spec", "CalibrationFiles", "run_recording", "RecordingRun",
+    "write_recording_video",
     "write_animation", "write_calibration", "write_headmeasures", "write_lab", "write_outline",
     "write_penetration_csv", "write_report", "write_table", "write_textgrid", "write_txy",
 ]

@@ -571,6 +571,7 @@ def calibrate_dataset(
     subject's tasks)."""
     import warnings
 
+    from .corpus import chosen_tasks
     from .dataset import Dataset
     from .face_model import load_model
 
@@ -586,7 +587,7 @@ def calibrate_dataset(
 
         iterator = tqdm(names, desc="calibrating", unit="subject")
     for subject in iterator:
-        wanted = ds.tasks(subject) if tasks is None else [t for t in tasks if t in ds.tasks(subject)]
+        wanted = chosen_tasks(ds, subject, tasks)  # the one rule of every dataset run
         if not wanted:
             raise MissingDataError(f"{ds.root}: subject {subject} has none of the tasks {tasks}")
         with warnings.catch_warnings():

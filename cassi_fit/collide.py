@@ -318,7 +318,7 @@ def report_frames(
 ) -> dict[str, Float[Array, " m"]]:
     """:func:`report` of every frame of ``vertices (m, V, 3)`` mm, one compiled call per
     (model topology, ``m``): key -> ``(m,)`` mm. Pad ``m`` to a frame bucket
-    (``animate.frame_bucket``) to share the compilation between recordings."""
+    (``frames.frame_bucket``) to share the compilation between recordings."""
     return jax.vmap(lambda v: report(model, v))(vertices)
 
 

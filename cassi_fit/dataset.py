@@ -1,4 +1,4 @@
-"""Finding XRMB recordings on disk and loading each with its subject's data.
+"""Finding recordings on disk (XRMB and articulographs) and loading each with its subject's data.
 
 Two layouts are understood, case-insensitively (see ``docs/FORMATS.md``):
 
@@ -10,6 +10,17 @@ Two layouts are understood, case-insensitively (see ``docs/FORMATS.md``):
 
 A root that is itself one subject's folder (it holds a bare ``PAL.DAT``) also works.
 Subject names are upper case (``JW11``, ``S01``), task names lower case (``tp005``).
+
+Articulograph (EMA) recordings are found beside them (docs/EMA.md): files ending
+``.ema`` (EST Track), ``.pos`` (Carstens), ``.tsv`` (NDI Wave) and ``.mat`` (mview), in a
+subject's folder (``S01/tp005.pos``) or flat with the speaker first (MOCHA-TIMIT's
+``fsew0_001.ema``, mngu0's ``mngu0_s1_0001.ema``; a suffix of one or two digits is a
+repeated trial, as in ``tp020_2``). A file whose name holds ``bite`` is the folder's
+bite-plane recording, not a task. The sensor map is the first of ``<stem>.sensors.toml``,
+``sensors.toml`` in the file's folder or the one above, else the built-in names; a map
+given to :func:`load_recording` or :class:`Dataset` wins. Other names (an EST file called
+``.txt``, arrays) are read by :func:`load_recording` alone, which detects the format by
+content. :func:`recording_from_array` makes a recording from a numpy array.
 """
 
 from __future__ import annotations
@@ -17,19 +28,33 @@ from __future__ import annotations
 import os
 import re
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from jaxtyping import Float
 
+from .ema import RawEma, SensorMap, SensorReport, ema_to_track, read_ema
+from .ema.arrays import raw_from_array
+from .ema.detect import detect_format
+from .ema.sensor_map import sensor_map as _sensor_map
 from .errors import DataFormatError, MissingDataError
 from .headmeasures import DEFAULT_HEAD_MEASURES, HeadMeasures, read_headmeasures
 from .outlines import read_outline
 from .txy import PelletTrack, read_txy
 
 PELLET_SUFFIX = ".txy"
+#: Articulograph files a :class:`Dataset` discovers (by suffix; read by content).
+EMA_SUFFIXES = (".ema", ".pos", ".tsv", ".mat")
+SENSOR_MAP_NAME = "sensors.toml"
 HEADMEASURES_NAME = "headmeasures.txt"
 _TRIAL = re.compile(r"[0-9]+")
+_SHORT_TRIAL = re.compile(r"[0-9]{1,2}")
+_BITE = re.compile(r"bite|occlusal", re.IGNORECASE)
+
+#: What a sensor map can be given as (:func:`cassi_fit.ema.sensor_map.sensor_map`).
+SensorMapLike = SensorMap | str | os.PathLike | None
 
 
 class DefaultHeadMeasuresWarning(UserWarning):
@@ -43,7 +68,12 @@ class Recording:
     ``palate`` and ``pharynx`` are ``(n, 2)`` mm arrays or None when the file is absent;
     ``head`` falls back to ``DEFAULT_HEAD_MEASURES`` (``head_is_default`` True, with a
     :class:`DefaultHeadMeasuresWarning` once per subject); ``audio`` is the ``.wav`` with
-    the pellet file's stem, or None.
+    the pellet file's stem, or None. ``sensors`` is None for XRMB files; for an
+    articulograph recording it says how its track was made (format, rate, units, the
+    roles of its sensors, the head correction and its per-frame residual, the occlusal
+    frame, each sensor's distance from the midsagittal plane:
+    :class:`~cassi_fit.ema.report.SensorReport`). The pipeline needs nothing else: the
+    track is in the toolkit's frame, mm, at the file's own rate (``track.frame_step_s``).
     """
 
     subject: str
@@ -54,7 +84,13 @@ class Recording:
     head: HeadMeasures
     head_is_default: bool
     audio: Path | None
-    path: Path
+    path: Path | None
+    sensors: SensorReport | None = None
+
+    @property
+    def format(self) -> str:
+        """``"xrmb"``, or the articulograph file's format (``est``, ``ag501``...)."""
+        return "xrmb" if self.sensors is None else self.sensors.format
 
 
 def recording_source(recording: Recording) -> str:
@@ -139,8 +175,11 @@ def _head_measures(subject: str, folders: list[Path]) -> tuple[HeadMeasures, boo
     return DEFAULT_HEAD_MEASURES, True
 
 
-def _assemble(path: Path, subject: str, task: str, own: Path | None, shared: list[Path]):
-    """Load a recording; ``own`` is the subject's folder (bare PAL.DAT allowed) or None."""
+def _assemble(path: Path, subject: str, task: str, own: Path | None, shared: list[Path],
+              ema: dict | None = None):
+    """Load a recording; ``own`` is the subject's folder (bare PAL.DAT allowed) or None;
+    ``ema``: None for an XRMB file, else the articulograph options (format, sensor map,
+    layout, rate, bite plane)."""
     prefixed = lambda kind: [f"{subject.lower()}_{kind}.dat"]  # noqa: E731
     bare = lambda kind: [f"{kind}.dat"]  # noqa: E731
     own_l = [own] if own is not None else []
@@ -149,7 +188,10 @@ def _assemble(path: Path, subject: str, task: str, own: Path | None, shared: lis
         found = _find(own_l, prefixed(kind) + bare(kind)) or _find(shared, prefixed(kind))
         return None if found is None else read_outline(found, kind=name)
 
-    track = read_txy(path)
+    if ema is None:
+        track, report = read_txy(path), None
+    else:
+        track, report = _ema_track(path, **ema)
     head, is_default = _head_measures(subject, own_l + shared)
     audio = _find([path.parent], [f"{path.stem.lower()}.wav"])
     return Recording(
@@ -162,41 +204,153 @@ def _assemble(path: Path, subject: str, task: str, own: Path | None, shared: lis
         head_is_default=is_default,
         audio=audio,
         path=path,
+        sensors=report,
     )
 
 
-def load_recording(path: str | os.PathLike) -> Recording:
-    """Load a single pellet file with the subject data found beside it or one folder up.
+def _is_bite(path: Path) -> bool:
+    return bool(_BITE.search(path.stem))
 
-    The subject is taken from a flat name (``jw11_tp005.txy``) or else from the name of
-    the file's folder (``JW11/TP005.TXY``).
+
+def _sensor_map_for(path: Path, given: SensorMapLike) -> SensorMap:
+    """The map given, else ``<stem>.sensors.toml``, ``sensors.toml`` beside or one folder
+    up, else the built-in names."""
+    if given is not None:
+        return _sensor_map(given)
+    found = (_find([path.parent], [f"{path.stem.lower()}.{SENSOR_MAP_NAME}", SENSOR_MAP_NAME])
+             or _find([path.parent.parent], [SENSOR_MAP_NAME]))
+    return _sensor_map(found)
+
+
+def _bite_for(path: Path, given: str | os.PathLike | None) -> Path | None:
+    """The bite-plane recording given, else the one file of the same suffix named
+    ``*bite*`` in the recording's folder (two are an error naming them)."""
+    if given is not None:
+        return Path(given)
+    if _is_bite(path):
+        return None
+    found = sorted(p for p in _listing(path.parent).values()
+                   if _is_bite(p) and p.suffix.lower() == path.suffix.lower())
+    if len(found) > 1:
+        raise DataFormatError(path.parent, None, f"{len(found)} bite-plane recordings "
+                              f"({', '.join(p.name for p in found)}): give one (bite_plane=)")
+    return found[0] if found else None
+
+
+def _ema_track(path: Path, *, fmt: str | None = None, sensor_map: SensorMapLike = None,
+               layout=None, rate: float | None = None, bite_plane=None
+               ) -> tuple[PelletTrack, SensorReport]:
+    raw = read_ema(path, format=fmt, layout=layout, rate=rate)
+    smap = _sensor_map_for(path, sensor_map)
+    bite_path = _bite_for(path, bite_plane)
+    if bite_path is None:
+        return ema_to_track(raw, smap)
+    bite = read_ema(bite_path, rate=rate)
+    return ema_to_track(raw, smap, bite=bite, bite_map=_sensor_map_for(bite_path, sensor_map))
+
+
+def _split_ema_stem(stem: str, folder_name: str, subject_folder: bool):
+    """``(subject, task)`` of an articulograph file stem; subject None = the folder's.
+    ``fsew0_001`` is speaker FSEW0's utterance 001; ``tp020_2`` (one or two digits after
+    the ``_``) is a repeated trial in a subject's folder."""
+    stem = stem.lower()
+    prefix, sep, rest = stem.partition("_")
+    if sep and rest and prefix == folder_name.lower():
+        return prefix.upper(), rest
+    if subject_folder or not (sep and rest) or _SHORT_TRIAL.fullmatch(rest):
+        return None, stem
+    if re.search("[a-z]", prefix):
+        return prefix.upper(), rest
+    return None, stem
+
+
+def load_recording(path: str | os.PathLike, *, sensor_map: SensorMapLike = None,
+                   layout: str | Sequence[str] | None = None, rate: float | None = None,
+                   bite_plane: str | os.PathLike | None = None) -> Recording:
+    """Load a single recording with the subject data found beside it or one folder up.
+
+    The format is detected by content (:func:`cassi_fit.ema.detect.detect_format`): an
+    XRMB pellet file, or an articulograph file (EST Track, Carstens ``.pos``, NDI Wave,
+    mview ``.mat``, a ``.npy``/``.npz``/CSV array). The subject is taken from a flat name
+    (``jw11_tp005.txy``, ``fsew0_001.ema``) or else from the name of the file's folder
+    (``JW11/TP005.TXY``). For articulograph files: ``sensor_map`` (a
+    :class:`~cassi_fit.ema.sensor_map.SensorMap`, a built-in name or a ``.toml`` file;
+    default the one beside the file, else the built-in names), ``layout`` and ``rate``
+    (arrays; ``rate`` also for a headerless ``.pos``), ``bite_plane`` (a bite-plane
+    recording; default a ``*bite*`` file beside).
     """
     path = Path(path)
     if path.exists() and not path.is_dir() and not path.is_file():
         raise DataFormatError(path, None, "not a regular file (a pipe, device or socket)")
     if not path.is_file():
         raise MissingDataError(f"{path}: no such pellet file")
+    fmt = "xrmb" if path.suffix.lower() == PELLET_SUFFIX else detect_format(path)
     folder = path.parent.resolve()
     names = _listing(folder)
-    subject, task = _split_stem(path.stem, folder.name, names, subject_folder=False)
+    if fmt == "xrmb":
+        ema = None
+        subject, task = _split_stem(path.stem, folder.name, names, subject_folder=False)
+    else:
+        ema = {"fmt": fmt, "sensor_map": sensor_map, "layout": layout, "rate": rate,
+               "bite_plane": bite_plane}
+        subject, task = _split_ema_stem(path.stem, folder.name, subject_folder=False)
     if subject is None or subject == folder.name.upper():
         subject = folder.name.upper()
-        return _assemble(path, subject, task, own=folder, shared=[folder.parent])
-    return _assemble(path, subject, task, own=None, shared=[folder, folder.parent])
+        return _assemble(path, subject, task, own=folder, shared=[folder.parent], ema=ema)
+    return _assemble(path, subject, task, own=None, shared=[folder, folder.parent], ema=ema)
+
+
+def recording_from_array(
+    ema: Float[np.ndarray, "n c"],
+    layout: str | Sequence[str] = "sparc",
+    rate: float = 50.0,
+    audio: str | os.PathLike | None = None,
+    *,
+    units: str | None = None,
+    mean_mm: Float[np.ndarray, " c"] | None = None,
+    sd_mm: Float[np.ndarray, " c"] | None = None,
+    sensor_map: SensorMapLike = None,
+    subject: str = "ARRAY",
+    task: str = "array",
+) -> Recording:
+    """A :class:`Recording` from a ``(frames, columns)`` array, e.g. an inversion model's
+    output, so that a notebook can animate it.
+
+    ``layout``: a built-in name (``"sparc"``: SPARC's 12 columns ``TDX TDY ... LLX LLY``
+    at 50 Hz; ``"mngu0"``) or the column names (``["UL_x", "UL_y", ...]``); ``rate`` Hz;
+    ``audio``: a ``.wav`` to play with it. Units: millimetres (``units``: ``"mm"``,
+    ``"cm"``, ``"m"``); SPARC's output is normalised, not millimetres (docs/EMA.md): give
+    ``mean_mm`` and ``sd_mm`` (per column, mm) or ``units="mm"`` if the values are mm.
+    The array's x and y are the midsagittal plane's; which way is forward and up comes
+    from the anatomy (the report says so). Head measures, palate and pharynx are the
+    defaults (``head_is_default``).
+    """
+    raw: RawEma = raw_from_array(ema, layout=layout, rate=rate, units=units,
+                                 mean_mm=mean_mm, sd_mm=sd_mm)
+    track, report = ema_to_track(raw, _sensor_map(sensor_map))
+    audio_path = None if audio is None else Path(audio)
+    if audio_path is not None and not audio_path.is_file():
+        raise MissingDataError(f"{audio_path}: no such audio file")
+    return Recording(subject=subject, task=task, track=track, palate=None, pharynx=None,
+                     head=DEFAULT_HEAD_MEASURES, head_is_default=True, audio=audio_path,
+                     path=None, sensors=report)
 
 
 class Dataset:
-    """The recordings under ``root`` (either layout, case-insensitive).
+    """The recordings under ``root`` (either layout, case-insensitive; XRMB and
+    articulograph files, see the module docstring; ``sensor_map`` for every
+    articulograph file, else each file's own).
 
     ``subjects()`` and ``tasks(subject)`` list canonical names (natural order);
     ``load(subject, task)`` returns a :class:`Recording`; ``pellet_path`` the file.
     Discovery reads only folder listings; files are read by ``load``.
     """
 
-    def __init__(self, root: str | os.PathLike):
+    def __init__(self, root: str | os.PathLike, *, sensor_map: SensorMapLike = None):
         self.root = Path(root)
         if not self.root.is_dir():
             raise MissingDataError(f"{self.root}: not a folder")
+        self.sensor_map = sensor_map
         # (SUBJECT, task) -> (pellet path, the subject's own folder or None)
         self._index: dict[tuple[str, str], tuple[Path, Path | None]] = {}
         self._scan_folder(self.root, subject_folder=False)
@@ -207,10 +361,15 @@ class Dataset:
     def _scan_folder(self, folder: Path, subject_folder: bool) -> None:
         names = _listing(folder)
         for lower in sorted(names):
-            if not lower.endswith(PELLET_SUFFIX) or lower.startswith("."):
+            if lower.startswith("."):
                 continue
             path = names[lower]
-            subject, task = _split_stem(path.stem, folder.name, names, subject_folder)
+            if lower.endswith(PELLET_SUFFIX):
+                subject, task = _split_stem(path.stem, folder.name, names, subject_folder)
+            elif path.suffix.lower() in EMA_SUFFIXES and not _is_bite(path):
+                subject, task = _split_ema_stem(path.stem, folder.name, subject_folder)
+            else:
+                continue
             own = folder if subject is None or subject == folder.name.upper() else None
             subject = subject or folder.name.upper()
             key = (subject, task)
@@ -250,7 +409,8 @@ class Dataset:
         own = self._index[(subject, task)][1]
         # a root that is itself a subject folder: look one folder up, as load_recording does
         shared = [self.root, self.root.parent] if own == self.root else [self.root]
-        return _assemble(path, subject, task, own=own, shared=shared)
+        ema = None if path.suffix.lower() == PELLET_SUFFIX else {"sensor_map": self.sensor_map}
+        return _assemble(path, subject, task, own=own, shared=shared, ema=ema)
 
     def __len__(self) -> int:
         return len(self._index)

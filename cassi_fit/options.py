@@ -32,7 +32,7 @@ TONGUE_ANCHORS = ("fixed", "follow", "none")
 #: thickness through the four tongue pellets (paper section 5: "a flat surface with no
 #: thickness").
 TONGUE_SHAPES = ("thick", "flat")
-#: Whole reproduction modes (``initialize.Mode``; docs/CASSI_MODE.md): the toolkit's
+#: Whole reproduction modes (``run_spec.RunSpec`` presets; docs/CASSI_MODE.md): the toolkit's
 #: improved defaults, or every choice the paper made.
 MODES = ("improved", "cassi")
 #: Jaw region weights: CASSI's percentages (Parke's times 1.11111) or Parke's own.

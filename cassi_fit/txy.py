@@ -54,12 +54,25 @@ class PelletTrack:
             ``(x, y)``; NaN exactly where ``valid`` is False.
         valid: ``(n, 8, 2)`` bool, False where the file held the marker 1000000.
         path: the file it came from, or None.
+        extra_names: names of sensors with no CASSI role (an articulograph's velum, lip
+            corners, parasagittal tongue or reference sensors), ``k`` of them; empty for
+            XRMB files.
+        extra_positions: ``(n, k, 2)`` float64 mm in the same frame as ``positions``, NaN
+            exactly where ``extra_valid`` is False (``(n, 0, 2)`` when there are none).
+        extra_valid: ``(n, k, 2)`` bool.
+
+    A role with no sensor (e.g. T4 with three tongue sensors, MNM with one jaw sensor) is
+    never valid. :attr:`frame_step_s` is the median time step: nothing may assume XRMB's
+    6866 us (articulographs record at 50 to 500 Hz).
     """
 
     times: np.ndarray
     positions: np.ndarray
     valid: np.ndarray
     path: Path | None = None
+    extra_names: tuple[str, ...] = ()
+    extra_positions: np.ndarray | None = None
+    extra_valid: np.ndarray | None = None
 
     def __post_init__(self):
         times = np.asarray(self.times, dtype=np.float64)
@@ -81,15 +94,57 @@ class PelletTrack:
         object.__setattr__(self, "valid", valid)
         if self.path is not None:
             object.__setattr__(self, "path", Path(self.path))
+        self._set_extras(n)
+
+    def _set_extras(self, n: int) -> None:
+        """Normalise the extra sensors: a tuple of names, ``(n, k, 2)`` arrays, NaN where
+        not valid; a shape that does not match the names is a ``ValueError``."""
+        names = tuple(str(s) for s in self.extra_names)
+        k = len(names)
+        if self.extra_positions is None and self.extra_valid is None:
+            extra = np.full((n, k, 2), np.nan)
+            valid = np.zeros((n, k, 2), bool)
+        else:
+            extra = np.asarray(self.extra_positions, dtype=np.float64)
+            valid = (np.isfinite(extra) if self.extra_valid is None
+                     else np.asarray(self.extra_valid, dtype=bool))
+        if extra.shape != (n, k, 2) or valid.shape != (n, k, 2):
+            raise ValueError(
+                f"PelletTrack: extra_positions and extra_valid must be ({n}, {k}, 2) for "
+                f"{k} extra sensor(s); got {extra.shape} and {valid.shape}"
+            )
+        if len(set(names)) != k:
+            raise ValueError(f"PelletTrack: extra sensor names repeat: {names}")
+        object.__setattr__(self, "extra_names", names)
+        object.__setattr__(self, "extra_positions", np.where(valid, extra, np.nan))
+        object.__setattr__(self, "extra_valid", valid)
 
     @property
     def n_frames(self) -> int:
         return int(self.times.shape[0])
 
     @property
+    def frame_step_s(self) -> float:
+        """Seconds between data lines: the median time step (XRMB 6.866 ms; MOCHA 2 ms,
+        mngu0 5 ms, AG501 4 ms, SPARC 20 ms); XRMB's nominal ``FRAME_STEP_US`` for a track
+        of fewer than two frames. The one home of a recording's line period: nothing else
+        assumes XRMB's 6866 us."""
+        if self.n_frames < 2:
+            return FRAME_STEP_US * 1e-6
+        return float(np.median(np.diff(self.times)))
+
+    @property
     def duration(self) -> float:
         """Seconds from the first to the last frame (0 for fewer than two frames)."""
         return float(self.times[-1] - self.times[0]) if self.n_frames > 1 else 0.0
+
+    def extra(self, name: str) -> Float[np.ndarray, "n 2"]:
+        """``(n, 2)`` mm positions of the extra sensor ``name`` (NaN where untracked);
+        ``ValueError`` naming the extra sensors if there is no such sensor."""
+        if name not in self.extra_names:
+            known = ", ".join(self.extra_names) or "none"
+            raise ValueError(f"no extra sensor {name!r} (extra sensors: {known})")
+        return self.extra_positions[:, self.extra_names.index(name), :]
 
     def pellet(self, name: str) -> Float[np.ndarray, "n 2"]:
         """``(n, 2)`` mm positions of one pellet (NaN where untracked)."""
@@ -102,7 +157,8 @@ class PelletTrack:
 
     def __repr__(self) -> str:
         where = f", path={str(self.path)!r}" if self.path is not None else ""
-        return f"PelletTrack(n_frames={self.n_frames}{where})"
+        extra = f", extra_names={self.extra_names!r}" if self.extra_names else ""
+        return f"PelletTrack(n_frames={self.n_frames}{extra}{where})"
 
 
 def _where(track: PelletTrack) -> str:

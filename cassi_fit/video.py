@@ -1,10 +1,11 @@
 """Frames to video: MP4 (H.264, yuv420p) with the recording's audio aligned, or GIF.
 
-Timing. XRMB data lines are ``FRAME_STEP_S`` = 6.866 ms apart (about 145.6 Hz). An
-animation that shows every ``stride``-th line plays at ``fps = 1 / (stride * 6.866 ms)``,
-a non-integer rate that MP4 stores exactly as the rational ``1000000 / (6866 stride)``.
-Frame ``k`` of the video shows data line ``first + k * stride``, recording time
-``t_0 + k * stride * 6.866 ms``, and it is on screen from video time ``k / fps``.
+Timing. A recording's data lines are ``PelletTrack.frame_step_s`` apart (XRMB: 6.866 ms,
+about 145.6 Hz; EMA: 2 ms at 500 Hz, 5 ms at 200 Hz ...). An animation that shows every
+``stride``-th line plays at ``fps = 1 / (stride * step)`` (``Animation.frame_step_s``),
+stored exactly as the rational ``1000000 / (step_us * stride)`` (for XRMB, a non-integer
+rate). Frame ``k`` of the video shows data line ``first + k * stride``, recording time
+``t_0 + k * stride * step``, and it is on screen from video time ``k / fps``.
 
 Speech synchronization (the report's future work, section 5): the video's time ``tau``
 corresponds to the recording's time ``t_0 + tau``, where ``t_0`` is the time of the first
@@ -27,7 +28,7 @@ import re
 import subprocess
 import tempfile
 import wave
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from fractions import Fraction
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
@@ -43,11 +44,6 @@ if TYPE_CHECKING:
     from .labels import Labels
     from .render import Renderer
 
-FRAME_STEP_US = 6866
-"""XRMB data-line period, microseconds."""
-FRAME_STEP_S = FRAME_STEP_US * 1e-6
-"""XRMB data-line period, seconds."""
-
 VIDEO_SUFFIXES = (".mp4", ".gif")
 TRAIL_S = 0.1
 """Seconds of pellet trail behind each pellet in the midsagittal view (at least 2 of the
@@ -58,11 +54,20 @@ class VideoError(CassiError):
     """ffmpeg failed to write or read a video."""
 
 
-def frame_rate(stride: int = 1, frame_step_us: int = FRAME_STEP_US) -> Fraction:
-    """Exact frames per second for every ``stride``-th data line: ``10^6 / (step_us * stride)``."""
-    if int(stride) < 1:
-        raise CassiError(f"stride must be a positive integer, got {stride}")
-    return Fraction(1_000_000, int(frame_step_us) * int(stride))
+def frame_rate(frame_step_s: float) -> Fraction:
+    """Exact frames per second for frames ``frame_step_s`` seconds apart
+    (``Animation.frame_step_s``), to the microsecond: ``10^6 / round(step * 10^6)``
+    (XRMB every 3rd line: ``10^6 / 20598``)."""
+    step_us = round(float(frame_step_s) * 1e6)
+    if not step_us >= 1:
+        raise CassiError(f"frame step must be at least 1 us, got {frame_step_s!r} s")
+    return Fraction(1_000_000, step_us)
+
+
+def trail_frames(animation: Animation) -> int:
+    """How many frames back the midsagittal view's pellet trail reaches: ``TRAIL_S`` of
+    the recording, at least 2 frames."""
+    return max(2, round(TRAIL_S / animation.frame_step_s))
 
 
 def _ffmpeg() -> str:
@@ -405,14 +410,14 @@ def animation_frames(
 
     from tqdm import tqdm
 
-    from .status import STATUS_LABELS
+    from .status import Status
 
     vertices = np.asarray(animation.vertices)
     measured = np.asarray(animation.pellets_measured)
     model_sites = np.asarray(animation.pellets_model)
     shown = np.isfinite(measured).all(axis=(0, 2))
     section = "midsagittal" in getattr(renderer, "views", ())
-    trail = max(2, round(TRAIL_S / (FRAME_STEP_S * animation.stride))) if section else 0
+    trail = trail_frames(animation) if section else 0
     current = (labels.at(np.asarray(animation.times, np.float64)) if labels is not None
                else np.full(animation.n_frames, "", dtype=str))
     indices = range(animation.n_frames) if indices is None else indices
@@ -428,7 +433,7 @@ def animation_frames(
                 "measured": _in_3d(measured[k][shown]),
                 "model": _in_3d(model_sites[k][shown]),
             }
-        status = STATUS_LABELS[int(animation.frame_status[k])]
+        status = Status(int(animation.frame_status[k])).label
         caption = frame_caption(
             subject, task, float(animation.times[k]), int(animation.frame_index[k]), status,
             str(current[k]),
@@ -465,19 +470,124 @@ def write_animation(
     overwrite: bool = False,
     labels: Labels | None = None,
 ) -> Path:
-    """Render ``animation`` to an MP4/GIF at the recording's pace (``frame_rate(stride)``);
+    """Render ``animation`` to an MP4/GIF at the recording's pace
+    (``frame_rate(animation.frame_step_s)``);
     an MP4 carries ``audio`` (a ``.wav`` on the recording's clock) aligned so that the
     first frame sounds at its own recording time; ``labels`` (``labels.Labels``, e.g.
     ``labels.labels_for(pellet_path)``) put the current phone/word in each caption.
     Returns the path written."""
-    times = np.asarray(animation.times, np.float64)
-    step_us = FRAME_STEP_US
-    if len(times) > 1:  # the recording's own line period, should it not be XRMB's
-        step_us = int(round(float(np.median(np.diff(times))) * 1e6 / animation.stride))
-    fps = frame_rate(animation.stride, step_us)
+    fps = frame_rate(animation.frame_step_s)
     start = float(animation.times[0])
     frames = animation_frames(
         animation, renderer, subject=subject, task=task, markers=markers, progress=progress,
         labels=labels,
     )
     return write_video(path, frames, fps, audio=audio, audio_start=start, overwrite=overwrite)
+
+
+# ------------------------------------------------------------- a recording's video
+def write_recording_video(
+    path: str | os.PathLike,
+    run: Any,
+    *,
+    renderer: Renderer | None = None,
+    size: tuple[int, int] = (640, 480),
+    views: Sequence[str] | None = None,
+    markers: bool = False,
+    audio: bool = True,
+    labels: Labels | None = None,
+    progress: bool = True,
+    overwrite: bool = False,
+) -> Path:
+    """The video of a ``pipeline.RecordingRun``: the one place that sets up the renderer
+    for a recording (the model, its ``views`` (default all of ``options.VIEWS``, in a
+    grid) at ``size``, the subject's palate and pharynx traces in the midsagittal view)
+    and writes :func:`write_animation`, with the recording's sound in an MP4 when
+    ``audio`` and a ``.wav`` is there (a GIF has none), the current ``labels`` in the
+    captions. ``renderer``: reuse an open ``render.Renderer`` of the same model (its
+    traces are replaced). Returns the path written."""
+    from .options import VIEWS
+    from .render import Renderer
+
+    recording, state = run.recording, run.state
+    traces = subject_traces(recording, state.scale)
+    own = renderer is None
+    if own:
+        views = tuple(views or VIEWS)
+        renderer = Renderer(state.model, size=tuple(size), views=views, grid=len(views) > 1,
+                            traces=traces)
+    else:
+        renderer.set_traces(traces)
+    sound = recording.audio if audio and Path(path).suffix.lower() == ".mp4" else None
+    try:
+        return write_animation(path, run.animation, renderer, subject=recording.subject,
+                               task=recording.task, audio=sound, markers=markers,
+                               progress=progress, overwrite=overwrite, labels=labels)
+    finally:
+        if own:
+            renderer.close()
+
+
+def video_output_path(out_dir: str | os.PathLike, item: Any, suffix: str = ".mp4") -> Path:
+    """``out_dir/SUBJECT/TASK.mp4`` (or the given suffix) of a ``corpus.CorpusItem``."""
+    return Path(out_dir) / item.subject / f"{item.task}{suffix}"
+
+
+def animate_task(item: Any, out_dir: str, *, spec: Any, suffix: str = ".mp4",
+                 size: tuple[int, int] = (640, 480), views: Sequence[str] | None = None,
+                 audio: bool = True, markers: bool = False, labels: bool = True,
+                 overwrite: bool = False) -> Any:
+    """``cassi animate DATASET``'s task: run one recording (``pipeline.run_recording``
+    with the ``run_spec.RunSpec`` ``spec`` and the worker's model) and write
+    ``out_dir/SUBJECT/TASK.mp4`` (or ``.gif``) by :func:`write_recording_video`, the
+    current label (``labels.labels_for``) in each frame's caption. Row: frames, stride,
+    the video, the label file, the tongue's volume range."""
+    from .corpus import TaskResult, load_item, worker_model
+    from .labels import labels_for
+    from .pipeline import run_recording
+    from .tongue import tongue_volumes
+
+    run = run_recording(load_item(item, quiet=True), spec, model=worker_model())
+    found = labels_for(run.recording.path) if labels else None
+    path = write_recording_video(video_output_path(out_dir, item, suffix), run, size=size,
+                                 views=views, markers=markers, audio=audio, labels=found,
+                                 progress=False, overwrite=overwrite)
+    volume = tongue_volumes(run.state.model, run.animation.vertices)
+    row = {"frames": int(run.animation.n_frames), "stride": int(run.animation.stride),
+           "video": str(Path(path).relative_to(Path(out_dir))),
+           "label_file": found.path.name if found is not None and found.path else "",
+           "tongue_volume_min_ml": round(float(volume.min()), 3),
+           "tongue_volume_max_ml": round(float(volume.max()), 3)}
+    return TaskResult(row, (str(path),))
+
+
+def animate_corpus(dataset: Any, out_dir: str | os.PathLike, *, spec: Any = None,
+                   subjects: Iterable[str] | None = None, tasks: Iterable[str] | None = None,
+                   video_options: dict[str, Any] | None = None,
+                   run_options: dict[str, Any] | None = None, **changes: Any) -> tuple:
+    """``cassi animate DATASET --out DIR``: :func:`animate_task` on every recording (the
+    run ``spec``, a ``run_spec.RunSpec`` or a preset's name, with ``changes``;
+    ``video_options``: ``suffix``, ``size``, ``views``, ``audio``, ``markers``, ``labels``),
+    then ``DIR/animate_corpus.csv`` (and ``.parquet``): one row per recording, failed ones
+    with their error. ``run_options`` go to ``corpus.run_corpus``. Returns ``(run, the
+    table files written)``."""
+    from .corpus import (
+        dataset_items,
+        refuse_existing,
+        replaces,
+        require_items,
+        run_corpus,
+        write_table,
+    )
+    from .run_spec import run_spec
+
+    spec = run_spec(spec, **changes)
+    run_options = dict(run_options or {})
+    table = Path(out_dir) / "animate_corpus.csv"
+    refuse_existing([table], run_options)
+    run_options.setdefault("desc", "animate")
+    options = {**(video_options or {}), "spec": spec}
+    items = require_items(dataset_items(dataset, subjects=subjects, tasks=tasks), dataset,
+                          subjects, tasks)
+    run = run_corpus(animate_task, items, out_dir, options=options, **run_options)
+    return run, write_table(run.rows(), table, overwrite=replaces(run_options))

@@ -279,7 +279,7 @@ def evaluate_both(root, calibrations: dict, model, tasks=None, progress=False,
     for name in settings:
         calibration, collisions, _ = SETTINGS[name]
         cal = calibration if calibration == "cassi" else calibrations[calibration]
-        out[name] = evaluate_dataset(root, calibrations=cal, collisions=collisions, tasks=tasks,
+        out[name] = evaluate_dataset(root, calibration=cal, collisions=collisions, tasks=tasks,
                                      subjects=list(calibrations[METHODS[0]]), jaw=JAW,
                                      model=model, progress=progress, stride=stride)
     return out

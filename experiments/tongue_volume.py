@@ -4,7 +4,7 @@
         [--out docs/generated/tongue_volume.md]
 
 Animates every task of the first synthetic subjects (seed 0, in memory) through the real
-pipeline (``initialize.animate_recording``) three ways: the improved mode (tongue back
+pipeline (``pipeline.run_recording``) three ways: the improved mode (tongue back
 following T4, no collisions), CASSI's fixed anchors on the thick tongue, and the improved
 mode with the collision projection; per recording the least and greatest tongue volume
 over the frames (mL, ``tongue.tongue_volumes``) and the largest departure from the model's
@@ -38,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from cassi_fit import synth
     from cassi_fit.dataset import Recording
-    from cassi_fit.initialize import animate_recording
+    from cassi_fit.pipeline import run_recording
     from cassi_fit.synth_tasks import TASKS
     from cassi_fit.tongue import tongue_volumes
 
@@ -58,8 +58,8 @@ def main(argv: list[str] | None = None) -> int:
             for options in RUNS.values():
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    state, animation = animate_recording(recording, stride=args.stride,
-                                                         **options)
+                    _, _, state, animation = run_recording(recording, stride=args.stride,
+                                                           **options)
                 ml = tongue_volumes(state.model, animation.vertices)
                 if rest is None:
                     rest = float(tongue_volumes(state.model, np.asarray(state.model.vertices)[None])[0])

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from cassi_fit import synth
-from cassi_fit.animate import animate, geometry
+from cassi_fit.animate import animate
 from cassi_fit.dataset import Recording
 from cassi_fit.errors import CassiError, InvalidChoiceError, MissingDataError
+from cassi_fit.frames import geometry
 from cassi_fit.gaps import frame_status, repair
 from cassi_fit.initialize import initialize
 from cassi_fit.pellets import LL, MNI, MNM, UL, first_valid_line
@@ -262,8 +263,8 @@ def test_a_second_recording_of_the_same_shape_compiles_nothing(model):
     fresh load of the model included), for initialization and animation alike."""
     from jax import monitoring
 
-    from cassi_fit.animate import frame_bucket
     from cassi_fit.face_model import load_model
+    from cassi_fit.frames import frame_bucket
 
     first, _ = make_recording(seconds=0.6, seed=21)
     t = first.track  # the same subject, other values and 7 lines fewer, same frame bucket

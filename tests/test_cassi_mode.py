@@ -12,7 +12,9 @@ from cassi_fit.dataset import Dataset
 from cassi_fit.deform import tongue_midline
 from cassi_fit.errors import CassiError, InvalidChoiceError
 from cassi_fit.evaluate._measures import back_v_deg
-from cassi_fit.initialize import CASSI, IMPROVED, Mode, animate_recording, initialize, mode_named
+from cassi_fit.initialize import initialize
+from cassi_fit.pipeline import run_recording
+from cassi_fit.run_spec import CASSI, IMPROVED, RunSpec, run_spec
 
 STRIDE = 4  # as test_evaluate: one compilation per frame bucket
 
@@ -30,17 +32,17 @@ def recording(corpus):
 @pytest.fixture(scope="module")
 def both(recording):
     """``{mode: (state, animation)}`` of S01's sentence in both modes."""
-    return {m: animate_recording(recording, mode=m, stride=STRIDE) for m in ("improved", "cassi")}
+    return {m: run_recording(recording, m, stride=STRIDE)[2:] for m in ("improved", "cassi")}
 
 
 def test_modes_are_records_and_names():
-    assert mode_named(None) == IMPROVED and mode_named("cassi") == CASSI
+    assert run_spec(None) == IMPROVED and run_spec("cassi") == CASSI
     assert (CASSI.tongue_shape, CASSI.tongue_anchor, CASSI.jaw_weights) == ("flat", "fixed", "cassi")
-    assert (CASSI.conformation, CASSI.collisions, CASSI.lip_rounding) == ("cassi", "off", False)
-    assert mode_named("cassi", stride=10).stride == 10
-    assert isinstance(mode_named(CASSI), Mode)
+    assert (CASSI.calibration, CASSI.collisions, CASSI.lip_rounding) == ("cassi", "off", False)
+    assert run_spec("cassi", stride=10).stride == 10
+    assert isinstance(run_spec(CASSI), RunSpec)
     with pytest.raises(InvalidChoiceError, match="mode"):
-        mode_named("parke")
+        run_spec("parke")
 
 
 def test_cassi_state_carries_the_papers_choices(both, recording):

@@ -16,20 +16,17 @@ from cassi_fit.corpus import (
     csv_text,
     dataset_items,
     item_rng,
-    jaw_corpus,
-    jaw_corpus_path,
-    jaw_output_path,
     load_item,
     marker_path,
-    parquet_available,
     run_corpus,
-    segments_output_path,
     worker_model,
 )
 from cassi_fit.errors import OutputExistsError
+from cassi_fit.jaw_corpus import jaw_corpus, jaw_corpus_path, jaw_output_path, segments_output_path
 from cassi_fit.labels import Labels, write_lab
 from cassi_fit.status import Status
 from cassi_fit.synth import generate_corpus
+from cassi_fit.tables import parquet_available
 
 TASKS = ("tp040", "tp106")  # the synthetic corpus's two shortest speech tasks
 
@@ -104,7 +101,7 @@ def test_jaw_csv_per_recording_with_labels(serial, corpus):
 
 
 def test_padding_to_a_frame_bucket_leaves_the_fit_unchanged(corpus):
-    from cassi_fit.corpus import JAW_FRAME_BUCKET, fit_jaw_bucketed
+    from cassi_fit.jaw_corpus import JAW_FRAME_BUCKET, fit_jaw_bucketed
     from cassi_fit.jaw_fit import jaw_from_track
     from cassi_fit.txy import read_txy
 

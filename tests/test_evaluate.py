@@ -501,7 +501,7 @@ def test_cli_evaluate_cassi_like(corpus, tmp_path, capsys):
 
 
 def test_evaluate_dataset_rows(corpus):
-    result = ev.evaluate_dataset(corpus, calibrations="cassi", tasks=["tp040"], progress=False,
+    result = ev.evaluate_dataset(corpus, calibration="cassi", tasks=["tp040"], progress=False,
                                  stride=4)
     (row,) = result.recordings
     assert (row.subject, row.task, row.status, row.stride) == ("S01", "tp040", Status.OK, 4)
@@ -542,7 +542,7 @@ def test_cli_calibration_folder_is_loaded_per_subject(corpus, tmp_path, capsys, 
         assert ",default,off," in fh.read().splitlines()[1]
     code, _, err = _run(capsys, "evaluate", corpus, "--calibration", tmp_path / "nowhere",
                         "--out", tmp_path / "other", "--quiet")
-    assert code == 2 and "no such folder" in err
+    assert code == 2 and "no such calibration file or folder" in err
 
 
 def test_bad_choices_are_refused_before_animating(corpus):
@@ -551,7 +551,7 @@ def test_bad_choices_are_refused_before_animating(corpus):
         ev.evaluate_dataset(corpus, collisions="push", progress=False)
     with pytest.raises(InvalidChoiceError, match="jaw method"):
         ev.evaluate_dataset(corpus, jaw="hinge", progress=False)
-    with pytest.raises(InvalidChoiceError, match="calibrations"):
-        ev.evaluate_dataset(corpus, calibrations="paper", progress=False)
+    with pytest.raises(InvalidChoiceError, match="calibration"):
+        ev.evaluate_dataset(corpus, calibration=3, progress=False)
     with pytest.raises(CassiError, match="stride"):
         ev.evaluate_dataset(corpus, stride=0, progress=False)

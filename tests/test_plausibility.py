@@ -311,10 +311,10 @@ def _no_work(monkeypatch):
     def forbidden(*args, **kwargs):
         raise AssertionError("the command started working before checking its outputs")
 
-    monkeypatch.setattr(cli_animate, "animate_recording", forbidden)
+    monkeypatch.setattr(cli_animate, "run_args", forbidden)
     import cassi_fit._cli.export as cli_export
 
-    monkeypatch.setattr(cli_export, "animate_recording", forbidden)
+    monkeypatch.setattr(cli_export, "run_args", forbidden)
 
 
 @pytest.mark.parametrize(

@@ -212,28 +212,27 @@ def load_recording_args(words):
     raise CassiError(f"RECORDING is a pellet file or DATASET SUBJECT TASK, got {len(words)} words")
 
 
-def animate_recording(recording, args):
-    """``initialize.animate_recording`` with the options of ``add_model_arguments``."""
-    from cassi_fit.calibrate import calibration_choice
-    from cassi_fit.errors import CassiError
-    from cassi_fit.initialize import animate_recording as run_pipeline
+def spec_from_args(args: argparse.Namespace):
+    """The ``run_spec.RunSpec`` of the options of :func:`add_model_arguments`, checked once
+    (for one recording and for every recording of a dataset alike)."""
+    from cassi_fit.run_spec import run_spec
 
-    if args.stride is not None and args.stride < 1:
-        raise CassiError(f"--stride must be at least 1, got {args.stride}")
     mode = chosen_mode(args)
-    path = getattr(args, "calibration", None)
-    if mode == "cassi" and path:
-        raise CassiError("--mode cassi (or --cassi) and --calibration exclude each other")
-    if mode == "cassi" and args.collisions == "project":
-        raise CassiError("--mode cassi means no collision handling; drop --collisions project")
-    calibration = calibration_choice(path, recording.subject) if path else None
-    return run_pipeline(recording, calibration=calibration, jaw=args.jaw, stride=args.stride,
-                        jaw_weights=args.jaw_weights, tongue_anchor=args.tongue_anchor,
-                        gap_policy=args.gap, collisions=args.collisions, mode=mode,
-                        tongue_shape=getattr(args, "tongue_shape", None))
+    return run_spec(mode, calibration=getattr(args, "calibration", None) or None,
+                    jaw=args.jaw, stride=args.stride, jaw_weights=args.jaw_weights,
+                    tongue_anchor=args.tongue_anchor, gap_policy=args.gap,
+                    collisions=args.collisions, tongue_shape=args.tongue_shape)
 
 
-def chosen_mode(args: argparse.Namespace) -> str:
+def run_args(recording, args):
+    """``pipeline.run_recording`` of one recording with the options of
+    :func:`add_model_arguments`."""
+    from cassi_fit.pipeline import run_recording
+
+    return run_recording(recording, spec_from_args(args))
+
+
+def chosen_mode(args: argparse.Namespace) -> str | None:
     """The mode of ``--mode`` and ``--cassi`` (the same as ``--mode cassi``); a
     ``CassiError`` if they disagree."""
     from cassi_fit.errors import CassiError
@@ -241,7 +240,7 @@ def chosen_mode(args: argparse.Namespace) -> str:
     mode, cassi = getattr(args, "mode", None), getattr(args, "cassi", False)
     if cassi and mode not in (None, "cassi"):
         raise CassiError(f"--cassi and --mode {mode} disagree")
-    return "cassi" if cassi else mode or "improved"
+    return "cassi" if cassi else mode
 
 
 def run(args) -> int:
@@ -259,14 +258,11 @@ def run(args) -> int:
     from cassi_fit._io import check_outputs  # before any work: no input, no clash, no overwrite
 
     check_outputs([out, csv_out], overwrite=args.force)
-    state, animation = animate_recording(recording, args)
-    from cassi_fit.render import Renderer
+    run = run_args(recording, args)
+    state, animation = run.state, run.animation
     from cassi_fit.reports import penetration_summary, tongue_volume_summary, write_penetration_csv
-    from cassi_fit.video import subject_traces
 
-    renderer = Renderer(state.model, size=size, views=views, grid=len(views) > 1,
-                        traces=subject_traces(recording, state.scale))
-    written = write_output(out, animation, renderer, recording, args)
+    written = write_output(out, run, size, views, args)
     print(f"wrote {written} ({animation.n_frames} frames, stride {animation.stride})")
     print(penetration_summary(animation))
     print(tongue_volume_summary(state.model, animation))
@@ -275,63 +271,44 @@ def run(args) -> int:
     return 0
 
 
-def write_output(out: Path, animation, renderer, recording, args) -> Path:
+def write_output(out: Path, run, size, views, args) -> Path:
+    """The run's still (``.png``, frame ``--frame``) or video (``video.write_recording_video``)."""
     from cassi_fit import video
     from cassi_fit.errors import CassiError
 
+    recording, animation = run.recording, run.animation
     if out.suffix.lower() == ".png":
-        from cassi_fit.render import save_png
+        from cassi_fit.render import Renderer, save_png
 
         if not 0 <= args.frame < animation.n_frames:
             raise CassiError(f"--frame {args.frame}: the animation has {animation.n_frames} frames")
-        (image,) = video.animation_frames(
-            animation,
-            renderer,
-            subject=recording.subject,
-            task=recording.task,
-            markers=args.markers,
-            progress=False,
-            indices=[args.frame],
-        )
+        with Renderer(run.state.model, size=size, views=views, grid=len(views) > 1,
+                      traces=video.subject_traces(recording, run.state.scale)) as renderer:
+            (image,) = video.animation_frames(
+                animation, renderer, subject=recording.subject, task=recording.task,
+                markers=args.markers, progress=False, indices=[args.frame])
         return save_png(out, image, overwrite=args.force)
-    audio = None if args.no_audio or out.suffix.lower() != ".mp4" else recording.audio
-    if audio is not None:
-        print(f"sound: {audio}", file=sys.stderr)
-    return video.write_animation(
-        out,
-        animation,
-        renderer,
-        subject=recording.subject,
-        task=recording.task,
-        audio=audio,
-        markers=args.markers,
-        progress=not args.quiet,
-        overwrite=args.force,
-    )
+    if not args.no_audio and out.suffix.lower() == ".mp4" and recording.audio is not None:
+        print(f"sound: {recording.audio}", file=sys.stderr)
+    return video.write_recording_video(out, run, size=size, views=views, markers=args.markers,
+                                       audio=not args.no_audio, progress=not args.quiet,
+                                       overwrite=args.force)
 
 
 def run_dataset(args) -> int:
     """``cassi animate DATASET --out DIR``: one video per recording
-    (``corpus.animate_corpus``), in parallel; exit 1 if any failed."""
-    from cassi_fit.corpus import animate_corpus
+    (``video.animate_corpus``) with the same run spec as one recording, in parallel; exit
+    1 if any failed."""
     from cassi_fit.errors import CassiError
+    from cassi_fit.video import animate_corpus
 
     if not args.out or Path(args.out).suffix.lower() in ANIMATION_SUFFIXES:
         raise CassiError(f"{args.recording[0]}: a dataset folder; give --out DIR for its videos")
-    if args.stride < 1:
-        raise CassiError(f"--stride must be at least 1, got {args.stride}")
-    if args.cassi and args.calibration:
-        raise CassiError("--cassi and --calibration exclude each other")
-    options = {"suffix": f".{args.format}", "size": parse_size(args.size),
-               "views": parse_views(args.views), "conformation": "cassi" if args.cassi else None,
-               "calibration_dir": (str(Path(args.calibration).absolute()) if args.calibration
-                                   else None),
-               "audio": not args.no_audio, "markers": args.markers, "jaw": args.jaw,
-               "stride": args.stride, "jaw_weights": args.jaw_weights,
-               "tongue_anchor": args.tongue_anchor, "gap_policy": args.gap,
-               "collisions": args.collisions}
-    run, written = animate_corpus(args.recording[0], args.out, task_options=options,
-                                  **run_options(args))
+    video_options = {"suffix": f".{args.format}", "size": parse_size(args.size),
+                     "views": parse_views(args.views), "audio": not args.no_audio,
+                     "markers": args.markers}
+    run, written = animate_corpus(args.recording[0], args.out, spec=spec_from_args(args),
+                                  video_options=video_options, run_options=run_options(args))
     print(f"{len(run.results) - len(run.failed)} of {len(run.results)} videos written to "
           f"{args.out} on {run.workers} worker(s); table {written[0]}")
     return finish(run)

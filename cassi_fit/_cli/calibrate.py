@@ -47,7 +47,7 @@ def _words(text):
 
 def run(args) -> int:
     from cassi_fit.calibrate import calibration_path
-    from cassi_fit.corpus import calibrate_corpus
+    from cassi_fit.calibrate_corpus import calibrate_corpus
     from cassi_fit.dataset import Dataset
     from cassi_fit.errors import CassiError, OutputExistsError
 

@@ -82,17 +82,17 @@ def jaw_plot(path, state, animation, *, title="", labels=None):
                                np.asarray(animation.times), labels=labels, title=title)
 
 
-def _comparison(path: Path, recording, animation, stride, size, caption="calibrated + collisions"):
+def _comparison(path: Path, run, size, caption="calibrated + collisions"):
     """Side by side at the frame where the CASSI-mode tongue is deepest in the front
-    teeth: the CASSI mode (initialize.CASSI) and the demo's animation."""
+    teeth: the CASSI mode (``run_spec.CASSI``) and the demo's run."""
     import numpy as np
 
-    from cassi_fit.animate import animate
-    from cassi_fit.initialize import initialize
+    from cassi_fit.pipeline import run_recording
     from cassi_fit.render import Renderer, save_png
 
-    state = initialize(recording, mode="cassi")
-    cassi = animate(state, recording, stride=stride, collisions="off")
+    animation = run.animation
+    cassi_run = run_recording(run.recording, "cassi", stride=run.spec.stride)
+    state, cassi = cassi_run.state, cassi_run.animation
     depth = np.maximum(cassi.penetration["tongue_upper_front"],
                        cassi.penetration["tongue_lower_front"])
     k = int(np.argmax(depth))
@@ -123,7 +123,7 @@ def _stills(out: Path, renderer, recording, animation):
         "measured": np.asarray(animation.pellets_measured[k]),
         "model": np.asarray(animation.pellets_model[k]),
     }
-    back = max(2, round(video.TRAIL_S / (video.FRAME_STEP_S * animation.stride)))
+    back = video.trail_frames(animation)
     trails = {"measured": np.asarray(animation.pellets_measured[max(k - back, 0) : k + 1])}
     views = renderer.render_views(animation.vertices[k], markers=markers, trails=trails,
                                   time=float(animation.times[k]))  # fmt: skip
@@ -144,81 +144,58 @@ def _stills(out: Path, renderer, recording, animation):
 
 def run(args) -> int:
     from cassi_fit import video
-    from cassi_fit.animate import animate
-    from cassi_fit.errors import CassiError
     from cassi_fit.export import export_glb
-    from cassi_fit.initialize import initialize
     from cassi_fit.labels import labels_for
     from cassi_fit.options import VIEWS
+    from cassi_fit.pipeline import run_recording
     from cassi_fit.render import Renderer
+    from cassi_fit.run_spec import run_spec
 
     from .animate import parse_size
 
     size = parse_size(args.size)
-    if args.stride < 1:
-        raise CassiError(f"--stride must be at least 1, got {args.stride}")
+    cassi = args.mode == "cassi"
+    # the demo's run: calibrated with collisions projected, or every choice of the paper
+    spec = run_spec(args.mode, stride=args.stride, collisions=None if cassi else "project")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     written = []
     renderer = None
     recordings = _corpus_recordings(args.subject)  # [jaw wagging, sentence]
-    from cassi_fit.calibrate import calibrate_subject, calibration_path, write_calibration
-
-    cassi = args.mode == "cassi"
-    calibration = None
     if not cassi:
+        from cassi_fit.calibrate import calibrate_subject, calibration_path, write_calibration
+
         print(f"calibrating {recordings[0].subject} ...", file=sys.stderr)
         calibration = calibrate_subject(recordings)
         written.append(write_calibration(calibration_path(out, calibration.subject),
                                          calibration, overwrite=True))
-    for recording in recordings:
-        print(f"animating {recording.subject} {recording.task} ({args.mode} mode) ...",
-              file=sys.stderr)
-        state = initialize(recording, calibration=calibration, mode=args.mode)
-        animation = animate(state, recording, stride=args.stride,
-                            collisions="off" if cassi else "project")
-        renderer = renderer or Renderer(state.model, size=size, views=VIEWS)
-        renderer.set_traces(video.subject_traces(recording, state.scale))
-        stem = f"{recording.subject}_{recording.task}"
-        written.append(
-            video.write_animation(
-                out / f"{stem}.mp4",
-                animation,
-                renderer,
-                subject=recording.subject,
-                task=recording.task,
-                audio=recording.audio,
-                progress=not args.quiet,
-                overwrite=True,
-            )
-        )
-        written += _stills(out, renderer, recording, animation)
-        if recording is recordings[-1]:  # the sentence: CASSI-like against this, and glTF
-            written.append(_comparison(
-                out / f"{stem}_cassi_vs_{args.mode if cassi else 'calibrated'}.png", recording,
-                animation, args.stride, size,
-                "CASSI mode" if cassi else "calibrated + collisions"))
-            written.append(
-                export_glb(
-                    out / f"{stem}.glb",
-                    animation.vertices,
-                    state.model.faces,
-                    animation.times,
-                    face_material=state.model.face_material,
-                    overwrite=True,
-                    extras={"subject": recording.subject, "task": recording.task},
-                )
-            )
-        else:  # jaw wagging: the closed form against the fits
-            written.append(
-                jaw_plot(
-                    out / f"{stem}_jaw.png",
-                    state,
-                    animation,
-                    title=f"{stem}: closed form vs pivot fits",
-                    labels=labels_for(recording.path),
-                )
-            )
+        spec = spec.replace(calibration=calibration)
+    try:
+        for recording in recordings:
+            print(f"animating {recording.subject} {recording.task} ({args.mode} mode) ...",
+                  file=sys.stderr)
+            run = run_recording(recording, spec)
+            renderer = renderer or Renderer(run.state.model, size=size, views=VIEWS)
+            stem = f"{recording.subject}_{recording.task}"
+            written.append(video.write_recording_video(
+                out / f"{stem}.mp4", run, renderer=renderer, progress=not args.quiet,
+                overwrite=True))
+            written += _stills(out, renderer, recording, run.animation)
+            if recording is recordings[-1]:  # the sentence: CASSI-like against this, and glTF
+                written.append(_comparison(
+                    out / f"{stem}_cassi_vs_{args.mode if cassi else 'calibrated'}.png", run,
+                    size, "CASSI mode" if cassi else "calibrated + collisions"))
+                written.append(export_glb(
+                    out / f"{stem}.glb", run.animation.vertices, run.state.model.faces,
+                    run.animation.times, face_material=run.state.model.face_material,
+                    overwrite=True, extras={"subject": recording.subject, "task": recording.task}))
+            else:  # jaw wagging: the closed form against the fits
+                written.append(jaw_plot(out / f"{stem}_jaw.png", run.state, run.animation,
+                                        title=f"{stem}: closed form vs pivot fits",
+                                        labels=labels_for(recording.path)))
+    finally:
+        if renderer is not None:
+            renderer.close()
     print(f"demo written to {out.resolve()}:")
     for path in written:
         print(f"  {path}")

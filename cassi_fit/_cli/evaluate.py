@@ -6,9 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from cassi_fit.options import COLLISION_MODES, JAW_METHODS, MODES
-
 from ._corpus import add_run_arguments, finish, run_options
+from .animate import add_model_arguments, spec_from_args
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -26,22 +25,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("dataset", metavar="DATASET", help="dataset folder (either layout)")
     parser.add_argument("--out", default="evaluation", metavar="DIR",
                         help="output folder (default: evaluation/ in the current folder)")
-    which = parser.add_mutually_exclusive_group()
-    which.add_argument("--calibration", metavar="DIR",
-                       help="per-subject calibration files written by `cassi calibrate`")
-    which.add_argument("--cassi", action="store_true",
-                       help="the same as --mode cassi")
-    parser.add_argument("--mode", choices=MODES, default=None,
-                        help="improved (default) or cassi: every choice of the paper (flat "
-                        "tongue of zero thickness, back anchored behind and below T4, only "
-                        "the jaw shape adjusted, no collisions; docs/CASSI_MODE.md)")
-    parser.add_argument("--collisions", choices=COLLISION_MODES, default=None,
-                        help="push the tongue and lips out of the teeth and palate (project) "
-                        "or not (off; the default)")
-    parser.add_argument("--jaw", choices=JAW_METHODS, default="closed-form",
-                        help="how the jaw moves (as in `cassi animate`; default closed-form)")
-    parser.add_argument("--stride", type=int, default=1, metavar="N",
-                        help="use every Nth data line (default 1: every line)")
+    add_model_arguments(parser)  # the same run options as `cassi animate`
     parser.add_argument("--tasks", nargs="+", metavar="TASK",
                         help="only these tasks (names or comma-separated lists, e.g. tp040 "
                         "tp106); default: every task of every subject")
@@ -62,16 +46,7 @@ def _words(values: list[str] | None) -> list[str] | None:
 def run(args: argparse.Namespace) -> int:
     from cassi_fit.errors import CassiError, OutputExistsError
 
-    if args.stride < 1:
-        raise CassiError(f"--stride must be at least 1, got {args.stride}")
-    from cassi_fit._cli.animate import chosen_mode
-
-    mode = chosen_mode(args)
-    if mode == "cassi" and args.collisions == "project":
-        raise CassiError("--cassi (--mode cassi) means the paper's choices, without collision "
-                         "handling; drop --collisions project or --cassi")
-    if mode == "cassi" and args.calibration:
-        raise CassiError("--mode cassi and --calibration exclude each other")
+    spec = spec_from_args(args)  # checked before anything is read or run
     dataset = Path(args.dataset)
     if not dataset.is_dir():
         raise CassiError(f"{dataset}: no such dataset folder")
@@ -82,17 +57,10 @@ def run(args: argparse.Namespace) -> int:
     existing = [str(p) for p in targets if p.exists()]
     if existing and not (args.force or args.resume):  # refuse before the (slow) evaluation
         raise OutputExistsError(f"{', '.join(existing)}: file exists (pass --force to replace)")
-    calibrations = "cassi" if args.cassi else args.calibration
-    if args.calibration and not Path(args.calibration).is_dir():
-        raise CassiError(f"--calibration {args.calibration}: no such folder")
-    from cassi_fit.corpus import evaluate_corpus
-    from cassi_fit.evaluate import markdown_table, write_report
+    from cassi_fit.evaluate import evaluate_corpus, markdown_table, write_report
 
-    run, result = evaluate_corpus(dataset, out, calibrations=calibrations,
-                                  collisions=args.collisions or "off", jaw=args.jaw,
-                                  stride=args.stride, tasks=_words(args.tasks),
-                                  subjects=_words(args.subjects), mode=mode,
-                                  **run_options(args))
+    run, result = evaluate_corpus(dataset, out, spec=spec, tasks=_words(args.tasks),
+                                  subjects=_words(args.subjects), run_options=run_options(args))
     print(markdown_table(result), end="")
     # all or nothing: an interrupted run leaves none of the tables and figure
     written = write_report(result, out, overwrite=args.force or args.resume,

@@ -4,12 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .animate import (
-    add_model_arguments,
-    add_recording_argument,
-    animate_recording,
-    load_recording_args,
-)
+from .animate import add_model_arguments, add_recording_argument, load_recording_args, run_args
 
 SUFFIXES = (".glb", ".obj", ".ply")
 
@@ -68,8 +63,8 @@ def run(args) -> int:
         raise CassiError(f"--max-keyframes must be 0 or at least 2, got {args.max_keyframes}")
     recording = load_recording_args(args.recording)
     check_outputs([out], overwrite=args.force)  # before any work: never an input or data file
-    state, animation = animate_recording(recording, args)
-    model = state.model
+    run = run_args(recording, args)
+    animation, model = run.animation, run.state.model
     if suffix == ".glb":
         written = export_glb(
             out,

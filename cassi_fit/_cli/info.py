@@ -1,4 +1,4 @@
-"""``cassi info PATH``: subjects, tasks, frames and a validity report of XRMB data."""
+"""``cassi info PATH``: subjects, tasks, frames and a validity report of XRMB or EMA data."""
 
 from __future__ import annotations
 
@@ -10,31 +10,68 @@ from pathlib import Path
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "info",
-        help="list subjects and tasks of XRMB data, with a validity report per file",
+        help="list subjects and tasks of XRMB or articulograph data, with a validity report",
         description="PATH is a dataset folder (one folder per subject, or flat names such as "
-        "jw11_tp005.txy) or a single pellet file. Prints subjects, tasks, frames, the first "
-        "valid frame, per-pellet valid fractions, unmarked mistracks and the jaw pellet "
-        "distance (MNI-MNM) spread.",
+        "jw11_tp005.txy or fsew0_001.ema) or a single recording (XRMB .txy, EST Track, "
+        "Carstens .pos, NDI Wave .tsv, mview .mat, .npy/.npz/.csv arrays; the format is "
+        "detected by content). Prints subjects, tasks, frames, the first valid frame, "
+        "per-pellet valid fractions, unmarked mistracks and the jaw pellet distance (MNI-MNM) "
+        "spread; for articulograph data also the sensor roles, the head correction and its "
+        "residual, the occlusal frame and each sensor's distance from the midsagittal plane "
+        "(docs/EMA.md). --json gives, per role, the median position in the toolkit's frame.",
     )
-    parser.add_argument("path", metavar="PATH", help="dataset folder or pellet (.txy) file")
+    parser.add_argument("path", metavar="PATH", help="dataset folder or recording file")
     parser.add_argument("--json", action="store_true", help="print one JSON document instead")
     parser.add_argument(
         "--list", action="store_true", help="only list subjects and tasks (read no file)"
     )
+    parser.add_argument("--sensor-map", metavar="MAP", default=None,
+                        help="articulograph sensor map: a built-in name (auto, mocha, mngu0, "
+                        "sparc, synthetic) or a .toml file (default: sensors.toml beside the "
+                        "files, else the built-in names)")
+    parser.add_argument("--layout", default=None,
+                        help="array files: a built-in layout (sparc, mngu0) or comma-separated "
+                        "column names")
+    parser.add_argument("--rate", type=float, default=None,
+                        help="array files (and headerless .pos files): the sampling rate, Hz")
+    parser.add_argument("--bite-plane", metavar="FILE", default=None,
+                        help="articulograph files: the bite-plane recording (default: a *bite* "
+                        "file beside)")
     parser.set_defaults(func=run)
+
+
+def _medians(positions, valid, names) -> dict:
+    """name -> median ``[x, y]`` mm over the frames where it is tracked, or None."""
+    import numpy as np
+
+    out = {}
+    for j, name in enumerate(names):
+        ok = valid[:, j].all(-1)
+        out[name] = (None if not ok.any()
+                     else [round(float(v), 3) for v in np.median(positions[ok, j], axis=0)])
+    return out
 
 
 def _describe(recording) -> dict:
     """JSON-ready summary of one loaded recording."""
+    from cassi_fit.pellets import PELLET_NAMES
     from cassi_fit.quality import quality_report
 
+    track = recording.track
+    sensors = getattr(recording, "sensors", None)
     return {
         "path": str(recording.path),
+        "format": "xrmb" if sensors is None else sensors.format,
+        "frame_step_s": track.frame_step_s,
         "audio": None if recording.audio is None else str(recording.audio),
         "palate_points": None if recording.palate is None else len(recording.palate),
         "pharynx_points": None if recording.pharynx is None else len(recording.pharynx),
         "head_is_default": recording.head_is_default,
-        "quality": quality_report(recording.track).to_dict(),
+        "quality": quality_report(track).to_dict(),
+        "median_mm": _medians(track.positions, track.valid, PELLET_NAMES),
+        "extras_median_mm": _medians(track.extra_positions, track.extra_valid,
+                                     track.extra_names),
+        "sensors": None if sensors is None else sensors.to_dict(),
     }
 
 
@@ -59,20 +96,29 @@ def _load(load, *args) -> dict:
         return {"error": str(exc)}
 
 
-def collect(path: Path, list_only: bool = False) -> dict:
-    """The whole report as a JSON-ready dict (a folder or a single pellet file)."""
+def collect(path: Path, list_only: bool = False, *, sensor_map=None, layout=None, rate=None,
+            bite_plane=None) -> dict:
+    """The whole report as a JSON-ready dict (a folder or a single recording file); the
+    keywords are :func:`cassi_fit.dataset.load_recording`'s, for articulograph files."""
+    from functools import partial
+
     from cassi_fit.dataset import Dataset, load_recording
     from cassi_fit.errors import MissingDataError
 
+    if isinstance(layout, str) and "," in layout:
+        layout = [c.strip() for c in layout.split(",") if c.strip()]
     if path.exists() and not path.is_dir():  # a file (load_recording refuses a FIFO)
-        rec = _quietly(load_recording, path)
+        load = partial(load_recording, sensor_map=sensor_map, layout=layout, rate=rate,
+                       bite_plane=bite_plane)
+        rec = _quietly(load, path)
         info = _describe(rec)
         return {"path": str(path), "kind": "file", "subject": rec.subject, "task": rec.task, **info}
     if not path.is_dir():
         raise MissingDataError(f"{path}: no such file or folder")
-    ds = Dataset(path)
+    ds = Dataset(path, sensor_map=sensor_map)
     if not ds.subjects():
-        raise MissingDataError(f"{path}: no pellet files (.txy) found")
+        raise MissingDataError(f"{path}: no pellet files or articulograph recordings (.txy, "
+                               ".ema, .pos, .tsv, .mat) found")
     subjects = {}
     for subject in ds.subjects():
         tasks = {}
@@ -100,6 +146,9 @@ def _print_file(report: dict, out) -> None:
     print(f"{report['subject']} {report['task']}  {report['path']}", file=out)
     paper = q.get("first_complete_frame")
     moved = f" (moved from {paper}: mistracked)" if paper is not None and paper != first else ""
+    never = [p for p in ("MNI", "MNM") if not q["valid_fraction"].get(p)]
+    if first is None and never:  # e.g. an articulograph with one jaw sensor
+        moved = f" (jaw pellet {', '.join(never)} never tracked)"
     print(f"  frames {q['n_frames']}  duration {q['duration_s']:.3f} s  first valid frame "
           f"{'-' if first is None else first}{moved}  first jaw frame "
           f"{'-' if q['first_jaw_frame'] is None else q['first_jaw_frame']}", file=out)  # fmt: skip
@@ -113,6 +162,41 @@ def _print_file(report: dict, out) -> None:
     print(f"  all     {_pct(q['all_valid_fraction']):>6}", file=out)
     print(f"  jaw distance MNI-MNM: median {_mm(q['jaw_distance_median_mm'])} mm, "
           f"SD {_mm(q['jaw_distance_sd_mm'], 3)} mm", file=out)  # fmt: skip
+    if report.get("sensors"):
+        _print_sensors(report, out)
+
+
+def _print_sensors(report: dict, out) -> None:
+    """The articulograph part: roles, references, head correction, frame, distances."""
+    s = report["sensors"]
+    print(f"  articulograph: {s['format']}, {s['dims']}D, {s['rate_hz']:g} Hz, units "
+          f"{s['units']}; file axes: {s['file_axes']}", file=out)
+    print(f"  sensor map: {s['sensor_map']}", file=out)
+    medians = report["median_mm"]
+    print("  role  sensor      median x, y (mm, toolkit frame)", file=out)
+    for role, sensor in s["roles"].items():
+        where = medians.get(role)
+        at = "-" if where is None else f"{where[0]:8.2f} {where[1]:8.2f}"
+        print(f"  {role:<4}  {sensor or '(none)':<10}  {at}", file=out)
+    for name, where in report["extras_median_mm"].items():
+        at = "-" if where is None else f"{where[0]:8.2f} {where[1]:8.2f}"
+        print(f"  extra {name:<10}  {at}", file=out)
+    r = s["head_residual_mm"]
+    print(f"  head correction: {s['head_correction']}", file=out)
+    if r["median"] is not None:
+        rot, shift = s["head_rotation_deg"], s["head_translation_mm"]
+        print(f"    residual mm: median {r['median']:.3f}, 95% {r['p95']:.3f}, max "
+              f"{r['max']:.3f}; head motion removed: up to {rot['max']:.2f} deg, "
+              f"{shift['max']:.2f} mm", file=out)
+    if s["frames_without_references"]:
+        print(f"    {s['frames_without_references']} frame(s) without the references "
+              "(untracked)", file=out)
+    print(f"  occlusal frame: {s['frame_source']}", file=out)
+    if s["midsagittal_distance_mm"]:
+        dist = ", ".join(f"{k} {v:+.1f}" for k, v in s["midsagittal_distance_mm"].items())
+        print(f"  distance from the midsagittal plane (mm, + left): {dist}", file=out)
+    for note in s["notes"]:
+        print(f"  note: {note}", file=out)
 
 
 _COLUMNS = ("subject", "task", "frames", "dur_s", "first", "all%", "jaw_mm", "jaw_sd", "mistr")
@@ -160,7 +244,8 @@ def _print_dataset(report: dict, out) -> None:
 
 
 def run(args) -> int:
-    report = collect(Path(args.path), list_only=args.list)
+    report = collect(Path(args.path), list_only=args.list, sensor_map=args.sensor_map,
+                     layout=args.layout, rate=args.rate, bite_plane=args.bite_plane)
     out = sys.stdout
     if args.json:
         json.dump(report, out, indent=2)

@@ -173,7 +173,7 @@ def run(args) -> int:
 
 def run_dataset(args) -> int:
     """``cassi jaw DATASET --out DIR``."""
-    from cassi_fit.corpus import jaw_corpus
+    from cassi_fit.jaw_corpus import jaw_corpus
     from cassi_fit.jaw_fit import jaw_method
 
     jaw_method(args.method, solver=args.solver, smoothness=args.smoothness)  # checks W
@@ -194,7 +194,7 @@ def run_recording(args) -> int:
     # is a quotient by sin(theta/2)), so the command computes in float64.
     jax.config.update("jax_enable_x64", True)
     from cassi_fit._io import atomic_write
-    from cassi_fit.corpus import csv_text, jaw_frame_csv
+    from cassi_fit.jaw_corpus import csv_text, jaw_frame_csv
     from cassi_fit.jaw_fit import jaw_diagnostics, jaw_from_track, jaw_method
     from cassi_fit.labels import SEGMENT_COLUMNS, labels_for, segment_summary
     from cassi_fit.status import Status

@@ -1,8 +1,12 @@
-"""``cassi synth OUT_DIR``: write a synthetic XRMB corpus with ground truth."""
+"""``cassi synth OUT_DIR``: write a synthetic XRMB (or articulograph) corpus with ground truth."""
 
 from __future__ import annotations
 
 import argparse
+
+#: ``--format`` values: the XRMB corpus, or the same corpus as an articulograph records it
+#: (cassi_fit.ema.synthetic.FORMATS; tests/test_ema_synthetic.py keeps the two in step).
+FORMATS = ("xrmb", "est", "est-ascii", "ag501", "wave", "mview")
 
 
 def register(subparsers) -> None:
@@ -46,6 +50,15 @@ def register(subparsers) -> None:
         help="comma-separated task names, e.g. tp106,tp040 (default: the standard set; "
         "`--tasks list` shows the library)",
     )
+    parser.add_argument(
+        "--format",
+        default="xrmb",
+        choices=FORMATS,
+        help="xrmb (the default: .txy pellet files) or an articulograph's format for the same "
+        "subjects and tasks, measured in 3D with reference sensors, a known head movement and "
+        "a recording frame (docs/EMA.md): est (EST Track binary, 200 Hz), est-ascii (500 Hz), "
+        "ag501 (Carstens .pos, 250 Hz), wave (NDI Wave .tsv, 100 Hz), mview (.mat, 100 Hz)",
+    )
     parser.add_argument("--no-audio", action="store_true", help="do not write .wav files")
     parser.add_argument("--force", action="store_true", help="overwrite existing files")
     parser.set_defaults(func=run)
@@ -57,6 +70,24 @@ def run(args: argparse.Namespace) -> int:
     if args.tasks is not None and args.tasks.strip().lower() == "list":
         for spec in TASKS.values():
             print(f"{spec.name:8s} {spec.kind:12s} {spec.prompt}")
+        return 0
+    if args.format != "xrmb":
+        from ..ema.synthetic import write_ema_corpus
+
+        out = write_ema_corpus(
+            args.out_dir,
+            format=args.format,
+            n_subjects=args.subjects,
+            seed=args.seed,
+            tasks=args.tasks,
+            noise_scale=args.noise_scale,
+            audio=not args.no_audio,
+            overwrite=args.force,
+            jaw_kinematics=args.jaw_kinematics,
+            noise_family=args.noise_family,
+        )
+        print(f"wrote a synthetic {args.format} EMA corpus of {args.subjects} subjects to {out} "
+              f"(seed {args.seed})")
         return 0
     out = generate_corpus(
         args.out_dir,

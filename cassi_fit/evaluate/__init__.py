@@ -62,8 +62,12 @@ from ._rows import NO_RECORDING as NO_RECORDING
 from ._rows import EvaluationResult as EvaluationResult
 from ._rows import RecordingRow as RecordingRow
 from ._rows import SubjectRow as SubjectRow
+from ._run import MEASURE_PREFIX as MEASURE_PREFIX
+from ._run import evaluate_corpus as evaluate_corpus
 from ._run import evaluate_dataset as evaluate_dataset
 from ._run import evaluate_recording as evaluate_recording
+from ._run import evaluate_task as evaluate_task
+from ._run import evaluation_result as evaluation_result
 
 __all__ = [
     "BACK_OVERLAP_MM", "CASSI_TOTALS", "COMPONENTS", "FRONT_OVERLAP_MM", "LIP_APART_LARGE_MM",
@@ -72,7 +76,8 @@ __all__ = [
     "SLOPE_STEEP_DEG", "SLOPE_UP_DEG", "SLOPE_VERY_STEEP_DEG", "SUSTAIN_S", "TEETH_APART_MM",
     "TEETH_IN_LIPS_MM", "TONGUE_HIDDEN_MM", "TONGUE_PALATE_MM", "TONGUE_POKE_DEEP_MM",
     "TONGUE_POKE_MM", "TONGUE_V_DEG", "AIRWAY_CLOSED_MM", "airway_of", "EvaluationResult", "MeasureSpec", "RecordingRow", "SubjectRow",
-    "combine", "compare", "describe", "evaluate_dataset", "evaluate_recording",
+    "combine", "compare", "describe", "evaluate_corpus", "evaluate_dataset",
+    "evaluate_recording", "evaluate_task", "evaluation_result", "MEASURE_PREFIX",
     "markdown_table", "measure", "penetration_of", "plot_summary", "problems", "rate",
     "rating", "sustain_frames", "sustained_max", "sustained_min", "write_report", "write_table", "SUMMARY_NAME",
 ]  # fmt: skip

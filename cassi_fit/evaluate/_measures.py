@@ -30,9 +30,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ..animate import frame_bucket, pad_frames
 from ..collide import FRONT_TEETH, REPORT_KEYS, airway_frames, has_collision_data, report_frames
 from ..errors import DegenerateGeometryError, MissingDataError
+from ..frames import frame_bucket, pad_frames
 from ..palate import N_ACROSS, N_ALONG, N_HARD
 from ..tongue import tongue_volumes
 
@@ -326,7 +326,7 @@ def _per_frame(sites: _Sites, points: Float[Array, "m k 3"]) -> dict[str, np.nda
     """Raw quantities of every frame, ``(m,)`` numpy each, from ``points (m, K, 3)``.
 
     One compiled, vmapped call; frames are padded to a size bucket
-    (``animate.frame_bucket``) so recordings of similar length share the compilation.
+    (``frames.frame_bucket``) so recordings of similar length share the compilation.
     """
     m = points.shape[0]
     out = _frame_kernel(pad_frames(points, frame_bucket(m)), sites.layout())
@@ -363,7 +363,7 @@ def penetration_of(
     """``collide.report`` of every frame of ``vertices (m, V, 3)``: key -> ``(m,)`` mm.
 
     For geometry that did not come from ``animate.animate`` (which reports it itself);
-    frames padded to ``animate.frame_bucket`` sizes, compiled once per model content.
+    frames padded to ``frames.frame_bucket`` sizes, compiled once per model content.
     """
     vertices = jnp.asarray(vertices)
     m = vertices.shape[0]
@@ -388,7 +388,7 @@ def airway_of(
     """``collide.airway`` of every frame of ``vertices (m, V, 3)``: ``(m,)`` mm, the
     least front-back distance from the tongue to the pharyngeal wall per frame (< 0:
     through it; +inf: no tongue vertex within the wall's height). Frames padded to
-    ``animate.frame_bucket`` sizes."""
+    ``frames.frame_bucket`` sizes."""
     vertices = jnp.asarray(vertices)
     m = vertices.shape[0]
     return np.asarray(airway_frames(model, pad_frames(vertices, frame_bucket(m))))[:m]

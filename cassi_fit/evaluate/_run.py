@@ -1,175 +1,186 @@
-"""Running the evaluation: animate each recording, measure and rate it, combine per subject."""
+"""Running the evaluation: animate each recording, measure and rate it, combine per subject.
+
+One recording: :func:`evaluate_recording` (``pipeline.run_recording``, then the measures).
+A dataset: :func:`evaluate_corpus` runs :func:`evaluate_task` on every recording through
+the corpus executor (``cassi evaluate``; one process, many, or a Dask cluster; resumable
+with an output folder), and :func:`evaluate_dataset` is the same run in memory with no
+output folder: the two differ only in where they run, never in what they choose.
+"""
 
 from __future__ import annotations
 
-import numbers
 import os
 import warnings
-from collections.abc import Iterable, Mapping
-from typing import TYPE_CHECKING, Union
+from collections.abc import Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
-from ..errors import CassiError, MissingDataError
-from ..options import COLLISION_MODES, CONFORMATIONS, JAW_METHODS, MODES, check_choice
+from ..corpus import (
+    CorpusItem,
+    CorpusRun,
+    TaskResult,
+    dataset_items,
+    load_item,
+    require_items,
+    run_corpus,
+    worker_model,
+)
+from ..run_spec import CalibrationFiles, RunSpec, run_spec
+from ..status import Status
 from ._measures import measure
 from ._rows import EvaluationResult, RecordingRow, SubjectRow
 
 if TYPE_CHECKING:
-    from ..calibrate import Calibration
     from ..dataset import Dataset, Recording
     from ..face_model import FaceModel
 
-#: What a recording is animated with: ``None`` (the toolkit's conformation from
-#: Headmeasures), a conformation name (``"cassi"``: only what the paper did) or a fitted
-#: ``Calibration``.
-CalibrationChoice = Union[None, str, "Calibration"]
+#: The per-recording table's measure columns are ``measure.NAME``.
+MEASURE_PREFIX = "measure."
 
 
-def _calibration_label(calibration: CalibrationChoice, mode: str = "improved") -> str:
-    """The word the tables print for ``calibration`` (``"cassi mode"`` in that mode)."""
-    if mode == "cassi":
-        return "cassi mode"
-    if calibration is None:
-        return "default"
-    if isinstance(calibration, str):
-        return calibration
-    return "calibrated"
+def _spec(spec: RunSpec | None, changes: Mapping[str, Any]) -> RunSpec:
+    mode = changes.pop("mode", None) if isinstance(changes, dict) else None
+    if spec is not None and mode is not None:
+        spec = spec.replace(mode=mode)
+    return run_spec(spec if spec is not None else mode, **changes)
 
 
-def _check_settings(collisions: str, jaw: str, stride: int) -> None:
-    check_choice("collisions", collisions, COLLISION_MODES)
-    check_choice("jaw method", jaw, JAW_METHODS)
-    if isinstance(stride, bool) or not isinstance(stride, numbers.Integral) or stride < 1:
-        raise CassiError(f"stride must be an integer of at least 1, got {stride!r}")
+def _settings(spec: RunSpec) -> dict:
+    return {"stride": spec.stride, "jaw": spec.jaw_name, "collisions": spec.collisions}
 
 
 def evaluate_recording(
     recording: Recording,
     *,
-    calibration: CalibrationChoice = None,
-    collisions: str = "off",
-    jaw: str = "closed-form",
-    stride: int = 1,
+    spec: RunSpec | None = None,
     model: FaceModel | None = None,
-    mode: str = "improved",
+    **changes: Any,
 ) -> RecordingRow:
-    """Animate one recording and rate it: an OK :class:`RecordingRow`.
+    """Animate one recording (``pipeline.run_recording``) and rate it: an OK
+    :class:`RecordingRow`.
 
-    ``calibration``: None (the toolkit's conformation from Headmeasures), ``"cassi"``
-    (only what the paper did) or a ``calibrate.Calibration``; ``collisions``: ``"off"``
-    or ``"project"`` (``options.COLLISION_MODES``); ``jaw`` (``options.JAW_METHODS``),
-    ``stride``: as ``animate.animate``; ``mode``: ``options.MODES`` (``"cassi"``: every
-    choice of the paper, ``initialize.CASSI``: flat tongue, fixed back anchors, no lip
-    rounding, the paper's conformation; then ``calibration`` must be None and
-    ``collisions`` ``"off"``). Errors propagate (``CassiError``).
+    ``spec``: the run's ``RunSpec`` (default the ``"improved"`` preset); ``changes``:
+    fields of it to change (``calibration=None | "cassi" | Calibration | path``,
+    ``collisions="project"``, ``jaw=``, ``stride=``, ``mode="cassi"`` ...). Errors
+    propagate (``CassiError``).
     """
-    from ..animate import animate
-    from ..initialize import initialize
+    from ..pipeline import run_recording
 
-    _check_settings(collisions, jaw, stride)
-    _check_mode(mode, calibration, collisions)
-    if isinstance(calibration, str):
-        check_choice("calibration", calibration, CONFORMATIONS)
-    state = initialize(recording, model, calibration=calibration, mode=mode)
-    anim = animate(state, recording, jaw=jaw, stride=stride, collisions=collisions)
+    spec = _spec(spec, dict(changes))
+    run = run_recording(recording, spec, model=model)
     return RecordingRow.evaluated(
-        recording.subject, recording.task, measure(state, anim), frames=int(anim.n_frames),
-        stride=int(stride), jaw=jaw, calibration=_calibration_label(calibration, mode),
-        collisions=collisions)
+        recording.subject, recording.task, measure(run.state, run.animation),
+        frames=int(run.animation.n_frames),
+        calibration=spec.calibration_label(run.state.calibration), **_settings(spec))
 
 
-def _check_mode(mode: str, calibration: object, collisions: str) -> None:
-    check_choice("mode", mode, MODES)
-    if mode == "cassi" and (calibration not in (None, "cassi") or collisions != "off"):
-        raise CassiError("the cassi mode is the paper's: no calibration and no collision "
-                         "handling")
+def evaluate_task(item: CorpusItem, out_dir: str | None, *, spec: RunSpec,
+                  overwrite: bool = False) -> TaskResult:
+    """``cassi evaluate``'s task: animate one recording and measure it
+    (:func:`evaluate_recording` with the worker's model). The row holds ``frames``,
+    ``calibration`` (its label) and every measure as ``measure.NAME``; ratings are
+    derived from the measures afterwards (:func:`evaluation_result`). Writes no file."""
+    recording = load_item(item, quiet=True)
+    row = evaluate_recording(recording, spec=spec, model=worker_model())
+    out = {"frames": row.frames, "calibration": row.calibration}
+    out.update((MEASURE_PREFIX + k, float(v)) for k, v in sorted(row.measures.items()))
+    return TaskResult(out)
 
 
-def _calibration_for(
-    calibrations: None | str | Mapping[str, Calibration], subject: str
-) -> CalibrationChoice:
-    if calibrations is None or isinstance(calibrations, str):
-        return calibrations
-    if subject in calibrations:
-        return calibrations[subject]
-    warnings.warn(f"{subject}: no calibration given; using the default conformation",
-                  stacklevel=3)
-    return None
+def evaluation_result(run: CorpusRun, spec: RunSpec) -> EvaluationResult:
+    """The :class:`EvaluationResult` of a run of :func:`evaluate_task`: one
+    ``RecordingRow`` per item in the run's sorted order (FAILED ones with their error),
+    then each subject's row combined from its recordings in that order."""
+    common = _settings(spec)
+    rows = []
+    for r in run.results:
+        s, t = r.item.subject, r.item.task
+        if r.status == Status.FAILED:
+            rows.append(RecordingRow.not_evaluated(s, t, r.error,
+                                                   calibration=spec.calibration_label(),
+                                                   **common))
+            continue
+        measures = {k[len(MEASURE_PREFIX):]: float(v) for k, v in r.row.items()
+                    if k.startswith(MEASURE_PREFIX)}
+        rows.append(RecordingRow.evaluated(s, t, measures, frames=int(r.row["frames"]),
+                                           calibration=r.row["calibration"], **common))
+    subjects = list(dict.fromkeys(r.subject for r in rows))
+    per_subject = [SubjectRow.of_recordings(s, [r for r in rows if r.subject == s], **common)
+                   for s in subjects]
+    return EvaluationResult(rows, per_subject,
+                            {**common, "calibration": spec.calibration_label()})
 
 
-def _plan(dataset: Dataset, subjects: Iterable[str] | None,
-          tasks: Iterable[str] | None) -> list[tuple[str, str]]:
-    """``(subject, task)`` pairs to evaluate, in the dataset's order."""
-    names = dataset.subjects() if subjects is None else [str(s).upper() for s in subjects]
-    if not names:
-        raise MissingDataError(f"{dataset.root}: no recordings found")
-    wanted = None if tasks is None else {str(t).lower() for t in tasks}
-    plan = []
-    for subject in names:
-        chosen = [t for t in dataset.tasks(subject) if wanted is None or t in wanted]
-        plan += [(subject, t) for t in chosen]
-    if not plan:
-        raise MissingDataError(
-            f"{dataset.root}: none of the tasks {', '.join(sorted(wanted or []))} found for "
-            f"{', '.join(names)}"
-        )
-    return plan
+def _check_calibrations(spec: RunSpec, items: Sequence[CorpusItem]) -> None:
+    """Read a folder's calibration files once here, so that a broken one stops the run
+    before it starts (instead of failing every recording of its subject), and warn once
+    for each subject that has none (its recordings get the default conformation)."""
+    cal = spec.calibration
+    subjects = list(dict.fromkeys(item.subject for item in items))
+    if isinstance(cal, CalibrationFiles) and cal.path.is_dir():
+        from ..calibrate import load_calibrations
+
+        have = load_calibrations(cal.path)
+    elif isinstance(cal, Mapping):
+        have = {str(k).upper(): v for k, v in cal.items()}
+    else:
+        return
+    for subject in subjects:
+        if subject not in have:
+            warnings.warn(f"{subject}: no calibration given; using the default conformation",
+                          stacklevel=3)
+
+
+def evaluate_corpus(
+    dataset: Dataset | str | os.PathLike,
+    out_dir: str | os.PathLike | None,
+    *,
+    spec: RunSpec | None = None,
+    subjects: Iterable[str] | None = None,
+    tasks: Iterable[str] | None = None,
+    run_options: Mapping[str, Any] | None = None,
+    **changes: Any,
+) -> tuple[CorpusRun, EvaluationResult]:
+    """``cassi evaluate DATASET``: :func:`evaluate_task` on every recording (the chosen
+    ``subjects``/``tasks``, names in any case), combined per subject
+    (:func:`evaluation_result`). ``spec``/``changes``: the run (as
+    :func:`evaluate_recording`; ``calibration`` may be a folder of ``cassi calibrate``'s
+    files or a dict subject -> ``Calibration``: a subject without one gets the default
+    conformation, with a warning). ``run_options`` go to ``corpus.run_corpus`` (``jobs``,
+    ``scheduler``, ``executor``, ``resume``, ``overwrite``, ``progress``, ...).
+    Completion markers go to ``out_dir`` (None: none, nothing written); the tables are the
+    caller's (``evaluate.write_table``). Returns ``(run, EvaluationResult)``."""
+    spec = _spec(spec, dict(changes))
+    items = require_items(dataset_items(dataset, subjects=subjects, tasks=tasks), dataset,
+                          subjects, tasks)
+    _check_calibrations(spec, items)
+    options = dict(run_options or {})
+    options.setdefault("desc", "evaluate")
+    with warnings.catch_warnings():  # said once above, not once per recording
+        warnings.filterwarnings("ignore", message=".*no calibration")
+        run = run_corpus(evaluate_task, items, out_dir, options={"spec": spec}, **options)
+    return run, evaluation_result(run, spec)
 
 
 def evaluate_dataset(
-    dataset_or_path: Dataset | str | os.PathLike,
+    dataset: Dataset | str | os.PathLike,
     *,
-    calibrations: None | str | Mapping[str, Calibration] = None,
-    collisions: str = "off",
-    tasks: Iterable[str] | None = None,
+    spec: RunSpec | None = None,
     subjects: Iterable[str] | None = None,
+    tasks: Iterable[str] | None = None,
     progress: bool = True,
-    jaw: str = "closed-form",
-    stride: int = 1,
     model: FaceModel | None = None,
-    mode: str = "improved",
+    **changes: Any,
 ) -> EvaluationResult:
-    """Evaluate every recording of a dataset (or the chosen ``subjects``/``tasks``) and
-    rate each subject.
+    """:func:`evaluate_corpus` in this process with no output folder: every recording of
+    a dataset (or the chosen ``subjects``/``tasks``) evaluated and each subject rated. A
+    recording that fails is kept as a ``FAILED`` row with its one-line error and not
+    rated; its subject is rated from the others. ``model``: the face model to use
+    (default the worker's, ``load_model()``)."""
+    if model is not None:
+        from ..corpus import use_model
 
-    ``calibrations``: None (the default conformation), ``"cassi"`` (CASSI-like, for
-    everyone) or a dict subject (upper case) -> ``Calibration`` (a subject missing from it
-    gets the default, with a warning). A recording that fails (a ``CassiError``: bad data,
-    non-finite geometry) is kept as a ``FAILED`` row with its message and not rated; its
-    subject is rated from the others. ``collisions``, ``jaw`` and ``stride`` are checked
-    before anything is animated; ``mode``: as :func:`evaluate_recording`. Progress bar
-    over the files on stderr (tqdm).
-    """
-    from tqdm import tqdm
-
-    from ..dataset import Dataset, DefaultHeadMeasuresWarning
-
-    _check_settings(collisions, jaw, stride)
-    _check_mode(mode, None if isinstance(calibrations, (str, type(None))) else {}, collisions)
-    if isinstance(calibrations, str):
-        check_choice("calibrations", calibrations, CONFORMATIONS)
-    dataset = dataset_or_path if isinstance(dataset_or_path, Dataset) else Dataset(
-        dataset_or_path)
-    plan = _plan(dataset, subjects, tasks)
-    settings = {"stride": int(stride), "jaw": jaw, "collisions": collisions}
-    rows = []
-    bar = tqdm(plan, desc="evaluate", unit="file", disable=not progress)
-    for subject, task in bar:
-        bar.set_postfix_str(f"{subject} {task}")
-        calibration = _calibration_for(calibrations, subject)
-        try:
-            with warnings.catch_warnings():  # the rows name the calibration used
-                warnings.simplefilter("ignore", DefaultHeadMeasuresWarning)
-                recording = dataset.load(subject, task)
-            rows.append(evaluate_recording(recording, calibration=calibration,
-                                           collisions=collisions, jaw=jaw, stride=stride,
-                                           model=model, mode=mode))
-        except CassiError as exc:
-            rows.append(RecordingRow.not_evaluated(
-                subject, task, str(exc), calibration=_calibration_label(calibration, mode),
-                **settings))
-    planned = list(dict.fromkeys(subject for subject, _ in plan))  # those with chosen tasks
-    per_subject = [SubjectRow.of_recordings(s, [r for r in rows if r.subject == s], **settings)
-                   for s in planned]
-    label = "calibrated" if isinstance(calibrations, Mapping) else _calibration_label(
-        calibrations, mode)
-    return EvaluationResult(rows, per_subject, {**settings, "calibration": label})
+        with use_model(model):
+            return evaluate_dataset(dataset, spec=spec, subjects=subjects, tasks=tasks,
+                                    progress=progress, **changes)
+    return evaluate_corpus(dataset, None, spec=spec, subjects=subjects, tasks=tasks,
+                           run_options={"jobs": 1, "progress": progress}, **changes)[1]

@@ -1,0 +1,176 @@
+"""Haskins ``mview`` data files (MATLAB ``.mat``): read and write.
+
+The format (mview's own input convention, as documented by its Python port PhonoScape and
+read there with ``scipy.io.loadmat``; see docs/EMA.md): a variable holding a struct array
+with one entry per channel, fields ``NAME`` (text), ``SRATE`` (Hz) and ``SIGNAL``
+(``[samples x dims]``); optional fields (``SOURCE``, ``SENTENCE``, ``COLOR``, ``NCOMPS``,
+``LABELS``...) are ignored. A channel whose ``SIGNAL`` has one column is a scalar (the
+first, ``AUDIO``, is usually the sound) and is not a sensor; a movement channel has 2 or
+3 position columns (mm) and, beyond the third, orientation angles. Haskins' processing
+leaves data head-corrected in an occlusal frame, but the file does not say which axis is
+which: :mod:`cassi_fit.ema.track` finds the frame (or a sensor map's ``[file]`` table says
+it). NaN is an untracked value.
+
+Which variable: the one named ``variable``, else the only struct array with those
+fields, else the one named like the file's stem; several candidates are an error naming
+them. MATLAB v7.3 files are HDF5 and are refused with the way out (save with ``-v7``).
+Refused with a :class:`DataFormatError` naming the file: no such struct, a movement
+channel with another rate or length than the others, a channel without a name.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+from .._io import atomic_write
+from ..errors import DataFormatError
+from ._raw import RawEma, read_bytes
+
+FIELDS = ("NAME", "SRATE", "SIGNAL")
+AUDIO_RATE_MIN_HZ = 5000.0  # mview's rule: a one-column channel at this rate is sound
+
+
+def is_mat(head: bytes) -> bool:
+    """Whether a file starts like a MATLAB 5 (or 7.3) ``.mat`` file."""
+    return head.startswith(b"MATLAB 5.0 MAT-file") or head.startswith(b"MATLAB 7.3 MAT-file")
+
+
+def _text(value) -> str:
+    value = np.asarray(value)
+    if value.dtype.kind in "US":
+        return "".join(str(v) for v in value.ravel()).strip()
+    if value.dtype == object and value.size == 1:
+        return _text(value.ravel()[0])
+    return str(value).strip()
+
+
+def _scalar(value) -> float:
+    return float(np.asarray(value, dtype=np.float64).ravel()[0])
+
+
+def _candidates(contents: dict) -> dict[str, np.ndarray]:
+    found = {}
+    for key, value in contents.items():
+        if key.startswith("__") or not isinstance(value, np.ndarray):
+            continue
+        names = value.dtype.names or ()
+        if all(f in names for f in FIELDS):
+            found[key] = value
+    return found
+
+
+def read_mview(path: str | os.PathLike, *, variable: str | None = None) -> RawEma:
+    """Read an mview ``.mat`` file into a :class:`RawEma` (seconds from 0 at ``SRATE``,
+    mm); see the module docstring for the format and every refusal."""
+    from scipy.io import loadmat
+
+    path, raw = read_bytes(path, ".mat file")
+    if raw.startswith(b"MATLAB 7.3"):
+        raise DataFormatError(path, None, "a MATLAB v7.3 (HDF5) file: save it with "
+                              "save(..., '-v7') to read it here")
+    try:
+        import io
+
+        contents = loadmat(io.BytesIO(raw), squeeze_me=False, struct_as_record=True)
+    except Exception as exc:  # scipy raises many kinds on a damaged file: one error here
+        raise DataFormatError(path, None, f"not a readable MATLAB file ({exc})") from None
+    found = _candidates(contents)
+    if variable is not None:
+        if variable not in found:
+            raise DataFormatError(path, None, f"no mview struct variable {variable!r} (found: "
+                                  f"{', '.join(found) or 'none'})")
+        key = variable
+    elif len(found) == 1:
+        key = next(iter(found))
+    elif path.stem in found:
+        key = path.stem
+    else:
+        raise DataFormatError(path, None, f"{len(found)} mview struct variables "
+                              f"({', '.join(found) or 'none with NAME, SRATE, SIGNAL'}): "
+                              "name one (variable=)")
+    entries = found[key].ravel()
+    names, signals, rates, notes = [], [], [], []
+    for i, entry in enumerate(entries):
+        name = _text(entry["NAME"])
+        if not name:
+            raise DataFormatError(path, None, f"{key}({i + 1}) has no NAME")
+        try:
+            signal = np.asarray(entry["SIGNAL"], dtype=np.float64)
+            rate = _scalar(entry["SRATE"])
+        except (ValueError, TypeError, IndexError):
+            raise DataFormatError(path, None, f"{key}({i + 1}) {name}: SIGNAL or SRATE is not "
+                                  "numeric") from None
+        if not (np.isfinite(rate) and rate > 0):
+            raise DataFormatError(path, None, f"{key}({i + 1}) {name}: SRATE {rate!r} is not a "
+                                  "rate")
+        if signal.ndim == 1 or (signal.ndim == 2 and min(signal.shape) == 1):
+            kind = "sound" if rate >= AUDIO_RATE_MIN_HZ else "a scalar channel"
+            notes.append(f"{name}: {kind} at {rate:g} Hz, not a sensor (not used)")
+            continue
+        if signal.ndim != 2:
+            raise DataFormatError(path, None, f"{key}({i + 1}) {name}: SIGNAL has shape "
+                                  f"{signal.shape}, expected samples x dims")
+        names.append(name)
+        signals.append(signal)
+        rates.append(rate)
+    if not names:
+        raise DataFormatError(path, None, f"{key} holds no movement channel (2 or 3 columns)")
+    for name, signal, rate in zip(names, signals, rates, strict=True):
+        if rate != rates[0] or signal.shape[0] != signals[0].shape[0]:
+            raise DataFormatError(path, None, f"{name}: {signal.shape[0]} samples at {rate:g} "
+                                  f"Hz, but {names[0]} has {signals[0].shape[0]} at "
+                                  f"{rates[0]:g} Hz (movement channels must share both)")
+    dims = 3 if max(s.shape[1] for s in signals) >= 3 else 2
+    for name, signal in zip(names, signals, strict=True):
+        if signal.shape[1] < dims:
+            raise DataFormatError(path, None, f"{name}: {signal.shape[1]} columns, others "
+                                  f"have {dims} (a missing channel)")
+    positions = np.stack([s[:, :dims] for s in signals], axis=1)
+    extra = [s.shape[1] - dims for s in signals]
+    orientation = None
+    if max(extra) > 0:
+        orientation = np.full(positions.shape[:2] + (max(extra),), np.nan)
+        for j, s in enumerate(signals):
+            orientation[:, j, : s.shape[1] - dims] = s[:, dims:]
+    n = positions.shape[0]
+    times = np.arange(n) / rates[0]
+    return RawEma(format="mview", times=times, names=tuple(names), positions=positions,
+                  rate_hz=rates[0], units="mm (mview)", path=path, orientation=orientation,
+                  axes="not stated by the file (Haskins data are usually head-corrected)",
+                  frame=None, notes=(f"variable {key!r}", *notes))
+
+
+def _identifier(stem: str) -> str:
+    """A MATLAB variable name from a file stem (letters, digits, ``_``; a letter first)."""
+    name = re.sub(r"\W", "_", stem)
+    return name if name[:1].isalpha() else f"v{name}"
+
+
+def write_mview(path: str | os.PathLike, raw: RawEma, *, variable: str | None = None,
+                audio: tuple[np.ndarray, float] | None = None, overwrite: bool = False) -> Path:
+    """Write ``raw`` as an mview ``.mat`` file (MATLAB 5 format, through
+    ``scipy.io.savemat``): one struct array named ``variable`` (default the file's stem),
+    ``AUDIO`` first when ``audio = (samples, rate)`` is given, then one entry per sensor
+    (``SIGNAL`` ``[n x dims]`` mm, NaN untracked). Written atomically; never replaces an
+    input, nor an existing file unless ``overwrite``."""
+    import io
+
+    from scipy.io import savemat
+
+    path = Path(path)
+    entries = []
+    if audio is not None:
+        entries.append(("AUDIO", float(audio[1]), np.asarray(audio[0], np.float64)[:, None]))
+    entries += [(name, float(raw.rate_hz), raw.positions[:, j, :])
+                for j, name in enumerate(raw.names)]
+    struct = np.empty((1, len(entries)), dtype=[(f, object) for f in FIELDS])
+    for j, (name, rate, signal) in enumerate(entries):
+        struct[0, j] = (name, rate, signal)
+    buffer = io.BytesIO()
+    savemat(buffer, {variable or _identifier(path.stem): struct}, format="5",
+            do_compression=False)
+    return atomic_write(path, buffer.getvalue(), overwrite=overwrite, data_file=True)

@@ -1,0 +1,336 @@
+"""From an articulograph file's sensors to the toolkit's pellet track.
+
+:func:`ema_to_track` takes a :class:`~cassi_fit.ema._raw.RawEma` (any reader's output), a
+sensor map and optionally a bite-plane recording, and returns the
+:class:`~cassi_fit.txy.PelletTrack` the pipeline reads (positions ``(n, 8, 2)`` mm in the
+toolkit's frame for ``UL LL T1 T2 T3 T4 MNI MNM``, NaN where a role has no sensor or is
+untracked; every other sensor in ``extra_*``) with a
+:class:`~cassi_fit.ema.report.SensorReport` saying how. The steps:
+
+1. units: the reader's millimetres, times a sensor map's ``[file] scale_mm``;
+2. roles (:mod:`cassi_fit.ema.sensor_map`);
+3. head correction on the reference sensors (:mod:`cassi_fit.ema.head`);
+4. the occlusal frame, from the first of these that applies:
+
+   a. a bite-plane recording (3D or 2D; its references fitted onto this recording's head
+      frame, so the head may move between the two recordings);
+   b. axes declared by the sensor map's ``[file]`` table (data already in a head frame),
+      origin at the upper-incisor sensor if there is one;
+   c. the format's documented frame (MOCHA-TIMIT: x toward the back, so x is mirrored;
+      origin at the ``ui`` coil);
+   d. 2D data: the file's axes, each sign chosen by the anatomy (the upper lip lies in
+      front of the back of the tongue and above the lower lip), origin at the
+      upper-incisor sensor if there is one, else the file's; the occlusal plane's angle is
+      then unknown and the file's x axis stands for it (said in the report);
+   e. 3D data with an upper-incisor sensor: the midsagittal plane fitted through the
+      midline sensors, x from the back of the tongue toward the upper lip within it (an
+      approximation of the occlusal plane, said in the report), origin at the incisor;
+   f. otherwise a :class:`DataFormatError`: 3D device coordinates cannot be placed
+      without a bite plane, an incisor sensor or declared axes;
+
+5. 3D data are projected onto the midsagittal plane (the toolkit's z = 0), and each
+   sensor's median distance from it is reported;
+6. checks: the sensors must span a head (15 to 250 mm: else the units are wrong), and the
+   anatomy must hold in the toolkit frame (:func:`cassi_fit.pellets.plausibility_problem`:
+   upper lip above lower lip, tongue behind the lips...), else a :class:`DataFormatError`
+   naming the file and what to check.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import DataFormatError
+from ..pellets import PELLET_NAMES, plausibility_problem
+from ..txy import PelletTrack
+from . import head
+from ._raw import RawEma
+from .report import SensorReport
+from .sensor_map import Assignment, SensorMap, resolve, sensor_map
+
+#: The span of the CASSI sensors' median positions (mm) of any head: outside it the
+#: units are wrong (a normalised array, centimetres, hundredths of a millimetre).
+SPAN_RANGE_MM = (15.0, 250.0)
+_BACK_FIRST = ("T4", "T3", "T2", "T1")
+
+
+@dataclass(frozen=True, eq=False)
+class _Corrected:
+    positions: np.ndarray  # (n, k, d) in the head frame
+    fits: head.RigidFits | None
+    config: np.ndarray | None
+    references: tuple[str, ...]
+    level: str
+    description: str
+
+
+def _median(positions: np.ndarray) -> np.ndarray:
+    """Per sensor median over frames, NaN for a sensor never tracked: ``(k, d)``."""
+    out = np.full(positions.shape[1:], np.nan)
+    for j in range(positions.shape[1]):
+        ok = np.isfinite(positions[:, j]).all(-1)
+        if ok.any():
+            out[j] = np.median(positions[ok, j], axis=0)
+    return out
+
+
+def _correct(where, positions: np.ndarray, assign: Assignment) -> _Corrected:
+    refs = assign.reference_names
+    dims = positions.shape[2]
+    level = head.reference_level(dims, len(refs))
+    if level == "none":
+        return _Corrected(positions, None, None, (), level, "none (no reference sensors: "
+                          "head movement stays in the data)")
+    index = [assign.names.index(r) for r in refs]
+    ref_pos = positions[:, index]
+    config = head.reference_configuration(ref_pos, level)
+    if config is None:
+        raise DataFormatError(where, None, f"no frame has every reference sensor "
+                              f"({', '.join(refs)}) tracked: the head frame cannot be set "
+                              "(name fewer references in a sensor map)")
+    fits = head.fit_references(ref_pos, config, level)
+    words = {
+        "full": f"rigid, {len(refs)} references ({', '.join(refs)})",
+        "two": (f"partial, 2 references ({', '.join(refs)}): translation and tilt removed, "
+                "the rotation about the line through them cannot be"),
+        "translation": f"translation only, 1 reference ({refs[0]}): rotations cannot be removed",
+    }
+    return _Corrected(head.apply(fits, positions), fits, config, refs, level, words[level])
+
+
+def _bite_points(bite: RawEma, smap: SensorMap, corrected: _Corrected, scale: float):
+    """Median bite-plane sensor positions in this recording's head frame, and a note."""
+    where = bite.path
+    assign = resolve(bite.names, smap, where, bite_plane=True)
+    for kind in ("front", "back"):
+        if kind not in assign.bite:
+            raise DataFormatError(where, None, f"bite-plane recording has no {kind} sensor "
+                                  f"(its sensors: {', '.join(assign.names)}; defaults OS, MS)")
+    positions = bite.positions * scale
+    note = None
+    if corrected.fits is not None:
+        missing = [r for r in corrected.references if r not in assign.names]
+        if missing:
+            raise DataFormatError(where, None, f"bite-plane recording lacks the reference "
+                                  f"sensor(s) {', '.join(missing)} of the recording")
+        index = [assign.names.index(r) for r in corrected.references]
+        fits = head.fit_references(positions[:, index], corrected.config, corrected.level)
+        positions = head.apply(fits, positions)
+    else:
+        note = ("bite plane used without head references: the head is assumed not to have "
+                "moved between the bite-plane recording and this one")
+    med = _median(positions)
+    points = {k: med[assign.names.index(s)] for k, s in assign.bite.items()}
+    for kind, p in points.items():
+        if not np.isfinite(p).all():
+            raise DataFormatError(where, None, f"bite-plane {kind} sensor "
+                                  f"{assign.bite[kind]!r} is never tracked")
+    return points, note
+
+
+def _up_hint(med: np.ndarray, assign: Assignment, origin: np.ndarray) -> np.ndarray | None:
+    """A direction that points up: nasion, else upper lip, relative to ``origin``."""
+    nasion = assign.references.get("nasion", ())
+    for name in list(nasion) + [assign.roles.get("UL")]:
+        if name is not None:
+            p = med[assign.names.index(name)]
+            if np.isfinite(p).all():
+                return p - origin
+    return None
+
+
+def _role_median(med, assign, role):
+    name = assign.roles.get(role)
+    if name is None:
+        return None
+    p = med[assign.names.index(name)]
+    return p if np.isfinite(p).all() else None
+
+
+def _midline_plane(med: np.ndarray, assign: Assignment, extra=()) -> np.ndarray | None:
+    points = [med[assign.names.index(s)] for s in assign.midline] + list(extra)
+    found = head.fit_plane(np.array(points)) if len(points) >= 3 else None
+    return None if found is None else found[0]
+
+
+def _anatomy_2d(med, assign, origin) -> head.Frame:
+    """2D data in unknown axes: each axis's sign from the anatomy."""
+    forward, up = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+    ul, ll = _role_median(med, assign, "UL"), _role_median(med, assign, "LL")
+    back = next((p for r in _BACK_FIRST if (p := _role_median(med, assign, r)) is not None),
+                None)
+    signs = []
+    if ul is not None and back is not None and ul[0] < back[0]:
+        forward = -forward
+        signs.append("x mirrored (the lips lie at -x)")
+    if ul is not None and ll is not None and ul[1] < ll[1]:
+        up = -up
+        signs.append("y mirrored (the upper lip lies at -y)")
+    source = ("the file's axes, signs from the anatomy" + (f": {'; '.join(signs)}" if signs
+                                                              else "") +
+              "; occlusal plane not given (the file's x axis stands for it)")
+    return head.Frame(np.stack([forward, up]), origin, source)
+
+
+def _occlusal_frame(where, raw: RawEma, corrected: _Corrected, assign: Assignment,
+                    smap: SensorMap, bite: RawEma | None, scale: float,
+                    bite_smap: SensorMap) -> tuple[head.Frame, list[str]]:
+    dims = raw.dims
+    med = _median(corrected.positions)
+    notes: list[str] = []
+    ui = assign.upper_incisor
+    ui_pos = med[assign.names.index(ui)] if ui is not None else None
+    if ui_pos is not None and not np.isfinite(ui_pos).all():
+        ui_pos = None
+    origin = ui_pos if ui_pos is not None else np.zeros(dims)
+    origin_words = (f"origin at the upper-incisor sensor {ui}" if ui_pos is not None
+                    else "origin: the file's (no upper-incisor sensor)")
+    if bite is not None:
+        points, note = _bite_points(bite, bite_smap, corrected, (bite_smap.scale_mm or 1.0))
+        if note:
+            notes.append(note)
+        lateral = None
+        if dims == 3 and not ("left" in points and "right" in points):
+            lateral = _midline_plane(med, assign, [points["front"], points["back"]])
+            if lateral is None:
+                raise DataFormatError(where, None, "bite plane without left/right sensors and "
+                                      "too few midline sensors to find the midsagittal plane")
+        frame = head.bite_frame(points["front"], points["back"],
+                                _up_hint(med, assign, points["front"]),
+                                left=points.get("left"), right=points.get("right"),
+                                lateral=lateral, source=f"bite plane {bite.path or ''}".strip())
+        if frame is None:
+            raise DataFormatError(where, None, "bite-plane sensors are degenerate (front and "
+                                  "back at one point, or left and right on the x axis)")
+        return frame, notes
+    if smap.anterior is not None:
+        forward = head.signed_axis(smap.anterior, dims)
+        up = head.signed_axis(smap.up, dims)
+        if abs(np.dot(forward, up)) > 0:
+            raise DataFormatError(smap.name, None, "[file] anterior and up are the same axis")
+        frame = head.frame_from_axes(forward, up, origin, f"axes declared by {smap.name} "
+                                     f"(anterior {smap.anterior}, up {smap.up}); {origin_words}")
+        return frame, notes
+    if raw.frame == "mocha" and dims == 2:
+        return head.Frame(np.array([[-1.0, 0.0], [0.0, 1.0]]), origin,
+                          "MOCHA-TIMIT's documented axes (x toward the back: mirrored); "
+                          f"{origin_words}; occlusal plane not given (the file's x axis "
+                          "stands for it)"), notes
+    if dims == 2:
+        frame = _anatomy_2d(med, assign, origin)
+        return head.Frame(frame.rotation, origin, f"{frame.source}; {origin_words}"), notes
+    if ui_pos is None:
+        raise DataFormatError(where, None, "3D positions in the device's frame cannot be "
+                              "placed in the occlusal frame: give a bite-plane recording, an "
+                              "upper-incisor reference sensor, or the axes in a sensor map's "
+                              "[file] table (docs/EMA.md)")
+    normal = _midline_plane(med, assign)
+    ul = _role_median(med, assign, "UL")
+    back = next((p for r in _BACK_FIRST if (p := _role_median(med, assign, r)) is not None),
+                None)
+    if normal is None or ul is None or back is None:
+        raise DataFormatError(where, None, "no bite plane, and too few midline sensors (upper "
+                              "lip, tongue, incisors) to estimate the occlusal frame")
+    forward = (ul - back) - np.dot(ul - back, normal) * normal
+    up = np.cross(normal, forward)
+    hint = _up_hint(med, assign, ui_pos)
+    if hint is not None and np.dot(up, hint) < 0:
+        up = -up
+    frame = head.frame_from_axes(forward, up, ui_pos, "estimated without a bite plane: "
+                                 "midsagittal plane through the midline sensors, x from the "
+                                 "back of the tongue toward the upper lip (within about 10 "
+                                 f"degrees of the occlusal plane); {origin_words}")
+    return frame, notes
+
+
+def _check_anatomy(where, track: PelletTrack, frame: head.Frame) -> None:
+    med = np.full((len(PELLET_NAMES), 2), np.nan)
+    for j in range(len(PELLET_NAMES)):
+        ok = track.valid[:, j].all(-1)
+        if ok.any():
+            med[j] = np.median(track.positions[ok, j], axis=0)
+    found = med[np.isfinite(med).all(1)]
+    if found.shape[0] >= 2:
+        span = float(np.max(np.linalg.norm(found[:, None] - found[None], axis=-1)))
+        lo, hi = SPAN_RANGE_MM
+        if not lo <= span <= hi:
+            raise DataFormatError(where, None, f"the sensors span {span:.3g} mm, not a head "
+                                  f"({lo:.0f}-{hi:.0f} mm): are the units millimetres? (a "
+                                  "sensor map's [file] scale_mm; normalised arrays need their "
+                                  "means and SDs; docs/EMA.md)")
+    problem = plausibility_problem(track)
+    if problem is not None:
+        raise DataFormatError(where, None, f"{problem} [occlusal frame: {frame.source}]; check "
+                              "the sensor map's roles and [file] axes (docs/EMA.md)")
+
+
+def ema_to_track(raw: RawEma, smap: SensorMap | str | os.PathLike | None = None, *,
+                 bite: RawEma | None = None,
+                 bite_map: SensorMap | str | os.PathLike | None = None, check: bool = True
+                 ) -> tuple[PelletTrack, SensorReport]:
+    """The toolkit's pellet track of an articulograph recording, and how it was made
+    (module docstring). ``smap``: a :class:`SensorMap`, a built-in map name, a ``.toml``
+    path, or None (the built-in names); ``bite``: a bite-plane recording, read with
+    ``bite_map`` (default ``smap``); ``check``: refuse implausible anatomy or units."""
+    smap = sensor_map(smap)
+    bite_smap = smap if bite_map is None else sensor_map(bite_map)
+    where = raw.path
+    scale = smap.scale_mm or 1.0
+    positions = raw.positions * scale
+    assign = resolve(raw.names, smap, where)
+    corrected = _correct(where, positions, assign)
+    frame, frame_notes = _occlusal_frame(where, raw, corrected, assign, smap, bite, scale,
+                                         bite_smap)
+    toolkit = frame.apply(corrected.positions)
+    n = raw.n_frames
+    index = {s: j for j, s in enumerate(assign.names)}
+    pellets = np.full((n, len(PELLET_NAMES), 2), np.nan)
+    for role, sensor in assign.roles.items():
+        pellets[:, PELLET_NAMES.index(role)] = toolkit[:, index[sensor], :2]
+    extras = toolkit[:, [index[s] for s in assign.extras], :2]
+    pellet_valid = np.isfinite(pellets)
+    pellet_valid &= pellet_valid.all(-1, keepdims=True)
+    extra_valid = np.isfinite(extras)
+    extra_valid &= extra_valid.all(-1, keepdims=True)
+    track = PelletTrack(times=raw.times, positions=pellets, valid=pellet_valid, path=raw.path,
+                        extra_names=assign.extras, extra_positions=extras,
+                        extra_valid=extra_valid)
+    if check:
+        _check_anatomy(where, track, frame)
+    distances = {}
+    if raw.dims == 3:
+        med = _median(toolkit)
+        distances = {s: float(med[j, 2]) for j, s in enumerate(assign.names)
+                     if np.isfinite(med[j, 2])}
+    fits = corrected.fits
+    d = raw.dims
+    if fits is not None:
+        residual = fits.residual
+        rotation = np.where(fits.ok, head.rotation_angle_deg(fits.rotation), np.nan)
+        refs = positions[:, [index[r] for r in corrected.references]]
+        centroid = head.tracked_mean(refs)
+        shift = np.linalg.norm(centroid - corrected.config.mean(0), axis=-1)
+        translation = np.where(fits.ok, shift, np.nan)
+        lost = int((~fits.ok).sum())
+    else:
+        residual = rotation = translation = np.full(n, np.nan)
+        lost = 0
+    notes = list(raw.notes) + list(assign.notes) + frame_notes
+    if lost:
+        notes.append(f"{lost} frame(s) lack the reference sensors: their sensors are untracked")
+    report = SensorReport(
+        format=raw.format, rate_hz=float(raw.rate_hz), units=raw.units + (
+            f"; times {smap.scale_mm:g} ([file] scale_mm)" if smap.scale_mm else ""),
+        file_axes=raw.axes, dims=d, sensor_map=smap.name,
+        roles={r: assign.roles.get(r) for r in PELLET_NAMES}, extras=assign.extras,
+        references=corrected.references, head_correction=corrected.description,
+        head_residual_mm=residual, head_rotation_deg=rotation,
+        head_translation_mm=translation, frames_without_references=lost,
+        frame_source=frame.source, frame_rotation=frame.rotation, frame_origin=frame.origin,
+        midsagittal_distance_mm=distances,
+        bite_plane=None if bite is None or bite.path is None else str(bite.path),
+        notes=tuple(notes), head_fits=fits)
+    return track, report

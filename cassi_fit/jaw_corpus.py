@@ -1,0 +1,217 @@
+"""``cassi jaw DATASET``'s task and table (one CSV per recording, the corpus table)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ._io import atomic_write
+from .corpus import (
+    CorpusItem,
+    CorpusRun,
+    TaskResult,
+    dataset_items,
+    require_items,
+    run_corpus,
+    write_table,
+)
+from .errors import OutputExistsError
+from .status import Status
+from .tables import csv_text
+
+if TYPE_CHECKING:
+    import numpy as np
+    from jaxtyping import Float
+
+    from .dataset import Dataset
+    from .jaw_fit import JawFit
+    from .labels import Labels
+    from .txy import PelletTrack
+
+
+JAW_FRAME_COLUMNS = ("time_s", "theta_deg", "pivot_a_mm", "pivot_b_mm", "tx_mm", "ty_mm",
+                     "residual_mm", "status")
+#: the jaw statuses counted per recording (Status values 0-5)
+JAW_STATUSES = (Status.OK, Status.PIVOT_UNDEFINED, Status.DEGENERATE, Status.NON_FINITE,
+                Status.INVALID_FRAME, Status.NOT_CONVERGED)
+
+
+def jaw_frame_csv(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels | None = None
+                  ) -> str:
+    """One recording's jaw table, as ``cassi jaw RECORDING`` writes it (one row per frame,
+    :data:`JAW_FRAME_COLUMNS`), plus a ``label`` column when ``labels`` are given
+    (``labels.Labels``; ``""`` between labelled intervals)."""
+    import numpy as np
+
+    columns = list(JAW_FRAME_COLUMNS) + (["label"] if labels is not None else [])
+    theta_deg = np.rad2deg(fit.theta)
+    names = [Status(int(c)).label for c in fit.status]
+    current = labels.at(times) if labels is not None else None
+    lines = [",".join(columns)]
+    for k in range(len(times)):
+        values = (times[k], theta_deg[k], fit.pivot[k, 0], fit.pivot[k, 1],
+                  fit.translation[k, 0], fit.translation[k, 1], fit.residual[k])
+        line = ",".join(f"{v:.6f}" for v in values) + f",{names[k]}"
+        if current is not None:
+            line += "," + _csv_field(str(current[k]))
+        lines.append(line)
+    return "\n".join(lines) + "\n"
+
+
+def _csv_field(text: str) -> str:
+    return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n\r') else text
+
+
+def _iqr(x: np.ndarray) -> float | None:
+    import numpy as np
+
+    if x.size == 0:
+        return None
+    q1, q3 = np.percentile(x, [25, 75])
+    return float(q3 - q1)
+
+
+def jaw_summary_row(fit: JawFit, *, label_file: str = "") -> dict:
+    """The corpus-table row of one jaw fit: method, frames, angle range (deg) over the
+    fitted frames, pivot spread (interquartile range of the pivot's a and b over frames
+    with a defined pivot, mm), residuals (rms and max over fitted frames, mm), the noise
+    estimate, convergence and the number of frames per status."""
+    import numpy as np
+
+    fitted = fit.status == int(Status.OK)
+    theta_deg = np.rad2deg(fit.theta[fitted])
+    pivots = fit.pivot[fitted & fit.pivot_defined]
+    residual = fit.residual[fitted]
+    row = {
+        "method": fit.method, "solver": fit.solver, "frames": int(fit.status.size),
+        "theta_min_deg": float(theta_deg.min()) if theta_deg.size else None,
+        "theta_max_deg": float(theta_deg.max()) if theta_deg.size else None,
+        "theta_range_deg": float(np.ptp(theta_deg)) if theta_deg.size else None,
+        "pivot_iqr_a_mm": _iqr(pivots[:, 0]), "pivot_iqr_b_mm": _iqr(pivots[:, 1]),
+        "residual_rms_mm": float(np.sqrt(np.mean(residual**2))) if residual.size else None,
+        "residual_max_mm": float(residual.max()) if residual.size else None,
+        "noise_mm": float(fit.noise_mm), "converged": bool(fit.converged),
+    }
+    for s in JAW_STATUSES:
+        row[f"frames_{s.label.replace('-', '_')}"] = int(np.sum(fit.status == int(s)))
+    row["label_file"] = label_file
+    return row
+
+
+#: frames per padding bucket of the jaw fits: one compilation covers every recording up to
+#: 7 s; the padding's cost is nothing for the closed form, and up to 3x a short recording's
+#: fitting time for "frame-fit" (still far below one compilation)
+JAW_FRAME_BUCKET = 1024
+
+
+def fit_jaw_bucketed(track: PelletTrack, *, method: str = "closed-form",
+                     solver: str = "optimistix-lm", smoothness: float = 1.0) -> JawFit:
+    """``jaw_fit.jaw_from_track`` with the frames padded to a multiple of
+    :data:`JAW_FRAME_BUCKET` (1024 frames, 7 s), so that a worker compiles the fit once per
+    bucket instead of once per recording length (the XRMB lengths all differ; compiling
+    costs about 2-3 s a length, fitting a recording tens of ms). The padding is untracked frames after the last: the per-frame methods give
+    the real frames the values of an unpadded fit (they are fitted frame by frame and
+    the noise is pooled over usable frames only), and "fixed-pivot" gets zero weight for
+    them. "smooth-pivot" is not padded: its pivot-path knots depend on the length."""
+    import dataclasses
+
+    import numpy as np
+
+    from .jaw_fit import jaw_from_track
+    from .txy import FRAME_STEP_US, PelletTrack
+
+    if method == "smooth-pivot":
+        return jaw_from_track(track, method=method, solver=solver, smoothness=float(smoothness))
+    n = track.n_frames
+    extra = -n % JAW_FRAME_BUCKET
+    step = FRAME_STEP_US * 1e-6
+    padded = PelletTrack(
+        times=np.concatenate([track.times, track.times[-1] + step * np.arange(1, extra + 1)]),
+        positions=np.concatenate([track.positions, np.full((extra, 8, 2), np.nan)]),
+        valid=np.concatenate([track.valid, np.zeros((extra, 8, 2), bool)]),
+        path=track.path,
+    )
+    fit = jaw_from_track(padded, method=method, solver=solver)
+    per_frame = {f.name: getattr(fit, f.name)[:n] for f in dataclasses.fields(fit)
+                 if isinstance(getattr(fit, f.name), np.ndarray)
+                 and getattr(fit, f.name).shape[:1] == (n + extra,)}
+    return dataclasses.replace(fit, **per_frame)
+
+
+def jaw_output_path(out_dir: str | os.PathLike, item: CorpusItem) -> Path:
+    """``out_dir/SUBJECT/TASK.jaw.csv``."""
+    return Path(out_dir) / item.subject / f"{item.task}.jaw.csv"
+
+
+def segments_output_path(out_dir: str | os.PathLike, item: CorpusItem) -> Path:
+    """``out_dir/SUBJECT/TASK.segments.csv``."""
+    return Path(out_dir) / item.subject / f"{item.task}.segments.csv"
+
+
+def jaw_task(item: CorpusItem, out_dir: str, *, method: str = "closed-form",
+             solver: str = "optimistix-lm", smoothness: float = 1.0,
+             labels: bool = True, overwrite: bool = False) -> TaskResult:
+    """``cassi jaw DATASET``'s task: fit the jaw of one pellet file
+    (:func:`fit_jaw_bucketed`), write ``out_dir/SUBJECT/TASK.jaw.csv`` (one row per frame)
+    and return the summary row (:func:`jaw_summary_row`). When ``labels`` and a label
+    file lies beside the pellet file (``labels.labels_for``), the frame table gets a
+    ``label`` column and ``TASK.segments.csv`` holds one row per labelled segment
+    (``labels.segment_summary``: peak jaw opening, lip aperture range, ...)."""
+    from .labels import SEGMENT_COLUMNS, labels_for, segment_summary
+    from .txy import read_txy
+
+    track = read_txy(item.path)
+    fit = fit_jaw_bucketed(track, method=method, solver=solver, smoothness=smoothness)
+    found = labels_for(item.path) if labels else None
+    out = jaw_output_path(out_dir, item)
+    outputs = [atomic_write(out, jaw_frame_csv(track.times, fit, found), overwrite=overwrite)]
+    label_file = ""
+    if found is not None:
+        label_file = found.path.name if found.path is not None else ""
+        rows = segment_summary(track.times, fit.theta, track.positions, found,
+                               usable=fit.status == int(Status.OK))
+        outputs.append(atomic_write(segments_output_path(out_dir, item),
+                                    csv_text(rows, SEGMENT_COLUMNS), overwrite=overwrite))
+    return TaskResult(jaw_summary_row(fit, label_file=label_file),
+                      tuple(str(p) for p in outputs))
+
+
+def jaw_corpus_path(out_dir: str | os.PathLike) -> Path:
+    """``out_dir/jaw_corpus.csv`` (and ``.parquet`` beside it)."""
+    return Path(out_dir) / "jaw_corpus.csv"
+
+
+def jaw_corpus(
+    dataset: Dataset | str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    method: str = "closed-form",
+    solver: str = "optimistix-lm",
+    smoothness: float = 1.0,
+    labels: bool = True,
+    subjects: Iterable[str] | None = None,
+    tasks: Iterable[str] | None = None,
+    **run_options: Any,
+) -> tuple[CorpusRun, list[Path]]:
+    """``cassi jaw DATASET --out DIR``: :func:`jaw_task` on every recording (float64, as
+    the single-recording command), then the corpus table ``DIR/jaw_corpus.csv`` (and
+    ``.parquet``). ``run_options`` go to :func:`run_corpus` (``jobs``, ``scheduler``,
+    ``executor``, ``resume``, ``overwrite``, ``progress``, ``compilation_cache``).
+    Returns the run (``run.failed``: exit non-zero) and the table files written."""
+    replace = bool(run_options.get("overwrite") or run_options.get("resume"))
+    table = jaw_corpus_path(out_dir)
+    if table.exists() and not replace:  # refuse before the run, not after it
+        raise OutputExistsError(f"{table}: file exists (pass overwrite=True / --force, or "
+                                "resume=True / --resume)")
+    run_options.setdefault("x64", True)  # pivots to a micrometre need float64 (cassi jaw)
+    run_options.setdefault("desc", "jaw")
+    options = {"method": method, "solver": solver, "labels": bool(labels)}
+    if method == "smooth-pivot":
+        options["smoothness"] = float(smoothness)
+    items = require_items(dataset_items(dataset, subjects=subjects, tasks=tasks), dataset,
+                          subjects, tasks)
+    run = run_corpus(jaw_task, items, out_dir, options=options, **run_options)
+    written = write_table(run.rows(), table, overwrite=replace)
+    return run, written
