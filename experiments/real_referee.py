@@ -24,9 +24,10 @@ reference frame excluded:
   Score: the distance (mm) between the predicted and the measured hidden sensor.
 - **Tongue.** With all four tongue pellets present, T2 and T3 are hidden in turn (the
   recording is loaded with that pellet never tracked) and the toolkit's own pipeline
-  (``initialize.animate_recording``) runs in the improved mode (thick tongue) and in the
-  cassi mode (CASSI's flat tongue); whatever the pipeline does with a never-tracked
-  tongue pellet is what is scored. Scores: ``surface``, the distance from the measured
+  (``pipeline.run_recording``) runs in the improved mode (thick tongue) and in the
+  cassi mode (CASSI's flat tongue), every ``TONGUE_STRIDE``-th line; whatever the pipeline
+  does with a never-tracked tongue pellet (today: ``frames.tongue_fill``, its displacement
+  interpolated in arc length between its neighbours') is what is scored. Scores: ``surface``, the distance from the measured
   hidden pellet to the model tongue's upper midsagittal contour (the polyline of its
   upper-midline vertices, ``deform.tongue_midline``: the section of the tongue's surface
   at z = 0); ``site``, the distance to where the model puts the hidden pellet (its pellet
@@ -84,7 +85,7 @@ STATISTICS = {"median": 50.0, "p95": 95.0}
 JAW = ("MNI", "MNM")
 TONGUE = ("T1", "T2", "T3", "T4")
 HIDDEN_TONGUE = ("T2", "T3")
-#: The tongue models scored: label -> the pipeline's mode (``initialize.MODES``).
+#: The tongue models scored: label -> the pipeline's mode (``options.MODES``).
 TONGUE_MODELS = {"thick tongue (improved)": "improved", "flat tongue (cassi)": "cassi"}
 #: The lower lip's jaw weight of each weight set (``options.JAW_WEIGHTS``), as labels.
 LIP_MODELS = {"jaw weight (cassi)": "cassi", "jaw weight (parke)": "parke"}
@@ -197,19 +198,19 @@ def padded(track, multiple: int = PAD_FRAMES):
     Fits and animations compile once per frame count; padding gives recordings of
     similar length one count. The appended frames are never used (untracked) nor scored.
     """
-    from cassi_fit.txy import PelletTrack
-
     n = track.n_frames
     extra = -n % multiple
-    step = float(np.median(np.diff(track.times))) if n > 1 else 6866e-6
-    shape = (extra, *track.positions.shape[1:])
-    return PelletTrack(np.concatenate([track.times, track.times[-1] + step * np.arange(1, extra + 1)]),
-                       np.concatenate([track.positions, np.full(shape, np.nan)]),
-                       np.concatenate([track.valid, np.zeros(shape, bool)]), track.path)
 
+    def pad(values, fill):
+        values = np.asarray(values)
+        return np.concatenate([values, np.full((extra, *values.shape[1:]), fill, values.dtype)])
 
-def _frame_step(track) -> float:
-    return float(np.median(np.diff(track.times)))
+    times = track.times[-1] + track.frame_step_s * np.arange(1, extra + 1)
+    return dataclasses.replace(
+        track, times=np.concatenate([track.times, times]),
+        positions=pad(track.positions, np.nan), valid=pad(track.valid, False),
+        extra_positions=pad(track.extra_positions, np.nan),
+        extra_valid=pad(track.extra_valid, False))
 
 
 class PartResult:
@@ -270,18 +271,15 @@ def jaw_part(track, seen: str, fit=None, single_sensor: Callable | None = None) 
     errors = {k: np.where(usable, point_errors(v, pos[:, h]), np.nan) for k, v in predicted.items()}
     order = [k for k in roles if roles[k] == "method"] + [k for k in roles if roles[k] != "method"]
     return [PartResult(f"jaw: {hidden} from {seen}", "position", {k: errors[k] for k in order},
-                       {k: roles[k] for k in order}, _frame_step(track))]
+                       {k: roles[k] for k in order}, track.frame_step_s)]
 
 
 def _hide(recording, name: str):
     """The recording, padded (:func:`padded`), with pellet ``name`` never tracked."""
-    from cassi_fit.txy import PelletTrack
-
     track = padded(recording.track)
     valid = track.valid.copy()
     valid[:, _col(name)] = False
-    masked = PelletTrack(track.times, track.positions, valid, track.path)
-    return dataclasses.replace(recording, track=masked)
+    return dataclasses.replace(recording, track=dataclasses.replace(track, valid=valid))
 
 
 def tongue_contour(model) -> np.ndarray:
@@ -296,7 +294,7 @@ def tongue_part(recording, hidden: str, model=None,
                 models: dict[str, str] | None = None) -> list[PartResult]:
     """The hidden tongue pellet test (``hidden`` in T2, T3): one result per metric.
     ``models``: label -> mode of the tongue models to run (default ``TONGUE_MODELS``)."""
-    from cassi_fit.initialize import animate_recording
+    from cassi_fit.pipeline import run_recording
 
     models = TONGUE_MODELS if models is None else models
     i = TONGUE.index(hidden)
@@ -308,8 +306,8 @@ def tongue_part(recording, hidden: str, model=None,
     errors = {m: {} for m in TONGUE_METRICS}
     fraction, scored = None, np.zeros(n, bool)
     for label, mode in models.items():
-        state, anim = animate_recording(_hide(recording, hidden), model, mode=mode,
-                                        stride=TONGUE_STRIDE)
+        _, _, state, anim = run_recording(_hide(recording, hidden), mode, model=model,
+                                          stride=TONGUE_STRIDE)
         rows = np.asarray(anim.frame_index)
         keep = rows < n
         rows = rows[keep]
@@ -344,16 +342,16 @@ def tongue_part(recording, hidden: str, model=None,
     for metric in TONGUE_METRICS:
         errs = dict(errors[metric])
         errs["linear interpolation"] = np.where(scored, baseline[metric], np.nan)
-        out.append(PartResult(part, metric, errs, roles, TONGUE_STRIDE * _frame_step(track)))
+        out.append(PartResult(part, metric, errs, roles, TONGUE_STRIDE * track.frame_step_s))
     return out
 
 
 def lips_part(track, model=None) -> list[PartResult]:
     """The lower lip predicted from the jaw alone (LL held out, both jaw pellets used)."""
     from cassi_fit.face_model import load_model
-    from cassi_fit.initialize import IMPROVED
     from cassi_fit.jaw_fit import jaw_from_track
     from cassi_fit.pellets import first_clean_line
+    from cassi_fit.run_spec import IMPROVED
     from cassi_fit.status import Status
 
     model = load_model() if model is None else model
@@ -376,7 +374,7 @@ def lips_part(track, model=None) -> list[PartResult]:
     predicted["moves with MNI"] = pos[f0, ll] + pos[:, mni] - pos[f0, mni]
     roles |= {"static": "baseline", "moves with MNI": "baseline"}
     errors = {k: np.where(usable, point_errors(v, pos[:, ll]), np.nan) for k, v in predicted.items()}
-    return [PartResult("lips: LL from the jaw", "position", errors, roles, _frame_step(track))]
+    return [PartResult("lips: LL from the jaw", "position", errors, roles, track.frame_step_s)]
 
 
 def single_sensor_methods() -> Callable | None:
