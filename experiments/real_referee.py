@@ -128,9 +128,7 @@ def polyline_distance(points: np.ndarray, polylines: np.ndarray):
     dist = np.linalg.norm(foot - p, axis=-1)  # (n, k - 1)
     nearest = np.argmin(np.where(np.isfinite(dist), dist, np.inf), axis=1)
     rows = np.arange(len(p))
-    seg_len = np.sqrt(length2)
-    start = np.concatenate([np.zeros((len(p), 1)), np.cumsum(seg_len, axis=1)], axis=1)
-    arc = start[rows, nearest] + t[rows, nearest] * seg_len[rows, nearest]
+    arc = arc_lengths(polylines)[rows, nearest] + t[rows, nearest] * np.sqrt(length2[rows, nearest])
     return dist[rows, nearest], arc
 
 
