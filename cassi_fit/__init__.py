@@ -77,7 +77,6 @@ if TYPE_CHECKING:
     from .initialize import initialize as initialize
     from .jaw import closed_form as closed_form
     from .jaw import closed_form_paper as closed_form_paper
-    from .jaw_corpus import jaw_corpus as jaw_corpus
     from .jaw_fit import ClosedForm as ClosedForm
     from .jaw_fit import Dogleg as Dogleg
     from .jaw_fit import FixedPivot as FixedPivot
@@ -94,6 +93,7 @@ if TYPE_CHECKING:
     from .jaw_fit import jaw_from_track as jaw_from_track
     from .jaw_fit import jaw_method as jaw_method
     from .jaw_fit import jaw_solver as jaw_solver
+    from .jaw_table import jaw_corpus as jaw_corpus
     from .labels import Labels as Labels
     from .labels import labels_for as labels_for
     from .labels import read_lab as read_lab
@@ -128,7 +128,7 @@ if TYPE_CHECKING:
     from .run_spec import CalibrationFiles as CalibrationFiles
     from .run_spec import RunSpec as RunSpec
     from .run_spec import run_spec as run_spec
-    from .status import STATUS_LABELS as STATUS_LABELS
+    from .status import SolverResult as SolverResult
     from .status import Status as Status
     from .synth import TASKS as TASKS
     from .synth import JawTruth as JawTruth
@@ -163,7 +163,7 @@ _PUBLIC = {
     "InvalidChoiceError": "errors",
     # status (base)
     "Status": "status",
-    "STATUS_LABELS": "status",
+    "SolverResult": "status",
     # options (base)
     "JAW_METHODS": "options",
     "SOLVERS": "options",
@@ -299,7 +299,7 @@ _PUBLIC = {
     "compare": "evaluate",
     # corpus (runs)
     "run_corpus": "corpus",
-    "jaw_corpus": "jaw_corpus",
+    "jaw_corpus": "jaw_table",
     "evaluate_corpus": "evaluate",
     "calibrate_corpus": "calibrate_corpus",
     "animate_corpus": "video",
@@ -318,7 +318,7 @@ __all__ = [
     "JAW_PELLETS", "JawDiagnostics", "JawFit", "JawMethod", "JawTruth", "Labels",
     "LevenbergMarquardt", "MATERIALS", "MissingDataError", "MistrackedFirstLineWarning",
     "OutputExistsError", "PELLET_NAMES", "PelletTrack", "QualityReport", "Recording", "Renderer",
-    "RenderingUnavailableError", "SOLVERS", "STATUS_LABELS", "SmoothPivot", "Solver", "Status",
+    "RenderingUnavailableError", "SOLVERS", "SmoothPivot", "Solver", "SolverResult", "Status",
     "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning", "Topology", "animate",
     "animate_corpus", "build_palate", "calibrate_corpus", "calibrate_dataset",
     "calibrate_subject", "calibration_choice", "closed_form", "closed_form_paper", "compare",

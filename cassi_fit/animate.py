@@ -32,7 +32,7 @@ from .dataset import Recording
 from .errors import MissingDataError
 from .frames import batch_geometry, frame_bucket, frame_params, pad_frames, unpad
 from .gaps import bad_values, frame_status, repair
-from .jaw import closed_form
+from .jaw import closed_form_frames
 from .pellets import JAW_INDEX, PELLET_NAMES
 
 
@@ -79,12 +79,6 @@ class Animation(eqx.Module):
         return self.stride * self.line_step_s
 
 
-@jax.jit
-def _closed_form_batch(reference, current):
-    fit = jax.vmap(closed_form, in_axes=(None, 0))(reference, current)
-    return fit.theta, fit.translation, fit.status
-
-
 def _jaw_since_first(state, jaw_pellets, method, size):
     """``(theta (size,), t (size, 2), status (m,))``: the jaw from the first valid line to
     each frame, by the jaw method object ``method``, padded to ``size`` frames;
@@ -93,8 +87,8 @@ def _jaw_since_first(state, jaw_pellets, method, size):
     real frames."""
     m = jaw_pellets.shape[0]
     if method.name == "closed-form":
-        theta, t, status = _closed_form_batch(state.reference_jaw, pad_frames(jaw_pellets, size))
-        return theta, t, np.asarray(status)[:m]
+        fit = closed_form_frames(state.reference_jaw, pad_frames(jaw_pellets, size))
+        return fit.theta, fit.translation, np.asarray(fit.status)[:m]
     from .jaw_fit import fit_jaw
 
     fit = fit_jaw(state.reference_jaw, jnp.asarray(jaw_pellets), method=method)

@@ -40,11 +40,9 @@ from .dataset import Recording, recording_source
 from .errors import DegenerateGeometryError
 from .face_model import FaceModel
 from .frames import batch_geometry, frame_bucket, frame_params
-from .jaw import closed_form
+from .jaw import closed_form_frames
 from .pellets import LL, MNI, MNM, UL, first_valid_line
 from .run_spec import RunSpec, run_spec
-
-_closed_form_one = jax.jit(closed_form)  # one frame; eager dispatch of its small ops is slow
 
 
 class SubjectState(eqx.Module):
@@ -190,7 +188,8 @@ def initialize(
     size = frame_bucket(track.times.shape[0] - first)
     rest = _rest_pellets(model, conformation, size, spec, fitted)
     reference = jnp.asarray(scale * pellets[[MNI, MNM]])
-    initial = _closed_form_one(rest[jnp.array([MNI, MNM])], reference)
+    initial = jax.tree.map(lambda x: x[0], closed_form_frames(rest[jnp.array([MNI, MNM])],
+                                                              reference[None]))
     state = SubjectState(
         model=model, scale=scale, first_frame=first, reference_jaw=reference,
         initial_jaw=(initial.theta, initial.translation), conformation=conformation,

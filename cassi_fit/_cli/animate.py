@@ -25,9 +25,34 @@ def add_recording_argument(parser: argparse.ArgumentParser) -> None:
         "recording",
         nargs="+",
         metavar="RECORDING",
-        help="a pellet file (.txy), or three words DATASET SUBJECT TASK: a dataset folder "
-        "(per-subject folders or flat files) and the subject and task in it",
+        help="a pellet file (.txy) or an articulograph file (EST Track .ema, Carstens .pos, "
+        "NDI Wave .tsv, mview .mat, a .npy/.npz/.csv array; docs/EMA.md), or three words "
+        "DATASET SUBJECT TASK: a dataset folder (per-subject folders or flat files) and the "
+        "subject and task in it",
     )
+    add_source_arguments(parser)
+
+
+def add_source_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options an articulograph file may need (``dataset.load_recording``'s)."""
+    parser.add_argument("--sensor-map", metavar="MAP", default=None,
+                        help="articulograph sensor map: a built-in name (auto, mocha, mngu0, "
+                        "sparc, synthetic) or a .toml file (default: sensors.toml beside the "
+                        "files, else the built-in names)")
+    parser.add_argument("--layout", default=None,
+                        help="array files: a built-in layout (sparc, mngu0) or comma-separated "
+                        "column names")
+    parser.add_argument("--rate", type=float, default=None,
+                        help="array files (and headerless .pos files): the sampling rate, Hz")
+    parser.add_argument("--bite-plane", metavar="FILE", default=None,
+                        help="articulograph files: the bite-plane recording (default: a *bite* "
+                        "file beside)")
+
+
+def source_options(args: argparse.Namespace) -> dict:
+    """``dataset.load_recording``'s keywords from :func:`add_source_arguments`' options."""
+    return {"sensor_map": args.sensor_map, "layout": args.layout, "rate": args.rate,
+            "bite_plane": args.bite_plane}
 
 
 def add_model_arguments(parser: argparse.ArgumentParser) -> None:
@@ -191,24 +216,26 @@ def parse_views(text: str) -> tuple[str, ...]:
     return views
 
 
-def load_recording_args(words):
-    """A ``Recording`` from ``[PATH]`` or ``[DATASET, SUBJECT, TASK]``."""
+def load_recording_args(words, args: argparse.Namespace | None = None):
+    """A ``Recording`` from ``[PATH]`` or ``[DATASET, SUBJECT, TASK]``, with the
+    articulograph options of :func:`add_source_arguments` in ``args``."""
     from cassi_fit.errors import CassiError
 
+    options = source_options(args) if args is not None else {}
     if len(words) == 1:
         from cassi_fit.dataset import load_recording
 
         path = Path(words[0])
         if not path.is_file():
-            raise CassiError(f"{path}: no such pellet file")
-        return load_recording(path)
+            raise CassiError(f"{path}: no such recording file")
+        return load_recording(path, **options)
     if len(words) == 3:
         from cassi_fit.dataset import Dataset
 
         root = Path(words[0])
         if not root.is_dir():
             raise CassiError(f"{root}: no such dataset folder")
-        return Dataset(root).load(words[1], words[2])
+        return Dataset(root, sensor_map=options.get("sensor_map")).load(words[1], words[2])
     raise CassiError(f"RECORDING is a pellet file or DATASET SUBJECT TASK, got {len(words)} words")
 
 
@@ -252,7 +279,7 @@ def run(args) -> int:
     out = Path(args.out) if args.out else None
     if out is not None and out.suffix.lower() not in ANIMATION_SUFFIXES:
         raise CassiError(f"--out {out}: must end in {', '.join(ANIMATION_SUFFIXES)}")
-    recording = load_recording_args(args.recording)
+    recording = load_recording_args(args.recording, args)
     out = out or Path(f"{recording.subject}_{recording.task}.mp4")
     csv_out = Path(args.penetration) if args.penetration else None
     from cassi_fit._io import check_outputs  # before any work: no input, no clash, no overwrite

@@ -1,7 +1,7 @@
 """``cassi jaw RECORDING --method ... --csv OUT.csv``: jaw rotation per frame, as a table,
 and truth-free diagnostics of the fit beside it (``OUT.diagnostics.csv``); with labels
 beside the pellet file, a label column and ``OUT.segments.csv``.
-``cassi jaw DATASET --out DIR``: the same for every recording (``corpus.jaw_corpus``)."""
+``cassi jaw DATASET --out DIR``: the same for every recording (``jaw_table.jaw_corpus``)."""
 
 from __future__ import annotations
 
@@ -129,14 +129,11 @@ def segments_path(out: Path) -> Path:
 
 
 def format_diagnostics(rows) -> str:
-    """CSV text of :class:`cassi_fit.jaw_fit.JawDiagnostics` rows."""
-    lines = [",".join(DIAGNOSTIC_COLUMNS)]
-    for row in rows:
-        d = row.to_dict()
-        lines.append(",".join(d[c] if isinstance(d[c], str) else
-                              (str(d[c]) if isinstance(d[c], int) else f"{d[c]:.4f}")
-                              for c in DIAGNOSTIC_COLUMNS))
-    return "\n".join(lines) + "\n"
+    """CSV text of :class:`cassi_fit.jaw_fit.JawDiagnostics` rows (``tables.csv_text``,
+    4 decimals)."""
+    from cassi_fit.tables import csv_text
+
+    return csv_text([row.to_dict() for row in rows], DIAGNOSTIC_COLUMNS, digits=4)
 
 
 def print_diagnostics(rows) -> None:
@@ -173,8 +170,8 @@ def run(args) -> int:
 
 def run_dataset(args) -> int:
     """``cassi jaw DATASET --out DIR``."""
-    from cassi_fit.jaw_corpus import jaw_corpus
     from cassi_fit.jaw_fit import jaw_method
+    from cassi_fit.jaw_table import jaw_corpus
 
     jaw_method(args.method, solver=args.solver, smoothness=args.smoothness)  # checks W
     run, written = jaw_corpus(args.recording[0], args.out, method=args.method,
@@ -194,10 +191,11 @@ def run_recording(args) -> int:
     # is a quotient by sin(theta/2)), so the command computes in float64.
     jax.config.update("jax_enable_x64", True)
     from cassi_fit._io import atomic_write
-    from cassi_fit.jaw_corpus import csv_text, jaw_frame_csv
     from cassi_fit.jaw_fit import jaw_diagnostics, jaw_from_track, jaw_method
+    from cassi_fit.jaw_table import jaw_frame_csv
     from cassi_fit.labels import SEGMENT_COLUMNS, labels_for, segment_summary
     from cassi_fit.status import Status
+    from cassi_fit.tables import csv_text
     from cassi_fit.txy import JAW_PELLETS, pellet_index
 
     method = jaw_method(args.method, solver=args.solver, smoothness=args.smoothness)
@@ -230,7 +228,7 @@ def run_recording(args) -> int:
     print(f"{out}: {track.n_frames} frames, {ok} fitted ({args.method}"
           f"{'' if args.method == 'closed-form' else ', ' + fit.solver}), "
           f"{mistracked} mistracked, noise estimate {fit.noise_mm:.3f} mm"
-          f"{'' if fit.converged else ', NOT converged'}")
+          f"{'' if fit.converged else ', NOT converged (' + fit.failure.label + ')'}")
     print_diagnostics(rows)
     print(f"{diag_out}: diagnostics written")
     return 0

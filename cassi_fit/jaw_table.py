@@ -1,4 +1,9 @@
-"""``cassi jaw DATASET``'s task and table (one CSV per recording, the corpus table)."""
+"""``cassi jaw``'s tables and its corpus task: one recording's jaw fit as a frame table and a
+summary row, and ``cassi jaw DATASET`` (the task run on every recording by the corpus
+executor, :func:`cassi_fit.corpus.run_corpus`).
+
+Every table goes through :mod:`cassi_fit.tables` (one writer, one way to print a cell).
+"""
 
 from __future__ import annotations
 
@@ -30,7 +35,6 @@ if TYPE_CHECKING:
     from .labels import Labels
     from .txy import PelletTrack
 
-
 JAW_FRAME_COLUMNS = ("time_s", "theta_deg", "pivot_a_mm", "pivot_b_mm", "tx_mm", "ty_mm",
                      "residual_mm", "status")
 #: the jaw statuses counted per recording (Status values 0-5)
@@ -38,30 +42,34 @@ JAW_STATUSES = (Status.OK, Status.PIVOT_UNDEFINED, Status.DEGENERATE, Status.NON
                 Status.INVALID_FRAME, Status.NOT_CONVERGED)
 
 
-def jaw_frame_csv(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels | None = None
-                  ) -> str:
-    """One recording's jaw table, as ``cassi jaw RECORDING`` writes it (one row per frame,
-    :data:`JAW_FRAME_COLUMNS`), plus a ``label`` column when ``labels`` are given
+def jaw_frame_rows(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels | None = None
+                   ) -> tuple[list[dict], list[str]]:
+    """One recording's jaw table as ``(rows, columns)``: one row per frame,
+    :data:`JAW_FRAME_COLUMNS` (times s, theta deg, pivot and translation mm, rms residual
+    mm, the status word), plus a ``label`` column when ``labels`` are given
     (``labels.Labels``; ``""`` between labelled intervals)."""
     import numpy as np
 
     columns = list(JAW_FRAME_COLUMNS) + (["label"] if labels is not None else [])
     theta_deg = np.rad2deg(fit.theta)
-    names = [Status(int(c)).label for c in fit.status]
     current = labels.at(times) if labels is not None else None
-    lines = [",".join(columns)]
+    rows = []
     for k in range(len(times)):
-        values = (times[k], theta_deg[k], fit.pivot[k, 0], fit.pivot[k, 1],
-                  fit.translation[k, 0], fit.translation[k, 1], fit.residual[k])
-        line = ",".join(f"{v:.6f}" for v in values) + f",{names[k]}"
+        row = {"time_s": float(times[k]), "theta_deg": float(theta_deg[k]),
+               "pivot_a_mm": float(fit.pivot[k, 0]), "pivot_b_mm": float(fit.pivot[k, 1]),
+               "tx_mm": float(fit.translation[k, 0]), "ty_mm": float(fit.translation[k, 1]),
+               "residual_mm": float(fit.residual[k]), "status": Status(int(fit.status[k])).label}
         if current is not None:
-            line += "," + _csv_field(str(current[k]))
-        lines.append(line)
-    return "\n".join(lines) + "\n"
+            row["label"] = str(current[k])
+        rows.append(row)
+    return rows, columns
 
 
-def _csv_field(text: str) -> str:
-    return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n\r') else text
+def jaw_frame_csv(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels | None = None
+                  ) -> str:
+    """:func:`jaw_frame_rows` as CSV text, as ``cassi jaw RECORDING`` writes it."""
+    rows, columns = jaw_frame_rows(times, fit, labels)
+    return csv_text(rows, columns)
 
 
 def _iqr(x: np.ndarray) -> float | None:
@@ -77,13 +85,15 @@ def jaw_summary_row(fit: JawFit, *, label_file: str = "") -> dict:
     """The corpus-table row of one jaw fit: method, frames, angle range (deg) over the
     fitted frames, pivot spread (interquartile range of the pivot's a and b over frames
     with a defined pivot, mm), residuals (rms and max over fitted frames, mm), the noise
-    estimate, convergence and the number of frames per status."""
+    estimate, convergence (and how the solve failed, ``solver_failure``, empty when it
+    converged) and the number of frames per status."""
     import numpy as np
 
     fitted = fit.status == int(Status.OK)
     theta_deg = np.rad2deg(fit.theta[fitted])
     pivots = fit.pivot[fitted & fit.pivot_defined]
     residual = fit.residual[fitted]
+    failure = fit.failure
     row = {
         "method": fit.method, "solver": fit.solver, "frames": int(fit.status.size),
         "theta_min_deg": float(theta_deg.min()) if theta_deg.size else None,
@@ -93,6 +103,7 @@ def jaw_summary_row(fit: JawFit, *, label_file: str = "") -> dict:
         "residual_rms_mm": float(np.sqrt(np.mean(residual**2))) if residual.size else None,
         "residual_max_mm": float(residual.max()) if residual.size else None,
         "noise_mm": float(fit.noise_mm), "converged": bool(fit.converged),
+        "solver_failure": "" if failure is None else failure.label,
     }
     for s in JAW_STATUSES:
         row[f"frames_{s.label.replace('-', '_')}"] = int(np.sum(fit.status == int(s)))
@@ -111,10 +122,11 @@ def fit_jaw_bucketed(track: PelletTrack, *, method: str = "closed-form",
     """``jaw_fit.jaw_from_track`` with the frames padded to a multiple of
     :data:`JAW_FRAME_BUCKET` (1024 frames, 7 s), so that a worker compiles the fit once per
     bucket instead of once per recording length (the XRMB lengths all differ; compiling
-    costs about 2-3 s a length, fitting a recording tens of ms). The padding is untracked frames after the last: the per-frame methods give
-    the real frames the values of an unpadded fit (they are fitted frame by frame and
-    the noise is pooled over usable frames only), and "fixed-pivot" gets zero weight for
-    them. "smooth-pivot" is not padded: its pivot-path knots depend on the length."""
+    costs about 2-3 s a length, fitting a recording tens of ms). The padding is untracked
+    frames after the last: the per-frame methods give the real frames the values of an
+    unpadded fit (they are fitted frame by frame and the noise is pooled over usable frames
+    only), and "fixed-pivot" gets zero weight for them. "smooth-pivot" is not padded: its
+    pivot-path knots depend on the length."""
     import dataclasses
 
     import numpy as np
@@ -197,9 +209,10 @@ def jaw_corpus(
 ) -> tuple[CorpusRun, list[Path]]:
     """``cassi jaw DATASET --out DIR``: :func:`jaw_task` on every recording (float64, as
     the single-recording command), then the corpus table ``DIR/jaw_corpus.csv`` (and
-    ``.parquet``). ``run_options`` go to :func:`run_corpus` (``jobs``, ``scheduler``,
-    ``executor``, ``resume``, ``overwrite``, ``progress``, ``compilation_cache``).
-    Returns the run (``run.failed``: exit non-zero) and the table files written."""
+    ``.parquet``). ``run_options`` go to :func:`cassi_fit.corpus.run_corpus` (``jobs``,
+    ``scheduler``, ``executor``, ``resume``, ``overwrite``, ``progress``,
+    ``compilation_cache``). Returns the run (``run.failed``: exit non-zero) and the table
+    files written."""
     replace = bool(run_options.get("overwrite") or run_options.get("resume"))
     table = jaw_corpus_path(out_dir)
     if table.exists() and not replace:  # refuse before the run, not after it
