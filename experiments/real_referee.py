@@ -637,6 +637,36 @@ def part_tables(rows, part: str, metric: str) -> str:
     return text
 
 
+def headline(rows) -> str:
+    """One Markdown table: per part (and metric) and dataset, the method and the baseline
+    with the lowest pooled median, and their paired difference with its verdict (a
+    lowest point estimate names no winner: the verdict says whether the interval does)."""
+    from cassi_fit.tables import markdown_text
+
+    table = []
+    for part, metric in dict.fromkeys((r["part"], r["metric"]) for r in rows):
+        if metric == "along":
+            continue
+        for d in _datasets(rows):
+            pooled = _pooled(rows, d, part, metric)
+            plain = [r for r in pooled if not r["versus"]]
+            best = {role: min((r for r in plain if r["role"] == role), default=None,
+                              key=lambda r: r["median_mm"]) for role in ("method", "baseline")}
+            if best["method"] is None or best["baseline"] is None:
+                continue
+            paired = next(r for r in pooled if (r["predictor"], r["versus"])
+                          == (best["method"]["predictor"], best["baseline"]["predictor"]))
+            table.append({
+                "part": f"{part} ({metric})", "dataset": d,
+                "lowest method: median [95 % CI]":
+                    f"{best['method']['predictor']}: {_cell(best['method'], 'median')}",
+                "lowest baseline: median [95 % CI]":
+                    f"{best['baseline']['predictor']}: {_cell(best['baseline'], 'median')}",
+                "method - baseline: median": _cell(paired, "median", verdict=True),
+                "method - baseline: 95th pct": _cell(paired, "p95", verdict=True)})
+    return markdown_text(table) if table else "No part has both a method and a baseline.\n"
+
+
 def issue_check(rows, dataset: str) -> str:
     """The issue's hand measurements on JW11 beside this run's (MNM from MNI)."""
     from cassi_fit.tables import markdown_text
@@ -713,6 +743,9 @@ def markdown(rows, command: str) -> str:
         "the interval excludes 0, else `tie`. Per-recording rows are in `real_referee.csv`.",
         "",
     ]
+    parts += ["## Headline", "", "Per held-out test, the method and the baseline with the "
+              "lowest pooled median (mm), and the method minus the baseline on the same "
+              "frames; the sections below give every predictor.", "", headline(rows), ""]
     seen = list(dict.fromkeys((r["part"], r["metric"]) for r in rows))
     for part, metric in seen:
         kind = part.split(":")[0]
