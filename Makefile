@@ -48,6 +48,7 @@ experiments: $(STAMP)
 	  $(BIN)/python experiments/real_referee.py $(XRMB_JW11) --out experiments/output \
 	    --docs docs/generated --force; \
 	else echo "real_referee: skipped, no real recording (make experiments XRMB_JW11=DIR)"; fi
+	$(BIN)/python experiments/mistrack_detection.py --docs docs/generated --force
 	$(BIN)/python experiments/quote_tables.py
 
 # ruff; the import-linter contracts (layers, no cycles; pyproject.toml); the public surface's

@@ -102,6 +102,8 @@ if TYPE_CHECKING:
     from .labels import segment_summary as segment_summary
     from .labels import write_lab as write_lab
     from .labels import write_textgrid as write_textgrid
+    from .mistracks import MistrackReport as MistrackReport
+    from .mistracks import mistrack_report as mistrack_report
     from .options import JAW_METHODS as JAW_METHODS
     from .options import SOLVERS as SOLVERS
     from .outlines import read_outline as read_outline
@@ -111,7 +113,6 @@ if TYPE_CHECKING:
     from .pellets import JAW_PELLETS as JAW_PELLETS
     from .pellets import PELLET_NAMES as PELLET_NAMES
     from .pellets import MistrackedFirstLineWarning as MistrackedFirstLineWarning
-    from .pellets import first_clean_line as first_clean_line
     from .pellets import first_valid_line as first_valid_line
     from .pellets import pellet_index as pellet_index
     from .pharynx import build_pharynx as build_pharynx
@@ -143,7 +144,6 @@ if TYPE_CHECKING:
     from .tongue import tongue_volumes as tongue_volumes
     from .txy import PelletTrack as PelletTrack
     from .txy import TimeGapWarning as TimeGapWarning
-    from .txy import first_valid_frame as first_valid_frame
     from .txy import read_txy as read_txy
     from .txy import require_tracked as require_tracked
     from .txy import write_txy as write_txy
@@ -172,13 +172,11 @@ _PUBLIC = {
     "JAW_PELLETS": "pellets",
     "pellet_index": "pellets",
     "first_valid_line": "pellets",
-    "first_clean_line": "pellets",
     "MistrackedFirstLineWarning": "pellets",
     # txy (data)
     "PelletTrack": "txy",
     "read_txy": "txy",
     "write_txy": "txy",
-    "first_valid_frame": "txy",
     "require_tracked": "txy",
     "TimeGapWarning": "txy",
     # outlines (data)
@@ -201,6 +199,9 @@ _PUBLIC = {
     "QualityReport": "quality",
     "quality_report": "quality",
     "detect_mistracks": "quality",
+    # mistracks (data)
+    "MistrackReport": "mistracks",
+    "mistrack_report": "mistracks",
     # gaps (data)
     "repair": "gaps",
     # labels (data)
@@ -316,18 +317,19 @@ __all__ = [
     "DegenerateGeometryError", "Dogleg", "EvaluationResult", "FaceModel", "FaceParams",
     "FixedPivot", "FrameFit", "GaussNewton", "HeadMeasures", "InvalidChoiceError", "JAW_METHODS",
     "JAW_PELLETS", "JawDiagnostics", "JawFit", "JawMethod", "JawTruth", "Labels",
-    "LevenbergMarquardt", "MATERIALS", "MissingDataError", "MistrackedFirstLineWarning",
+    "LevenbergMarquardt", "MATERIALS", "MissingDataError", "MistrackReport",
+    "MistrackedFirstLineWarning",
     "OutputExistsError", "PELLET_NAMES", "PelletTrack", "QualityReport", "Recording", "Renderer",
     "RenderingUnavailableError", "SOLVERS", "SmoothPivot", "Solver", "SolverResult", "Status",
     "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning", "Topology", "animate",
     "animate_corpus", "build_palate", "calibrate_corpus", "calibrate_dataset",
     "calibrate_subject", "calibration_choice", "closed_form", "closed_form_paper", "compare",
     "dataset_items", "default_params", "deform", "detect_mistracks", "ensure_default_corpus",
-    "evaluate_corpus", "evaluate_dataset", "evaluate_recording", "first_clean_line",
-    "first_valid_frame", "first_valid_line", "fit_jaw", "generate_corpus", "initialize",
+    "evaluate_corpus", "evaluate_dataset", "evaluate_recording", "first_valid_line", "fit_jaw",
+    "generate_corpus", "initialize",
     "jaw_comparison_plot", "jaw_corpus", "jaw_diagnostics", "jaw_from_track", "jaw_method",
     "jaw_solver", "labels_for", "load_anatomy", "load_calibrations", "load_model",
-    "load_recording", "load_truth", "make_subject", "midsagittal_figure",
+    "load_recording", "load_truth", "make_subject", "midsagittal_figure", "mistrack_report",
     "model_pellets", "pellet_index",
     "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
     "read_outline", "read_textgrid", "read_txy", "recording_from_array", "repair",

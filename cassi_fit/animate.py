@@ -43,7 +43,9 @@ class Animation(eqx.Module):
     whose leaves carry a leading ``(m,)`` axis; vertices ``(m, V, 3)`` mm;
     pellets_measured ``(m, 8, 2)`` mm, scaled by ``p / d`` and repaired; pellets_model
     ``(m, 8, 2)`` mm, where the model puts its pellet sites; repaired ``(m, 8)`` bool;
-    mistracked ``(m, 8)`` bool; frame_status ``(m,)`` int (``status.Status`` values);
+    mistracked ``(m, 8)`` bool; mistrack_reasons ``(m, 8)`` int, the detector's reasons
+    (``mistracks.Reason`` bits, 0 where not mistracked); frame_status ``(m,)`` int
+    (``status.Status`` values);
     jaw_status ``(m,)`` int (``status.Status`` values); penetration: ``collide.REPORT_KEYS``
     -> ``(m,)`` mm, the deepest point of each kind per frame before any projection (empty
     if the model has no collision data); penetration_after: the same after projection
@@ -60,6 +62,7 @@ class Animation(eqx.Module):
     pellets_model: jax.Array
     repaired: np.ndarray
     mistracked: np.ndarray
+    mistrack_reasons: np.ndarray
     frame_status: np.ndarray
     jaw_status: np.ndarray
     penetration: dict
@@ -144,6 +147,7 @@ def animate(state: eqx.Module, recording: Recording, **changes: object) -> Anima
         pellets_model=sites,
         repaired=bad[rows] & tracked,
         mistracked=mistracked[rows],
+        mistrack_reasons=np.asarray(track.mistracks.reasons)[rows],
         frame_status=frame_status(untracked[rows] & tracked, mistracked[rows], spec.gap_policy),
         jaw_status=jaw_status,
         penetration=before,

@@ -183,6 +183,10 @@ def register(subparsers) -> None:
         "front teeth; lips in teeth), before and after any projection, to CSV",
     )
     parser.add_argument("--no-audio", action="store_true", help="leave the sound out of an .mp4")
+    parser.add_argument("--accept-mismatch", action="store_true",
+                        help="use sound or labels whose length does not fit the recording "
+                        "(a wrong sample rate, a cut file, labels in other units): a warning "
+                        "instead of the error")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     # DATASET alone with --out DIR: every recording to DIR/SUBJECT/TASK.mp4 (run_dataset)
@@ -319,6 +323,7 @@ def write_output(out: Path, run, size, views, args) -> Path:
         print(f"sound: {recording.audio}", file=sys.stderr)
     return video.write_recording_video(out, run, size=size, views=views, markers=args.markers,
                                        audio=not args.no_audio, progress=not args.quiet,
+                                       accept_mismatch=args.accept_mismatch,
                                        overwrite=args.force)
 
 

@@ -21,7 +21,7 @@ def jaw_from_track(track: PelletTrack, *, method: JawMethod | str = "closed-form
                    reference_frame: int | None = None, **options: Any) -> JawFit:
     """:func:`fit_jaw` on a :class:`cassi_fit.txy.PelletTrack`'s MNI and MNM pellets.
 
-    Values flagged by the mistrack detector (:func:`cassi_fit.quality.detect_mistracks`)
+    Values flagged by the mistrack detector (``PelletTrack.mistracks``, :mod:`cassi_fit.mistracks`)
     are not used: their frames get status MISTRACKED (values interpolated, as for
     untracked frames, which get INVALID_FRAME). The reference is ``reference_frame`` (an
     index in ``[0, n)`` whose jaw pellets are tracked and not mistracked) or, by default,
@@ -30,17 +30,18 @@ def jaw_from_track(track: PelletTrack, *, method: JawMethod | str = "closed-form
     value cannot tilt every frame. ``options`` (``solver``, ``smoothness``, ...) go to
     :func:`fit_jaw` with a method alias. Errors name the file.
     """
-    from ..pellets import JAW_PELLETS, detect_mistracks, first_clean_line, pellet_index
+    from ..pellets import JAW_PELLETS, first_valid_line, pellet_index
 
     where = str(track.path) if track.path is not None else "<pellet track>"
     cols = [pellet_index(p) for p in JAW_PELLETS]
     tracked = track.frame_valid(JAW_PELLETS)
-    flags = detect_mistracks(track)
+    flags = track.mistracks.flags  # the track's one detection
     mistracked = flags[:, cols].any(axis=1) & tracked
     usable = tracked & ~mistracked
     n = track.n_frames
     if reference_frame is None:  # the one first-valid-line rule (pellets), for the jaw pellets
-        reference_frame = first_clean_line(track, JAW_PELLETS, where, mistracked=flags)
+        reference_frame = first_valid_line(track, where, pellets=JAW_PELLETS,
+                                           mistracked=flags).index
     elif (isinstance(reference_frame, bool) or not isinstance(reference_frame, (int, np.integer))
           or not 0 <= reference_frame < n):
         raise InvalidChoiceError(f"{where}: reference_frame must be a frame index in "
