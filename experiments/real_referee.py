@@ -9,7 +9,7 @@ e.g. the real JW11 task 5 in /work/shared/data/xrmb_jw11/. Beside it the same is
 synthetic corpus (``cassi_fit.synth.ensure_default_corpus()``; ``--synthetic-subjects``
 and ``--synthetic-tasks`` choose a subset, ``--synthetic none`` skips it). Per recording,
 three held-out tests (``PARTS``), each scored only on frames where every pellet it uses
-and the hidden one are tracked and not flagged by ``pellets.detect_mistracks``, the
+and the hidden one are tracked and not flagged by the mistrack detector (``PelletTrack.mistracks``), the
 reference frame excluded:
 
 - **Jaw.** With both jaw sensors present, each is hidden in turn (MNM predicted from MNI
@@ -174,10 +174,9 @@ def _moved(theta, translation, point, weight):
 
 # -------------------------------------------------------------------------- recordings
 def clean_values(track) -> np.ndarray:
-    """(n, 8) bool: the pellet's x and y tracked and not flagged as mistracked."""
-    from cassi_fit.pellets import detect_mistracks
-
-    return track.valid.all(axis=2) & ~detect_mistracks(track)
+    """(n, 8) bool: the pellet's x and y tracked and not flagged as mistracked (the
+    track's one detection, ``PelletTrack.mistracks``)."""
+    return track.valid.all(axis=2) & ~np.asarray(track.mistracks.flags, bool)
 
 
 def _col(name: str) -> int:
@@ -348,7 +347,7 @@ def lips_part(track, model=None) -> list[PartResult]:
     """The lower lip predicted from the jaw alone (LL held out, both jaw pellets used)."""
     from cassi_fit.face_model import load_model
     from cassi_fit.jaw_fit import jaw_from_track
-    from cassi_fit.pellets import first_clean_line
+    from cassi_fit.pellets import first_valid_line
     from cassi_fit.run_spec import IMPROVED
     from cassi_fit.status import Status
 
@@ -356,7 +355,7 @@ def lips_part(track, model=None) -> list[PartResult]:
     n = track.n_frames
     clean = clean_values(track)
     ll, mni = _col("LL"), _col("MNI")
-    f0 = first_clean_line(track, ("MNI", "MNM", "LL"))
+    f0 = first_valid_line(track, pellets=("MNI", "MNM", "LL")).index
     fit = jaw_from_track(padded(track), method=IMPROVED.jaw, reference_frame=f0)
     usable = clean[:, [ll, mni, _col("MNM")]].all(axis=1)
     usable &= np.asarray(fit.status)[:n] <= Status.PIVOT_UNDEFINED
