@@ -78,14 +78,17 @@ if TYPE_CHECKING:
     from .jaw import closed_form as closed_form
     from .jaw import closed_form_paper as closed_form_paper
     from .jaw_fit import ClosedForm as ClosedForm
+    from .jaw_fit import CoupledRotation as CoupledRotation
     from .jaw_fit import Dogleg as Dogleg
     from .jaw_fit import FixedPivot as FixedPivot
     from .jaw_fit import FrameFit as FrameFit
     from .jaw_fit import GaussNewton as GaussNewton
+    from .jaw_fit import JawCoupling as JawCoupling
     from .jaw_fit import JawDiagnostics as JawDiagnostics
     from .jaw_fit import JawFit as JawFit
     from .jaw_fit import JawMethod as JawMethod
     from .jaw_fit import LevenbergMarquardt as LevenbergMarquardt
+    from .jaw_fit import PivotPrior as PivotPrior
     from .jaw_fit import SmoothPivot as SmoothPivot
     from .jaw_fit import Solver as Solver
     from .jaw_fit import fit_jaw as fit_jaw
@@ -93,6 +96,7 @@ if TYPE_CHECKING:
     from .jaw_fit import jaw_from_track as jaw_from_track
     from .jaw_fit import jaw_method as jaw_method
     from .jaw_fit import jaw_solver as jaw_solver
+    from .jaw_fit import learn_jaw_coupling as learn_jaw_coupling
     from .jaw_table import jaw_corpus as jaw_corpus
     from .labels import Labels as Labels
     from .labels import labels_for as labels_for
@@ -261,6 +265,10 @@ _PUBLIC = {
     "Solver": "jaw_fit",
     "jaw_diagnostics": "jaw_fit",
     "JawDiagnostics": "jaw_fit",
+    "CoupledRotation": "jaw_fit",
+    "PivotPrior": "jaw_fit",
+    "JawCoupling": "jaw_fit",
+    "learn_jaw_coupling": "jaw_fit",
     # conformation (fitting)
     "Calibration": "conformation",
     # calibrate (fitting)
@@ -313,6 +321,7 @@ _MODULES = ("animate", "deform", "rigid", "synth")
 
 __all__ = [
     "Animation", "Calibration", "CassiError", "ClosedForm", "CorpusItem", "CorpusRun",
+    "CoupledRotation", "JawCoupling", "PivotPrior", "learn_jaw_coupling",
     "DEFAULT_HEAD_MEASURES", "DataFormatError", "Dataset", "DefaultHeadMeasuresWarning",
     "DegenerateGeometryError", "Dogleg", "EvaluationResult", "FaceModel", "FaceParams",
     "FixedPivot", "FrameFit", "GaussNewton", "HeadMeasures", "InvalidChoiceError", "JAW_METHODS",

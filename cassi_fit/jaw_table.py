@@ -46,11 +46,17 @@ def jaw_frame_rows(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels |
                    ) -> tuple[list[dict], list[str]]:
     """One recording's jaw table as ``(rows, columns)``: one row per frame,
     :data:`JAW_FRAME_COLUMNS` (times s, theta deg, pivot and translation mm, rms residual
-    mm, the status word), plus a ``label`` column when ``labels`` are given
-    (``labels.Labels``; ``""`` between labelled intervals)."""
+    mm, the status word); with one jaw sensor and the other's reference known, the hidden
+    sensor's predicted position (``MNM_pred_x_mm``, ``MNM_pred_y_mm`` or ``MNI_...``, mm,
+    in the pellet frame); a ``label`` column when ``labels`` are given (``labels.Labels``;
+    ``""`` between labelled intervals)."""
     import numpy as np
 
-    columns = list(JAW_FRAME_COLUMNS) + (["label"] if labels is not None else [])
+    predicted = fit.hidden_predicted
+    pred_columns = ([f"{fit.hidden_sensor}_pred_x_mm", f"{fit.hidden_sensor}_pred_y_mm"]
+                    if predicted is not None else [])
+    columns = (list(JAW_FRAME_COLUMNS) + pred_columns
+               + (["label"] if labels is not None else []))
     theta_deg = np.rad2deg(fit.theta)
     current = labels.at(times) if labels is not None else None
     rows = []
@@ -59,6 +65,8 @@ def jaw_frame_rows(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels |
                "pivot_a_mm": float(fit.pivot[k, 0]), "pivot_b_mm": float(fit.pivot[k, 1]),
                "tx_mm": float(fit.translation[k, 0]), "ty_mm": float(fit.translation[k, 1]),
                "residual_mm": float(fit.residual[k]), "status": Status(int(fit.status[k])).label}
+        if predicted is not None:
+            row[pred_columns[0]], row[pred_columns[1]] = (float(v) for v in predicted[k])
         if current is not None:
             row["label"] = str(current[k])
         rows.append(row)
@@ -81,12 +89,15 @@ def _iqr(x: np.ndarray) -> float | None:
     return float(q3 - q1)
 
 
-def jaw_summary_row(fit: JawFit, *, label_file: str = "") -> dict:
-    """The corpus-table row of one jaw fit: method, frames, angle range (deg) over the
-    fitted frames, pivot spread (interquartile range of the pivot's a and b over frames
-    with a defined pivot, mm), residuals (rms and max over fitted frames, mm), the noise
-    estimate, convergence (and how the solve failed, ``solver_failure``, empty when it
-    converged) and the number of frames per status."""
+def jaw_summary_row(fit: JawFit, *, label_file: str = "",
+                    current: Float[np.ndarray, "n 2 2"] | None = None) -> dict:
+    """The corpus-table row of one jaw fit: method, the jaw sensors used and the prior,
+    frames, angle range (deg) over the fitted frames, pivot spread (interquartile range of
+    the pivot's a and b over frames with a defined pivot, mm), residuals (rms and max over
+    fitted frames, mm), the noise estimate, convergence (and how the solve failed,
+    ``solver_failure``, empty when it converged), the number of frames per status, and,
+    given the recording's jaw pellets ``current`` (n, 2, 2) mm, the hidden sensor's
+    prediction error (median and 95th percentile, mm; empty with both sensors)."""
     import numpy as np
 
     fitted = fit.status == int(Status.OK)
@@ -95,7 +106,8 @@ def jaw_summary_row(fit: JawFit, *, label_file: str = "") -> dict:
     residual = fit.residual[fitted]
     failure = fit.failure
     row = {
-        "method": fit.method, "solver": fit.solver, "frames": int(fit.status.size),
+        "method": fit.method, "solver": fit.solver, "jaw_sensors": ",".join(fit.jaw_sensors),
+        "prior": fit.prior, "frames": int(fit.status.size),
         "theta_min_deg": float(theta_deg.min()) if theta_deg.size else None,
         "theta_max_deg": float(theta_deg.max()) if theta_deg.size else None,
         "theta_range_deg": float(np.ptp(theta_deg)) if theta_deg.size else None,
@@ -107,6 +119,14 @@ def jaw_summary_row(fit: JawFit, *, label_file: str = "") -> dict:
     }
     for s in JAW_STATUSES:
         row[f"frames_{s.label.replace('-', '_')}"] = int(np.sum(fit.status == int(s)))
+    hidden = (None, None)
+    if current is not None and fit.hidden_predicted is not None:
+        from .jaw_fit import jaw_diagnostics
+
+        d = jaw_diagnostics(fit, current)
+        hidden = tuple(None if np.isnan(v) else v
+                       for v in (d.hidden_error_median_mm, d.hidden_error_p95_mm))
+    row["hidden_error_median_mm"], row["hidden_error_p95_mm"] = hidden
     row["label_file"] = label_file
     return row
 
@@ -118,7 +138,8 @@ JAW_FRAME_BUCKET = 1024
 
 
 def fit_jaw_bucketed(track: PelletTrack, *, method: str = "closed-form",
-                     solver: str = "optimistix-lm", smoothness: float = 1.0) -> JawFit:
+                     solver: str | None = None, smoothness: float = 1.0,
+                     jaw_sensors: str = "MNI,MNM") -> JawFit:
     """``jaw_fit.jaw_from_track`` with the frames padded to a multiple of
     :data:`JAW_FRAME_BUCKET` (1024 frames, 7 s), so that a worker compiles the fit once per
     bucket instead of once per recording length (the XRMB lengths all differ; compiling
@@ -126,7 +147,8 @@ def fit_jaw_bucketed(track: PelletTrack, *, method: str = "closed-form",
     frames after the last: the per-frame methods give the real frames the values of an
     unpadded fit (they are fitted frame by frame and the noise is pooled over usable frames
     only), and "fixed-pivot" gets zero weight for them. "smooth-pivot" is not padded: its
-    pivot-path knots depend on the length."""
+    pivot-path knots depend on the length. ``jaw_sensors``: both, or one (``"MNI"``,
+    ``"MNM"``; ``jaw_fit.fit_jaw``)."""
     import dataclasses
 
     import numpy as np
@@ -135,7 +157,8 @@ def fit_jaw_bucketed(track: PelletTrack, *, method: str = "closed-form",
     from .txy import FRAME_STEP_US, PelletTrack
 
     if method == "smooth-pivot":
-        return jaw_from_track(track, method=method, solver=solver, smoothness=float(smoothness))
+        return jaw_from_track(track, method=method, solver=solver, smoothness=float(smoothness),
+                              jaw_sensors=jaw_sensors)
     n = track.n_frames
     extra = -n % JAW_FRAME_BUCKET
     step = FRAME_STEP_US * 1e-6
@@ -145,7 +168,7 @@ def fit_jaw_bucketed(track: PelletTrack, *, method: str = "closed-form",
         valid=np.concatenate([track.valid, np.zeros((extra, 8, 2), bool)]),
         path=track.path,
     )
-    fit = jaw_from_track(padded, method=method, solver=solver)
+    fit = jaw_from_track(padded, method=method, solver=solver, jaw_sensors=jaw_sensors)
     per_frame = {f.name: getattr(fit, f.name)[:n] for f in dataclasses.fields(fit)
                  if isinstance(getattr(fit, f.name), np.ndarray)
                  and getattr(fit, f.name).shape[:1] == (n + extra,)}
@@ -163,19 +186,23 @@ def segments_output_path(out_dir: str | os.PathLike, item: CorpusItem) -> Path:
 
 
 def jaw_task(item: CorpusItem, out_dir: str, *, method: str = "closed-form",
-             solver: str = "optimistix-lm", smoothness: float = 1.0,
+             solver: str | None = None, smoothness: float = 1.0, jaw_sensors: str = "MNI,MNM",
              labels: bool = True, overwrite: bool = False) -> TaskResult:
     """``cassi jaw DATASET``'s task: fit the jaw of one pellet file
     (:func:`fit_jaw_bucketed`), write ``out_dir/SUBJECT/TASK.jaw.csv`` (one row per frame)
     and return the summary row (:func:`jaw_summary_row`). When ``labels`` and a label
     file lies beside the pellet file (``labels.labels_for``), the frame table gets a
     ``label`` column and ``TASK.segments.csv`` holds one row per labelled segment
-    (``labels.segment_summary``: peak jaw opening, lip aperture range, ...)."""
+    (``labels.segment_summary``: peak jaw opening, lip aperture range, ...). With one jaw
+    sensor (``jaw_sensors``), the other's prediction is in the frame table and its error,
+    where the file has it, in the row."""
     from .labels import SEGMENT_COLUMNS, labels_for, segment_summary
+    from .pellets import JAW_PELLETS, pellet_index
     from .txy import read_txy
 
     track = read_txy(item.path)
-    fit = fit_jaw_bucketed(track, method=method, solver=solver, smoothness=smoothness)
+    fit = fit_jaw_bucketed(track, method=method, solver=solver, smoothness=smoothness,
+                           jaw_sensors=jaw_sensors)
     found = labels_for(item.path) if labels else None
     out = jaw_output_path(out_dir, item)
     outputs = [atomic_write(out, jaw_frame_csv(track.times, fit, found), overwrite=overwrite)]
@@ -186,7 +213,8 @@ def jaw_task(item: CorpusItem, out_dir: str, *, method: str = "closed-form",
                                usable=fit.status == int(Status.OK))
         outputs.append(atomic_write(segments_output_path(out_dir, item),
                                     csv_text(rows, SEGMENT_COLUMNS), overwrite=overwrite))
-    return TaskResult(jaw_summary_row(fit, label_file=label_file),
+    current = track.positions[:, [pellet_index(p) for p in JAW_PELLETS]]
+    return TaskResult(jaw_summary_row(fit, label_file=label_file, current=current),
                       tuple(str(p) for p in outputs))
 
 
@@ -200,8 +228,9 @@ def jaw_corpus(
     out_dir: str | os.PathLike,
     *,
     method: str = "closed-form",
-    solver: str = "optimistix-lm",
+    solver: str | None = None,
     smoothness: float = 1.0,
+    jaw_sensors: str = "MNI,MNM",
     labels: bool = True,
     subjects: Iterable[str] | None = None,
     tasks: Iterable[str] | None = None,
@@ -211,16 +240,24 @@ def jaw_corpus(
     the single-recording command), then the corpus table ``DIR/jaw_corpus.csv`` (and
     ``.parquet``). ``run_options`` go to :func:`cassi_fit.corpus.run_corpus` (``jobs``,
     ``scheduler``, ``executor``, ``resume``, ``overwrite``, ``progress``,
-    ``compilation_cache``). Returns the run (``run.failed``: exit non-zero) and the table
-    files written."""
+    ``compilation_cache``). ``solver``: None for the method's own; ``jaw_sensors``: both,
+    or one (``"MNI"``, ``"MNM"``). Returns the run (``run.failed``: exit non-zero) and the
+    table files written. A method that cannot run with the sensors given is refused
+    before the run."""
     replace = bool(run_options.get("overwrite") or run_options.get("resume"))
     table = jaw_corpus_path(out_dir)
     if table.exists() and not replace:  # refuse before the run, not after it
         raise OutputExistsError(f"{table}: file exists (pass overwrite=True / --force, or "
                                 "resume=True / --resume)")
+    from .jaw_fit import check_sensors, jaw_method, jaw_sensor_set
+
+    sensors = ",".join(jaw_sensor_set(jaw_sensors))
+    check_sensors(jaw_method(method, solver=solver, smoothness=smoothness), jaw_sensor_set(sensors))
     run_options.setdefault("x64", True)  # pivots to a micrometre need float64 (cassi jaw)
     run_options.setdefault("desc", "jaw")
     options = {"method": method, "solver": solver, "labels": bool(labels)}
+    if sensors != "MNI,MNM":  # the two-sensor runs keep their fingerprint (resumable)
+        options["jaw_sensors"] = sensors
     if method == "smooth-pivot":
         options["smoothness"] = float(smoothness)
     items = require_items(dataset_items(dataset, subjects=subjects, tasks=tasks), dataset,

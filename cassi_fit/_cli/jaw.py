@@ -1,6 +1,7 @@
 """``cassi jaw RECORDING --method ... --csv OUT.csv``: jaw rotation per frame, as a table,
 and truth-free diagnostics of the fit beside it (``OUT.diagnostics.csv``); with labels
-beside the pellet file, a label column and ``OUT.segments.csv``.
+beside the pellet file, a label column and ``OUT.segments.csv``. ``--jaw-sensors MNI`` (or
+``MNM``) fits one jaw sensor and predicts the other (``MNM_pred_x_mm`` ...).
 ``cassi jaw DATASET --out DIR``: the same for every recording (``jaw_table.jaw_corpus``)."""
 
 from __future__ import annotations
@@ -9,13 +10,14 @@ import os
 import stat
 from pathlib import Path
 
-from cassi_fit.options import JAW_METHODS, SOLVERS
+from cassi_fit.options import ALL_JAW_METHODS, JAW_SENSOR_SETS, SOLVERS
 
 from ._corpus import add_run_arguments, finish, run_options
 
-DIAGNOSTIC_COLUMNS = ("method", "frames_used", "jaw_distance_sd_mm", "jaw_distance_range_mm",
-                      "residual_median_mm", "pivot_iqr_x_mm", "pivot_iqr_y_mm",
-                      "pivot_plausible_fraction")
+DIAGNOSTIC_COLUMNS = ("method", "jaw_sensors", "frames_used", "jaw_distance_sd_mm",
+                      "jaw_distance_range_mm", "residual_median_mm", "pivot_iqr_x_mm",
+                      "pivot_iqr_y_mm", "pivot_plausible_fraction", "hidden_error_median_mm",
+                      "hidden_error_p95_mm", "prior")
 # Names of files that hold a recording's data (lower case): never replaced by an output,
 # whether or not this command reads them (issue 12).
 _DATA_NAMES = ("pal.dat", "pha.dat", "headmeasures.txt")
@@ -34,20 +36,32 @@ def register(subparsers) -> None:
         "truth (jaw-pellet distance spread, pivot spread, share of anatomically plausible "
         "pivots) are printed and written to OUT.diagnostics.csv; see docs/JAW.md. Phone or "
         "word labels beside the pellet file (X.lab, X.TextGrid) add a label column and "
-        "OUT.segments.csv (peak jaw opening and lip aperture per segment). With a DATASET "
+        "OUT.segments.csv (peak jaw opening and lip aperture per segment). --jaw-sensors MNI "
+        "(or MNM) uses that jaw sensor alone, as most EMA corpora have one: the rotation is "
+        "then not determined by the data, closed-form and frame-fit refuse, the pivot methods "
+        "rest on a pivot prior and coupled-rotation on a coupling learned from two-sensor "
+        "recordings (the prior is written to the diagnostics); the table gains the other "
+        "sensor's predicted position (MNM_pred_x_mm, MNM_pred_y_mm) and, where the file has "
+        "it, the diagnostics its error. With a DATASET "
         "folder alone and --out DIR: every recording, in parallel, to DIR/SUBJECT/TASK.jaw.csv "
         "(and TASK.segments.csv) and the corpus table DIR/jaw_corpus.csv (and .parquet).",
     )
     parser.add_argument("recording", nargs="+", metavar="RECORDING",
                         help="PELLET_FILE, or DATASET_DIR SUBJECT TASK, or DATASET_DIR "
                         "(with --out)")
-    parser.add_argument("--method", choices=JAW_METHODS, default="closed-form")
-    parser.add_argument("--solver", choices=SOLVERS, default="optimistix-lm")
+    parser.add_argument("--method", choices=ALL_JAW_METHODS, default="closed-form")
+    parser.add_argument("--jaw-sensors", default="MNI,MNM", metavar="S",
+                        help=f"the jaw sensors to use: {', '.join(JAW_SENSOR_SETS)} "
+                        "(default: both)")
+    parser.add_argument("--solver", choices=SOLVERS, default=None,
+                        help="iterative solver (default: the method's own: the closed form "
+                        "for frame-fit, optimistix-lm for the pivot methods)")
     parser.add_argument("--smoothness", type=float, default=1.0, metavar="W",
                         help="smooth-pivot: weight of the pivot-path smoothness prior "
                         "(finite, > 0)")
     parser.add_argument("--compare-methods", action="store_true",
-                        help="diagnostics for all four methods, not only --method")
+                        help="diagnostics for every method that can run with the jaw "
+                        "sensors, not only --method")
     parser.add_argument("--csv", metavar="OUT.csv", help="table to write (one recording)")
     parser.add_argument("--out", metavar="DIR", help="output folder (DATASET form)")
     parser.add_argument("--no-labels", action="store_true",
@@ -143,9 +157,13 @@ def print_diagnostics(rows) -> None:
     print(f"diagnostics (jaw-pellet distance SD/range mm; median residual mm; pivot IQR x/y "
           f"mm; share of pivots in x {X[0]:.0f}..{X[1]:.0f}, y {Y[0]:.0f}..{Y[1]:.0f} mm):")
     for r in rows:
-        print(f"  {r.method:13s} distance {r.jaw_distance_sd_mm:.3f}/{r.jaw_distance_range_mm:.3f}"
+        hidden = ("" if r.hidden_error_median_mm != r.hidden_error_median_mm else
+                  f"  hidden sensor error {r.hidden_error_median_mm:.2f} median, "
+                  f"{r.hidden_error_p95_mm:.2f} p95")
+        print(f"  {r.method:16s} distance {r.jaw_distance_sd_mm:.3f}/{r.jaw_distance_range_mm:.3f}"
               f"  residual {r.residual_median_mm:.3f}  pivot IQR {r.pivot_iqr_x_mm:.1f}/"
-              f"{r.pivot_iqr_y_mm:.1f}  plausible {100 * r.pivot_plausible_fraction:.0f} %")
+              f"{r.pivot_iqr_y_mm:.1f}  plausible {100 * r.pivot_plausible_fraction:.0f} %"
+              f"{hidden}")
 
 
 def run(args) -> int:
@@ -170,13 +188,18 @@ def run(args) -> int:
 
 def run_dataset(args) -> int:
     """``cassi jaw DATASET --out DIR``."""
-    from cassi_fit.jaw_fit import jaw_method
+    from cassi_fit.jaw_fit import check_sensors, jaw_method, jaw_sensor_set
+
+    sensors = jaw_sensor_set(args.jaw_sensors)
+    # checks W and the sensors, before anything starts
+    check_sensors(jaw_method(args.method, solver=args.solver, smoothness=args.smoothness),
+                  sensors)
     from cassi_fit.jaw_table import jaw_corpus
 
-    jaw_method(args.method, solver=args.solver, smoothness=args.smoothness)  # checks W
     run, written = jaw_corpus(args.recording[0], args.out, method=args.method,
                               solver=args.solver, smoothness=args.smoothness,
-                              labels=not args.no_labels, **run_options(args))
+                              jaw_sensors=",".join(sensors), labels=not args.no_labels,
+                              **run_options(args))
     ok = len(run.results) - len(run.failed)
     print(f"{ok} of {len(run.results)} recordings fitted ({args.method}) on {run.workers} "
           f"worker(s); tables: {', '.join(str(p) for p in written)}")
@@ -191,7 +214,13 @@ def run_recording(args) -> int:
     # is a quotient by sin(theta/2)), so the command computes in float64.
     jax.config.update("jax_enable_x64", True)
     from cassi_fit._io import atomic_write
-    from cassi_fit.jaw_fit import jaw_diagnostics, jaw_from_track, jaw_method
+    from cassi_fit.jaw_fit import (
+        check_sensors,
+        jaw_diagnostics,
+        jaw_from_track,
+        jaw_method,
+        jaw_sensor_set,
+    )
     from cassi_fit.jaw_table import jaw_frame_csv
     from cassi_fit.labels import SEGMENT_COLUMNS, labels_for, segment_summary
     from cassi_fit.status import Status
@@ -199,6 +228,8 @@ def run_recording(args) -> int:
     from cassi_fit.txy import JAW_PELLETS, pellet_index
 
     method = jaw_method(args.method, solver=args.solver, smoothness=args.smoothness)
+    sensors = jaw_sensor_set(args.jaw_sensors)
+    check_sensors(method, sensors)  # refuse with the method's reason, before any work
     out = Path(args.csv)
     diag_out, seg_out = diagnostics_path(out), segments_path(out)
     inputs = [Path(args.recording[0])] if len(args.recording) == 1 else []
@@ -209,13 +240,15 @@ def run_recording(args) -> int:
         for path in (out, diag_out, seg_out):
             _check_output(path, [track.path], args.force)
     labels = None if args.no_labels or track.path is None else labels_for(track.path)
-    fit = jaw_from_track(track, method=method)
+    fit = jaw_from_track(track, method=method, jaw_sensors=sensors)
     jaw_points = track.positions[:, [pellet_index(p) for p in JAW_PELLETS], :]
     rows = [jaw_diagnostics(fit, jaw_points)]
     if args.compare_methods:
         others = [jaw_method(m, solver=args.solver, smoothness=args.smoothness)
-                  for m in JAW_METHODS if m != args.method]
-        rows += [jaw_diagnostics(jaw_from_track(track, method=m), jaw_points) for m in others]
+                  for m in ALL_JAW_METHODS if m != args.method]
+        others = [m for m in others if len(sensors) in m.jaw_sensors_needed]
+        rows += [jaw_diagnostics(jaw_from_track(track, method=m, jaw_sensors=sensors),
+                                 jaw_points) for m in others]
     atomic_write(out, jaw_frame_csv(track.times, fit, labels), overwrite=args.force)
     atomic_write(diag_out, format_diagnostics(rows), overwrite=args.force)
     if labels is not None:
@@ -226,9 +259,12 @@ def run_recording(args) -> int:
     ok = int((fit.status <= 1).sum())
     mistracked = int((fit.status == Status.MISTRACKED).sum())
     print(f"{out}: {track.n_frames} frames, {ok} fitted ({args.method}"
-          f"{'' if args.method == 'closed-form' else ', ' + fit.solver}), "
+          f"{'' if args.method == 'closed-form' else ', ' + fit.solver}"
+          f"{'' if len(sensors) == 2 else ', ' + sensors[0] + ' alone'}), "
           f"{mistracked} mistracked, noise estimate {fit.noise_mm:.3f} mm"
           f"{'' if fit.converged else ', NOT converged (' + fit.failure.label + ')'}")
+    if fit.prior:
+        print(f"prior: {fit.prior}")
     print_diagnostics(rows)
     print(f"{diag_out}: diagnostics written")
     return 0

@@ -89,6 +89,15 @@ def fixed_pivot_residuals(pivot: Float[Array, "2"], args: Any) -> Float[Array, "
     return about_pivot_frames(pivot, reference, current, weight).ravel()
 
 
+def pivot_prior_residuals(pivot: Float[Array, "2"], args: Any) -> Float[Array, " r"]:
+    """:func:`fixed_pivot_residuals` and a pivot prior: ``args = (reference, current,
+    weight, prior_mean (2,), prior_weight (2,))`` -> the data residuals (2 k n,) mm and
+    ``prior_weight * (pivot - prior_mean)`` (2,) mm (zero weight: no prior)."""
+    reference, current, weight, prior_mean, prior_weight = args
+    data = about_pivot_frames(pivot, reference, current, weight).ravel()
+    return jnp.concatenate([data, prior_weight * (pivot - prior_mean)])
+
+
 def spline(knots: Float[Array, "m 2"], n: int, spacing: int) -> Float[Array, "n 2"]:
     """Piecewise-linear path (n, 2) through ``knots`` (m, 2) placed every ``spacing`` frames."""
     k = jnp.arange(n)
@@ -113,10 +122,12 @@ def smooth_pivot_residuals(knots: Float[Array, " 2m"], args: Any) -> Float[Array
     return jnp.concatenate([data, prior])
 
 
-def smooth_pivot_system(knots, reference, current, weight, smoothness, spacing, newton):
+def smooth_pivot_system(knots, reference, current, weight, smoothness, spacing, newton,
+                        prior=None):
     """Cost, gradient (m, 2), the step matrix and the Gauss-Newton normal matrix of
     :func:`smooth_pivot_residuals` at ``knots`` (m, 2); each matrix block-tridiagonal as
-    ``(diag (m, 2, 2), upper (m-1, 2, 2))``.
+    ``(diag (m, 2, 2), upper (m-1, 2, 2))``. ``prior = (mean (2,), weight (2,))`` adds the
+    residuals ``weight * (Q_j - mean)`` for every knot (a pivot prior; weight 0: none).
 
     Assembled from per-frame blocks: frame ``k`` depends on its pivot ``q_k = (1-f) Q_j + f
     Q_j+1`` only, through a (4, 2) Jacobian ``J_k`` (angle projected out), so it adds
@@ -160,5 +171,13 @@ def smooth_pivot_system(knots, reference, current, weight, smoothness, spacing, 
     grad = jnp.zeros((m, 2), g.dtype).at[j].add(w0[:, None] * g).at[j + 1].add(w1[:, None] * g)
     grad = grad.at[:-1].add(-lam * step).at[1:].add(lam * step)
     cost = 0.5 * (jnp.sum(res**2) + lam * jnp.sum(step**2))
-    gn = blocks(a_gn)
-    return cost, grad, (blocks(a_step) if newton else gn), gn
+    gn, mat = blocks(a_gn), (blocks(a_step) if newton else None)
+    if prior is not None:
+        mean, w = prior
+        off = w * (knots - mean)
+        cost = cost + 0.5 * jnp.sum(off**2)
+        grad = grad + w * off
+        ridge = jnp.diag(w**2)
+        gn = (gn[0] + ridge, gn[1])
+        mat = None if mat is None else (mat[0] + ridge, mat[1])
+    return cost, grad, (gn if mat is None else mat), gn
