@@ -1,62 +1,66 @@
 """Real recordings as the referee: every model predicts a sensor it never saw.
 
     python experiments/real_referee.py DATASET [--out DIR] [--docs DIR] [--force]
+        [--label NAME] [--subjects S ...] [--tasks T ...]
         [--synthetic DIR|default|none] [--synthetic-subjects N] [--synthetic-tasks T ...]
-        [--subjects S ...] [--tasks T ...]
 
 DATASET is any folder of XRMB recordings (either layout, ``cassi_fit.dataset.Dataset``),
 e.g. the real JW11 task 5 in /work/shared/data/xrmb_jw11/. Beside it the same is run on the
-synthetic corpus (``cassi_fit.synth.ensure_default_corpus()``; ``--synthetic-subjects``
-and ``--synthetic-tasks`` choose a subset, ``--synthetic none`` skips it). Per recording,
-three held-out tests (``PARTS``), each scored only on frames where every pellet it uses
-and the hidden one are tracked and not flagged by the mistrack detector (``PelletTrack.mistracks``), the
+synthetic corpus (``cassi_fit.synth.ensure_default_corpus()``, its speech tasks
+``SYNTHETIC_TASKS``; ``--synthetic-subjects`` and ``--synthetic-tasks`` choose a subset,
+``--synthetic DIR`` another corpus, ``--synthetic none`` none). Per recording, three
+held-out tests, each scored on the frames where every pellet it uses and the hidden one
+are tracked and not flagged by the mistrack detector (``PelletTrack.mistracks``), the
 reference frame excluded:
 
-- **Jaw.** With both jaw sensors present, each is hidden in turn (MNM predicted from MNI
-  alone, MNI from MNM alone). Predictors: every single-sensor jaw method of
-  ``cassi_fit.jaw_fit`` (``jaw_from_track(..., jaw_sensors=(SEEN,))``) when the library
-  has them; the baselines ``static`` (the hidden sensor stays at its reference-frame
-  position) and ``translate`` (it moves as the seen sensor does); and two references that
-  saw both sensors: ``two-pellet fixed pivot`` (``jaw_from_track(method="fixed-pivot")``
-  on both pellets, its motion applied to the hidden sensor's reference position) and
-  ``two-pellet pivot, seen angle`` (that pivot, the angle of each frame from the seen
-  sensor alone: what a single-sensor method with a perfect pivot prior would reach).
-  Score: the distance (mm) between the predicted and the measured hidden sensor.
-- **Tongue.** With all four tongue pellets present, T2 and T3 are hidden in turn (the
-  recording is loaded with that pellet never tracked) and the toolkit's own pipeline
-  (``pipeline.run_recording``) runs in the improved mode (thick tongue) and in the
-  cassi mode (CASSI's flat tongue), every ``TONGUE_STRIDE``-th line; whatever the pipeline
-  does with a never-tracked tongue pellet (today: ``frames.tongue_fill``, its displacement
-  interpolated in arc length between its neighbours') is what is scored. Scores: ``surface``, the distance from the measured
-  hidden pellet to the model tongue's upper midsagittal contour (the polyline of its
-  upper-midline vertices, ``deform.tongue_midline``: the section of the tongue's surface
-  at z = 0); ``site``, the distance to where the model puts the hidden pellet (its pellet
-  site, ``Animation.pellets_model``); ``along``, the distance along the contour from that
-  site to the foot of the perpendicular from the measured pellet (the tangential part of
-  ``site``). Baseline: linear interpolation between the neighbouring pellets (``surface``:
-  the distance to the chord between them; ``site``: the point at the model's rest
-  arc-length fraction along it).
-- **Lips.** The lower lip (LL, held out) predicted from the jaw alone: the jaw's motion
-  from the reference frame (the pipeline's jaw method, ``IMPROVED.jaw``, on both jaw
-  pellets) applied to LL's reference position with the model's lower-lip jaw weight
-  (``rigid.fractional``; CASSI's weight 1.11 and Parke's 1.0). Baselines: ``static`` and
-  ``moves with MNI``. The jaw pellets are not held out here; UL has no model predictor (the
-  model moves it only by its own pellet), so it is not scored.
+- **Jaw** (:func:`jaw_part`). With both jaw sensors present, each is hidden in turn (MNM
+  predicted from MNI alone, MNI from MNM alone). Methods: the library's single-sensor jaw
+  methods (:func:`single_sensor_methods`, ``jaw_from_track(..., jaw_sensors=SEEN)``,
+  ``JawFit.hidden_predicted``); "coupled-rotation" gets a coupling learned on other
+  speakers only (:class:`Couplings`). Baselines: ``static`` (the hidden sensor stays at
+  its reference-frame position) and ``translate`` (it moves as the seen sensor does).
+  References that saw both sensors: ``two-pellet fixed pivot`` (``jaw_from_track(method=
+  "fixed-pivot")`` on both pellets, its motion applied to the hidden sensor's reference
+  position) and ``two-pellet pivot, seen angle`` (that pivot, each frame's angle from the
+  seen sensor alone: a single-sensor method with a perfect pivot prior). Score: the
+  distance (mm) between the predicted and the measured hidden sensor.
+- **Tongue** (:func:`tongue_part`). With all four tongue pellets present, T2 and T3 are
+  hidden in turn (the recording loaded with that pellet never tracked) and the toolkit's
+  own pipeline (``pipeline.run_recording``) runs in the improved mode (thick tongue) and in
+  the cassi mode (CASSI's flat tongue), every ``TONGUE_STRIDE``-th line; whatever the
+  pipeline does with a never-tracked tongue pellet (today ``frames.tongue_fill``: its
+  displacement interpolated in arc length between its neighbours') is what is scored.
+  Scores: ``surface``, the distance from the measured hidden pellet to the model tongue's
+  upper midsagittal contour (the polyline of its upper-midline vertices,
+  ``deform.tongue_midline``: the section of the tongue's surface at z = 0); ``site``, the
+  distance to where the model puts the hidden pellet (``Animation.pellets_model``);
+  ``along``, the distance along the contour from that site to the foot of the
+  perpendicular from the measured pellet (the tangential part of ``site``). Baseline:
+  linear interpolation between the neighbouring pellets (``surface``: the distance to the
+  chord between them; ``site``: the point at the model's rest arc-length fraction along it).
+- **Lips** (:func:`lips_part`). The lower lip (LL, held out) predicted from the jaw
+  alone: the jaw's motion from the reference frame (the pipeline's jaw method,
+  ``run_spec.IMPROVED.jaw``, on both jaw pellets) applied to LL's reference position with
+  the model's lower-lip jaw weight (``rigid.fractional``; CASSI's weight 1.11 and Parke's
+  1.0). Baselines: ``static`` and ``moves with MNI``. The jaw pellets are not held out
+  here; UL has no model predictor (the model moves it by its own pellet only): not scored.
 
 Statistics: the median and 95th percentile of the per-frame errors, per recording and
 pooled over a dataset's recordings (frames pooled), each with a 95 % percentile-bootstrap
-interval: ``BOOTSTRAP`` resamples; within a recording a moving-block bootstrap over frames
-(blocks of ``BLOCK_S`` seconds of consecutive scored frames: neighbouring frames share
-movement and noise); pooled, subjects resampled with replacement (all of a chosen subject's recordings)
-and then blocks within each recording. Paired comparisons: a method's statistic minus a
-baseline's on the same resampled frames, with its interval; ``better``/``worse`` only where
-the interval excludes 0, else ``tie``. Every resample is seeded from the names (dataset,
-subject, task, part), so a re-run of one recording reproduces its rows exactly.
+interval of ``BOOTSTRAP`` resamples: within a recording a moving-block bootstrap (blocks of
+``BLOCK_S`` seconds of consecutive scored frames: neighbouring frames share movement and
+noise); pooled, subjects resampled with replacement (with all their recordings), then
+blocks within each recording. Paired comparisons: a method's statistic minus a baseline's
+(or a reference's) on the same resampled frames, with its interval; ``better``/``worse``
+only where the interval excludes 0, else ``tie``. Every resample is seeded from names
+(dataset, subject, task, part), so a re-run of one recording reproduces its rows exactly.
 
-Writes ``real_referee.csv`` (every row) and ``real_referee.md`` (the side-by-side tables)
-into --out (default experiments/output) and, with --docs, into that folder too; the
-Markdown's first line names the command. Outputs are checked before any work and never
-replaced without --force.
+Writes ``real_referee.csv`` (every row), ``real_referee_couplings.csv`` (the couplings
+learned) and ``real_referee.md`` (the side-by-side tables, rendered from the CSVs) into
+--out (default experiments/output) and, with --docs, into that folder too; the Markdown's
+first line names the command. Outputs are checked before any work and never replaced
+without --force. Fits and animations run on tracks padded with untracked frames to a
+multiple of ``PAD_FRAMES`` (:func:`padded`), so that they compile once per length class.
 """
 
 from __future__ import annotations
@@ -241,8 +245,7 @@ def two_pellet_fit(track):
     n = track.n_frames
     fit = jaw_from_track(padded(track), method="fixed-pivot")
     ok = np.asarray(fit.status)[:n] <= Status.PIVOT_UNDEFINED
-    return fit.theta[:n], fit.translation[:n], fit.pivot[fit.reference_frame], ok, \
-        fit.reference_frame
+    return fit.theta, fit.translation, fit.pivot[fit.reference_frame], ok, fit.reference_frame
 
 
 def jaw_part(track, seen: str, fit=None, single_sensor: Callable | None = None) -> list[PartResult]:
