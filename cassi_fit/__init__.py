@@ -43,6 +43,7 @@ if TYPE_CHECKING:
     from .dataset import Dataset as Dataset
     from .dataset import DefaultHeadMeasuresWarning as DefaultHeadMeasuresWarning
     from .dataset import Recording as Recording
+    from .dataset import SpecialFileWarning as SpecialFileWarning
     from .dataset import load_recording as load_recording
     from .dataset import recording_from_array as recording_from_array
     from .deform import FaceParams as FaceParams
@@ -197,6 +198,7 @@ _PUBLIC = {
     "load_recording": "dataset",
     "recording_from_array": "dataset",
     "DefaultHeadMeasuresWarning": "dataset",
+    "SpecialFileWarning": "dataset",
     # ema (data): articulograph files
     "SensorReport": "ema",
     # quality (data)
@@ -330,7 +332,8 @@ __all__ = [
     "MistrackedFirstLineWarning",
     "OutputExistsError", "PELLET_NAMES", "PelletTrack", "QualityReport", "Recording", "Renderer",
     "RenderingUnavailableError", "SOLVERS", "SmoothPivot", "Solver", "SolverResult", "Status",
-    "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning", "Topology", "animate",
+    "SpecialFileWarning", "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning",
+    "Topology", "animate",
     "animate_corpus", "build_palate", "calibrate_corpus", "calibrate_dataset",
     "calibrate_subject", "calibration_choice", "closed_form", "closed_form_paper", "compare",
     "dataset_items", "default_params", "deform", "detect_mistracks", "ensure_default_corpus",
