@@ -39,8 +39,8 @@ reference frame excluded:
   linear interpolation between the neighbouring pellets (``surface``: the distance to the
   chord between them; ``site``: the point at the model's rest arc-length fraction along it).
 - **Lips** (:func:`lips_part`). The lower lip (LL, held out) predicted from the jaw
-  alone: the jaw's motion from the reference frame (the pipeline's jaw method,
-  ``run_spec.IMPROVED.jaw``, on both jaw pellets) applied to LL's reference position with
+  alone: the jaw's motion from the reference frame (the pipeline's jaw method with both
+  jaw pellets, ``run_spec.IMPROVED.jaw_method_for(("MNI", "MNM"))``: the closed form) applied to LL's reference position with
   the model's lower-lip jaw weight (``rigid.fractional``; CASSI's weight 1.11 and Parke's
   1.0). Baselines: ``static`` and ``moves with MNI``. The jaw pellets are not held out
   here; UL has no model predictor (the model moves it by its own pellet only): not scored.
@@ -362,7 +362,8 @@ def lips_part(track, model=None) -> list[PartResult]:
     clean = clean_values(track)
     ll, mni = _col("LL"), _col("MNI")
     f0 = first_valid_line(track, pellets=("MNI", "MNM", "LL")).index
-    fit = jaw_from_track(padded(track), method=IMPROVED.jaw, reference_frame=f0)
+    fit = jaw_from_track(padded(track), method=IMPROVED.jaw_method_for(JAW),
+                         reference_frame=f0)
     usable = clean[:, [ll, mni, _col("MNM")]].all(axis=1)
     usable &= np.asarray(fit.status)[:n] <= Status.PIVOT_UNDEFINED
     usable[f0] = False
