@@ -339,7 +339,7 @@ def tongue_part(recording, hidden: str, model=None,
     baseline = {"surface": chord_dist,
                 "site": point_errors(a + fraction * (b - a), observed),
                 "along": np.abs(chord_arc - fraction * chord_len)}
-    part = f"tongue: {hidden} from {before}, {after} and the others"
+    part = f"tongue: {hidden} from {', '.join(k for k in TONGUE if k != hidden)}"
     roles = {k: "method" for k in models} | {"linear interpolation": "baseline"}
     out = []
     for metric in TONGUE_METRICS:
