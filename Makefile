@@ -40,6 +40,7 @@ experiments: $(STAMP)
 	$(BIN)/python experiments/single_sensor_jaw.py --out experiments/output --docs docs/generated --force
 	$(BIN)/python experiments/synthetic_realism.py --out experiments/output --docs docs/generated --force
 	$(BIN)/python experiments/subject_fitting.py --out experiments/output --docs docs/generated --force
+	$(BIN)/python experiments/calibration_limits.py --out experiments/output --docs docs/generated --force
 	$(BIN)/python experiments/cassi_mode.py --subjects 5 --tasks tp011 tp040 --stride 1
 	$(BIN)/python experiments/tongue_volume.py --subjects 2 --stride 1
 	$(BIN)/python experiments/mistrack_detection.py --docs docs/generated --force

@@ -30,12 +30,13 @@ if TYPE_CHECKING:
     from .animate import Animation as Animation
     from .calibrate import calibrate_dataset as calibrate_dataset
     from .calibrate import calibrate_subject as calibrate_subject
-    from .calibrate import calibration_choice as calibration_choice
-    from .calibrate import load_calibrations as load_calibrations
-    from .calibrate import read_calibration as read_calibration
-    from .calibrate import write_calibration as write_calibration
     from .calibrate_corpus import calibrate_corpus as calibrate_corpus
-    from .conformation import Calibration as Calibration
+    from .calibration import Calibration as Calibration
+    from .calibration import CalibrationWarning as CalibrationWarning
+    from .calibration import calibration_choice as calibration_choice
+    from .calibration import load_calibrations as load_calibrations
+    from .calibration import read_calibration as read_calibration
+    from .calibration import write_calibration as write_calibration
     from .corpus import CorpusItem as CorpusItem
     from .corpus import CorpusRun as CorpusRun
     from .corpus import dataset_items as dataset_items
@@ -43,6 +44,7 @@ if TYPE_CHECKING:
     from .dataset import Dataset as Dataset
     from .dataset import DefaultHeadMeasuresWarning as DefaultHeadMeasuresWarning
     from .dataset import Recording as Recording
+    from .dataset import SpecialFileWarning as SpecialFileWarning
     from .dataset import load_recording as load_recording
     from .dataset import recording_from_array as recording_from_array
     from .deform import FaceParams as FaceParams
@@ -197,6 +199,7 @@ _PUBLIC = {
     "load_recording": "dataset",
     "recording_from_array": "dataset",
     "DefaultHeadMeasuresWarning": "dataset",
+    "SpecialFileWarning": "dataset",
     # ema (data): articulograph files
     "SensorReport": "ema",
     # quality (data)
@@ -269,15 +272,16 @@ _PUBLIC = {
     "PivotPrior": "jaw_fit",
     "JawCoupling": "jaw_fit",
     "learn_jaw_coupling": "jaw_fit",
-    # conformation (fitting)
-    "Calibration": "conformation",
+    # calibration (fitting): the record and its file
+    "Calibration": "calibration",
+    "CalibrationWarning": "calibration",
+    "read_calibration": "calibration",
+    "write_calibration": "calibration",
+    "load_calibrations": "calibration",
+    "calibration_choice": "calibration",
     # calibrate (fitting)
     "calibrate_subject": "calibrate",
     "calibrate_dataset": "calibrate",
-    "read_calibration": "calibrate",
-    "write_calibration": "calibrate",
-    "load_calibrations": "calibrate",
-    "calibration_choice": "calibrate",
     # initialize (pipeline)
     "initialize": "initialize",
     "SubjectState": "initialize",
@@ -320,8 +324,8 @@ _PUBLIC = {
 _MODULES = ("animate", "deform", "rigid", "synth")
 
 __all__ = [
-    "Animation", "Calibration", "CassiError", "ClosedForm", "CorpusItem", "CorpusRun",
-    "CoupledRotation", "JawCoupling", "PivotPrior", "learn_jaw_coupling",
+    "Animation", "Calibration", "CalibrationWarning", "CassiError", "ClosedForm", "CorpusItem",
+    "CorpusRun", "CoupledRotation", "JawCoupling", "PivotPrior", "learn_jaw_coupling",
     "DEFAULT_HEAD_MEASURES", "DataFormatError", "Dataset", "DefaultHeadMeasuresWarning",
     "DegenerateGeometryError", "Dogleg", "EvaluationResult", "FaceModel", "FaceParams",
     "FixedPivot", "FrameFit", "GaussNewton", "HeadMeasures", "InvalidChoiceError", "JAW_METHODS",
@@ -330,7 +334,8 @@ __all__ = [
     "MistrackedFirstLineWarning",
     "OutputExistsError", "PELLET_NAMES", "PelletTrack", "QualityReport", "Recording", "Renderer",
     "RenderingUnavailableError", "SOLVERS", "SmoothPivot", "Solver", "SolverResult", "Status",
-    "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning", "Topology", "animate",
+    "SpecialFileWarning", "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning",
+    "Topology", "animate",
     "animate_corpus", "build_palate", "calibrate_corpus", "calibrate_dataset",
     "calibrate_subject", "calibration_choice", "closed_form", "closed_form_paper", "compare",
     "dataset_items", "default_params", "deform", "detect_mistracks", "ensure_default_corpus",

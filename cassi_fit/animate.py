@@ -82,19 +82,33 @@ class Animation(eqx.Module):
         return self.stride * self.line_step_s
 
 
-def _jaw_since_first(state, jaw_pellets, method, size):
+def _jaw_sensors(state, spec) -> tuple[str, ...]:
+    """The jaw sensors the animation uses: the spec's choice, else every jaw pellet the
+    recording tracks; a chosen sensor the recording lacks is one error naming it."""
+    if spec.jaw_sensors is None:
+        return state.jaw_sensors
+    lacking = [p for p in spec.jaw_sensors if p not in state.jaw_sensors]
+    if lacking:
+        raise MissingDataError(f"{state.source}: jaw sensor {', '.join(lacking)} is never "
+                               "tracked (jaw sensors: "
+                               f"{', '.join(state.jaw_sensors) or 'none'})")
+    return spec.jaw_sensors
+
+
+def _jaw_since_first(state, jaw_pellets, method, sensors, size):
     """``(theta (size,), t (size, 2), status (m,))``: the jaw from the first valid line to
-    each frame, by the jaw method object ``method``, padded to ``size`` frames;
-    ``jaw_pellets (m, 2, 2)`` scaled mm, rows [MNI, MNM]. The closed form is per frame, so
-    it runs on the padded frames (one compilation per size bucket); a fit sees only the
-    real frames."""
+    each frame, by the jaw method object ``method`` on the jaw ``sensors``, padded to
+    ``size`` frames; ``jaw_pellets (m, 2, 2)`` scaled mm, rows [MNI, MNM]. The closed form
+    is per frame, so it runs on the padded frames (one compilation per size bucket); a fit
+    sees only the real frames."""
     m = jaw_pellets.shape[0]
     if method.name == "closed-form":
         fit = closed_form_frames(state.reference_jaw, pad_frames(jaw_pellets, size))
         return fit.theta, fit.translation, np.asarray(fit.status)[:m]
     from .jaw_fit import fit_jaw
 
-    fit = fit_jaw(state.reference_jaw, jnp.asarray(jaw_pellets), method=method)
+    fit = fit_jaw(state.reference_jaw, jnp.asarray(jaw_pellets), method=method,
+                  jaw_sensors=sensors)
     return pad_frames(fit.theta, size), pad_frames(fit.translation, size), np.asarray(fit.status)
 
 
@@ -120,11 +134,14 @@ def animate(state: eqx.Module, recording: Recording, **changes: object) -> Anima
     positions = repair(np.asarray(track.positions), bad, spec.gap_policy)
     rows = np.arange(state.first_frame, track.times.shape[0], spec.stride)
     scaled = state.scale * positions[rows]
-    if not (~bad[:, list(JAW_INDEX)].any(axis=1)).any():
+    sensors = _jaw_sensors(state, spec)
+    method = spec.jaw_method_for(sensors)
+    used = [PELLET_NAMES.index(p) for p in sensors]
+    if not (~bad[:, used].any(axis=1)).any():
         raise MissingDataError(f"{state.source}: the jaw pellets are never tracked well")
     m, size = len(rows), frame_bucket(len(rows))
     theta, translation, jaw_status = _jaw_since_first(
-        state, scaled[:, list(JAW_INDEX)], spec.jaw, size
+        state, scaled[:, list(JAW_INDEX)], method, sensors, size
     )
     params = frame_params(state, pad_frames(scaled, size), theta, translation)
     from .collide import has_collision_data, require_collision_data
@@ -153,7 +170,7 @@ def animate(state: eqx.Module, recording: Recording, **changes: object) -> Anima
         penetration=before,
         penetration_after=after,
         stride=spec.stride,
-        jaw_method=spec.jaw_name,
+        jaw_method=method.name,
         collisions=spec.collisions,
         line_step_s=track.frame_step_s,
     )

@@ -42,21 +42,23 @@ JAW_STATUSES = (Status.OK, Status.PIVOT_UNDEFINED, Status.DEGENERATE, Status.NON
                 Status.INVALID_FRAME, Status.NOT_CONVERGED)
 
 
-def jaw_frame_rows(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels | None = None
-                   ) -> tuple[list[dict], list[str]]:
+def jaw_frame_rows(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels | None = None,
+                   mistracks: list[str] | None = None) -> tuple[list[dict], list[str]]:
     """One recording's jaw table as ``(rows, columns)``: one row per frame,
     :data:`JAW_FRAME_COLUMNS` (times s, theta deg, pivot and translation mm, rms residual
     mm, the status word); with one jaw sensor and the other's reference known, the hidden
     sensor's predicted position (``MNM_pred_x_mm``, ``MNM_pred_y_mm`` or ``MNI_...``, mm,
-    in the pellet frame); a ``label`` column when ``labels`` are given (``labels.Labels``;
-    ``""`` between labelled intervals)."""
+    in the pellet frame); a ``mistrack`` column when ``mistracks`` are given (one string
+    per frame, ``MistrackReport.frame_labels``: which pellet the detector flagged and
+    why, e.g. ``"MNI:dropout"``); a ``label`` column when ``labels`` are given
+    (``labels.Labels``; ``""`` between labelled intervals)."""
     import numpy as np
 
     predicted = fit.hidden_predicted
     pred_columns = ([f"{fit.hidden_sensor}_pred_x_mm", f"{fit.hidden_sensor}_pred_y_mm"]
                     if predicted is not None else [])
-    columns = (list(JAW_FRAME_COLUMNS) + pred_columns
-               + (["label"] if labels is not None else []))
+    columns = (list(JAW_FRAME_COLUMNS) + (["mistrack"] if mistracks is not None else [])
+               + pred_columns + (["label"] if labels is not None else []))
     theta_deg = np.rad2deg(fit.theta)
     current = labels.at(times) if labels is not None else None
     rows = []
@@ -67,16 +69,18 @@ def jaw_frame_rows(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels |
                "residual_mm": float(fit.residual[k]), "status": Status(int(fit.status[k])).label}
         if predicted is not None:
             row[pred_columns[0]], row[pred_columns[1]] = (float(v) for v in predicted[k])
+        if mistracks is not None:
+            row["mistrack"] = mistracks[k]
         if current is not None:
             row["label"] = str(current[k])
         rows.append(row)
     return rows, columns
 
 
-def jaw_frame_csv(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels | None = None
-                  ) -> str:
+def jaw_frame_csv(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels | None = None,
+                  mistracks: list[str] | None = None) -> str:
     """:func:`jaw_frame_rows` as CSV text, as ``cassi jaw RECORDING`` writes it."""
-    rows, columns = jaw_frame_rows(times, fit, labels)
+    rows, columns = jaw_frame_rows(times, fit, labels, mistracks)
     return csv_text(rows, columns)
 
 
@@ -137,9 +141,9 @@ def jaw_summary_row(fit: JawFit, *, label_file: str = "",
 JAW_FRAME_BUCKET = 1024
 
 
-def fit_jaw_bucketed(track: PelletTrack, *, method: str = "closed-form",
+def fit_jaw_bucketed(track: PelletTrack, *, method: str | None = None,
                      solver: str | None = None, smoothness: float = 1.0,
-                     jaw_sensors: str = "MNI,MNM") -> JawFit:
+                     jaw_sensors: str | None = None) -> JawFit:
     """``jaw_fit.jaw_from_track`` with the frames padded to a multiple of
     :data:`JAW_FRAME_BUCKET` (1024 frames, 7 s), so that a worker compiles the fit once per
     bucket instead of once per recording length (the XRMB lengths all differ; compiling
@@ -148,20 +152,27 @@ def fit_jaw_bucketed(track: PelletTrack, *, method: str = "closed-form",
     unpadded fit (they are fitted frame by frame and the noise is pooled over usable frames
     only), and "fixed-pivot" gets zero weight for them. "smooth-pivot" is not padded: its
     pivot-path knots depend on the length. ``jaw_sensors``: both, or one (``"MNI"``,
-    ``"MNM"``; ``jaw_fit.fit_jaw``)."""
+    ``"MNM"``; ``jaw_fit.fit_jaw``), or None for the jaw pellets the track has; ``method``
+    None: the closed form with two, coupled-rotation with one
+    (``jaw_fit.method_for_sensors``)."""
     import dataclasses
 
     import numpy as np
 
-    from .jaw_fit import jaw_from_track
-    from .txy import FRAME_STEP_US, PelletTrack
+    from .jaw_fit import jaw_from_track, jaw_sensor_set, method_for_sensors, tracked_jaw_sensors
+    from .txy import PelletTrack
+
+    sensors = (tracked_jaw_sensors(track.valid) if jaw_sensors is None
+               else jaw_sensor_set(jaw_sensors))
+    method = method_for_sensors(method, sensors).name
+    jaw_sensors = ",".join(sensors)
 
     if method == "smooth-pivot":
         return jaw_from_track(track, method=method, solver=solver, smoothness=float(smoothness),
                               jaw_sensors=jaw_sensors)
     n = track.n_frames
     extra = -n % JAW_FRAME_BUCKET
-    step = FRAME_STEP_US * 1e-6
+    step = track.frame_step_s
     padded = PelletTrack(
         times=np.concatenate([track.times, track.times[-1] + step * np.arange(1, extra + 1)]),
         positions=np.concatenate([track.positions, np.full((extra, 8, 2), np.nan)]),
@@ -185,9 +196,10 @@ def segments_output_path(out_dir: str | os.PathLike, item: CorpusItem) -> Path:
     return Path(out_dir) / item.subject / f"{item.task}.segments.csv"
 
 
-def jaw_task(item: CorpusItem, out_dir: str, *, method: str = "closed-form",
-             solver: str | None = None, smoothness: float = 1.0, jaw_sensors: str = "MNI,MNM",
-             labels: bool = True, overwrite: bool = False) -> TaskResult:
+def jaw_task(item: CorpusItem, out_dir: str, *, method: str | None = None,
+             solver: str | None = None, smoothness: float = 1.0,
+             jaw_sensors: str | None = None, labels: bool = True,
+             overwrite: bool = False) -> TaskResult:
     """``cassi jaw DATASET``'s task: fit the jaw of one pellet file
     (:func:`fit_jaw_bucketed`), write ``out_dir/SUBJECT/TASK.jaw.csv`` (one row per frame)
     and return the summary row (:func:`jaw_summary_row`). When ``labels`` and a label
@@ -195,17 +207,24 @@ def jaw_task(item: CorpusItem, out_dir: str, *, method: str = "closed-form",
     ``label`` column and ``TASK.segments.csv`` holds one row per labelled segment
     (``labels.segment_summary``: peak jaw opening, lip aperture range, ...). With one jaw
     sensor (``jaw_sensors``), the other's prediction is in the frame table and its error,
-    where the file has it, in the row."""
+    where the file has it, in the row. Any recording the toolkit reads (XRMB or an
+    articulograph's, ``corpus.load_item``); ``method``/``jaw_sensors`` None: as
+    :func:`fit_jaw_bucketed`, per recording."""
+    from .corpus import load_item
     from .labels import SEGMENT_COLUMNS, labels_for, segment_summary
     from .pellets import JAW_PELLETS, pellet_index
-    from .txy import read_txy
+    from .sound import recording_seconds
 
-    track = read_txy(item.path)
+    recording = load_item(item, quiet=True)
+    track = recording.track
     fit = fit_jaw_bucketed(track, method=method, solver=solver, smoothness=smoothness,
                            jaw_sensors=jaw_sensors)
-    found = labels_for(item.path) if labels else None
+    found = labels_for(recording.path, recording_s=recording_seconds(track.times)) \
+        if labels else None
     out = jaw_output_path(out_dir, item)
-    outputs = [atomic_write(out, jaw_frame_csv(track.times, fit, found), overwrite=overwrite)]
+    outputs = [atomic_write(out, jaw_frame_csv(track.times, fit, found,
+                                               track.mistracks.frame_labels()),
+                            overwrite=overwrite)]
     label_file = ""
     if found is not None:
         label_file = found.path.name if found.path is not None else ""
@@ -227,10 +246,10 @@ def jaw_corpus(
     dataset: Dataset | str | os.PathLike,
     out_dir: str | os.PathLike,
     *,
-    method: str = "closed-form",
+    method: str | None = None,
     solver: str | None = None,
     smoothness: float = 1.0,
-    jaw_sensors: str = "MNI,MNM",
+    jaw_sensors: str | None = None,
     labels: bool = True,
     subjects: Iterable[str] | None = None,
     tasks: Iterable[str] | None = None,
@@ -241,9 +260,10 @@ def jaw_corpus(
     ``.parquet``). ``run_options`` go to :func:`cassi_fit.corpus.run_corpus` (``jobs``,
     ``scheduler``, ``executor``, ``resume``, ``overwrite``, ``progress``,
     ``compilation_cache``). ``solver``: None for the method's own; ``jaw_sensors``: both,
-    or one (``"MNI"``, ``"MNM"``). Returns the run (``run.failed``: exit non-zero) and the
-    table files written. A method that cannot run with the sensors given is refused
-    before the run."""
+    or one (``"MNI"``, ``"MNM"``), or None (the default) for the jaw pellets each recording
+    has; ``method`` None: the closed form with two jaw sensors, coupled-rotation with one.
+    Returns the run (``run.failed``: exit non-zero) and the table files written. A method
+    that cannot run with the sensors given is refused before the run."""
     replace = bool(run_options.get("overwrite") or run_options.get("resume"))
     table = jaw_corpus_path(out_dir)
     if table.exists() and not replace:  # refuse before the run, not after it
@@ -251,13 +271,15 @@ def jaw_corpus(
                                 "resume=True / --resume)")
     from .jaw_fit import check_sensors, jaw_method, jaw_sensor_set
 
-    sensors = ",".join(jaw_sensor_set(jaw_sensors))
-    check_sensors(jaw_method(method, solver=solver, smoothness=smoothness), jaw_sensor_set(sensors))
+    sensors = None if jaw_sensors is None else ",".join(jaw_sensor_set(jaw_sensors))
+    if method is not None:  # checked here (the name, its options) rather than per recording
+        chosen = jaw_method(method, solver=solver, smoothness=smoothness)
+        if sensors is not None:
+            check_sensors(chosen, jaw_sensor_set(sensors))
     run_options.setdefault("x64", True)  # pivots to a micrometre need float64 (cassi jaw)
     run_options.setdefault("desc", "jaw")
-    options = {"method": method, "solver": solver, "labels": bool(labels)}
-    if sensors != "MNI,MNM":  # the two-sensor runs keep their fingerprint (resumable)
-        options["jaw_sensors"] = sensors
+    options = {"method": method, "solver": solver, "labels": bool(labels),
+               "jaw_sensors": sensors}
     if method == "smooth-pivot":
         options["smoothness"] = float(smoothness)
     items = require_items(dataset_items(dataset, subjects=subjects, tasks=tasks), dataset,

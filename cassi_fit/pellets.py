@@ -141,7 +141,8 @@ def first_valid_line(
 
     ``track``: a ``txy.PelletTrack`` (times, positions, valid, mistracks); ``source``
     names the file in errors (default: ``track.path``). ``pellets``: None for every
-    pellet the file ever tracks (a jaw pellet never tracked raises ``MissingDataError``),
+    pellet the file ever tracks (both jaw pellets never tracked raise
+    ``MissingDataError``; one jaw sensor, as most articulograph corpora have, is enough),
     or the names of the pellets to look at (e.g. ``JAW_PELLETS``, the jaw fit's
     reference). ``mistracked``: an ``(n, 8)`` mask to use instead of the track's own
     detection. Raises ``MissingDataError`` naming the file if no line has those pellets
@@ -151,9 +152,9 @@ def first_valid_line(
     where = source_of(track, source)
     if pellets is None:
         ever = ever_tracked(track.valid)
-        missing = [PELLET_NAMES[j] for j in JAW_INDEX if not ever[j]]
-        if missing:
-            raise MissingDataError(f"{where}: jaw pellet(s) {', '.join(missing)} never tracked")
+        if not any(ever[j] for j in JAW_INDEX):  # one jaw sensor (EMA's usual) is enough
+            raise MissingDataError(f"{where}: jaw pellets {', '.join(JAW_PELLETS)} never "
+                                   "tracked")
         columns = list(np.flatnonzero(ever))
         what = "first valid line"
     else:

@@ -46,7 +46,7 @@ def test_writes_one_row_per_frame(pellet_file, tmp_path, capsys):
     rows = list(csv.DictReader(out.read_text().splitlines()))
     assert len(rows) == 60 and list(rows[0]) == [
         "time_s", "theta_deg", "pivot_a_mm", "pivot_b_mm", "tx_mm", "ty_mm", "residual_mm",
-        "status"]
+        "status", "mistrack"]
     assert [r["status"] for r in rows[:2]] == ["invalid-frame"] * 2
     assert rows[30]["status"] == "invalid-frame" and rows[40]["status"] == "ok"
     # the reference is frame 2; the motion is relative to it (pellets stored in whole um)
@@ -146,6 +146,7 @@ def test_mistracked_rows_are_marked(tmp_path, capsys):
     assert cli.main(["jaw", str(path), "--csv", str(out)]) == 0
     rows = list(csv.DictReader(out.read_text().splitlines()))
     assert rows[0]["status"] == rows[40]["status"] == "mistracked"
+    assert rows[40]["mistrack"].startswith("MNI:") and rows[30]["mistrack"] == ""  # and why
     assert float(rows[1]["theta_deg"]) == pytest.approx(0.0, abs=0.01)  # line 1 is the reference
     assert float(rows[30]["theta_deg"]) == pytest.approx(np.rad2deg(theta[30] - theta[1]),
                                                          abs=0.01)

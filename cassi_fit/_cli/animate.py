@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
 from cassi_fit._cli._corpus import add_run_arguments, finish, run_options
 from cassi_fit.options import (
+    ALL_JAW_METHODS,
     ANIMATION_SUFFIXES,
     COLLISION_MODES,
     GAP_POLICIES,
-    JAW_METHODS,
+    JAW_SENSOR_SETS,
     JAW_WEIGHTS,
     MODES,
     TONGUE_ANCHORS,
@@ -67,11 +69,21 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--jaw",
-        choices=JAW_METHODS,
+        choices=ALL_JAW_METHODS,
         default=None,
-        help="how the jaw moves: the paper's closed form from the two jaw pellets (default), "
-        "or a least-squares fit: per frame (frame-fit), about one pivot for the whole "
-        "recording (fixed-pivot), or about a pivot that moves smoothly (smooth-pivot)",
+        help="how the jaw moves: the paper's closed form from the two jaw pellets (the "
+        "default with two jaw sensors), or a least-squares fit: per frame (frame-fit), about "
+        "one pivot for the whole recording (fixed-pivot), or about a pivot that moves "
+        "smoothly (smooth-pivot); with one jaw sensor (most EMA corpora) the default is "
+        "coupled-rotation (the rotation coupled to the sensor's displacement, learned from "
+        "two-sensor recordings; docs/JAW.md), and the pivot fits run on a stated prior",
+    )
+    parser.add_argument(
+        "--jaw-sensors",
+        choices=JAW_SENSOR_SETS,
+        default=None,
+        help="the jaw sensors to use (default: every jaw pellet the recording tracks); MNI "
+        "alone animates as a one-sensor recording would be",
     )
     parser.add_argument(
         "--stride",
@@ -230,9 +242,9 @@ def load_recording_args(words, args: argparse.Namespace | None = None):
         from cassi_fit.dataset import load_recording
 
         path = Path(words[0])
-        if not path.is_file():
+        if not os.path.lexists(path):  # anything else load_recording names (a pipe, ...)
             raise CassiError(f"{path}: no such recording file")
-        return load_recording(path, **options)
+        return load_recording(path, **options)  # a pipe, device or folder: one line saying which
     if len(words) == 3:
         from cassi_fit.dataset import Dataset
 
@@ -252,7 +264,8 @@ def spec_from_args(args: argparse.Namespace):
     return run_spec(mode, calibration=getattr(args, "calibration", None) or None,
                     jaw=args.jaw, stride=args.stride, jaw_weights=args.jaw_weights,
                     tongue_anchor=args.tongue_anchor, gap_policy=args.gap,
-                    collisions=args.collisions, tongue_shape=args.tongue_shape)
+                    collisions=args.collisions, tongue_shape=args.tongue_shape,
+                    jaw_sensors=getattr(args, "jaw_sensors", None))
 
 
 def run_args(recording, args):

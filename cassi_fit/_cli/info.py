@@ -126,7 +126,8 @@ def collect(path: Path, list_only: bool = False, *, sensor_map=None, layout=None
 
     if isinstance(layout, str) and "," in layout:
         layout = [c.strip() for c in layout.split(",") if c.strip()]
-    if path.exists() and not path.is_dir():  # a file (load_recording refuses a FIFO)
+    if (path.exists() or path.is_symlink()) and not path.is_dir():
+        # a file (load_recording refuses a FIFO, a device, a broken or looping link)
         load = partial(load_recording, sensor_map=sensor_map, layout=layout, rate=rate,
                        bite_plane=bite_plane)
         rec = _quietly(load, path)
@@ -135,9 +136,7 @@ def collect(path: Path, list_only: bool = False, *, sensor_map=None, layout=None
     if not path.is_dir():
         raise MissingDataError(f"{path}: no such file or folder")
     ds = Dataset(path, sensor_map=sensor_map)
-    if not ds.subjects():
-        raise MissingDataError(f"{path}: no pellet files or articulograph recordings (.txy, "
-                               ".ema, .pos, .tsv, .mat) found")
+    ds.check_selection()  # nothing found: one line naming the folder and what was looked for
     subjects = {}
     for subject in ds.subjects():
         tasks = {}

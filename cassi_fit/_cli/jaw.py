@@ -7,12 +7,12 @@ beside the pellet file, a label column and ``OUT.segments.csv``. ``--jaw-sensors
 from __future__ import annotations
 
 import os
-import stat
 from pathlib import Path
 
 from cassi_fit.options import ALL_JAW_METHODS, JAW_SENSOR_SETS, SOLVERS
 
 from ._corpus import add_run_arguments, finish, run_options
+from .animate import add_source_arguments, load_recording_args
 
 DIAGNOSTIC_COLUMNS = ("method", "jaw_sensors", "frames_used", "jaw_distance_sd_mm",
                       "jaw_distance_range_mm", "residual_median_mm", "pivot_iqr_x_mm",
@@ -49,10 +49,13 @@ def register(subparsers) -> None:
     parser.add_argument("recording", nargs="+", metavar="RECORDING",
                         help="PELLET_FILE, or DATASET_DIR SUBJECT TASK, or DATASET_DIR "
                         "(with --out)")
-    parser.add_argument("--method", choices=ALL_JAW_METHODS, default="closed-form")
-    parser.add_argument("--jaw-sensors", default="MNI,MNM", metavar="S",
+    parser.add_argument("--method", choices=ALL_JAW_METHODS, default=None,
+                        help="default: the paper's closed form with two jaw sensors, "
+                        "coupled-rotation with one")
+    parser.add_argument("--jaw-sensors", default=None, metavar="S",
                         help=f"the jaw sensors to use: {', '.join(JAW_SENSOR_SETS)} "
-                        "(default: both)")
+                        "(default: the jaw pellets the recording tracks)")
+    add_source_arguments(parser)
     parser.add_argument("--solver", choices=SOLVERS, default=None,
                         help="iterative solver (default: the method's own: the closed form "
                         "for frame-fit, optimistix-lm for the pivot methods)")
@@ -72,41 +75,17 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-def _regular_file(path) -> Path:
-    """``path`` if it is a regular file; one clear error for anything else (a FIFO would
-    block the reader forever, a folder or device gives no pellet data)."""
-    from cassi_fit.errors import MissingDataError
-
-    path = Path(path)
-    try:
-        mode = os.stat(path).st_mode
-    except OSError:
-        raise MissingDataError(f"{path}: no such pellet file") from None
-    if not stat.S_ISREG(mode):
-        raise MissingDataError(f"{path}: not a regular file (a folder, pipe or device); "
-                               f"give a pellet (.txy) file")
-    return path
-
-
-def _load_track(parts):
-    """The PelletTrack named by ``[path]`` or ``[dataset_dir, subject, task]``."""
+def _load_recording(args):
+    """The recording named by ``[path]`` or ``[dataset_dir, subject, task]`` (any format the
+    toolkit reads; the articulograph options of ``add_source_arguments``); the head
+    measures' default warning is left out (the jaw fit does not use them)."""
     import warnings
 
-    from cassi_fit.errors import CassiError
+    from cassi_fit.dataset import DefaultHeadMeasuresWarning
 
-    if len(parts) == 1:
-        from cassi_fit.txy import read_txy
-
-        return read_txy(_regular_file(parts[0]))
-    if len(parts) == 3:
-        from cassi_fit.dataset import Dataset
-
-        dataset = Dataset(parts[0])
-        _regular_file(dataset.pellet_path(parts[1], parts[2]))
-        with warnings.catch_warnings():  # head measures are not used by the jaw fit
-            warnings.simplefilter("ignore", UserWarning)
-            return dataset.load(parts[1], parts[2]).track
-    raise CassiError(f"RECORDING is a pellet file or DATASET_DIR SUBJECT TASK, got {parts}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DefaultHeadMeasuresWarning)
+        return load_recording_args(args.recording, args)
 
 
 def _check_output(out: Path, inputs: list[Path], force: bool) -> None:
@@ -188,20 +167,16 @@ def run(args) -> int:
 
 def run_dataset(args) -> int:
     """``cassi jaw DATASET --out DIR``."""
-    from cassi_fit.jaw_fit import check_sensors, jaw_method, jaw_sensor_set
-
-    sensors = jaw_sensor_set(args.jaw_sensors)
-    # checks W and the sensors, before anything starts
-    check_sensors(jaw_method(args.method, solver=args.solver, smoothness=args.smoothness),
-                  sensors)
     from cassi_fit.jaw_table import jaw_corpus
 
+    # jaw_corpus checks the method, its options and the sensors before anything starts
     run, written = jaw_corpus(args.recording[0], args.out, method=args.method,
                               solver=args.solver, smoothness=args.smoothness,
-                              jaw_sensors=",".join(sensors), labels=not args.no_labels,
+                              jaw_sensors=args.jaw_sensors, labels=not args.no_labels,
                               **run_options(args))
     ok = len(run.results) - len(run.failed)
-    print(f"{ok} of {len(run.results)} recordings fitted ({args.method}) on {run.workers} "
+    what = args.method or "closed-form, or coupled-rotation with one jaw sensor"
+    print(f"{ok} of {len(run.results)} recordings fitted ({what}) on {run.workers} "
           f"worker(s); tables: {', '.join(str(p) for p in written)}")
     return finish(run)
 
@@ -220,26 +195,36 @@ def run_recording(args) -> int:
         jaw_from_track,
         jaw_method,
         jaw_sensor_set,
+        method_for_sensors,
+        tracked_jaw_sensors,
     )
     from cassi_fit.jaw_table import jaw_frame_csv
     from cassi_fit.labels import SEGMENT_COLUMNS, labels_for, segment_summary
+    from cassi_fit.sound import recording_seconds
     from cassi_fit.status import Status
     from cassi_fit.tables import csv_text
     from cassi_fit.txy import JAW_PELLETS, pellet_index
 
-    method = jaw_method(args.method, solver=args.solver, smoothness=args.smoothness)
-    sensors = jaw_sensor_set(args.jaw_sensors)
-    check_sensors(method, sensors)  # refuse with the method's reason, before any work
+    chosen = None if args.method is None else jaw_method(args.method, solver=args.solver,
+                                                         smoothness=args.smoothness)
+    if chosen is not None and args.jaw_sensors is not None:  # refuse before any work
+        check_sensors(chosen, jaw_sensor_set(args.jaw_sensors))
     out = Path(args.csv)
     diag_out, seg_out = diagnostics_path(out), segments_path(out)
     inputs = [Path(args.recording[0])] if len(args.recording) == 1 else []
     for path in (out, diag_out, seg_out):  # refuse before the (slower) fit
         _check_output(path, inputs, args.force)
-    track = _load_track(args.recording)
+    recording = _load_recording(args)
+    track = recording.track
     if track.path is not None:
         for path in (out, diag_out, seg_out):
             _check_output(path, [track.path], args.force)
-    labels = None if args.no_labels or track.path is None else labels_for(track.path)
+    sensors = (tracked_jaw_sensors(track.valid) if args.jaw_sensors is None
+               else jaw_sensor_set(args.jaw_sensors))
+    method = method_for_sensors(chosen, sensors)  # by default, by the recording's sensors
+    args.method = method.name
+    labels = None if args.no_labels or recording.path is None else labels_for(
+        recording.path, recording_s=recording_seconds(track.times))
     fit = jaw_from_track(track, method=method, jaw_sensors=sensors)
     jaw_points = track.positions[:, [pellet_index(p) for p in JAW_PELLETS], :]
     rows = [jaw_diagnostics(fit, jaw_points)]
@@ -249,7 +234,8 @@ def run_recording(args) -> int:
         others = [m for m in others if len(sensors) in m.jaw_sensors_needed]
         rows += [jaw_diagnostics(jaw_from_track(track, method=m, jaw_sensors=sensors),
                                  jaw_points) for m in others]
-    atomic_write(out, jaw_frame_csv(track.times, fit, labels), overwrite=args.force)
+    atomic_write(out, jaw_frame_csv(track.times, fit, labels, track.mistracks.frame_labels()),
+                 overwrite=args.force)
     atomic_write(diag_out, format_diagnostics(rows), overwrite=args.force)
     if labels is not None:
         segments = segment_summary(track.times, fit.theta, track.positions, labels,

@@ -108,17 +108,18 @@ def dataset_items(dataset: Dataset | str | os.PathLike, *, subjects: Iterable[st
 def require_items(items: list[CorpusItem], dataset: object,
                   subjects: Iterable[str] | None = None, tasks: Iterable[str] | None = None
                   ) -> list[CorpusItem]:
-    """``items`` if there are any; else a ``MissingDataError`` naming the folder and what
-    was looked for: no recordings at all, or none of the subjects and tasks asked for."""
-    if items:
-        return items
+    """``items`` if there are any and every subject and task asked for is there
+    (``dataset.Dataset.check_selection``); else a ``MissingDataError`` naming the folder
+    and what was looked for: no recordings at all (and the special files skipped), a
+    subject or task that is not there, or none of the subjects and tasks asked for."""
     from ..dataset import Dataset
     from ..errors import MissingDataError
 
     ds = dataset if isinstance(dataset, Dataset) else Dataset(os.path.abspath(dataset))
-    if len(ds) == 0:
-        raise MissingDataError(f"{ds.root}: no recordings (pellet .txy or articulograph "
-                               "files) found")
+    ds.check_selection(None if subjects is None else list(subjects),
+                       None if tasks is None else list(tasks))
+    if items:
+        return items
     wanted = []
     if tasks is not None:
         wanted.append("the task(s) " + ", ".join(str(t) for t in tasks))

@@ -76,6 +76,8 @@ from ._methods import (
     SmoothPivot,
     check_sensors,
     jaw_method,
+    method_for_sensors,
+    tracked_jaw_sensors,
 )
 from ._priors import (
     DEFAULT_COUPLINGS,
@@ -102,7 +104,7 @@ __all__ = [
     "PRIOR_NOISE_MM", "ClosedForm", "CoupledRotation", "Dogleg", "JawCoupling", "PivotPrior", "FixedPivot", "FrameFit", "GaussNewton", "JawDiagnostics",
     "JawFit", "JawMethod", "JaxoptGaussNewton", "JaxoptLevenbergMarquardt",
     "LevenbergMarquardt", "SmoothPivot", "Solver", "best_angle_about",
-    "block_tridiagonal_inverse_blocks", "block_tridiagonal_solve", "check_sensors", "fit_jaw",
+    "block_tridiagonal_inverse_blocks", "block_tridiagonal_solve", "check_sensors", "method_for_sensors", "tracked_jaw_sensors", "fit_jaw",
     "fixed_pivot_residuals", "jaw_diagnostics", "jaw_from_track", "jaw_method", "jaw_sensor_set", "jaw_solver",
     "learn_jaw_coupling", "least_squares", "rigid_residuals", "scaled_rigid_residuals", "smooth_pivot_residuals",
     "solve",

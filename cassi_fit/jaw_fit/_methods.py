@@ -17,10 +17,10 @@ from typing import Any, ClassVar, NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Float
+from jaxtyping import Bool, Float
 
 from .. import jaw
-from ..errors import DegenerateGeometryError, InvalidChoiceError
+from ..errors import DegenerateGeometryError, InvalidChoiceError, MissingDataError
 from ..options import ALL_JAW_METHODS, check_choice
 from ..status import SolverResult
 from ._kernels import (
@@ -455,6 +455,31 @@ def jaw_method(name: str, *, solver: Solver | str | None = None, smoothness: flo
     if name == "fixed-pivot":
         return FixedPivot(solver=solver)
     return SmoothPivot(smoothness=smoothness, knot_spacing=knot_spacing, solver=solver)
+
+
+def method_for_sensors(method: JawMethod | str | None, sensors: tuple[str, ...]
+                       ) -> JawMethod:
+    """The jaw method for a recording whose jaw ``sensors`` are those given (both, or one
+    of ``"MNI"``, ``"MNM"``): ``method`` (an object or an alias), or by default (None) the
+    paper's closed form with two and :class:`CoupledRotation` with one. A method that
+    cannot run with those sensors is refused with its reason (:func:`check_sensors`)."""
+    if method is None:
+        method = ClosedForm() if len(sensors) == 2 else CoupledRotation()
+    elif isinstance(method, str):
+        method = jaw_method(method)
+    check_sensors(method, tuple(sensors))
+    return method
+
+
+def tracked_jaw_sensors(valid: Bool[np.ndarray, "n 8 2"]) -> tuple[str, ...]:
+    """The jaw pellets a recording ever tracks (``valid``: a ``PelletTrack``'s), in the jaw
+    order: the default jaw sensors of a fit (``MissingDataError`` if none)."""
+    from ..pellets import JAW_INDEX, JAW_PELLETS
+
+    ever = np.asarray(valid)[:, list(JAW_INDEX)].all(axis=2).any(axis=0)
+    if not ever.any():
+        raise MissingDataError(f"jaw pellets {', '.join(JAW_PELLETS)} never tracked")
+    return tuple(p for p, e in zip(JAW_PELLETS, ever, strict=True) if e)
 
 
 def as_method(method: JawMethod | str, solver: Any, smoothness: Any, knot_spacing: Any

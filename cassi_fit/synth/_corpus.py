@@ -200,6 +200,10 @@ def generate_corpus(
                 )
     if out_dir.exists() and not out_dir.is_dir():
         raise OutputExistsError(f"{out_dir}: exists and is not a folder")
+    if out_dir.is_dir():  # never into a real dataset, whatever overwrite says (issue 24)
+        from .._io import refuse_foreign_data
+
+        refuse_foreign_data(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
     try:
