@@ -556,6 +556,10 @@ def _flush_and_exit(status: int, line: str | None = "cassi: interrupted") -> Non
     interpreter shutdown (``os._exit``)."""
     import sys
 
+    if "multiprocessing.resource_tracker" in sys.modules:
+        import gc
+
+        gc.collect()  # a finished pool's semaphores released: no "leaked" warning at exit
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()

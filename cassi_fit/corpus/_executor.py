@@ -163,7 +163,9 @@ class _Pool:
                 for process in list(getattr(self.executor, "_processes", {}).values()):
                     if process.is_alive():
                         process.terminate()
-            self.executor.shutdown(wait=True, cancel_futures=True)
+            # interrupted: the pool breaks and fails every pending future itself (Python
+            # 3.11 raises in its manager thread if one of them was cancelled first)
+            self.executor.shutdown(wait=True, cancel_futures=not interrupted)
         if self.client is not None:
             self.client.close()
 
@@ -399,8 +401,9 @@ def _run_on_pool(pool, submit, todo, record) -> None:
                 for item in crashed:
                     record(ItemResult(item, Status.FAILED, WORKER_DIED))
     except BaseException:
-        for future in in_flight:
-            future.cancel()
+        if pool.settings is None:  # our own pool is stopped whole by _Pool.close
+            for future in in_flight:
+                future.cancel()
         raise
 
 
