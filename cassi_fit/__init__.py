@@ -18,6 +18,8 @@ keeps the two in step.
 from __future__ import annotations
 
 import importlib
+import sys
+import types
 from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
@@ -111,6 +113,7 @@ if TYPE_CHECKING:
     from .pellets import JAW_PELLETS as JAW_PELLETS
     from .pellets import PELLET_NAMES as PELLET_NAMES
     from .pellets import MistrackedFirstLineWarning as MistrackedFirstLineWarning
+    from .pellets import detect_mistracks as detect_mistracks
     from .pellets import first_clean_line as first_clean_line
     from .pellets import first_valid_line as first_valid_line
     from .pellets import pellet_index as pellet_index
@@ -119,7 +122,6 @@ if TYPE_CHECKING:
     from .pipeline import RecordingRun as RecordingRun
     from .pipeline import run_recording as run_recording
     from .quality import QualityReport as QualityReport
-    from .quality import detect_mistracks as detect_mistracks
     from .quality import quality_report as quality_report
     from .render import Renderer as Renderer
     from .render import midsagittal_figure as midsagittal_figure
@@ -172,6 +174,7 @@ _PUBLIC = {
     "JAW_PELLETS": "pellets",
     "pellet_index": "pellets",
     "first_valid_line": "pellets",
+    "detect_mistracks": "pellets",  # the detector's home (quality uses it)
     "first_clean_line": "pellets",
     "MistrackedFirstLineWarning": "pellets",
     # txy (data)
@@ -200,7 +203,6 @@ _PUBLIC = {
     # quality (data)
     "QualityReport": "quality",
     "quality_report": "quality",
-    "detect_mistracks": "quality",
     # gaps (data)
     "repair": "gaps",
     # labels (data)
@@ -355,3 +357,23 @@ def __getattr__(name: str) -> object:
 
 def __dir__() -> list[str]:
     return list(__all__)
+
+
+class _PublicSurface(types.ModuleType):
+    """The package's module type. Importing a submodule binds it to the package under its
+    own name, so the public functions named as their modules (``initialize``, ``run_spec``,
+    ``jaw_corpus``, ``calibrate_corpus``) would turn into modules as soon as anything
+    imported those (``from cassi_fit import run_recording, initialize`` gave the module
+    ``initialize``). Such a binding is refused here: the name keeps meaning the function.
+    ``sys.modules`` still holds the module: ``from cassi_fit.initialize import ...`` and
+    ``importlib.import_module`` work as ever (``import cassi_fit.initialize as m``, which
+    reads the package's attribute, gives the function)."""
+
+    def __setattr__(self, name: str, value: object) -> None:
+        if (name in _PUBLIC and isinstance(value, types.ModuleType)
+                and value.__name__ == f"{__name__}.{name}"):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _PublicSurface
