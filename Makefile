@@ -37,9 +37,12 @@ bench: $(STAMP)
 
 experiments: $(STAMP)
 	$(BIN)/python experiments/jaw_comparison.py --out experiments/output --docs docs/generated --force
+	$(BIN)/python experiments/single_sensor_jaw.py --out experiments/output --docs docs/generated --force
+	$(BIN)/python experiments/synthetic_realism.py --out experiments/output --docs docs/generated --force
 	$(BIN)/python experiments/subject_fitting.py --out experiments/output --docs docs/generated --force
 	$(BIN)/python experiments/cassi_mode.py --subjects 5 --tasks tp011 tp040 --stride 1
 	$(BIN)/python experiments/tongue_volume.py --subjects 2 --stride 1
+	$(BIN)/python experiments/mistrack_detection.py --docs docs/generated --force
 	$(BIN)/python experiments/quote_tables.py
 
 # ruff; the import-linter contracts (layers, no cycles; pyproject.toml); the public surface's

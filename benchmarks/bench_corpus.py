@@ -35,7 +35,8 @@ def _load() -> str:
 
 def _task(command: str, method: str, solver: str):
     """The command's task function and options, as the command runs them."""
-    from cassi_fit.corpus import evaluate_task, jaw_task
+    from cassi_fit.corpus import evaluate_task
+    from cassi_fit.jaw_table import jaw_task
 
     if command == "evaluate":  # `cassi evaluate DATASET`: default conformation, no collisions
         return evaluate_task, {"collisions": "off", "jaw": "closed-form", "stride": 1}, None

@@ -45,6 +45,7 @@ if TYPE_CHECKING:
     from .dataset import Dataset as Dataset
     from .dataset import DefaultHeadMeasuresWarning as DefaultHeadMeasuresWarning
     from .dataset import Recording as Recording
+    from .dataset import SpecialFileWarning as SpecialFileWarning
     from .dataset import load_recording as load_recording
     from .dataset import recording_from_array as recording_from_array
     from .deform import FaceParams as FaceParams
@@ -79,16 +80,18 @@ if TYPE_CHECKING:
     from .initialize import initialize as initialize
     from .jaw import closed_form as closed_form
     from .jaw import closed_form_paper as closed_form_paper
-    from .jaw_corpus import jaw_corpus as jaw_corpus
     from .jaw_fit import ClosedForm as ClosedForm
+    from .jaw_fit import CoupledRotation as CoupledRotation
     from .jaw_fit import Dogleg as Dogleg
     from .jaw_fit import FixedPivot as FixedPivot
     from .jaw_fit import FrameFit as FrameFit
     from .jaw_fit import GaussNewton as GaussNewton
+    from .jaw_fit import JawCoupling as JawCoupling
     from .jaw_fit import JawDiagnostics as JawDiagnostics
     from .jaw_fit import JawFit as JawFit
     from .jaw_fit import JawMethod as JawMethod
     from .jaw_fit import LevenbergMarquardt as LevenbergMarquardt
+    from .jaw_fit import PivotPrior as PivotPrior
     from .jaw_fit import SmoothPivot as SmoothPivot
     from .jaw_fit import Solver as Solver
     from .jaw_fit import fit_jaw as fit_jaw
@@ -96,6 +99,8 @@ if TYPE_CHECKING:
     from .jaw_fit import jaw_from_track as jaw_from_track
     from .jaw_fit import jaw_method as jaw_method
     from .jaw_fit import jaw_solver as jaw_solver
+    from .jaw_fit import learn_jaw_coupling as learn_jaw_coupling
+    from .jaw_table import jaw_corpus as jaw_corpus
     from .labels import Labels as Labels
     from .labels import labels_for as labels_for
     from .labels import read_lab as read_lab
@@ -104,6 +109,9 @@ if TYPE_CHECKING:
     from .labels import segment_summary as segment_summary
     from .labels import write_lab as write_lab
     from .labels import write_textgrid as write_textgrid
+    from .mistracks import MistrackReport as MistrackReport
+    from .mistracks import detect_mistracks as detect_mistracks
+    from .mistracks import mistrack_report as mistrack_report
     from .options import JAW_METHODS as JAW_METHODS
     from .options import SOLVERS as SOLVERS
     from .outlines import read_outline as read_outline
@@ -113,8 +121,6 @@ if TYPE_CHECKING:
     from .pellets import JAW_PELLETS as JAW_PELLETS
     from .pellets import PELLET_NAMES as PELLET_NAMES
     from .pellets import MistrackedFirstLineWarning as MistrackedFirstLineWarning
-    from .pellets import detect_mistracks as detect_mistracks
-    from .pellets import first_clean_line as first_clean_line
     from .pellets import first_valid_line as first_valid_line
     from .pellets import pellet_index as pellet_index
     from .pharynx import build_pharynx as build_pharynx
@@ -130,7 +136,7 @@ if TYPE_CHECKING:
     from .run_spec import CalibrationFiles as CalibrationFiles
     from .run_spec import RunSpec as RunSpec
     from .run_spec import run_spec as run_spec
-    from .status import STATUS_LABELS as STATUS_LABELS
+    from .status import SolverResult as SolverResult
     from .status import Status as Status
     from .synth import TASKS as TASKS
     from .synth import JawTruth as JawTruth
@@ -145,7 +151,6 @@ if TYPE_CHECKING:
     from .tongue import tongue_volumes as tongue_volumes
     from .txy import PelletTrack as PelletTrack
     from .txy import TimeGapWarning as TimeGapWarning
-    from .txy import first_valid_frame as first_valid_frame
     from .txy import read_txy as read_txy
     from .txy import require_tracked as require_tracked
     from .txy import write_txy as write_txy
@@ -165,7 +170,7 @@ _PUBLIC = {
     "InvalidChoiceError": "errors",
     # status (base)
     "Status": "status",
-    "STATUS_LABELS": "status",
+    "SolverResult": "status",
     # options (base)
     "JAW_METHODS": "options",
     "SOLVERS": "options",
@@ -174,14 +179,11 @@ _PUBLIC = {
     "JAW_PELLETS": "pellets",
     "pellet_index": "pellets",
     "first_valid_line": "pellets",
-    "detect_mistracks": "pellets",  # the detector's home (quality uses it)
-    "first_clean_line": "pellets",
     "MistrackedFirstLineWarning": "pellets",
     # txy (data)
     "PelletTrack": "txy",
     "read_txy": "txy",
     "write_txy": "txy",
-    "first_valid_frame": "txy",
     "require_tracked": "txy",
     "TimeGapWarning": "txy",
     # outlines (data)
@@ -198,11 +200,16 @@ _PUBLIC = {
     "load_recording": "dataset",
     "recording_from_array": "dataset",
     "DefaultHeadMeasuresWarning": "dataset",
+    "SpecialFileWarning": "dataset",
     # ema (data): articulograph files
     "SensorReport": "ema",
     # quality (data)
     "QualityReport": "quality",
     "quality_report": "quality",
+    # mistracks (data)
+    "detect_mistracks": "mistracks",  # its home (quality uses it)
+    "MistrackReport": "mistracks",
+    "mistrack_report": "mistracks",
     # gaps (data)
     "repair": "gaps",
     # labels (data)
@@ -262,6 +269,10 @@ _PUBLIC = {
     "Solver": "jaw_fit",
     "jaw_diagnostics": "jaw_fit",
     "JawDiagnostics": "jaw_fit",
+    "CoupledRotation": "jaw_fit",
+    "PivotPrior": "jaw_fit",
+    "JawCoupling": "jaw_fit",
+    "learn_jaw_coupling": "jaw_fit",
     # conformation (fitting)
     "Calibration": "conformation",
     # calibrate (fitting)
@@ -301,7 +312,7 @@ _PUBLIC = {
     "compare": "evaluate",
     # corpus (runs)
     "run_corpus": "corpus",
-    "jaw_corpus": "jaw_corpus",
+    "jaw_corpus": "jaw_table",
     "evaluate_corpus": "evaluate",
     "calibrate_corpus": "calibrate_corpus",
     "animate_corpus": "video",
@@ -314,22 +325,25 @@ _MODULES = ("animate", "deform", "rigid", "synth")
 
 __all__ = [
     "Animation", "Calibration", "CassiError", "ClosedForm", "CorpusItem", "CorpusRun",
+    "CoupledRotation", "JawCoupling", "PivotPrior", "learn_jaw_coupling",
     "DEFAULT_HEAD_MEASURES", "DataFormatError", "Dataset", "DefaultHeadMeasuresWarning",
     "DegenerateGeometryError", "Dogleg", "EvaluationResult", "FaceModel", "FaceParams",
     "FixedPivot", "FrameFit", "GaussNewton", "HeadMeasures", "InvalidChoiceError", "JAW_METHODS",
     "JAW_PELLETS", "JawDiagnostics", "JawFit", "JawMethod", "JawTruth", "Labels",
-    "LevenbergMarquardt", "MATERIALS", "MissingDataError", "MistrackedFirstLineWarning",
+    "LevenbergMarquardt", "MATERIALS", "MissingDataError", "MistrackReport",
+    "MistrackedFirstLineWarning",
     "OutputExistsError", "PELLET_NAMES", "PelletTrack", "QualityReport", "Recording", "Renderer",
-    "RenderingUnavailableError", "SOLVERS", "STATUS_LABELS", "SmoothPivot", "Solver", "Status",
-    "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning", "Topology", "animate",
+    "RenderingUnavailableError", "SOLVERS", "SmoothPivot", "Solver", "SolverResult", "Status",
+    "SpecialFileWarning", "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning",
+    "Topology", "animate",
     "animate_corpus", "build_palate", "calibrate_corpus", "calibrate_dataset",
     "calibrate_subject", "calibration_choice", "closed_form", "closed_form_paper", "compare",
     "dataset_items", "default_params", "deform", "detect_mistracks", "ensure_default_corpus",
-    "evaluate_corpus", "evaluate_dataset", "evaluate_recording", "first_clean_line",
-    "first_valid_frame", "first_valid_line", "fit_jaw", "generate_corpus", "initialize",
+    "evaluate_corpus", "evaluate_dataset", "evaluate_recording", "first_valid_line", "fit_jaw",
+    "generate_corpus", "initialize",
     "jaw_comparison_plot", "jaw_corpus", "jaw_diagnostics", "jaw_from_track", "jaw_method",
     "jaw_solver", "labels_for", "load_anatomy", "load_calibrations", "load_model",
-    "load_recording", "load_truth", "make_subject", "midsagittal_figure",
+    "load_recording", "load_truth", "make_subject", "midsagittal_figure", "mistrack_report",
     "model_pellets", "pellet_index",
     "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
     "read_outline", "read_textgrid", "read_txy", "recording_from_array", "repair",

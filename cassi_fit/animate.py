@@ -32,7 +32,7 @@ from .dataset import Recording
 from .errors import MissingDataError
 from .frames import batch_geometry, frame_bucket, frame_params, pad_frames, unpad
 from .gaps import bad_values, frame_status, repair
-from .jaw import closed_form
+from .jaw import closed_form_frames
 from .pellets import JAW_INDEX, PELLET_NAMES
 
 
@@ -43,7 +43,9 @@ class Animation(eqx.Module):
     whose leaves carry a leading ``(m,)`` axis; vertices ``(m, V, 3)`` mm;
     pellets_measured ``(m, 8, 2)`` mm, scaled by ``p / d`` and repaired; pellets_model
     ``(m, 8, 2)`` mm, where the model puts its pellet sites; repaired ``(m, 8)`` bool;
-    mistracked ``(m, 8)`` bool; frame_status ``(m,)`` int (``status.Status`` values);
+    mistracked ``(m, 8)`` bool; mistrack_reasons ``(m, 8)`` int, the detector's reasons
+    (``mistracks.Reason`` bits, 0 where not mistracked); frame_status ``(m,)`` int
+    (``status.Status`` values);
     jaw_status ``(m,)`` int (``status.Status`` values); penetration: ``collide.REPORT_KEYS``
     -> ``(m,)`` mm, the deepest point of each kind per frame before any projection (empty
     if the model has no collision data); penetration_after: the same after projection
@@ -60,6 +62,7 @@ class Animation(eqx.Module):
     pellets_model: jax.Array
     repaired: np.ndarray
     mistracked: np.ndarray
+    mistrack_reasons: np.ndarray
     frame_status: np.ndarray
     jaw_status: np.ndarray
     penetration: dict
@@ -79,25 +82,33 @@ class Animation(eqx.Module):
         return self.stride * self.line_step_s
 
 
-@jax.jit
-def _closed_form_batch(reference, current):
-    fit = jax.vmap(closed_form, in_axes=(None, 0))(reference, current)
-    return fit.theta, fit.translation, fit.status
+def _jaw_sensors(state, spec) -> tuple[str, ...]:
+    """The jaw sensors the animation uses: the spec's choice, else every jaw pellet the
+    recording tracks; a chosen sensor the recording lacks is one error naming it."""
+    if spec.jaw_sensors is None:
+        return state.jaw_sensors
+    lacking = [p for p in spec.jaw_sensors if p not in state.jaw_sensors]
+    if lacking:
+        raise MissingDataError(f"{state.source}: jaw sensor {', '.join(lacking)} is never "
+                               "tracked (jaw sensors: "
+                               f"{', '.join(state.jaw_sensors) or 'none'})")
+    return spec.jaw_sensors
 
 
-def _jaw_since_first(state, jaw_pellets, method, size):
+def _jaw_since_first(state, jaw_pellets, method, sensors, size):
     """``(theta (size,), t (size, 2), status (m,))``: the jaw from the first valid line to
-    each frame, by the jaw method object ``method``, padded to ``size`` frames;
-    ``jaw_pellets (m, 2, 2)`` scaled mm, rows [MNI, MNM]. The closed form is per frame, so
-    it runs on the padded frames (one compilation per size bucket); a fit sees only the
-    real frames."""
+    each frame, by the jaw method object ``method`` on the jaw ``sensors``, padded to
+    ``size`` frames; ``jaw_pellets (m, 2, 2)`` scaled mm, rows [MNI, MNM]. The closed form
+    is per frame, so it runs on the padded frames (one compilation per size bucket); a fit
+    sees only the real frames."""
     m = jaw_pellets.shape[0]
     if method.name == "closed-form":
-        theta, t, status = _closed_form_batch(state.reference_jaw, pad_frames(jaw_pellets, size))
-        return theta, t, np.asarray(status)[:m]
+        fit = closed_form_frames(state.reference_jaw, pad_frames(jaw_pellets, size))
+        return fit.theta, fit.translation, np.asarray(fit.status)[:m]
     from .jaw_fit import fit_jaw
 
-    fit = fit_jaw(state.reference_jaw, jnp.asarray(jaw_pellets), method=method)
+    fit = fit_jaw(state.reference_jaw, jnp.asarray(jaw_pellets), method=method,
+                  jaw_sensors=sensors)
     return pad_frames(fit.theta, size), pad_frames(fit.translation, size), np.asarray(fit.status)
 
 
@@ -123,11 +134,14 @@ def animate(state: eqx.Module, recording: Recording, **changes: object) -> Anima
     positions = repair(np.asarray(track.positions), bad, spec.gap_policy)
     rows = np.arange(state.first_frame, track.times.shape[0], spec.stride)
     scaled = state.scale * positions[rows]
-    if not (~bad[:, list(JAW_INDEX)].any(axis=1)).any():
+    sensors = _jaw_sensors(state, spec)
+    method = spec.jaw_method_for(sensors)
+    used = [PELLET_NAMES.index(p) for p in sensors]
+    if not (~bad[:, used].any(axis=1)).any():
         raise MissingDataError(f"{state.source}: the jaw pellets are never tracked well")
     m, size = len(rows), frame_bucket(len(rows))
     theta, translation, jaw_status = _jaw_since_first(
-        state, scaled[:, list(JAW_INDEX)], spec.jaw, size
+        state, scaled[:, list(JAW_INDEX)], method, sensors, size
     )
     params = frame_params(state, pad_frames(scaled, size), theta, translation)
     from .collide import has_collision_data, require_collision_data
@@ -150,12 +164,13 @@ def animate(state: eqx.Module, recording: Recording, **changes: object) -> Anima
         pellets_model=sites,
         repaired=bad[rows] & tracked,
         mistracked=mistracked[rows],
+        mistrack_reasons=np.asarray(track.mistracks.reasons)[rows],
         frame_status=frame_status(untracked[rows] & tracked, mistracked[rows], spec.gap_policy),
         jaw_status=jaw_status,
         penetration=before,
         penetration_after=after,
         stride=spec.stride,
-        jaw_method=spec.jaw_name,
+        jaw_method=method.name,
         collisions=spec.collisions,
         line_step_s=track.frame_step_s,
     )

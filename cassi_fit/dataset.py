@@ -21,6 +21,13 @@ bite-plane recording, not a task. The sensor map is the first of ``<stem>.sensor
 given to :func:`load_recording` or :class:`Dataset` wins. Other names (an EST file called
 ``.txt``, arrays) are read by :func:`load_recording` alone, which detects the format by
 content. :func:`recording_from_array` makes a recording from a numpy array.
+
+Special files (named pipes, devices, sockets, broken links) are never opened: discovery
+skips them with a :class:`SpecialFileWarning` naming them (opening a FIFO for reading
+blocks until a writer comes), and loading one is a :class:`DataFormatError`. A folder in
+which nothing is found is not an error for :class:`Dataset` (``len(dataset) == 0``);
+:meth:`Dataset.check_selection` turns it, and subjects or tasks asked for that are not
+there, into one :class:`MissingDataError` naming the folder and what was looked for.
 """
 
 from __future__ import annotations
@@ -35,13 +42,14 @@ from pathlib import Path
 import numpy as np
 from jaxtyping import Float
 
+from ._io import special_kind
 from .ema import RawEma, SensorMap, SensorReport, ema_to_track, read_ema
 from .ema.arrays import raw_from_array
 from .ema.detect import detect_format
 from .ema.sensor_map import sensor_map as _sensor_map
 from .errors import DataFormatError, MissingDataError
 from .headmeasures import DEFAULT_HEAD_MEASURES, HeadMeasures, read_headmeasures
-from .outlines import read_outline
+from .outlines import outlines_problem, read_outline
 from .txy import PelletTrack, read_txy
 
 PELLET_SUFFIX = ".txy"
@@ -52,6 +60,10 @@ HEADMEASURES_NAME = "headmeasures.txt"
 _TRIAL = re.compile(r"[0-9]+")
 _SHORT_TRIAL = re.compile(r"[0-9]{1,2}")
 _BITE = re.compile(r"bite|occlusal", re.IGNORECASE)
+#: What discovery looks for, in messages.
+LOOKED_FOR = ("pellet files (.txy) or articulograph recordings (.ema, .pos, .tsv, .mat), "
+              "in the folder or its subject folders")
+_MAX_NAMES = 12  # names listed in a message before "..."
 
 #: What a sensor map can be given as (:func:`cassi_fit.ema.sensor_map.sensor_map`).
 SensorMapLike = SensorMap | str | os.PathLike | None
@@ -59,6 +71,12 @@ SensorMapLike = SensorMap | str | os.PathLike | None
 
 class DefaultHeadMeasuresWarning(UserWarning):
     """A recording uses ``DEFAULT_HEAD_MEASURES`` because its subject has no measures."""
+
+
+class SpecialFileWarning(UserWarning):
+    """Discovery skipped special files (pipes, devices, sockets, broken links) in a
+    dataset's folder: they are never opened, so they are never a recording, an outline or
+    a ``Headmeasures.txt``."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,15 +118,75 @@ def recording_source(recording: Recording) -> str:
     return str(path) if path is not None else f"{recording.subject}/{recording.task}"
 
 
+def _names(names: Sequence[str]) -> str:
+    """``a, b, c`` (at most ``_MAX_NAMES``, then ``...``), or ``none``."""
+    names = list(names)
+    if not names:
+        return "none"
+    more = f", ... ({len(names)} in all)" if len(names) > _MAX_NAMES else ""
+    return ", ".join(names[:_MAX_NAMES]) + more
+
+
+def _special_files(folder: Path) -> list[tuple[Path, str]]:
+    """``(path, what it is)`` of the special files in ``folder`` (``os.stat`` only)."""
+    try:
+        entries = sorted(folder.iterdir())
+    except OSError:
+        return []
+    found = [(p, special_kind(p)) for p in entries]
+    return [(p, kind) for p, kind in found if kind is not None]
+
+
+_WARNED_SPECIAL: set[tuple[str, tuple[str, ...]]] = set()
+
+
+def _warn_special(folder: Path, stacklevel: int) -> list[tuple[Path, str]]:
+    """The special files in ``folder``, with one :class:`SpecialFileWarning` naming them
+    (once per process for the same folder and files: a dataset is scanned by every
+    command stage that opens it)."""
+    found = _special_files(folder)
+    key = (os.path.realpath(folder), tuple(p.name for p, _ in found))
+    if found and key not in _WARNED_SPECIAL:
+        _WARNED_SPECIAL.add(key)
+        what = _names([f"{p.name} ({kind})" for p, kind in found])
+        warnings.warn(f"{folder}: skipped {len(found)} special file(s), never opened: {what}",
+                      SpecialFileWarning, stacklevel=stacklevel + 1)
+    return found
+
+
+def _regular(path: Path) -> None:
+    """A :class:`DataFormatError` naming ``path`` unless it is a regular file (or a link to
+    one); :class:`MissingDataError` if it does not exist. Never opens it."""
+    kind = special_kind(path)
+    if kind is not None:
+        raise DataFormatError(path, None, f"not a regular file but {kind}; not read")
+    if path.is_dir():
+        raise DataFormatError(path, None, "is a folder, not a recording file")
+    if not path.is_file():
+        raise MissingDataError(f"{path}: no such recording file")
+
+
+def _not_a_folder(path: Path) -> str:
+    """Why ``path`` is no dataset folder, for a message."""
+    kind = special_kind(path)
+    if kind is not None:
+        return f"is {kind}, not a dataset folder"
+    if path.is_file():
+        return ("is a file, not a dataset folder (give the folder that holds it, or load "
+                "one recording with load_recording)")
+    return "no such dataset folder"
+
+
 def _listing(folder: Path) -> dict[str, Path]:
-    """Lower-case file name -> path for the regular files in ``folder``.
+    """Lower-case file name -> path for the regular files in ``folder`` (special files
+    are left out: :func:`_warn_special` says which).
 
     Names are matched case-insensitively, so two files whose names differ only in case
     (``TP101.TXY`` and ``tp101.txy``) would be one recording twice: a
     :class:`DataFormatError` naming both, never a silent pick.
     """
     try:
-        files = sorted(p for p in folder.iterdir() if p.is_file())
+        files = sorted(p for p in folder.iterdir() if p.is_file())  # stat only, never open
     except OSError:
         return {}
     listing: dict[str, Path] = {}
@@ -194,12 +272,18 @@ def _assemble(path: Path, subject: str, task: str, own: Path | None, shared: lis
         track, report = _ema_track(path, **ema)
     head, is_default = _head_measures(subject, own_l + shared)
     audio = _find([path.parent], [f"{path.stem.lower()}.wav"])
+    palate, pharynx = outline("pal", "palate"), outline("pha", "pharynx")
+    if palate is not None and pharynx is not None:
+        problem = outlines_problem(palate, pharynx)
+        if problem is not None:
+            pha = _find(own_l, prefixed("pha") + bare("pha")) or _find(shared, prefixed("pha"))
+            raise DataFormatError(pha, None, problem)
     return Recording(
         subject=subject,
         task=task,
         track=track,
-        palate=outline("pal", "palate"),
-        pharynx=outline("pha", "pharynx"),
+        palate=palate,
+        pharynx=pharynx,
         head=head,
         head_is_default=is_default,
         audio=audio,
@@ -278,14 +362,16 @@ def load_recording(path: str | os.PathLike, *, sensor_map: SensorMapLike = None,
     default the one beside the file, else the built-in names), ``layout`` and ``rate``
     (arrays; ``rate`` also for a headerless ``.pos``), ``bite_plane`` (a bite-plane
     recording; default a ``*bite*`` file beside).
+
+    ``path`` must be a regular file (or a link to one): a pipe, device or socket is a
+    :class:`DataFormatError` and is never opened; special files beside it are skipped
+    with a :class:`SpecialFileWarning`.
     """
     path = Path(path)
-    if path.exists() and not path.is_dir() and not path.is_file():
-        raise DataFormatError(path, None, "not a regular file (a pipe, device or socket)")
-    if not path.is_file():
-        raise MissingDataError(f"{path}: no such pellet file")
+    _regular(path)
     fmt = "xrmb" if path.suffix.lower() == PELLET_SUFFIX else detect_format(path)
     folder = path.parent.resolve()
+    _warn_special(folder, stacklevel=2)  # the subject's files are looked for here
     names = _listing(folder)
     if fmt == "xrmb":
         ema = None
@@ -343,22 +429,34 @@ class Dataset:
 
     ``subjects()`` and ``tasks(subject)`` list canonical names (natural order);
     ``load(subject, task)`` returns a :class:`Recording`; ``pellet_path`` the file.
-    Discovery reads only folder listings; files are read by ``load``.
+    Discovery reads only folder listings (``os.stat``, never ``open``); files are read by
+    ``load``. Special files are skipped with a :class:`SpecialFileWarning` and listed in
+    ``skipped`` (``(path, what it is)``). A ``root`` that is not a folder (a file, a pipe,
+    nothing) is a :class:`MissingDataError` naming it; a folder with no recordings gives
+    an empty dataset, which :meth:`check_selection` refuses.
     """
 
     def __init__(self, root: str | os.PathLike, *, sensor_map: SensorMapLike = None):
         self.root = Path(root)
         if not self.root.is_dir():
-            raise MissingDataError(f"{self.root}: not a folder")
+            raise MissingDataError(f"{self.root}: {_not_a_folder(self.root)}")
+        try:
+            entries = sorted(self.root.iterdir())
+        except OSError as exc:
+            raise MissingDataError(f"{self.root}: cannot list the dataset folder "
+                                   f"({exc.strerror or exc})") from None
         self.sensor_map = sensor_map
         # (SUBJECT, task) -> (pellet path, the subject's own folder or None)
         self._index: dict[tuple[str, str], tuple[Path, Path | None]] = {}
+        self.skipped: list[tuple[Path, str]] = []
         self._scan_folder(self.root, subject_folder=False)
-        for sub in sorted(p for p in self.root.iterdir() if p.is_dir()):
+        for sub in (p for p in entries if p.is_dir()):
             if not sub.name.startswith("."):
                 self._scan_folder(sub, subject_folder=True)
 
     def _scan_folder(self, folder: Path, subject_folder: bool) -> None:
+        # stacklevel: warn -> _warn_special -> _scan_folder -> __init__ -> the caller
+        self.skipped += _warn_special(folder, stacklevel=3)
         names = _listing(folder)
         for lower in sorted(names):
             if lower.startswith("."):
@@ -391,25 +489,81 @@ class Dataset:
     def _subject(self, subject: str) -> str:
         key = str(subject).upper()
         if key not in self.subjects():
-            known = ", ".join(self.subjects()) or "none"
-            raise MissingDataError(f"{self.root}: no subject {subject!r} (subjects: {known})")
+            raise MissingDataError(f"{self.root}: no subject {subject!r} (subjects: "
+                                   f"{_names(self.subjects())}){self._nothing_found()}")
         return key
 
+    def _nothing_found(self) -> str:
+        """`` ; found no ...`` for messages about an empty dataset, else ``""``."""
+        return "" if self._index else f"; found no recordings: looked for {LOOKED_FOR}"
+
+    def _skipped_note(self) -> str:
+        """``; skipped 1 special file(s): S01/TP040.TXY (a named pipe (FIFO))`` or ``""``."""
+        if not self.skipped:
+            return ""
+        names = [f"{p.relative_to(self.root)} ({kind})" for p, kind in self.skipped]
+        return f"; skipped {len(names)} special file(s), never opened: {_names(names)}"
+
+    def _skipped_as(self, subject: str, task: str) -> str:
+        """``; S01/TP999.TXY is a named pipe ...`` if a skipped special file would have
+        been ``subject``'s ``task``, else ``""``."""
+        for path, kind in self.skipped:
+            stem = path.name.split(".")[0].lower()
+            if stem in (task, f"{subject.lower()}_{task}"):
+                return f"; {path} is {kind}, skipped"
+        return ""
+
     def pellet_path(self, subject: str, task: str) -> Path:
+        """The recording file of ``subject``'s ``task`` (names in any case); a
+        :class:`MissingDataError` naming the folder, the subject or task not found and
+        those there are."""
         key = (self._subject(subject), str(task).lower())
         if key not in self._index:
-            known = ", ".join(self.tasks(key[0]))
-            raise MissingDataError(f"{self.root}: {key[0]} has no task {task!r} (tasks: {known})")
+            raise MissingDataError(
+                f"{self.root}: {key[0]} has no task {task!r} (tasks: "
+                f"{_names(self.tasks(key[0]))}){self._skipped_as(key[0], key[1])}")
         return self._index[key][0]
 
+    def check_selection(self, subjects: Sequence[str] | None = None,
+                        tasks: Sequence[str] | None = None) -> None:
+        """Refuse a choice that finds nothing, before any work: one
+        :class:`MissingDataError` naming the folder and what was looked for, if the
+        dataset holds no recordings, if a subject asked for is not there, or if a task
+        asked for is held by none of the chosen subjects (all subjects when ``subjects``
+        is None). Names in any case; None means all."""
+        if not self._index:
+            raise MissingDataError(f"{self.root}: found no recordings: looked for "
+                                   f"{LOOKED_FOR}{self._skipped_note()}")
+        chosen = self.subjects() if subjects is None else [self._subject(s) for s in subjects]
+        if not chosen:
+            raise MissingDataError(f"{self.root}: no subject chosen (an empty list); "
+                                   f"subjects: {_names(self.subjects())}")
+        if tasks is None:
+            return
+        held = {t for s in chosen for t in self.tasks(s)}
+        wanted = [str(t) for t in tasks]
+        missing = [t for t in wanted if t.lower() not in held]
+        if not wanted or missing:
+            whose = "any subject" if subjects is None else f"subject(s) {_names(chosen)}"
+            what = f"no task {_names(missing)}" if missing else "no task chosen (an empty list)"
+            raise MissingDataError(
+                f"{self.root}: {what} for {whose} (tasks: "
+                f"{_names(sorted(held, key=_natural_key))})"
+                f"{''.join(self._skipped_as(s, t.lower()) for s in chosen for t in missing)}")
+
     def load(self, subject: str, task: str) -> Recording:
-        """Read one recording with its subject's palate, pharynx, head measures, audio."""
+        """Read one recording with its subject's palate, pharynx, head measures, audio.
+        The file must still be a regular file (never opened otherwise); its format is
+        detected by content, as :func:`load_recording` does (a pellet file named ``.ema``
+        is read as the pellet file it is)."""
         path = self.pellet_path(subject, task)
+        _regular(path)
         subject, task = self._subject(subject), str(task).lower()
         own = self._index[(subject, task)][1]
         # a root that is itself a subject folder: look one folder up, as load_recording does
         shared = [self.root, self.root.parent] if own == self.root else [self.root]
-        ema = None if path.suffix.lower() == PELLET_SUFFIX else {"sensor_map": self.sensor_map}
+        xrmb = path.suffix.lower() == PELLET_SUFFIX or detect_format(path) == "xrmb"
+        ema = None if xrmb else {"sensor_map": self.sensor_map}
         return _assemble(path, subject, task, own=own, shared=shared, ema=ema)
 
     def __len__(self) -> int:

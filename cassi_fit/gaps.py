@@ -1,7 +1,8 @@
 """Gaps in a pellet recording: which values cannot be used, their repair, frame status.
 
 A value is *bad* when it is untracked (the file's marker 1000000, NaN in memory) or
-mistracked (tracked but flagged by :func:`cassi_fit.quality.detect_mistracks`). Bad values
+mistracked (tracked but flagged by the mistrack detector: the track's one detection,
+``PelletTrack.mistracks``, whose reasons say why; :mod:`cassi_fit.mistracks`). Bad values
 are never passed on to the model: per pellet they are replaced by the last good value
 (``"hold"``) or by linear interpolation between good neighbours (``"interpolate"``; the
 ends are held), and each frame is given a :class:`~cassi_fit.status.Status`: ``MISTRACKED``
@@ -14,17 +15,18 @@ from __future__ import annotations
 import numpy as np
 from jaxtyping import Bool, Float, Int
 
+from .mistracks import mistrack_report
 from .options import GAP_POLICIES, check_choice
-from .pellets import detect_mistracks
 from .status import Status
 from .txy import PelletTrack
 
 
 def bad_values(track: PelletTrack) -> tuple[Bool[np.ndarray, "n 8"], Bool[np.ndarray, "n 8"]]:
     """``(untracked, mistracked)``, each ``(n, 8)`` bool: a pellet untracked in x or y, and
-    a tracked value that ``quality.detect_mistracks`` flags. ``track``: a ``PelletTrack``."""
+    a tracked value the mistrack detector flags (``track.mistracks``: computed once per
+    track; its ``reasons`` say why). ``track``: a ``PelletTrack``."""
     untracked = ~np.asarray(track.valid).all(axis=-1)
-    mistracked = np.asarray(detect_mistracks(track), bool) & ~untracked
+    mistracked = mistrack_report(track).flags & ~untracked
     return untracked, mistracked
 
 

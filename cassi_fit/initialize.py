@@ -7,9 +7,14 @@ Paper section 2; :func:`initialize`:
    stays at the model's rest site, flagged);
 2. pellets to model: every coordinate scaled by ``p / d``, ``d = |MNI - MNM|`` of the
    subject in that frame, ``p`` the same distance between the model's jaw pellet sites.
-   Both frames have their origin at the upper incisor tip, so no translation is needed;
+   Both frames have their origin at the upper incisor tip, so no translation is needed.
+   With one jaw sensor (most articulograph corpora: the lower incisor only) there is no
+   ``d``: the scale is 1 (the data are in mm, the model is an adult's; a fitted
+   calibration's scale when given), and the state says so (``SubjectState.jaw_sensors``);
 3. the lower teeth and the jaw: the closed form (Eqs 1-3, 6-7, ``jaw.closed_form``) from
-   the model's jaw sites to the scaled first-frame jaw pellets;
+   the model's jaw sites to the scaled first-frame jaw pellets; with one jaw sensor, the
+   translation that puts the model's incisor site on it (no rotation: one point cannot
+   give one);
 4. the pharyngeal wall from the scaled PHA.DAT (``pharynx.with_pharynx``; the model's
    default wall if absent), then the palate from the scaled PAL.DAT (``palate.with_palate``,
    joined to the model's upper teeth, its velum in front of the wall; the model's own
@@ -40,11 +45,9 @@ from .dataset import Recording, recording_source
 from .errors import DegenerateGeometryError
 from .face_model import FaceModel
 from .frames import batch_geometry, frame_bucket, frame_params
-from .jaw import closed_form
+from .jaw import closed_form_frames
 from .pellets import LL, MNI, MNM, UL, first_valid_line
 from .run_spec import RunSpec, run_spec
-
-_closed_form_one = jax.jit(closed_form)  # one frame; eager dispatch of its small ops is slow
 
 
 class SubjectState(eqx.Module):
@@ -58,7 +61,8 @@ class SubjectState(eqx.Module):
     nose) with no animation; rest_pellets ``(8, 2)`` mm: the model's pellet sites in that
     shape, from which the tongue and lip parameters are measured (with a calibration, UL
     and LL raised by its ``lip_rest_offset``). initial_params: the parameters of the first
-    valid frame. tracked_pellets: the names of the pellets the file ever tracks.
+    valid frame. tracked_pellets: the names of the pellets the file ever tracks
+    (``jaw_sensors``: the jaw pellets among them, ``("MNI",)`` for one jaw sensor).
     spec: the run's :class:`~cassi_fit.run_spec.RunSpec` (its calibration resolved for
     this subject); calibration: what the conformation came from (None: Headmeasures;
     ``"cassi"``; or the fitted ``Calibration``). source: the recording's name in messages.
@@ -76,6 +80,11 @@ class SubjectState(eqx.Module):
     source: str = eqx.field(static=True)
     spec: RunSpec = eqx.field(static=True)
     calibration: object = eqx.field(static=True, default=None)
+
+    @property
+    def jaw_sensors(self) -> tuple[str, ...]:
+        """The jaw pellets the recording tracks, ``("MNI", "MNM")`` or one of them."""
+        return tuple(p for p in ("MNI", "MNM") if p in self.tracked_pellets)
 
     # the run's choices, read from the spec (one home)
     @property
@@ -125,6 +134,17 @@ def _rest_pellets(model, conformation, size, spec, calibration):
         rest = rest.at[UL, 1].add(calibration.lip_rest_offset[0])
         rest = rest.at[LL, 1].add(calibration.lip_rest_offset[1])
     return rest
+
+
+def _initial_jaw(rest, reference, tracked) -> tuple:
+    """Step 3: ``(theta, t)`` from the model's jaw sites ``rest[[MNI, MNM]]`` onto the
+    first line's scaled jaw pellets ``reference (2, 2)``: the closed form with both; with
+    one jaw sensor, the translation of its site onto it (theta 0)."""
+    if "MNI" in tracked and "MNM" in tracked:
+        motion = closed_form_frames(rest[jnp.array([MNI, MNM])], reference[None])
+        return motion.theta[0], motion.translation[0]
+    k = MNI if "MNI" in tracked else MNM
+    return jnp.zeros((), reference.dtype), reference[k - MNI] - rest[k]
 
 
 def _subject_model(model, recording, scale):
@@ -178,7 +198,11 @@ def initialize(
     track = recording.track
     first, tracked = first_valid_line(track, source)
     pellets = np.asarray(track.positions[first], np.float64)  # (8, 2) mm, subject
-    scale = float(fitted.scale) if fitted is not None else _scale(model, pellets, source, first)
+    both = "MNI" in tracked and "MNM" in tracked
+    if fitted is not None:
+        scale = float(fitted.scale)
+    else:  # one jaw sensor: no p / d; the data are in mm (module docstring, step 2)
+        scale = _scale(model, pellets, source, first) if both else 1.0
     model = _subject_model(model, recording, scale)
     if fitted is not None:
         conformation = fitted.face_params(jnp.asarray(model.vertices).dtype)
@@ -189,11 +213,10 @@ def initialize(
     # share one compilation (the extra frames cost ~0.1 s)
     size = frame_bucket(track.times.shape[0] - first)
     rest = _rest_pellets(model, conformation, size, spec, fitted)
-    reference = jnp.asarray(scale * pellets[[MNI, MNM]])
-    initial = _closed_form_one(rest[jnp.array([MNI, MNM])], reference)
+    reference = jnp.asarray(scale * pellets[[MNI, MNM]])  # NaN for a jaw pellet not tracked
     state = SubjectState(
         model=model, scale=scale, first_frame=first, reference_jaw=reference,
-        initial_jaw=(initial.theta, initial.translation), conformation=conformation,
+        initial_jaw=_initial_jaw(rest, reference, tracked), conformation=conformation,
         rest_pellets=rest, initial_params=conformation, tracked_pellets=tracked,
         source=source, spec=spec, calibration=calibration,
     )  # fmt: skip

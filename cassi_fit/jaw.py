@@ -15,18 +15,23 @@ Three closed forms live here, all written for one frame (``jax.vmap`` them over 
   pivot derived by :func:`cassi_fit.rigid.pivot`, a status code instead of a division by zero.
 * :func:`procrustes` -- the least-squares rigid motion of the two points (Kabsch), the
   exact reference for the per-frame fit in :mod:`cassi_fit.jaw_fit`.
+
+Compiled once, for every caller: :func:`closed_form_frames` and :func:`procrustes_frames`
+(one reference, ``n`` frames; module-level ``jax.jit``, so a shape compiles once per
+process). One frame is ``current[None]``.
 """
 
 from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 from jax import Array
 from jaxtyping import Float
 
 from . import rigid
-from .status import STATUS_LABELS, Status
+from .status import Status
 
 # Status codes of a jaw motion (``JawMotion.status``; also used per frame by ``JawFit``): the
 # first values of the toolkit's one status vocabulary, :class:`cassi_fit.status.Status`.
@@ -36,7 +41,6 @@ STATUS_DEGENERATE = int(Status.DEGENERATE)  # the two jaw pellets coincide
 STATUS_NON_FINITE = int(Status.NON_FINITE)  # a NaN or infinite coordinate (untracked pellet)
 STATUS_INVALID_FRAME = int(Status.INVALID_FRAME)  # (fits) excluded by ``valid``: interpolated
 STATUS_NOT_CONVERGED = int(Status.NOT_CONVERGED)  # (fits) the solver did not report success
-STATUS_NAMES = STATUS_LABELS  # int -> table word, every status
 
 
 class JawMotion(NamedTuple):
@@ -44,8 +48,8 @@ class JawMotion(NamedTuple):
 
     theta: rad, opening positive. translation: (2,) mm, ``p' = R(theta) p + t``, always
     finite. pivot: (2,) mm, the fixed point (a, b) of Eqs 6-7, (0, 0) where undefined.
-    pivot_defined: bool. status: int, see ``STATUS_NAMES`` (0 ok, 1 pivot undefined,
-    2 degenerate, 3 non-finite input). Where status >= 2 theta, t and pivot are all 0.
+    pivot_defined: bool. status: int, a :class:`cassi_fit.status.Status` (0 ok, 1 pivot
+    undefined, 2 degenerate, 3 non-finite input; ``Status(code).label`` is its word). Where status >= 2 theta, t and pivot are all 0.
     """
 
     theta: Array
@@ -158,7 +162,19 @@ def procrustes(reference: Float[Array, "2 2"], current: Float[Array, "2 2"]) -> 
     return _finish(theta, t, ok, finite)
 
 
-def status_name(code: int) -> str:
-    """The word for a status code (``"ok"``, ``"pivot-undefined"``, ...; see
-    :attr:`cassi_fit.status.Status.label`)."""
-    return STATUS_LABELS.get(int(code), f"status-{int(code)}")
+_closed_form_frames = jax.jit(jax.vmap(closed_form, in_axes=(None, 0)))
+_procrustes_frames = jax.jit(jax.vmap(procrustes, in_axes=(None, 0)))
+
+
+def closed_form_frames(reference: Float[Array, "2 2"], current: Float[Array, "n 2 2"]) -> JawMotion:
+    """:func:`closed_form` for every frame of ``current`` (n, 2, 2) mm from one ``reference``
+    (2, 2) mm, compiled once per shape and dtype: a :class:`JawMotion` whose leaves have a
+    leading ``n`` axis (theta (n,) rad, translation (n, 2) mm, pivot (n, 2) mm,
+    pivot_defined (n,), status (n,)). The toolkit's one compiled closed form."""
+    return _closed_form_frames(jnp.asarray(reference), jnp.asarray(current))
+
+
+def procrustes_frames(reference: Float[Array, "2 2"], current: Float[Array, "n 2 2"]) -> JawMotion:
+    """:func:`procrustes` for every frame of ``current`` (n, 2, 2) mm, compiled once per shape
+    and dtype; leaves as :func:`closed_form_frames`."""
+    return _procrustes_frames(jnp.asarray(reference), jnp.asarray(current))

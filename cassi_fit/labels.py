@@ -22,6 +22,17 @@ Formats (both written atomically, and read back identically by the readers):
 Every malformation (a non-numeric time, ``end < start``, unsorted or overlapping
 intervals, a TextGrid praatio cannot read) raises one :class:`DataFormatError` naming the
 file and, where one can be found, the line.
+
+**Labels against the recording** (:func:`check_labels`; :func:`labels_for` runs it with
+the pellet file's length). Labels share the pellets' clock (time 0 = the first frame);
+the last label may end a little after the last frame (JW11 task 5: 5.019 s against
+5.012 s). Beyond ``max(LABEL_TOLERANCE_S, 5 %)`` past the end, or spanning a fraction of
+the recording that a unit mix-up explains, one line gives the numbers and the likely
+cause: times in milliseconds or in samples read as seconds (1000 or 16000 times too
+long), or read as HTK's 100 ns units (10000 or 625 times too short): an error, since every
+label would be shifted or empty, with ``units=`` as the cure. Labels past the end that no
+unit explains warn (:class:`LabelMismatchWarning`; those intervals are never reached).
+``accept_mismatch=True`` turns the errors into warnings and keeps the labels as they are.
 """
 
 # jaxtyping's shape strings ("n 8 2") are not Python expressions:
@@ -30,6 +41,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -46,6 +58,21 @@ HTK_UNITS_PER_S = 10_000_000  # HTK time unit: 100 ns
 HTK_UNITS_THRESHOLD = 1000  # all-integer times reaching this are HTK units (see above)
 DEFAULT_TIERS = ("phones", "words")  # tried in this order when no tier is named
 UNITS = ("auto", "seconds", "htk")
+#: Labels may end this long (s), or 5 % of the recording, after the pellets' last frame.
+LABEL_TOLERANCE_S = 0.25
+LABEL_TOLERANCE_FRACTION = 0.05
+#: How close (relative) a span ratio must be to a unit factor to be named as the cause.
+UNIT_MATCH = 0.1
+_SAMPLE_RATES_HZ = (8000, 16000, 22050, 44100, 48000)
+#: (factor by which the labels' span is too long, what happened): ratio = span / length.
+_UNIT_CAUSES = (
+    (1000.0, "times in milliseconds read as seconds"),
+    *((float(r), f"times in samples at {r} Hz read as seconds") for r in _SAMPLE_RATES_HZ),
+    (1e-4, "times in milliseconds read as HTK units of 100 ns (write the times in seconds)"),
+    *((r / 1e7, f"times in samples at {r} Hz read as HTK units of 100 ns")
+      for r in _SAMPLE_RATES_HZ),
+    (1e7, "times in HTK units of 100 ns read as seconds (pass units='htk')"),
+)
 
 
 class Segment(NamedTuple):
@@ -103,6 +130,69 @@ class Labels:
         kk = np.clip(k, 0, len(self) - 1)
         inside = (k >= 0) & (times < self.ends[kk])
         return np.where(inside, np.asarray(self.labels, dtype=str)[kk], "")
+
+
+class LabelMismatchWarning(UserWarning):
+    """Labels do not fit the recording's length (accepted, or only past its end)."""
+
+
+@dataclass(frozen=True)
+class LabelCheck:
+    """Labels against the recording: ``n_intervals``, the labels' ``last_end_s``, the
+    recording's ``recording_s``, ``status`` (``"ok"``, ``"units"``: a unit mix-up
+    explains the span, ``"past-end"``: intervals after the end), ``n_past_end``
+    intervals starting after the end, and the one-line ``message`` (None when ok)."""
+
+    path: str | None
+    n_intervals: int
+    last_end_s: float
+    recording_s: float
+    status: str
+    n_past_end: int
+    message: str | None
+
+
+def _unit_cause(ratio: float) -> str | None:
+    for factor, cause in _UNIT_CAUSES:
+        if abs(ratio / factor - 1.0) <= UNIT_MATCH:
+            return cause
+    return None
+
+
+def check_labels(labels: Labels, recording_s: float, *,
+                 accept_mismatch: bool = False) -> LabelCheck:
+    """Check ``labels`` against a recording of ``recording_s`` seconds (time 0 to the end
+    of the last frame); see the module docstring. Raises :class:`DataFormatError`
+    naming the label file when a unit mix-up explains the labels' span (unless
+    ``accept_mismatch``); warns (:class:`LabelMismatchWarning`) for intervals past the
+    end, or for an accepted mismatch."""
+    where = labels.path if labels.path is not None else "<labels>"
+    recording_s = float(recording_s)
+    n = len(labels)
+    if not n or recording_s <= 0:
+        return LabelCheck(None if labels.path is None else str(labels.path), n, 0.0,
+                          recording_s, "ok", 0, None)
+    last = float(labels.ends.max())
+    tolerance = max(LABEL_TOLERANCE_S, LABEL_TOLERANCE_FRACTION * recording_s)
+    past = int((labels.starts >= recording_s).sum())
+    numbers = (f"{n} labels span 0-{last:.4g} s, the recording {recording_s:.4g} s "
+               f"({past} start after its end)")
+    cause = _unit_cause(last / recording_s) if last > 0 else None
+    status = "ok"
+    if cause is not None and abs(last - recording_s) > tolerance:
+        status, message, error = "units", f"{numbers}: likely {cause}", True
+    elif last > recording_s + tolerance:
+        status, error = "past-end", False
+        message = (f"{numbers}: labels past the end are never shown (labels of another "
+                   "recording, or a different time origin?)")
+    if status == "ok":
+        return LabelCheck(None if labels.path is None else str(labels.path), n, last,
+                          recording_s, status, past, None)
+    if error and not accept_mismatch:
+        raise DataFormatError(where, None, message + " (accept them with accept_mismatch=True)")
+    warnings.warn(f"{where}: {message}", LabelMismatchWarning, stacklevel=2)
+    return LabelCheck(None if labels.path is None else str(labels.path), n, last,
+                      recording_s, status, past, message)
 
 
 def _check_intervals(path, starts, ends, lines) -> None:
@@ -377,11 +467,42 @@ def label_path_for(pellet_path: str | os.PathLike) -> Path | None:
 
 
 def labels_for(pellet_path: str | os.PathLike, *, tier: str | None = None,
-               units: str = "auto") -> Labels | None:
+               units: str = "auto", recording_s: float | None = None,
+               accept_mismatch: bool = False) -> Labels | None:
     """The labels beside a pellet file (see :func:`label_path_for`), or None if there
-    are none. A TextGrid is preferred to a ``.lab`` when both exist."""
+    are none. A TextGrid is preferred to a ``.lab`` when both exist.
+
+    The labels are checked against the recording (:func:`check_labels`): its length
+    ``recording_s`` (s), by default read from the pellet file's last line (time plus one
+    frame); ``accept_mismatch`` keeps labels whose times do not fit (with a warning)."""
     found = label_path_for(pellet_path)
-    return None if found is None else read_labels(found, tier=tier, units=units)
+    if found is None:
+        return None
+    labels = read_labels(found, tier=tier, units=units)
+    if recording_s is None:
+        recording_s = _pellet_seconds(Path(pellet_path))
+    if recording_s is not None:
+        check_labels(labels, recording_s, accept_mismatch=accept_mismatch)
+    return labels
+
+
+def _pellet_seconds(pellet_path: Path) -> float | None:
+    """The length (s) of a pellet file: its last line's time (us) plus one frame step;
+    None if the file cannot say (its reader reports the problem)."""
+    from .txy import FRAME_STEP_US
+
+    if not pellet_path.is_file():  # a FIFO would block: the reader refuses it in one line
+        return None
+    try:
+        with open(pellet_path, "rb") as fh:
+            fh.seek(0, os.SEEK_END)
+            size = fh.tell()
+            fh.seek(max(size - 4096, 0))
+            tail = fh.read().decode("utf-8", errors="replace")
+        last = [line for line in tail.splitlines() if line.strip()][-1]
+        return (int(last.split()[0]) + FRAME_STEP_US) / 1e6
+    except (OSError, IndexError, ValueError):
+        return None
 
 
 # ----------------------------------------------------------- per-segment summaries

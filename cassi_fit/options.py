@@ -16,6 +16,14 @@ from .errors import InvalidChoiceError
 #: Jaw-motion methods (docs/JAW.md): the paper's Eqs 1-7, a rigid fit per frame, Parke's
 #: fixed pivot, and a pivot that moves smoothly in time.
 JAW_METHODS = ("closed-form", "frame-fit", "fixed-pivot", "smooth-pivot")
+#: Jaw methods for one jaw sensor only (docs/JAW.md): the rotation coupled to the sensor's
+#: displacement by a prior learned from two-sensor recordings. ``cassi jaw`` and
+#: ``jaw_fit.jaw_method`` accept them beside :data:`JAW_METHODS`.
+ONE_SENSOR_JAW_METHODS = ("coupled-rotation",)
+ALL_JAW_METHODS = JAW_METHODS + ONE_SENSOR_JAW_METHODS
+#: The jaw sensors a jaw fit may use (``--jaw-sensors``): both XRMB jaw pellets (incisor MNI,
+#: molar MNM), or one of them (most EMA corpora have only the lower incisor).
+JAW_SENSOR_SETS = ("MNI,MNM", "MNI", "MNM")
 #: Least-squares solvers for the fitted jaw methods; jaxopt's sit behind one adapter.
 SOLVERS = ("optimistix-lm", "optimistix-gn", "optimistix-dogleg", "jaxopt-lm", "jaxopt-gn")
 #: How an untracked or mistracked pellet value is replaced during animation.

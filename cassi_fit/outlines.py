@@ -75,6 +75,16 @@ PALATE_MIN_LENGTH_MM = 15.0
 PALATE_MAX_FORWARD_STEP_MM = 2.0
 PHARYNX_X_RANGE_MM = (-130.0, -20.0)
 PHARYNX_Y_RANGE_MM = (-90.0, 60.0)
+#: ``PHA.DAT``'s first and last points (the two the wall is built from,
+#: ``cassi_fit.pharynx.midline``) must be this far apart in height: the trace covers the
+#: wall behind the tongue root over tens of millimetres (JW11: 41 mm; the synthetic
+#: subjects: 40 to 57 mm); two points closer than this (coincident ones included) give
+#: no direction for the wall.
+PHARYNX_MIN_HEIGHT_MM = 10.0
+#: ... and the wall runs down more than across (within 45 degrees of vertical): the
+#: posterior pharyngeal wall is near vertical (JW11: 0.05 degrees off it; the synthetic
+#: subjects: at most 15 degrees).
+PHARYNX_MAX_TILT_DEG = 45.0
 
 
 def _units(points: np.ndarray, x_range: tuple[float, float], y_range: tuple[float, float]
@@ -102,19 +112,57 @@ def _outside(points: np.ndarray, x_range, y_range, where: str) -> tuple[int, str
     return None
 
 
+def _coincident(points: np.ndarray, what: str) -> str | None:
+    """A message when every point of an outline is the same point (a degenerate trace)."""
+    if np.all(points == points[0]):
+        x, y = points[0]
+        return (f"all {len(points)} points coincide at ({x:.3f}, {y:.3f}) mm: a degenerate "
+                f"{what} (a trace of one point has no shape)")
+    return None
+
+
+def _wall_problem(pts: np.ndarray) -> tuple[int | None, str] | None:
+    """The pharyngeal wall's geometry: its end points (the two the wall is built from)
+    ``PHARYNX_MIN_HEIGHT_MM`` apart in height, within ``PHARYNX_MAX_TILT_DEG`` of
+    vertical."""
+    (x0, y0), (x1, y1) = pts[0], pts[-1]
+    height, across = abs(y0 - y1), abs(x0 - x1)
+    if height < PHARYNX_MIN_HEIGHT_MM:
+        return len(pts) - 1, (
+            f"a degenerate pharyngeal wall: its first and last points are {height:.1f} mm "
+            f"apart in height (y {y0:.1f} and {y1:.1f} mm), not at least "
+            f"{PHARYNX_MIN_HEIGHT_MM:.0f} mm: PHA.DAT holds the wall's top and bottom, "
+            "which give the wall its direction")
+    tilt = float(np.degrees(np.arctan2(across, height)))
+    if tilt > PHARYNX_MAX_TILT_DEG:
+        return len(pts) - 1, (
+            f"the pharyngeal wall runs {tilt:.0f} degrees off vertical (x {x0:.1f} to "
+            f"{x1:.1f}, y {y0:.1f} to {y1:.1f} mm), more than {PHARYNX_MAX_TILT_DEG:.0f}: "
+            "the posterior wall runs down behind the tongue (x and y swapped?)")
+    return None
+
+
 def outline_problem(
     points: Float[np.ndarray, "n 2"], kind: str = "palate"
 ) -> tuple[int | None, str] | None:
     """Why an outline (mm, pellet frame) is implausible, as ``(point index or None,
-    message)``, or None. Palate: the units, the position (``PALATE_*_RANGE_MM``: behind
-    the incisor tip and above it), the order (front to back, over at least
-    ``PALATE_MIN_LENGTH_MM``, no step forward beyond ``PALATE_MAX_FORWARD_STEP_MM``).
-    Pharynx: the units and the position (``PHARYNX_*_RANGE_MM``)."""
+    message)``, or None. Both: not every point the same (a degenerate trace). Palate:
+    the units, the position (``PALATE_*_RANGE_MM``: behind the incisor tip and above
+    it), the order (front to back, over at least ``PALATE_MIN_LENGTH_MM``, no step
+    forward beyond ``PALATE_MAX_FORWARD_STEP_MM``). Pharynx: the units, the position
+    (``PHARYNX_*_RANGE_MM``), the wall's end points ``PHARYNX_MIN_HEIGHT_MM`` apart in
+    height and within ``PHARYNX_MAX_TILT_DEG`` of vertical."""
     pts = np.asarray(points, dtype=np.float64)
+    what = "pharyngeal wall" if kind == "pharynx" else "palate outline"
+    same = _coincident(pts, what)
+    if same is not None:
+        return None, same
     if kind == "pharynx":
         hint = _units(pts, PHARYNX_X_RANGE_MM, PHARYNX_Y_RANGE_MM)
-        return (None, hint) if hint else _outside(
-            pts, PHARYNX_X_RANGE_MM, PHARYNX_Y_RANGE_MM, "the pharyngeal wall lies behind the mouth")
+        if hint:
+            return None, hint
+        return _outside(pts, PHARYNX_X_RANGE_MM, PHARYNX_Y_RANGE_MM,
+                        "the pharyngeal wall lies behind the mouth") or _wall_problem(pts)
     hint = _units(pts, PALATE_X_RANGE_MM, PALATE_Y_RANGE_MM)
     if hint:
         return None, hint
@@ -131,6 +179,22 @@ def outline_problem(
                    "must run front to back (points shuffled or zig-zag?)")
     return _outside(pts, PALATE_X_RANGE_MM, PALATE_Y_RANGE_MM,
                     "the palate lies behind and above the upper incisor tip")
+
+
+def outlines_problem(
+    palate: Float[np.ndarray, "n 2"], pharynx: Float[np.ndarray, "m 2"]
+) -> str | None:
+    """Why a subject's palate and pharyngeal wall (mm, pellet frame) cannot both be
+    right, or None: the wall must lie behind the palate's back end (every wall point's x
+    below the last palate point's), since the velum hangs between them (JW11: 29 mm
+    behind; the synthetic subjects: 5 to 16 mm)."""
+    back = float(np.asarray(palate, dtype=np.float64)[-1, 0])
+    front = float(np.max(np.asarray(pharynx, dtype=np.float64)[:, 0]))
+    if front >= back:
+        return (f"the pharyngeal wall (x up to {front:.1f} mm) is not behind the palate's "
+                f"back end (x {back:.1f} mm): the velum hangs between them; the wrong "
+                "subject's PHA.DAT or PAL.DAT?")
+    return None
 
 
 def write_outline(

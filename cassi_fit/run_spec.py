@@ -72,7 +72,7 @@ CalibrationChoice = Union[None, str, "Calibration", CalibrationFiles]  # noqa: F
 def _jaw_method(jaw: Any) -> Any:
     from .jaw_fit import JawMethod, jaw_method
 
-    if isinstance(jaw, JawMethod):
+    if jaw is None or isinstance(jaw, JawMethod):
         return jaw
     if isinstance(jaw, str):
         return jaw_method(jaw)
@@ -105,8 +105,12 @@ class RunSpec:
     (``None``: the subject's conformation from Headmeasures; the cassi mode's is
     ``"cassi"``); tongue_shape, tongue_anchor, jaw_weights, lip_rounding: as
     ``deform.deform``; collisions: ``options.COLLISION_MODES``; jaw: a jaw method object
-    (``jaw_fit.ClosedForm()``, ...; a name is converted); stride: every Nth data line
-    from the first valid one (>= 1); gap_policy: ``options.GAP_POLICIES``.
+    (``jaw_fit.ClosedForm()``, ...; a name is converted), or None (the default): the
+    paper's closed form with two jaw sensors, ``CoupledRotation`` with one
+    (:meth:`jaw_method_for`); stride: every Nth data line from the first valid one
+    (>= 1); gap_policy: ``options.GAP_POLICIES``; jaw_sensors: None (every jaw pellet the
+    recording tracks) or the jaw sensors to use (``("MNI",)``: the other is left out, as
+    if absent).
     """
 
     mode: str = "improved"
@@ -116,9 +120,10 @@ class RunSpec:
     jaw_weights: str = "cassi"
     lip_rounding: bool = True
     collisions: str = "off"
-    jaw: Any = "closed-form"
+    jaw: Any = None
     stride: int = 1
     gap_policy: str = "hold"
+    jaw_sensors: Any = None
 
     def __post_init__(self):
         check_choice("mode", self.mode, MODES)
@@ -134,6 +139,10 @@ class RunSpec:
         object.__setattr__(self, "stride", int(stride))
         object.__setattr__(self, "lip_rounding", bool(self.lip_rounding))
         object.__setattr__(self, "jaw", _jaw_method(self.jaw))
+        if self.jaw_sensors is not None:
+            from .jaw_fit import jaw_sensor_set
+
+            object.__setattr__(self, "jaw_sensors", jaw_sensor_set(self.jaw_sensors))
         object.__setattr__(self, "calibration", _calibration(self.calibration))
         if isinstance(self.calibration, CalibrationFiles) and not self.calibration.path.exists():
             raise CassiError(f"{self.calibration.path}: no such calibration file or folder")
@@ -160,8 +169,19 @@ class RunSpec:
 
     @property
     def jaw_name(self) -> str:
-        """The jaw method's name (``options.JAW_METHODS``), as tables and captions print it."""
-        return self.jaw.name
+        """The jaw method's name (``options.ALL_JAW_METHODS``) as tables print it;
+        ``"auto"`` for the default (:meth:`jaw_method_for`)."""
+        return "auto" if self.jaw is None else self.jaw.name
+
+    def jaw_method_for(self, sensors: tuple[str, ...]) -> Any:
+        """The jaw method object for a recording whose jaw ``sensors`` are those given
+        (``("MNI", "MNM")`` or one): the spec's own, or by default the paper's closed form
+        with two and ``CoupledRotation`` (rotation coupled to the incisor's displacement,
+        learned from two-sensor recordings; docs/JAW.md) with one. A method that cannot run
+        with those sensors is refused with its reason (``InvalidChoiceError``)."""
+        from .jaw_fit import method_for_sensors
+
+        return method_for_sensors(self.jaw, tuple(sensors))
 
     def calibration_for(self, subject: str) -> Any:
         """The calibration for ``subject``'s recordings, as ``initialize`` takes it: None

@@ -1,9 +1,12 @@
-"""One status vocabulary for per-frame and per-recording results.
+"""One status vocabulary for per-frame and per-recording results, and one for solvers.
 
 Jaw fits, animation frames and evaluation rows report what happened as a :class:`Status`
-(an ``IntEnum``: arrays carry the integer, tables print :attr:`Status.label`). Where a
-result cannot be computed at all, the library raises a :class:`~cassi_fit.errors.CassiError`
-instead; inside traced code a status value is returned, never an exception.
+(an ``IntEnum``: arrays carry the integer, tables print :attr:`Status.label`, the one home
+of the words). Where a result cannot be computed at all, the library raises a
+:class:`~cassi_fit.errors.CassiError` instead; inside traced code a status value is
+returned, never an exception. How an iterative solve ended is a :class:`SolverResult`
+(optimistix's ``RESULTS``, and jaxopt's state, mapped to a few values of our own), so a fit
+that did not converge says why.
 """
 
 from __future__ import annotations
@@ -11,7 +14,14 @@ from __future__ import annotations
 import enum
 
 
-class Status(enum.IntEnum):
+class _Labelled(enum.IntEnum):
+    @property
+    def label(self) -> str:
+        """The word written in tables: ``"ok"``, ``"pivot-undefined"``, ..."""
+        return self.name.lower().replace("_", "-")
+
+
+class Status(_Labelled):
     """What happened to one frame (or one recording)."""
 
     OK = 0
@@ -34,11 +44,20 @@ class Status(enum.IntEnum):
     #: a whole recording that could not be processed (its one-line error is kept beside).
     FAILED = 9
 
-    @property
-    def label(self) -> str:
-        """The word written in tables: ``"ok"``, ``"pivot-undefined"``, ..."""
-        return self.name.lower().replace("_", "-")
 
+class SolverResult(_Labelled):
+    """How an iterative least-squares solve ended (arrays carry the integer; ``.label`` is
+    the table word). A frame or recording whose solve was not SUCCESSFUL gets the status
+    NOT_CONVERGED; this says which failure it was."""
 
-#: ``int -> label`` for every status, for tables written from integer arrays.
-STATUS_LABELS = {int(s): s.label for s in Status}
+    #: converged: the solver's own test, or a Gauss-Newton step from the answer would gain
+    #: less than the cost can resolve
+    SUCCESSFUL = 0
+    #: the step budget (``max_steps``) ran out first
+    MAX_STEPS_REACHED = 1
+    #: the iteration diverged (optimistix's ``nonlinear_divergence``)
+    NONLINEAR_DIVERGENCE = 2
+    #: a linear solve inside the iteration failed (a singular or ill-posed system)
+    SINGULAR = 3
+    #: a NaN or infinite value appeared in the iteration
+    NON_FINITE = 4

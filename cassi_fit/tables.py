@@ -35,6 +35,10 @@ def cell(value: object, digits: int = FLOAT_DIGITS) -> str:
     """One cell as text: None -> ``""``, bools -> ``true``/``false``, floats (numpy's
     too) with ``digits`` decimals (``nan``, ``inf``, ``-inf`` spelled out), integers and
     strings as they are."""
+    if type(value) is float:  # the common case first: Python's format spells nan/inf too
+        return f"{value:.{digits}f}"
+    if type(value) is int:
+        return str(value)
     if value is None:
         return ""
     if isinstance(value, bool) or type(value).__name__ in ("bool", "bool_"):
@@ -78,8 +82,9 @@ def csv_text(rows: Sequence[Row], columns: Sequence[str] | None = None, *,
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(columns)
+    places = [(c, _digits_of(c, digits)) for c in columns]
     for row in rows:
-        writer.writerow([cell(row.get(c), _digits_of(c, digits)) for c in columns])
+        writer.writerow([cell(row.get(c), d) for c, d in places])
     return buffer.getvalue()
 
 

@@ -1,4 +1,4 @@
-"""X-ray microbeam pellet files (``.txy``): read, write, first valid frame.
+"""X-ray microbeam pellet files (``.txy``): read, write.
 
 The format (see ``docs/FORMATS.md``): plain text, one frame per line, 17 integer fields
 separated by white space (tabs in the distribution): time in microseconds, then x and y
@@ -13,6 +13,7 @@ mask; positions are NaN exactly where the mask is False. This module is numpy on
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import stat
@@ -20,20 +21,17 @@ import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from jaxtyping import Bool, Float
 
 from ._io import atomic_write, register_input
+
+if TYPE_CHECKING:
+    from .mistracks import MistrackReport
 from .errors import DataFormatError, MissingDataError
-from .pellets import (
-    JAW_PELLETS,
-    PELLET_NAMES,
-    first_clean_line,
-    first_valid_line,
-    pellet_index,
-    plausibility_problem,
-)
+from .pellets import JAW_PELLETS, PELLET_NAMES, pellet_index, plausibility_problem
 
 UNTRACKED = 1_000_000  # marker in files, per value (um)
 FRAME_STEP_US = 6866  # about 145.6 Hz
@@ -138,6 +136,15 @@ class PelletTrack:
         """Seconds from the first to the last frame (0 for fewer than two frames)."""
         return float(self.times[-1] - self.times[0]) if self.n_frames > 1 else 0.0
 
+    @functools.cached_property
+    def mistracks(self) -> MistrackReport:
+        """The track's one mistrack detection (:func:`cassi_fit.mistracks.detect`),
+        computed on first use and kept: every user reads this one result. The arrays
+        must not be changed in place after it is computed."""
+        from .mistracks import detect
+
+        return detect(self)
+
     def extra(self, name: str) -> Float[np.ndarray, "n 2"]:
         """``(n, 2)`` mm positions of the extra sensor ``name`` (NaN where untracked);
         ``ValueError`` naming the extra sensors if there is no such sensor."""
@@ -163,21 +170,6 @@ class PelletTrack:
 
 def _where(track: PelletTrack) -> str:
     return str(track.path) if track.path is not None else "<pellet track>"
-
-
-def first_valid_frame(track: PelletTrack, pellets: Sequence[str] | None = None) -> int:
-    """Index of CASSI's first valid line (initialisation step 1).
-
-    Default: the one rule of :func:`cassi_fit.pellets.first_valid_line` (the first frame
-    in which every pellet the file ever tracks is tracked and none is mistracked;
-    ``MissingDataError`` if a jaw pellet is never tracked). With ``pellets``: the same
-    rule for those pellets only (:func:`cassi_fit.pellets.first_clean_line`), e.g.
-    ``JAW_PELLETS`` for the jaw fit's reference. Raises :class:`MissingDataError` naming
-    the file if there is no such frame.
-    """
-    if pellets is None:
-        return first_valid_line(track, _where(track)).index
-    return first_clean_line(track, pellets, _where(track))
 
 
 def require_tracked(track: PelletTrack, pellets: Sequence[str] = JAW_PELLETS) -> None:

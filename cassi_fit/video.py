@@ -410,6 +410,7 @@ def animation_frames(
 
     from tqdm import tqdm
 
+    from .mistracks import mistrack_labels
     from .status import Status
 
     vertices = np.asarray(animation.vertices)
@@ -421,6 +422,7 @@ def animation_frames(
     current = (labels.at(np.asarray(animation.times, np.float64)) if labels is not None
                else np.full(animation.n_frames, "", dtype=str))
     indices = range(animation.n_frames) if indices is None else indices
+    reasons = getattr(animation, "mistrack_reasons", None)  # the detector's, per pellet
     for k in tqdm(
         indices, desc="rendering", unit="frame", file=sys.stderr, disable=not progress, leave=False
     ):
@@ -434,6 +436,8 @@ def animation_frames(
                 "model": _in_3d(model_sites[k][shown]),
             }
         status = Status(int(animation.frame_status[k])).label
+        if reasons is not None and reasons[k].any():  # which pellet, and why
+            status = f"{status} {mistrack_labels(reasons[k])}"
         caption = frame_caption(
             subject, task, float(animation.times[k]), int(animation.frame_index[k]), status,
             str(current[k]),
@@ -495,7 +499,8 @@ def write_recording_video(
     views: Sequence[str] | None = None,
     markers: bool = False,
     audio: bool = True,
-    labels: Labels | None = None,
+    labels: Labels | bool | None = True,
+    accept_mismatch: bool = False,
     progress: bool = True,
     overwrite: bool = False,
 ) -> Path:
@@ -503,13 +508,28 @@ def write_recording_video(
     for a recording (the model, its ``views`` (default all of ``options.VIEWS``, in a
     grid) at ``size``, the subject's palate and pharynx traces in the midsagittal view)
     and writes :func:`write_animation`, with the recording's sound in an MP4 when
-    ``audio`` and a ``.wav`` is there (a GIF has none), the current ``labels`` in the
-    captions. ``renderer``: reuse an open ``render.Renderer`` of the same model (its
+    ``audio`` and a ``.wav`` is there (a GIF has none; the sound is checked against the
+    recording's length first, ``sound.check_sound``), the current label in the captions
+    (``labels``: True for the labels beside the recording, ``labels.labels_for``, checked
+    against its length; a ``Labels``; or None/False for none). ``accept_mismatch``: keep
+    sound or labels whose length does not fit the recording (with a warning) instead of
+    the error. ``renderer``: reuse an open ``render.Renderer`` of the same model (its
     traces are replaced). Returns the path written."""
     from .options import VIEWS
     from .render import Renderer
+    from .sound import check_sound, recording_seconds
 
     recording, state = run.recording, run.state
+    length_s = recording_seconds(recording.track.times)
+    if labels is True:
+        from .labels import labels_for
+
+        labels = labels_for(recording.path, recording_s=length_s,
+                            accept_mismatch=accept_mismatch) if recording.path else None
+    labels = labels or None
+    sound = recording.audio if audio and Path(path).suffix.lower() == ".mp4" else None
+    if sound is not None:
+        check_sound(sound, length_s, accept_mismatch=accept_mismatch)
     traces = subject_traces(recording, state.scale)
     own = renderer is None
     if own:
@@ -518,7 +538,6 @@ def write_recording_video(
                             traces=traces)
     else:
         renderer.set_traces(traces)
-    sound = recording.audio if audio and Path(path).suffix.lower() == ".mp4" else None
     try:
         return write_animation(path, run.animation, renderer, subject=recording.subject,
                                task=recording.task, audio=sound, markers=markers,
@@ -545,10 +564,12 @@ def animate_task(item: Any, out_dir: str, *, spec: Any, suffix: str = ".mp4",
     from .corpus import TaskResult, load_item, worker_model
     from .labels import labels_for
     from .pipeline import run_recording
+    from .sound import recording_seconds
     from .tongue import tongue_volumes
 
     run = run_recording(load_item(item, quiet=True), spec, model=worker_model())
-    found = labels_for(run.recording.path) if labels else None
+    found = labels_for(run.recording.path, recording_s=recording_seconds(
+        run.recording.track.times)) if labels else None
     path = write_recording_video(video_output_path(out_dir, item, suffix), run, size=size,
                                  views=views, markers=markers, audio=audio, labels=found,
                                  progress=False, overwrite=overwrite)

@@ -5,14 +5,22 @@
 
 Synthetic part (cassi_fit.synth; the true jaw motion is known). Every jaw method
 (cassi_fit.options.JAW_METHODS, called through ``cassi_fit.jaw_fit.fit_jaw``) on every
-truth family (``synth.JAW_KINEMATICS``: fixed condyle, physiological eminence glide, thrust)
-x noise family (``NOISE_FAMILIES`` below) x |theta| bin (degrees from the reference frame).
-The same subjects (geometry drawn once, ``SUBJECT_SEEDS``) and tasks are used for every
-family and noise, so the cells are paired. Per frame: angle error, pivot error (against the
-true motion's fixed point, Eqs 6-7), and the errors of two points on the jaw moved by the
-estimated motion (lower incisor tip, chin = gnathion). Per cell: the median and a 95 %
-moving-block bootstrap interval of the median (``BOOTSTRAP`` resamples of blocks of
-``BLOCK_FRAMES`` consecutive frames, seeded, since neighbouring frames are correlated).
+truth family (``synth.JAW_KINEMATICS``: fixed condyle, physiological eminence glide, thrust,
+speech) x noise family (``NOISE_FAMILIES`` below, "xrmb" the one like a real file) x
+|theta| bin (degrees from the reference frame). Per cell ``N_SUBJECTS`` subjects x
+``TASKS``; each recording has its own seed, derived from its family, subject and task
+(:func:`recording_seed`); a subject's geometry is the same in every family. Per frame:
+angle error, pivot error (against the true motion's fixed point, Eqs 6-7), and the errors
+of two points on the jaw moved by the estimated motion (lower incisor tip, chin =
+gnathion), NaN in frames a method did not use, so every comparison is on the same frames.
+Per cell: the pooled median (95th percentile) and a 95 % interval from ``BOOTSTRAP``
+resamples of the recordings (the independent units; frames of one recording share its
+noise and motion). A regime names a winner only when the paired interval of its
+difference to every other method (the same resamples, the same frames) lies below 0;
+otherwise it reads ``tie:`` (:func:`verdict`). Smooth-pivot's ``smoothness`` and knot
+spacing are chosen first on held-out recordings (subjects ``H01`` ..., not compared;
+:func:`tune_smooth_pivot`). The run takes a few minutes on two cores (compiling each
+method once: every recording has ``DURATION_S`` seconds).
 
 Writes to --out: ``jaw_comparison.csv`` (every cell), ``jaw_comparison.md`` (the winners
 per regime and the full tables), ``pivot_error_vs_theta.png``, ``point_error_vs_noise.png``.
@@ -34,12 +42,13 @@ from pathlib import Path
 import numpy as np
 
 # name: (synth noise family, SD per coordinate in mm, unmarked jaw-pellet mistracks)
+# ("xrmb": band-limited noise and the molar pellet's out-of-plane yaw at noise scale 1,
+# docs/SYNTHETIC.md; its SD argument is the default noise, which it rescales itself)
 NOISE_FAMILIES = {
     "none": ("white", 0.0, False),
-    "white-0.1": ("white", 0.1, False),
     "white-0.25": ("white", 0.25, False),
-    "white-0.5": ("white", 0.5, False),
     "drift-0.25": ("drift", 0.25, False),
+    "xrmb": ("xrmb", 0.3 / np.sqrt(2.0), False),
     "mistracks": ("white", 0.25, True),
 }
 THETA_BINS_DEG = (0.0, 1.0, 2.0, 4.0, 8.0, 16.0, 90.0)
@@ -56,11 +65,12 @@ STATISTICS = {
 }
 WINNER_STATISTICS = ("median_chin_err_mm", "median_pivot_err_mm", "median_angle_err_deg",
                      "p95_chin_err_mm")
-SUBJECT_SEEDS = (300, 301, 302, 303)
+N_SUBJECTS = 6  # per cell, each with its own geometry; x 2 tasks = 12 recordings per cell
+BASE_SEED = 2026
 TASKS = ("tp106", "tp040")  # jaw wagging (wide angles), a sentence (speech angles)
-DURATION_S = 6.0
+DURATION_S = 4.0
 SMALL = {"subjects": 1, "tasks": ("tp106",), "duration_s": 3.0}
-BOOTSTRAP, BLOCK_FRAMES, BOOTSTRAP_SEED = 300, 25, 12345
+BOOTSTRAP, BOOTSTRAP_SEED = 400, 12345
 TRUST_PIVOT_MM = 5.0  # a pivot is "trustworthy" when its median error is below this
 MISTRACK_MM = (4.0, 10.0)  # jump size of an injected jaw-pellet mistrack
 
@@ -109,15 +119,17 @@ def _with_mistracks(track, truth, rng):
     return PelletTrack(times=track.times, positions=positions, valid=track.valid)
 
 
-def frame_errors(track, truth, anatomy, method):
-    """Per-frame errors of one method on one recording: dict of (n_used,) arrays."""
+def frame_errors(track, truth, anatomy, method):  # method: an alias or a method object
+    """Per-frame errors of one method on one recording: dict of (n,) arrays, NaN in the
+    frames the method did not use (so methods are compared on the same frames)."""
     from cassi_fit.jaw_fit import fit_jaw
 
     jaw = track.positions[:, 6:8, :]
     valid = track.valid[:, 6:8].all(axis=(1, 2))
     f0 = int(np.argmax(valid))
+    options = {"solver": "optimistix-lm"} if isinstance(method, str) else {}
     fit = fit_jaw(jaw[f0], np.where(valid[:, None, None], jaw, 0.0), method=method,
-                  solver="optimistix-lm", valid=valid)  # fmt: skip
+                  valid=valid, **options)
     theta, t, pivot, defined = true_motion(truth, f0)
     use = valid & (fit.status <= 1) & (np.arange(len(valid)) > f0)
     out = {"theta_deg": np.rad2deg(np.abs(theta)),
@@ -128,76 +140,220 @@ def frame_errors(track, truth, anatomy, method):
         at_f0 = _rotate(truth.theta[f0 : f0 + 1], rest)[0] + truth.translation[f0]
         err = (_rotate(fit.theta, at_f0) + fit.translation) - (_rotate(theta, at_f0) + t)
         out[f"{name}_err_mm"] = np.linalg.norm(err, axis=1)
-    return {k: v[use] for k, v in out.items()}
+    return {k: v if k == "theta_deg" else np.where(use, v, np.nan) for k, v in out.items()}
 
 
-def _recordings(small: bool):
-    """Yield ``(family, noise name, track, truth, anatomy)`` for every recording."""
+def recording_seed(*names: str) -> tuple[int, int]:
+    """A seed of its own for every recording, from its full names (e.g. family, subject,
+    task): no two recordings share their noise or their task's random draws."""
+    import zlib
+
+    return BASE_SEED, zlib.crc32("|".join(names).encode())
+
+
+def _recordings(small: bool, *, prefix: str = "X", tasks=None, noises=None, families=None):
+    """Yield ``(family, noise name, recording id, track, truth, anatomy)`` for every
+    recording. A subject's geometry is the same in every family (paired families); its
+    motion and noise are drawn from the recording's own seed, shared by the noise levels
+    of one recording (paired noise levels). ``prefix`` names the subjects (``X01`` ... for
+    the comparison, ``H01`` ... for the held-out tuning set: other seeds, other people)."""
     from cassi_fit import synth
 
-    n_subjects = SMALL["subjects"] if small else len(SUBJECT_SEEDS)
-    tasks = SMALL["tasks"] if small else TASKS
+    n_subjects = SMALL["subjects"] if small else N_SUBJECTS
+    tasks = tasks or (SMALL["tasks"] if small else TASKS)
     duration = SMALL["duration_s"] if small else DURATION_S
-    for family in synth.JAW_KINEMATICS:
-        for s, subject_seed in enumerate(SUBJECT_SEEDS[:n_subjects]):
-            rng = np.random.default_rng(subject_seed)  # same geometry for every family
-            anatomy = synth.make_subject(f"X{s + 1:02d}", rng, jaw_kinematics=family)
+    for family in families or synth.JAW_KINEMATICS:
+        for s in range(n_subjects):
+            subject = f"{prefix}{s + 1:02d}"
+            rng = np.random.default_rng(recording_seed(subject))
+            anatomy = synth.make_subject(subject, rng, jaw_kinematics=family)
             for task in tasks:
-                for k, (noise, (kind, sd, mistracks)) in enumerate(NOISE_FAMILIES.items()):
+                seed = recording_seed(family, subject, task)
+                for noise, (kind, sd, mistracks) in NOISE_FAMILIES.items():
+                    if noises is not None and noise not in noises:
+                        continue
                     track, truth = synth.synth_recording(
-                        anatomy, task, seed=(subject_seed, len(task), 7), noise_mm=sd,
-                        duration_s=duration, dropouts=False, mistracks=False,
-                        noise_family=kind)  # fmt: skip
+                        anatomy, task, seed=seed, noise_mm=sd, duration_s=duration,
+                        dropouts=False, mistracks=False, noise_family=kind)
                     if mistracks:
-                        rng_m = np.random.default_rng((subject_seed, len(task), 8, k))
+                        rng_m = np.random.default_rng((*seed, 8))
                         track = _with_mistracks(track, truth, rng_m)
-                    yield family, noise, track, truth, anatomy
+                    yield family, noise, f"{subject}/{task}", track, truth, anatomy
 
 
 # ------------------------------------------------------------------------------ tables
-def block_bootstrap_ci(values, rng, q=50, n_boot=BOOTSTRAP, block=BLOCK_FRAMES):
-    """95 % interval of the ``q``-th percentile of ``values`` (in frame order) by a
-    moving-block bootstrap: ``n_boot`` resamples made of random runs of ``block``
-    consecutive values (neighbouring frames share noise drift and fit errors)."""
-    n = values.shape[0]
-    if n == 0:
+SMOOTHNESS_GRID = (0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0)
+KNOT_SPACING_GRID = (4, 8, 16, 32)  # frames
+TUNING_NOISES = ("white-0.25", "xrmb")
+
+
+def tune_smooth_pivot(small: bool):
+    """Choose smooth-pivot's ``smoothness`` and ``knot_spacing`` on held-out recordings.
+
+    The held-out set: subjects ``H01`` ... (``N_SUBJECTS`` of them, not in the comparison),
+    every truth family, both tasks, noises ``TUNING_NOISES``. Each pair of the grid
+    ``SMOOTHNESS_GRID`` x ``KNOT_SPACING_GRID`` is scored by the median chin point error
+    over all their frames; the lowest wins. Returns ``(rows, (smoothness, knot_spacing))``.
+    With ``small`` nothing is tuned: the library's defaults, and no rows.
+    """
+    from cassi_fit.jaw_fit import DEFAULT_KNOT_SPACING, jaw_method
+
+    if small:
+        return [], (1.0, DEFAULT_KNOT_SPACING)
+    recordings = list(_recordings(False, prefix="H", noises=TUNING_NOISES))
+    rows = []
+    for spacing in KNOT_SPACING_GRID:
+        for smoothness in SMOOTHNESS_GRID:
+            method = jaw_method("smooth-pivot", solver="optimistix-lm",
+                                smoothness=smoothness, knot_spacing=spacing)
+            chin, pivot = [], []
+            for *_, track, truth, anatomy in recordings:
+                errs = frame_errors(track, truth, anatomy, method)
+                chin.append(errs["chin_err_mm"])
+                pivot.append(errs["pivot_err_mm"])
+            chin, pivot = np.concatenate(chin), np.concatenate(pivot)
+            rows.append({"smoothness": smoothness, "knot_spacing": spacing,
+                         "recordings": len(recordings),
+                         "median_chin_err_mm": float(np.nanmedian(chin)),
+                         "median_pivot_err_mm": float(np.nanmedian(pivot))})
+    best = min(rows, key=lambda r: r["median_chin_err_mm"])
+    return rows, (best["smoothness"], best["knot_spacing"])
+
+
+def tuned_methods(choice):
+    """name -> method object: smooth-pivot with the tuned ``(smoothness, knot_spacing)``."""
+    from cassi_fit.jaw_fit import jaw_method
+
+    smoothness, spacing = choice
+    methods = default_methods()
+    methods["smooth-pivot"] = jaw_method("smooth-pivot", solver="optimistix-lm",
+                                         smoothness=smoothness, knot_spacing=spacing)
+    return methods
+
+
+def default_methods():
+    """name -> method object, every alias with the library's defaults."""
+    from cassi_fit.jaw_fit import jaw_method
+
+    return {m: jaw_method(m, solver="optimistix-lm") for m in _methods()}
+
+
+def _regimes(small: bool, methods=None):
+    """``{(family, noise, bin lo): {method: [per-recording dict of (n_bin,) arrays]}}``,
+    every method's arrays on the same frames of the same recordings."""
+    methods = methods or default_methods()
+    regimes: dict = {}
+    for family, noise, _rec, track, truth, anatomy in _recordings(small):
+        errs = {m: frame_errors(track, truth, anatomy, obj) for m, obj in methods.items()}
+        theta = errs["closed-form"]["theta_deg"]  # the truth's, the same for every method
+        for lo, hi in zip(THETA_BINS_DEG[:-1], THETA_BINS_DEG[1:], strict=True):
+            sel = (theta >= lo) & (theta < hi)
+            if not sel.any():
+                continue
+            cell = regimes.setdefault((family, noise, lo), {})
+            for m, e in errs.items():
+                cell.setdefault(m, []).append({k: v[sel] for k, v in e.items()})
+    return regimes
+
+
+def _stack(recs, metric, mask=None):
+    """``(values, recording index)`` of ``metric`` pooled over the recordings ``recs``
+    (finite values, and where ``mask`` (a list like ``recs``) is True)."""
+    values, owner = [], []
+    for i, r in enumerate(recs):
+        keep = np.isfinite(r[metric]) if mask is None else mask[i]
+        values.append(r[metric][keep])
+        owner.append(np.full(int(keep.sum()), i))
+    return np.concatenate(values), np.concatenate(owner)
+
+
+def weighted_percentile(values, owner, counts, q):
+    """The ``q``-th percentile (inverted CDF, as numpy's ``method="inverted_cdf"``) of the
+    pooled ``values`` with each value weighted by ``counts[:, owner]``: one statistic per
+    row of ``counts`` ``(B, n_recordings)`` (a bootstrap resample of the recordings is a
+    count per recording). ``(B,)``; NaN where a resample holds no value."""
+    order = np.argsort(values, kind="stable")
+    v, w = values[order], counts[:, owner[order]].astype(float)  # (N,), (B, N)
+    cum = np.cumsum(w, axis=1)
+    total = cum[:, -1:] if cum.shape[1] else np.zeros((counts.shape[0], 1))
+    target = q / 100.0 * total
+    index = np.minimum((cum < target).sum(axis=1), max(v.shape[0] - 1, 0))
+    out = v[index] if v.size else np.full(counts.shape[0], np.nan)
+    return np.where(total[:, 0] > 0, out, np.nan)
+
+
+def _resamples(n, rng):
+    """``(BOOTSTRAP, n)`` counts: how often each of ``n`` recordings is drawn."""
+    draws = rng.integers(0, n, size=(BOOTSTRAP, n))
+    return np.stack([np.bincount(d, minlength=n) for d in draws])
+
+
+def _interval(stats):
+    stats = stats[np.isfinite(stats)]
+    if not stats.size:
         return float("nan"), float("nan")
-    block = min(block, n)
-    n_blocks = -(-n // block)
-    starts = rng.integers(0, n - block + 1, size=(n_boot, n_blocks))
-    index = (starts[:, :, None] + np.arange(block)).reshape(n_boot, -1)[:, :n]
-    stats = np.percentile(values[index], q, axis=1)
     lo, hi = np.percentile(stats, [2.5, 97.5])
     return float(lo), float(hi)
 
 
-def synthetic_table(small: bool):
-    """Rows (dicts), one per method x family x noise x |theta| bin, with each of
-    ``STATISTICS`` (key) and its 95 % interval (key + ``_lo``, ``_hi``)."""
-    pooled = {}
-    for family, noise, track, truth, anatomy in _recordings(small):
-        for method in _methods():
-            errs = frame_errors(track, truth, anatomy, method)
-            cell = pooled.setdefault((method, family, noise), {})
-            for k, v in errs.items():
-                cell.setdefault(k, []).append(v)
+def synthetic_table(small: bool, methods=None):
+    """``(rows, verdicts)``. Rows (dicts), one per method x family x noise x |theta| bin,
+    with each of ``STATISTICS`` (key), its 95 % interval (key + ``_lo``, ``_hi``: a
+    bootstrap over recordings, the independent units; frames of one recording share its
+    noise and motion) and the recordings behind it. Verdicts:
+    ``{(family, noise, bin lo, key): (text, clear winner or None)}`` (:func:`verdict`).
+    ``methods``: name -> method object (default: the aliases with library defaults)."""
     rng = np.random.default_rng(BOOTSTRAP_SEED)
-    rows = []
-    for (method, family, noise), errs in pooled.items():
-        errs = {k: np.concatenate(v) for k, v in errs.items()}
-        for lo, hi in zip(THETA_BINS_DEG[:-1], THETA_BINS_DEG[1:], strict=True):
-            sel = (errs["theta_deg"] >= lo) & (errs["theta_deg"] < hi)
-            if not sel.any():
-                continue
+    rows, verdicts = [], {}
+    for (family, noise, lo), by_method in _regimes(small, methods).items():
+        hi = THETA_BINS_DEG[THETA_BINS_DEG.index(lo) + 1]
+        n = len(next(iter(by_method.values())))
+        counts = _resamples(n, rng)
+        for method, recs in by_method.items():
             row = {"method": method, "family": family, "noise": noise, "theta_lo_deg": lo,
-                   "theta_hi_deg": hi, "frames": int(sel.sum())}  # fmt: skip
+                   "theta_hi_deg": hi, "recordings": n,
+                   "frames": int(sum(np.isfinite(r["chin_err_mm"]).sum() for r in recs))}
             for key, (metric, q, _) in STATISTICS.items():
-                v = errs[metric][sel]
-                v = v[np.isfinite(v)]  # pivot undefined (theta = 0) in truth or estimate
-                row[key] = float(np.percentile(v, q)) if v.size else float("nan")
-                row[f"{key}_lo"], row[f"{key}_hi"] = block_bootstrap_ci(v, rng, q)
+                values, owner = _stack(recs, metric)
+                row[key] = (float(np.percentile(values, q, method="inverted_cdf"))
+                            if values.size else float("nan"))
+                row[f"{key}_lo"], row[f"{key}_hi"] = _interval(
+                    weighted_percentile(values, owner, counts, q))
             rows.append(row)
-    return rows
+        for key in WINNER_STATISTICS:
+            metric, q, _ = STATISTICS[key]
+            verdicts[(family, noise, lo, key)] = verdict(by_method, metric, q, counts)
+    return rows, verdicts
+
+
+def verdict(by_method, metric, q, counts):
+    """``(text, winner)`` of one regime. The method with the lowest statistic wins only if,
+    paired with every other method on the same frames, the 95 % interval of the difference
+    of their statistics over the bootstrap resamples ``counts`` (recordings) lies below 0;
+    otherwise the cell reads ``tie: A, B ...`` (the best and every method it does not
+    beat) and the winner is None."""
+    stats = {}
+    for m, recs in by_method.items():
+        values, _ = _stack(recs, metric)
+        if values.size:
+            stats[m] = float(np.percentile(values, q, method="inverted_cdf"))
+    if not stats:
+        return "-", None
+    ranked = sorted(stats, key=stats.get)
+    best = ranked[0]
+    tied = []
+    for m in ranked[1:]:
+        a, b = by_method[best], by_method[m]
+        both = [np.isfinite(x[metric]) & np.isfinite(y[metric]) for x, y in zip(a, b,
+                                                                               strict=True)]
+        va, oa = _stack(a, metric, both)
+        vb, ob = _stack(b, metric, both)
+        diff = weighted_percentile(va, oa, counts, q) - weighted_percentile(vb, ob, counts, q)
+        if not _interval(diff)[1] < 0:
+            tied.append(m)
+    if tied:
+        return "tie: " + ", ".join([best, *tied]), None
+    return best, best
 
 
 def trust_threshold(rows, method="closed-form", noise="white-0.25", family="physiological"):
@@ -213,51 +369,30 @@ def trust_threshold(rows, method="closed-form", noise="white-0.25", family="phys
     return threshold
 
 
-def winner(cells, key):
-    """The method with the lowest statistic ``key`` in ``cells`` (rows of one regime), and
-    whether it is clear (its interval lies below every other method's) or a near tie (the
-    runner-up's interval overlaps): ``(text, method)``."""
-    cells = [r for r in cells if np.isfinite(r[key])]
-    if not cells:
-        return "-", None
-    ranked = sorted(cells, key=lambda r: r[key])
-    best = ranked[0]
-    ties = [r["method"] for r in ranked[1:] if r[f"{key}_lo"] <= best[f"{key}_hi"]]
-    text = best["method"] if not ties else f"{best['method']} ~ {ties[0]}"
-    return text, best["method"]
-
-
 def _bin_label(lo, hi):
     return f"{lo:g}-{hi:g}" if hi < 90 else f">={lo:g}"
 
 
-def winners_markdown(rows, metric):
-    """Family x noise rows, |theta| bins as columns, each cell the winning method."""
+def winners_markdown(rows, verdicts, metric):
+    """Family x noise rows, |theta| bins as columns, each cell the clear winner or a tie."""
     bins = list(zip(THETA_BINS_DEG[:-1], THETA_BINS_DEG[1:], strict=True))
     lines = ["| truth | noise | " + " | ".join(f"{_bin_label(*b)} deg" for b in bins) + " |",
              "|---|---|" + "---|" * len(bins)]  # fmt: skip
-    families = list(dict.fromkeys(r["family"] for r in rows))
-    for family in families:
+    for family in dict.fromkeys(r["family"] for r in rows):
         for noise in NOISE_FAMILIES:
-            cells = []
-            for lo, _ in bins:
-                regime = [r for r in rows if r["family"] == family and r["noise"] == noise
-                          and r["theta_lo_deg"] == lo]  # fmt: skip
-                cells.append(winner(regime, metric)[0])
+            cells = [verdicts.get((family, noise, lo, metric), ("-", None))[0]
+                     for lo, _ in bins]
             if any(c != "-" for c in cells):
                 lines.append(f"| {family} | {noise} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
-def wins_count(rows, metric):
-    """``{method: number of regimes it wins}`` for ``metric`` (clear or not)."""
-    counts = {m: 0 for m in _methods()}
-    keys = {(r["family"], r["noise"], r["theta_lo_deg"]) for r in rows}
-    for key in sorted(keys):
-        regime = [r for r in rows if (r["family"], r["noise"], r["theta_lo_deg"]) == key]
-        best = winner(regime, metric)[1]
-        if best is not None:
-            counts[best] += 1
+def wins_count(verdicts, metric):
+    """``{method: regimes it wins clearly, "tie": regimes with no clear winner}``."""
+    counts = {m: 0 for m in _methods()} | {"tie": 0}
+    for (_f, _n, _lo, key), (text, best) in sorted(verdicts.items()):
+        if key == metric and text != "-":
+            counts[best if best is not None else "tie"] += 1
     return counts
 
 
@@ -285,24 +420,54 @@ def full_markdown(rows, metric):
     return "\n".join(lines)
 
 
-def markdown(rows, command: str) -> str:
+def tuning_markdown(tuning, choice) -> str:
+    """The held-out tuning table (empty text without one)."""
+    if not tuning:
+        return ""
+    from cassi_fit.tables import markdown_text
+
+    return markdown_text(tuning, ["smoothness", "knot_spacing", "recordings",
+                                  "median_chin_err_mm", "median_pivot_err_mm"],
+                         digits={"smoothness": 2, "median_chin_err_mm": 3,
+                                 "median_pivot_err_mm": 2})
+
+
+def markdown(rows, verdicts, command: str, tuning=(), choice=(1.0, 16)) -> str:
     """The whole Markdown report; its first line names the command that wrote it."""
     parts = [
         f"<!-- written by `{command}`; do not edit: `make experiments` rewrites it -->",
         "# Jaw methods per regime (synthetic truth)",
         "",
         "Written by `experiments/jaw_comparison.py` (see its docstring and docs/JAW.md). "
-        "Frames binned by the true |theta| from the reference frame. A cell names the "
-        "method with the lowest error; `A ~ B`: B's 95 % interval overlaps A's (no clear "
-        "winner). Intervals: moving-block bootstrap over frames; a fixed pivot is one value "
-        "per recording, so its intervals are coarse. Truth and noise families: "
-        "docs/SYNTHETIC.md.",
+        f"Per cell (truth x noise): {N_SUBJECTS} subjects x {len(TASKS)} tasks = "
+        f"{N_SUBJECTS * len(TASKS)} recordings of {DURATION_S:g} s, each with its own seed "
+        "(from its family, subject and task); every method on the same frames. Frames "
+        "binned by the true |theta| from the reference frame. A cell names a method only "
+        "when it beats every other one: the paired 95 % interval of the difference of the "
+        f"two methods' statistic ({BOOTSTRAP} bootstrap resamples of the recordings, the "
+        "independent units) lies below 0; otherwise it reads `tie:` and lists the best "
+        "method and every method it does not beat. Intervals in the full tables: the same "
+        "bootstrap over recordings. Smooth-pivot runs with smoothness "
+        f"{choice[0]:g} and a knot every {choice[1]} frames, "
+        + ("chosen on held-out recordings (below)" if tuning else
+           "the library's defaults (not tuned in this run)")
+        + ". Truth and noise families: docs/SYNTHETIC.md.",
         "",
     ]
+    parts += ["## Smooth-pivot settings chosen on held-out recordings", ""]
+    if tuning:
+        parts += [f"Subjects H01-H{N_SUBJECTS:02d} (not in the comparison), every truth "
+                  f"family, both tasks, noise {' and '.join(TUNING_NOISES)}: "
+                  f"{tuning[0]['recordings']} recordings. Median chin point error over "
+                  "their frames; the lowest is used below.", "",
+                  tuning_markdown(tuning, choice), ""]
+    else:
+        parts += ["Not tuned in this run (`--small`): the library's defaults.", ""]
     for key in WINNER_STATISTICS:
-        counts = ", ".join(f"{m} {c}" for m, c in wins_count(rows, key).items())
-        parts += [f"## Winner by {STATISTICS[key][2]}", "", f"Regimes won: {counts}.", "",
-                  winners_markdown(rows, key), ""]  # fmt: skip
+        counts = ", ".join(f"{m} {c}" for m, c in wins_count(verdicts, key).items())
+        parts += [f"## Winner by {STATISTICS[key][2]}", "",
+                  f"Regimes won clearly, and ties: {counts}.", "",
+                  winners_markdown(rows, verdicts, key), ""]
     for key, (_, _, title) in STATISTICS.items():
         parts += [f"## {title} [95 % interval]", "", full_markdown(rows, key), ""]
     return "\n".join(parts)
@@ -314,16 +479,6 @@ def section(text: str, title: str) -> str:
     start = text.index(f"## {title}\n") + len(f"## {title}\n")
     end = text.find("\n## ", start)
     return text[start : end if end >= 0 else len(text)].strip("\n") + "\n"
-
-
-def _csv(rows) -> str:
-    keys = list(rows[0])
-    buf = io.StringIO()
-    buf.write(",".join(keys) + "\n")
-    for r in rows:
-        buf.write(",".join(f"{r[k]:.6g}" if isinstance(r[k], float) else str(r[k])
-                           for k in keys) + "\n")  # fmt: skip
-    return buf.getvalue()
 
 
 # ----------------------------------------------------------------------------- figures
@@ -421,7 +576,9 @@ def dataset_report(root, out, overwrite, limit):
     ax.legend(fontsize=6)
     atomic_write(out / "dataset_pivots.png", _png(fig), overwrite=overwrite)
     if rows:
-        atomic_write(out / "dataset_methods.csv", _csv(rows), overwrite=overwrite)
+        from cassi_fit.tables import csv_text
+
+        atomic_write(out / "dataset_methods.csv", csv_text(rows), overwrite=overwrite)
     return rows
 
 
@@ -431,13 +588,13 @@ def _command(argv) -> str:
     return " ".join(["python experiments/jaw_comparison.py", *argv])
 
 
-def _summary(rows) -> None:
+def _summary(rows, verdicts) -> None:
     threshold = trust_threshold(rows)
     print(f"closed-form pivot trustworthy (median error < {TRUST_PIVOT_MM} mm, physiological "
           f"truth, white 0.25 mm) from |theta| >= {threshold} deg" if threshold is not None
           else "closed-form pivot never trustworthy at white 0.25 mm noise in this run")
     for key in WINNER_STATISTICS:
-        counts = ", ".join(f"{m} {c}" for m, c in wins_count(rows, key).items())
+        counts = ", ".join(f"{m} {c}" for m, c in wins_count(verdicts, key).items())
         print(f"regimes won by {STATISTICS[key][2]}: {counts}")
 
 
@@ -469,15 +626,17 @@ def main(argv=None) -> int:
     # Errors of a few hundredths of a mm are compared here: float32 would blur them.
     jax.config.update("jax_enable_x64", True)
     from cassi_fit._io import atomic_write
+    from cassi_fit.tables import csv_text
 
-    rows = synthetic_table(args.small)
-    text = markdown(rows, _command(argv))
-    atomic_write(out / "jaw_comparison.csv", _csv(rows), overwrite=args.force)
+    tuning, choice = tune_smooth_pivot(args.small)
+    rows, verdicts = synthetic_table(args.small, tuned_methods(choice))
+    text = markdown(rows, verdicts, _command(argv), tuning, choice)
+    atomic_write(out / "jaw_comparison.csv", csv_text(rows), overwrite=args.force)
     atomic_write(out / "jaw_comparison.md", text, overwrite=args.force)
     if args.docs:
         atomic_write(Path(args.docs) / "jaw_comparison.md", text, overwrite=args.force)
     _figures(rows, out, overwrite=args.force)
-    _summary(rows)
+    _summary(rows, verdicts)
     if args.dataset:
         dataset_report(args.dataset, out, args.force, args.limit)
     return 0

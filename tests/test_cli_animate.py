@@ -275,7 +275,7 @@ def test_demo_writes_everything_and_reruns(corpus, tmp_path, capsys, monkeypatch
 @pytest.mark.parametrize(
     "argv, fragment",
     [
-        (["animate", "/no/such/file.txy"], "no such pellet file"),
+        (["animate", "/no/such/file.txy"], "no such recording file"),
         (["animate", "{txy}", "--size", "big"], "--size"),
         (["animate", "{txy}", "--views", "front,back"], "back"),
         (["animate", "{txy}", "--out", "x.avi"], ".avi"),

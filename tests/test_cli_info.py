@@ -73,4 +73,4 @@ def test_info_errors_are_one_line(dataset, capsys):
     empty = dataset / "empty"
     empty.mkdir()
     assert main(["info", str(empty)]) == 2
-    assert "no pellet files" in capsys.readouterr().err
+    assert "found no recordings: looked for pellet files" in capsys.readouterr().err

@@ -22,7 +22,7 @@ from cassi_fit.corpus import (
     worker_model,
 )
 from cassi_fit.errors import OutputExistsError
-from cassi_fit.jaw_corpus import jaw_corpus, jaw_corpus_path, jaw_output_path, segments_output_path
+from cassi_fit.jaw_table import jaw_corpus, jaw_corpus_path, jaw_output_path, segments_output_path
 from cassi_fit.labels import Labels, write_lab
 from cassi_fit.status import Status
 from cassi_fit.synth import generate_corpus
@@ -101,8 +101,8 @@ def test_jaw_csv_per_recording_with_labels(serial, corpus):
 
 
 def test_padding_to_a_frame_bucket_leaves_the_fit_unchanged(corpus):
-    from cassi_fit.jaw_corpus import JAW_FRAME_BUCKET, fit_jaw_bucketed
     from cassi_fit.jaw_fit import jaw_from_track
+    from cassi_fit.jaw_table import JAW_FRAME_BUCKET, fit_jaw_bucketed
     from cassi_fit.txy import read_txy
 
     track = read_txy(dataset_items(corpus)[0].path)

@@ -104,7 +104,7 @@ def test_errors(folder_layout, tmp_path):
         ds.tasks("JW99")
     with pytest.raises(MissingDataError, match="no task"):
         ds.load("S01", "tp999")
-    with pytest.raises(MissingDataError, match="not a folder"):
+    with pytest.raises(MissingDataError, match="no such dataset folder"):
         Dataset(tmp_path / "nowhere")
     with pytest.raises(MissingDataError):
         load_recording(tmp_path / "nowhere.txy")
@@ -116,3 +116,104 @@ def test_errors(folder_layout, tmp_path):
 def test_empty_root(tmp_path):
     ds = Dataset(tmp_path)
     assert ds.subjects() == [] and len(ds) == 0
+
+
+# ----------------------------------------------------- special files, nothing found (issue 24)
+@pytest.mark.filterwarnings("ignore::cassi_fit.dataset.DefaultHeadMeasuresWarning")
+def test_special_files_are_skipped_with_a_warning_and_never_opened(folder_layout):
+    """A FIFO named like a pellet file, a palate or a Headmeasures file, a socket and a
+    broken link: discovery names them in one SpecialFileWarning per folder and never
+    opens them (opening a FIFO for reading would block for ever); loading one is a
+    DataFormatError naming it."""
+    from special_files import FifoGuard, make_fifo, make_socket
+
+    from cassi_fit.dataset import SpecialFileWarning
+
+    s01 = folder_layout / "S01"
+    fifos = [make_fifo(s01 / "TP999.TXY"), make_fifo(folder_layout / "jw11" / "PAL.DAT"),
+             make_fifo(folder_layout / "jw11" / "tp106.wav")]
+    make_socket(s01 / "tp998.txy")
+    (s01 / "tp997.txy").symlink_to(s01 / "absent.txy")
+    with FifoGuard(*fifos) as guard, pytest.warns(SpecialFileWarning) as caught:
+        ds = Dataset(folder_layout)
+        assert ds.tasks("S01") == ["tp005", "tp020", "tp020_2"]
+        with pytest.raises(MissingDataError, match=r"TP999\.TXY is a named pipe \(FIFO\), "
+                           "skipped"):
+            ds.load("S01", "tp999")
+        rec = ds.load("jw11", "tp106")  # its palate and sound are FIFOs: absent, not read
+        assert rec.palate is None and rec.audio is None
+        for path in (fifos[0], s01 / "tp998.txy", s01 / "tp997.txy"):
+            with pytest.raises(DataFormatError, match="not a regular file but a (named pipe|socket|broken link)") as info:
+                load_recording(path)
+            assert info.value.path == str(path)
+    assert guard.opened == []
+    messages = [str(w.message) for w in caught if w.category is SpecialFileWarning]
+    assert len(messages) == 2 and all("\n" not in m for m in messages)
+    s01_message = next(m for m in messages if m.startswith(f"{s01}:"))
+    assert "skipped 3 special file(s), never opened" in s01_message
+    for what in ("TP999.TXY (a named pipe (FIFO))", "tp998.txy (a socket)",
+                 "tp997.txy (a broken link)"):
+        assert what in s01_message
+    assert sorted(p.name for p, _ in ds.skipped) == ["PAL.DAT", "TP999.TXY", "tp106.wav",
+                                                     "tp997.txy", "tp998.txy"]
+
+
+@pytest.mark.filterwarnings("ignore::cassi_fit.dataset.DefaultHeadMeasuresWarning")
+def test_load_recording_warns_of_special_files_beside_it(tmp_path):
+    from special_files import FifoGuard, make_fifo
+
+    from cassi_fit.dataset import SpecialFileWarning
+
+    pellets = _copy("sample.txy", tmp_path / "S01" / "tp005.txy")
+    fifo = make_fifo(tmp_path / "S01" / "PHA.DAT")
+    with FifoGuard(fifo) as guard, pytest.warns(SpecialFileWarning, match=r"PHA\.DAT \(a "
+                                                "named pipe"):
+        assert load_recording(pellets).pharynx is None
+    assert guard.opened == []
+
+
+def test_a_root_that_is_no_folder_is_one_line(tmp_path):
+    from special_files import make_fifo
+
+    (tmp_path / "tp005.txy").write_text("0" + "\t1000000" * 16 + "\n")
+    for path, why in ((tmp_path / "tp005.txy", "is a file, not a dataset folder"),
+                      (make_fifo(tmp_path / "pipe"), r"is a named pipe \(FIFO\), not a "
+                       "dataset folder"),
+                      (tmp_path / "absent", "no such dataset folder")):
+        with pytest.raises(MissingDataError, match=f"^{path}: {why}") as info:
+            Dataset(path)
+        assert "\n" not in str(info.value)
+
+
+def test_check_selection_names_the_folder_and_what_was_looked_for(folder_layout, tmp_path):
+
+    empty = Dataset(tmp_path)
+    with pytest.raises(MissingDataError, match=f"^{tmp_path}: found no recordings: looked "
+                       r"for pellet files \(\.txy\) or articulograph recordings"):
+        empty.check_selection()
+    with pytest.raises(MissingDataError, match=f"^{tmp_path}: no subject 'S01' "
+                       r"\(subjects: none\); found no recordings"):
+        empty.tasks("S01")
+    ds = Dataset(folder_layout)
+    ds.check_selection()
+    ds.check_selection(["s01"], ["TP005", "tp020"])
+    ds.check_selection(None, ["tp106"])  # one subject has it
+    cases = [
+        (["S09"], None, r"no subject 'S09' \(subjects: JW11, S01\)"),
+        ([], None, "no subject chosen"),
+        (None, ["tp999"], r"no task tp999 for any subject \(tasks: tp005, tp020, tp020_2, "
+         r"tp106\)"),
+        (["S01"], ["tp005", "tp106"], r"no task tp106 for subject\(s\) S01 \(tasks: tp005, "
+         r"tp020, tp020_2\)"),
+        (None, [], "no task chosen"),
+    ]
+    for subjects, tasks, match in cases:
+        with pytest.raises(MissingDataError, match=f"^{folder_layout}: {match}") as info:
+            ds.check_selection(subjects, tasks)
+        assert "\n" not in str(info.value)
+    from special_files import make_fifo
+
+    make_fifo(folder_layout / "S01" / "tp999.txy")
+    with pytest.warns(UserWarning), pytest.raises(MissingDataError,
+                                                  match=r"tp999\.txy is a named pipe"):
+        Dataset(folder_layout).check_selection(["S01"], ["tp999"])

@@ -1,5 +1,7 @@
 """Atomic writing: never a half-written file, never an overwritten input."""
 
+import re
+
 import pytest
 
 from cassi_fit import _io
@@ -172,3 +174,135 @@ def test_atomic_outputs_are_all_or_nothing(tmp_path):
             group.write(table, "again")
     assert table.read_text() == "a,b\n1,2\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["figure.png", "table.csv"]
+
+
+# ------------------------------------------------ special files and foreign data (issue 24)
+def _special_nodes(tmp_path):
+    """``(path, what special_kind says)`` of paths that exist but are no regular file: a
+    FIFO, a socket, a link to a character device (/dev/null: no root needed), a link to a
+    FIFO, a broken link, a link to itself."""
+    import os
+    import socket
+
+    os.mkfifo(tmp_path / "pipe.csv")
+    sock = socket.socket(socket.AF_UNIX)
+    sock.bind(str(tmp_path / "sock.csv"))
+    sock.close()
+    (tmp_path / "null.csv").symlink_to(os.devnull)
+    (tmp_path / "to_pipe.csv").symlink_to(tmp_path / "pipe.csv")
+    (tmp_path / "broken.csv").symlink_to(tmp_path / "absent")
+    (tmp_path / "loop.csv").symlink_to(tmp_path / "loop.csv")
+    return [(tmp_path / "pipe.csv", "a named pipe (FIFO)"), (tmp_path / "sock.csv", "a socket"),
+            (tmp_path / "null.csv", "a character device"),
+            (tmp_path / "to_pipe.csv", "a named pipe (FIFO)"),
+            (tmp_path / "broken.csv", "a broken link"), (tmp_path / "loop.csv", "a link that loops")]
+
+
+def _node(path):
+    import os
+
+    return os.lstat(path).st_mode, os.readlink(path) if os.path.islink(path) else None
+
+
+def test_special_files_are_never_replaced_even_with_force(tmp_path):
+    """`--force` onto a FIFO or a device replaced the node with a regular file (as root,
+    onto the disk's device node): every writer refuses any path that is not a regular
+    file, with one line naming it and what it is, and leaves the node as it was."""
+    for path, kind in _special_nodes(tmp_path):
+        assert _io.special_kind(path) == kind
+        before = _node(path)
+        for write in (lambda p: _io.atomic_write(p, "x", overwrite=True),
+                      lambda p: _io.atomic_write(p, "x"),
+                      lambda p: _io.atomic_output_path(p, overwrite=True),
+                      lambda p: _io.check_outputs([p], overwrite=True)):
+            with pytest.raises(OutputExistsError, match="not a regular file") as info:
+                write(path)
+            message = str(info.value)
+            assert message.startswith(f"{path}: is {kind}, not a regular file")
+            assert "\n" not in message
+        with pytest.raises(OutputExistsError, match="not a regular file"):
+            with _io.atomic_outputs(overwrite=True) as group:
+                group.write(path, "x")
+        assert _node(path) == before
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary left
+
+
+def test_special_kind_of_ordinary_paths(tmp_path):
+    (tmp_path / "file.csv").write_text("x")
+    (tmp_path / "link.csv").symlink_to(tmp_path / "file.csv")
+    assert [_io.special_kind(tmp_path / n) for n in ("file.csv", "link.csv", "absent")] == [
+        None, None, None]
+    assert _io.special_kind(tmp_path) is None  # a folder: check_output's own message
+    _io.atomic_write(tmp_path / "link.csv", "y", overwrite=True)  # a link to a file is fine
+
+
+def test_foreign_data_of_a_synthetic_corpus(tmp_path_factory, tmp_path):
+    """A corpus the synthetic writer wrote holds no foreign data; anything a user adds
+    to it (a real recording, labels, another subject's head measures, a README of their
+    own, a FIFO) is listed, and refuse_foreign_data names the folder and the first."""
+    import os
+    import shutil
+
+    import zoo
+
+    corpus = zoo.small_corpus(tmp_path_factory)
+    assert _io.foreign_data(corpus) == []
+    assert _io.foreign_data(tmp_path / "absent") == [] and _io.foreign_data(tmp_path) == []
+    _io.refuse_foreign_data(corpus)  # nothing to say
+    copy = tmp_path / "corpus"
+    shutil.copytree(corpus, copy)
+    headmeasures = (copy / "Headmeasures.txt").read_text()
+    added = {
+        "S01/TP999.TXY": (copy / "S01" / "TP106.TXY").read_text(),  # no truth sidecar
+        "S01/TP106.lab": "0 0.5 a\n",
+        "JW11/tp005.txy": "0" + "\t1000000" * 16 + "\n",
+        "JW11/PAL.DAT": " -4000 4433\n",
+        "jw11_pha.dat": " -90663 16444\n -90629 -24627\n",
+        "S02/tp040.truth.csv": "time_s\n0\n",  # a sidecar that is not the generator's
+    }
+    for rel, text in added.items():
+        (copy / rel).parent.mkdir(exist_ok=True)
+        (copy / rel).write_text(text)
+    os.mkfifo(copy / "S02" / "tp777.txy")
+    expected = {copy / rel for rel in added} | {copy / "S02" / "tp777.txy"}
+    # S02's tp040.txy and .wav lose their synthetic sidecar with it
+    expected |= {p for p in (copy / "S02").iterdir() if p.name.lower() in ("tp040.txy",
+                                                                             "tp040.wav")}
+    assert set(_io.foreign_data(copy)) == expected
+    (copy / "Headmeasures.txt").write_text(headmeasures + "JW11 " + " 1" * 10 + "\n")
+    (copy / "README.txt").write_text("JW11 from the XRMB database\n")
+    found = _io.foreign_data(copy)
+    assert {copy / "Headmeasures.txt", copy / "README.txt"} <= set(found)
+    with pytest.raises(OutputExistsError, match="did not write") as info:
+        _io.refuse_foreign_data(copy)
+    message = str(info.value)
+    assert message.startswith(f"{copy}: holds data cassi synth did not write ({found[0]} and")
+    assert "\n" not in message
+
+
+def test_the_real_recording_is_foreign_data():
+    from pathlib import Path
+
+    here = Path(__file__).resolve()
+    jw11 = next((p for p in (here.parents[2] / "shared/data/xrmb_jw11",
+                             here.parents[3] / "shared/data/xrmb_jw11") if p.is_dir()), None)
+    if jw11 is None:
+        pytest.skip("the real XRMB recording JW11 task 5 is not here (/work/shared/data/xrmb_jw11)")
+    names = {p.name for p in _io.foreign_data(jw11)}
+    assert {"jw11_tp005.txy", "jw11_pal.dat", "jw11_pha.dat", "jw11_tp005.wav",
+            "jw11_tp005.lab"} <= names
+
+
+def test_an_output_folder_that_is_not_a_folder(tmp_path):
+    (tmp_path / "file").write_text("x")
+    assert _io.check_output_folder(tmp_path) == tmp_path
+    assert _io.check_output_folder(tmp_path / "new" / "deeper") == tmp_path / "new" / "deeper"
+    for path, kind in _special_nodes(tmp_path):
+        with pytest.raises(CassiError, match=f"^{re.escape(str(path))}: is {re.escape(kind)}, not a "
+                           "folder") as info:
+            _io.check_output_folder(path)
+        assert "\n" not in str(info.value)
+    with pytest.raises(CassiError, match="is a file, not a folder"):
+        _io.check_output_folder(tmp_path / "file")
+    with pytest.raises(CassiError, match="a parent is a file"):
+        _io.check_output_folder(tmp_path / "file" / "out")

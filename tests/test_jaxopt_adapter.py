@@ -10,7 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cassi_fit import _jaxopt_adapter
+from cassi_fit.jaw_fit import _jaxopt_adapter
+from cassi_fit.status import SolverResult
 
 
 def rosenbrock(p, a):
@@ -24,16 +25,16 @@ def test_solves_and_vmaps_without_warnings(method):
         importlib.reload(_jaxopt_adapter)
         run = jax.vmap(lambda a: _jaxopt_adapter.least_squares(
             rosenbrock, jnp.array([-1.2, 1.0]), a, method=method))
-        params, converged = run(jnp.array([1.0, 2.0]))
+        params, result = run(jnp.array([1.0, 2.0]))
     np.testing.assert_allclose(params, [[1.0, 1.0], [2.0, 4.0]], atol=1e-7)
-    assert bool(np.all(converged))
+    assert np.all(result == SolverResult.SUCCESSFUL)
     assert not [w for w in caught if "jaxopt" in str(w.message).lower()
                 or "maintained" in str(w.message).lower()]
 
 
 def test_import_warning_never_reaches_users():
-    code = ("import jax.numpy as jnp\nfrom cassi_fit import _jaxopt_adapter as a\n"
-            "print(a.least_squares(lambda p, x: p - x, jnp.zeros(2), 1.0)[1])")
+    code = ("import jax.numpy as jnp\nfrom cassi_fit.jaw_fit import _jaxopt_adapter as a\n"
+            "print(int(a.least_squares(lambda p, x: p - x, jnp.zeros(2), 1.0)[1]) == 0)")
     out = subprocess.run([sys.executable, "-W", "error", "-c", code], capture_output=True,
                          text=True)
     assert out.returncode == 0, out.stderr
@@ -48,10 +49,14 @@ def test_unknown_method_is_refused():
 @pytest.mark.parametrize("solver", [_jaxopt_adapter.JaxoptLevenbergMarquardt(),
                                     _jaxopt_adapter.JaxoptGaussNewton()])
 def test_solver_objects_solve_and_respect_their_step_budget(solver):
+    from cassi_fit.jaw_fit import Solver
+
+    assert isinstance(solver, Solver)  # the one typed interface
     run = jax.vmap(lambda a: solver.run(rosenbrock, jnp.array([-1.2, 1.0]), a))
-    params, converged = run(jnp.array([1.0, 2.0]))
+    params, result = run(jnp.array([1.0, 2.0]))
     np.testing.assert_allclose(params, [[1.0, 1.0], [2.0, 4.0]], atol=1e-7)
-    assert bool(np.all(converged)) and solver.name.startswith("jaxopt-")
+    assert np.all(result == SolverResult.SUCCESSFUL) and solver.name.startswith("jaxopt-")
     stopped = type(solver)(max_steps=1)
-    params, converged = stopped.run(rosenbrock, jnp.array([-1.2, 1.0]), 1.0)
-    assert not bool(converged) and np.linalg.norm(np.asarray(params) - 1.0) > 1e-3
+    params, result = stopped.run(rosenbrock, jnp.array([-1.2, 1.0]), 1.0)
+    assert int(result) == SolverResult.MAX_STEPS_REACHED
+    assert np.linalg.norm(np.asarray(params) - 1.0) > 1e-3

@@ -8,7 +8,9 @@ import pytest
 
 from cassi_fit.errors import DataFormatError, MissingDataError
 from cassi_fit.labels import (
+    LabelMismatchWarning,
     Labels,
+    check_labels,
     label_path_for,
     labels_for,
     read_lab,
@@ -225,3 +227,71 @@ def test_video_captions_carry_the_current_label():
                         for k, (t, lab) in enumerate(zip(animation.times,
                                                          ("", "pa", "ta", "ta"), strict=True))]
     assert captions[1].endswith('"pa"') and '"' not in captions[0]
+
+
+# ------------------------------------------- labels against the recording (issue 24)
+JW11_LIKE = [(0.0, 0.752, "sil"), (0.752, 0.92, "s"), (0.92, 1.234, "a"), (1.234, 4.9, "s"),
+             (4.9, 5.019, "a")]  # as the real JW11 task 5's labels: the last ends 5.019 s
+
+
+@pytest.fixture
+def five_seconds(tmp_path):
+    """A 730-frame (5.01 s) pellet file, as JW11 task 5."""
+    import zoo
+
+    from cassi_fit.txy import PelletTrack, write_txy
+
+    track, _ = zoo.recording("tp069", clean=True)  # the paragraph: longer than 730 frames
+    k = slice(0, 730)
+    short = PelletTrack(track.times[k], track.positions[k], track.valid[k])
+    return write_txy(tmp_path / "tp005.txy", short)
+
+
+def _lab(folder, rows, fmt) -> Path:
+    path = folder / "tp005.lab"
+    path.write_text("".join(f"{fmt(a)} {fmt(b)} {lab}\n" for a, b, lab in rows))
+    return path
+
+
+@pytest.mark.parametrize("fmt, cause", [
+    (lambda s: str(round(s * 1000)), "milliseconds read as HTK"),  # integers >= 1000: htk
+    (lambda s: f"{s * 1000:.1f}", "milliseconds read as seconds"),
+    (lambda s: str(round(s * 16000)), "samples at 16000 Hz read as HTK"),
+    (lambda s: f"{s * 16000:.1f}", "samples at 16000 Hz read as seconds"),
+])
+def test_labels_in_the_wrong_unit_are_one_error_naming_the_cause(five_seconds, fmt, cause):
+    path = _lab(five_seconds.parent, JW11_LIKE, fmt)
+    with pytest.raises(DataFormatError, match=rf"{path.name}: 5 labels span .* the recording "
+                       rf"5\.012 s .*likely .*{cause}"):
+        labels_for(five_seconds)
+    with pytest.warns(LabelMismatchWarning, match=cause):
+        labels = labels_for(five_seconds, accept_mismatch=True)  # kept as they are
+    assert len(labels) == 5
+
+
+def test_labels_that_fit_pass_silently(five_seconds):
+    import warnings
+
+    _lab(five_seconds.parent, JW11_LIKE, lambda s: f"{s:g}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert len(labels_for(five_seconds)) == 5  # 5.019 s against 5.012 s: fits
+    check = check_labels(labels_for(five_seconds), 5.012)
+    assert check.status == "ok" and check.message is None
+
+
+def test_labels_past_the_end_warn_with_the_numbers(five_seconds):
+    rows = [*JW11_LIKE, (5.019, 6.0, "s"), (6.0, 7.5, "a")]
+    _lab(five_seconds.parent, rows, lambda s: f"{s:g}")
+    with pytest.warns(LabelMismatchWarning, match=r"7 labels span 0-7\.5 s, the recording "
+                      r"5\.012 s \(2 start after its end\)"):
+        labels = labels_for(five_seconds)
+    assert len(labels) == 7
+    with pytest.warns(LabelMismatchWarning):
+        check = check_labels(labels, 5.012)
+    assert (check.status, check.n_past_end) == ("past-end", 2)
+
+
+def test_a_partial_labelling_is_not_a_mismatch():
+    check = check_labels(Labels([1.0, 1.2], [1.2, 1.5], ("p", "a")), 5.0)
+    assert check.status == "ok"

@@ -59,3 +59,49 @@ def test_bad_kind_and_bad_points(tmp_path):
         write_outline(tmp_path / "a.dat", [[0.0, np.nan], [1.0, 2.0]])
     with pytest.raises(DataFormatError, match=r"\(n, 2\)"):
         write_outline(tmp_path / "a.dat", [1.0, 2.0])
+
+
+# ------------------------------------------------------------ degenerate outlines (issue 24)
+@pytest.mark.parametrize(
+    "kind, text, line, match",
+    [
+        ("pharynx", "  -73530   15572\r\n  -73530   15572\r\n", None,
+         r"all 2 points coincide at \(-73\.530, 15\.572\) mm: a degenerate pharyngeal wall"),
+        ("pharynx", "  -73530   15572\r\n  -73530   15000\r\n", 2,
+         "a degenerate pharyngeal wall: its first and last points are 0.6 mm apart in height"),
+        ("pharynx", "  -90000   10000\r\n  -60000   10000\r\n", 2, "0.0 mm apart in height"),
+        ("pharynx", "  -100000   15572\r\n  -60000  -10000\r\n", 2,
+         "runs 57 degrees off vertical"),
+        ("palate", "  -20000   10000\r\n" * 5, None,
+         r"all 5 points coincide at \(-20\.000, 10\.000\) mm: a degenerate palate outline"),
+    ],
+)
+def test_degenerate_outlines_name_the_file(tmp_path, kind, text, line, match):
+    """A PHA.DAT whose points coincide (or lie level) passed `cassi info` and then failed
+    in the wall's builder with a message naming no file: it is refused on reading."""
+    p = tmp_path / ("PHA.DAT" if kind == "pharynx" else "PAL.DAT")
+    p.write_text(text, newline="")
+    with pytest.raises(DataFormatError, match=match) as info:
+        read_outline(p, kind=kind)
+    assert info.value.path == str(p) and info.value.line == line
+    assert str(info.value).startswith(str(p)) and "\n" not in str(info.value)
+    read_outline(p, kind=kind, check=False)  # well formed: an expert may still read it
+
+
+def test_real_walls_pass_and_the_wall_is_behind_the_palate():
+    """The fixture and the synthetic subjects' walls pass; a wall in front of the palate's
+    back end (the wrong subject's file) is refused by outlines_problem."""
+    import zoo
+
+    from cassi_fit.outlines import outline_problem, outlines_problem
+
+    palate = read_outline(FIXTURES / "PAL.DAT")
+    pharynx = read_outline(FIXTURES / "PHA.DAT", kind="pharynx")
+    assert outlines_problem(palate, pharynx) is None
+    for i in range(8):
+        anatomy = zoo.subject(i)
+        assert outline_problem(anatomy.pharynx, "pharynx") is None
+        assert outlines_problem(anatomy.palate, anatomy.pharynx) is None
+    forward = np.array([[-40.0, 15.0], [-40.0, -28.0]])  # in range, but inside the mouth
+    assert outline_problem(forward, "pharynx") is None
+    assert "not behind the palate's back end (x -60.0 mm)" in outlines_problem(palate, forward)

@@ -19,7 +19,7 @@ from cassi_fit.pellets import (
     pellet_index,
 )
 from cassi_fit.quality import quality_report
-from cassi_fit.txy import PelletTrack, first_valid_frame, read_txy, write_txy
+from cassi_fit.txy import PelletTrack, read_txy, write_txy
 
 
 def _track(t4_never=True, t1_late=3):
@@ -51,8 +51,11 @@ def test_the_rule_on_fully_tracked_and_never_tracked_pellets():
     first = first_valid_line(lost, "x.txy")
     assert first.index == expected and "T4" not in first.tracked and len(first.tracked) == 7
     valid = lost.valid.copy()
-    valid[:, pellet_index("MNM")] = False
-    with pytest.raises(MissingDataError, match="x.txy: jaw pellet.*MNM"):
+    valid[:, pellet_index("MNM")] = False  # one jaw sensor, as most EMA corpora: enough
+    one = first_valid_line(PelletTrack(lost.times, lost.positions, valid), "x.txy")
+    assert one.index == expected and "MNM" not in one.tracked and "MNI" in one.tracked
+    valid[:, pellet_index("MNI")] = False
+    with pytest.raises(MissingDataError, match="x.txy: jaw pellets MNI, MNM never tracked"):
         first_valid_line(PelletTrack(lost.times, lost.positions, valid), "x.txy")
 
 
@@ -65,8 +68,8 @@ def test_info_quality_txy_and_animate_agree_when_t4_is_never_tracked(tmp_path, c
     track, expected = _track()
     path = write_txy(tmp_path / "S01_tp040.txy", track)
     track = read_txy(path)
-    assert first_valid_frame(track) == expected  # the default of txy: the rule
-    assert first_valid_frame(track, JAW_PELLETS) < expected  # a subset asks something else
+    assert first_valid_line(track).index == expected  # the default: every tracked pellet
+    assert first_valid_line(track, pellets=JAW_PELLETS).index < expected  # a subset
     assert quality_report(track).first_valid_frame == expected
     assert main(["info", str(path), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["quality"]["first_valid_frame"] == expected

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from cassi_fit.errors import DataFormatError, MissingDataError
 from cassi_fit.pellets import MistrackedFirstLineWarning, first_valid_line
 from cassi_fit.quality import quality_report
-from cassi_fit.txy import FRAME_STEP_US, PelletTrack, TimeGapWarning, first_valid_frame, read_txy
+from cassi_fit.txy import FRAME_STEP_US, PelletTrack, TimeGapWarning, read_txy
 
 pytestmark = pytest.mark.filterwarnings("ignore::cassi_fit.dataset.DefaultHeadMeasuresWarning")
 
@@ -44,9 +44,9 @@ def test_first_valid_line_skips_a_mistracked_first_line_and_says_so():
         first = first_valid_line(track, "f.txy")
     assert first.index == 1
     with pytest.warns(MistrackedFirstLineWarning):
-        assert first_valid_frame(track) == 1
+        assert first_valid_line(track).index == 1
     with pytest.warns(MistrackedFirstLineWarning):
-        assert first_valid_frame(track, ("MNI", "MNM")) == 1
+        assert first_valid_line(track, pellets=("MNI", "MNM")).index == 1
 
 
 def test_clean_first_line_is_unchanged_and_silent():

@@ -6,6 +6,7 @@ import warnings
 import numpy as np
 import pytest
 
+from cassi_fit.mistracks import Reason, mistrack_report
 from cassi_fit.quality import detect_mistracks, quality_report
 from cassi_fit.txy import FRAME_STEP_US, PELLET_NAMES, PelletTrack
 
@@ -61,8 +62,8 @@ def test_planted_errors_are_found_and_only_them():
     expected[400:402, 0] = True
     pos[700, 5] = [-300.0, 17.0]  # far out of range on T4
     expected[700, 5] = True
-    pos[900, 7] += [3.0, 0.0]  # MNM 3 mm off: jaw distance; flags both jaw pellets
-    expected[900, 6:] = True
+    pos[900, 7] += [3.0, 0.0]  # MNM 3 mm off for one frame: the acceleration test names it
+    expected[900, 7] = True
     valid = np.ones(pos.shape, bool)
     valid[1000:1010, 3] = False  # marked dropouts are not mistracks
     flags = detect_mistracks(_track(t, pos, valid))
@@ -71,11 +72,20 @@ def test_planted_errors_are_found_and_only_them():
 
 
 def test_jaw_threshold_floor_of_two_mm():
+    """A slow slide of MNM away from MNI (no jump: only the jaw distance sees it) is
+    flagged once it passes 2 mm, on both jaw pellets (the distance cannot say which)."""
     t, pos = _speech_like(seed=2, jaw_noise=0.02)  # tiny noise: 5 robust SD is far below 2 mm
-    pos[300, 7] += [1.5, 0.0]
+    slide = np.zeros(len(t))
+    slide[300:400] = np.linspace(0.0, 1.0, 100)
+    slide[400:450] = 1.0
+    pos[:, 7, 0] += 1.5 * slide  # up to 1.5 mm: within the floor
     assert not detect_mistracks(_track(t, pos))[:, 6:].any()
-    pos[300, 7] += [1.0, 0.0]
-    assert detect_mistracks(_track(t, pos))[300, 6:].all()
+    pos[:, 7, 0] += 1.5 * slide  # up to 3 mm
+    report = mistrack_report(_track(t, pos))
+    deviation = 3.0 * slide  # along x; the distance changes by about as much
+    assert report.flags[deviation > 2.4][:, 6:].all()
+    assert not report.flags[deviation < 1.6].any()
+    assert report.has(Reason.JAW_DISTANCE)[450 - 1, 6] and report.has(Reason.DRIFT)[420, 7]
 
 
 def test_report():

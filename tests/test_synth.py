@@ -210,6 +210,72 @@ def test_thrust_translates_independently_of_rotation():
     np.testing.assert_allclose(moved - anatomy.pellets_rest[6:], np.repeat(t[:, None], 2, 1))
 
 
+def _mni_per_degree(truth):
+    """(x, y) mm of true MNI displacement per degree of true opening (least squares)."""
+    deg = np.rad2deg(truth.theta)
+    mni = truth.pellets_true[:, 6] - truth.pellets_true[0, 6]
+    design = np.stack([deg, np.ones_like(deg)], axis=1)
+    return np.linalg.lstsq(design, mni, rcond=None)[0][0]
+
+
+@pytest.mark.parametrize("index", range(3))
+def test_speech_jaw_translates_with_and_apart_from_the_rotation(index):
+    """The speech family's incisor goes nearly straight down as the jaw opens (the glide
+    cancels a hinge's backward swing: JW11's MNI moves -0.09 mm forward per degree, a
+    fixed condyle's -0.6), and its translation is not a function of the angle."""
+    speech = _family_subject("speech", index)
+    hinge = _family_subject("fixed-condyle", index)
+    assert 0.6 <= speech.speech_slide_mm_per_deg <= 1.2
+    record = dict(seed=[0, 2, index, 5], noise_mm=0.0, dropouts=False, mistracks=False)
+    truth = synth.synth_recording(speech, "tp005", **record)[1]
+    x_speech, y_speech = _mni_per_degree(truth)
+    x_hinge, _ = _mni_per_degree(synth.synth_recording(hinge, "tp005", **record)[1])
+    assert x_hinge < -0.5 and -0.35 < x_speech < 0.2, (x_hinge, x_speech)
+    assert -2.4 < y_speech < -1.7, y_speech  # an effective radius beyond the condyle's
+    # Its own protrusion on top of the coupled glide: frames at nearly the same angle sit
+    # at condyle positions millimetres apart (a fixed-condyle or physiological jaw: 0).
+    deg = np.rad2deg(truth.theta)
+    close = np.abs(deg[:, None] - deg[None, :]) < 0.05
+    apart = np.linalg.norm(truth.condyle[:, None] - truth.condyle[None, :], axis=-1)[close]
+    assert 0.5 < apart.max() < 8.0, apart.max()
+    # The motion is still rigid in the plane, so the pivot truth stays exact.
+    jaw = truth.pellets_true[:, 6:8]
+    np.testing.assert_allclose(np.linalg.norm(jaw[:, 0] - jaw[:, 1], axis=1),
+                               speech.jaw_pellet_distance, atol=1e-9)
+
+
+def test_xrmb_measurement_is_band_limited_and_follows_the_jaw():
+    """The xrmb family's noise has no power a 10 ms Gaussian removes (JW11: 0.007 mm of
+    the jaw pellet distance; realistic: 0.17 mm), and the molar pellet's out-of-plane
+    error follows the opening (slope of the distance against the angle)."""
+    from scipy.ndimage import gaussian_filter1d
+
+    anatomy = _family_subject("speech", 1)
+    out = {}
+    for family in ("xrmb", "realistic"):
+        track, truth = synth.synth_recording(anatomy, "tp005", seed=[3, 1], dropouts=False,
+                                             mistracks=False, noise_family=family)
+        lead = int(np.argmax(track.valid.any(axis=(1, 2))))
+        pos = track.positions[lead:]
+        distance = np.linalg.norm(pos[:, 6] - pos[:, 7], axis=1)
+        dev = distance - distance.mean()
+        out[family] = (np.std(dev - gaussian_filter1d(dev, 0.010 / synth.FRAME_STEP_S)),
+                       np.corrcoef(dev[1:], dev[:-1])[0, 1], np.std(dev),
+                       np.polyfit(np.rad2deg(truth.theta[lead:]), distance, 1)[0])
+    hp, lag1, sd, slope = out["xrmb"]
+    assert hp < 0.02 and lag1 > 0.98, out
+    assert out["realistic"][0] > 0.1 and out["realistic"][1] < 0.8, out
+    assert 0.15 < sd < 0.45, out  # JW11: 0.30 mm
+    # MNM (behind MNI) moved forward by lateral * sin(yaw) shortens the distance
+    expected = -anatomy.mnm_lateral_mm * np.deg2rad(anatomy.jaw_yaw_per_deg)  # mm/deg
+    assert abs(expected) > 0.05 and slope == pytest.approx(expected, abs=0.03), out
+    # noise scale 0 is ideal data, the out-of-plane error included
+    track, truth = synth.synth_recording(anatomy, "tp005", seed=[3, 1], noise_mm=0.0,
+                                         dropouts=False, mistracks=False, noise_family="xrmb")
+    lead = int(np.argmax(track.valid.any(axis=(1, 2))))
+    np.testing.assert_allclose(track.positions[lead:], truth.pellets_true[lead:], atol=6e-4)
+
+
 def test_the_family_changes_nothing_but_the_jaw_motion():
     a = _family_subject("thrust", 3)
     b = _family_subject("fixed-condyle", 3)
@@ -467,7 +533,9 @@ def test_default_corpus_location_and_ensure(tmp_path, monkeypatch):
     assert synth.default_corpus_dir().parent == tmp_path / "cache" / "cassi_fit"
     monkeypatch.setenv("CASSI_SYNTH_DIR", str(tmp_path / "corpus"))
     assert synth.default_corpus_dir() == tmp_path / "corpus"
-    monkeypatch.setattr(synth, "_DEFAULT_CORPUS_ARGS", {"n_subjects": 1, "seed": 0})
+    from cassi_fit.synth import _corpus  # the stage module that reads the default's arguments
+
+    monkeypatch.setattr(_corpus, "_DEFAULT_CORPUS_ARGS", {"n_subjects": 1, "seed": 0})
     root = synth.ensure_default_corpus()
     assert root == tmp_path / "corpus" and (root / "S01" / "TP106.TXY").is_file()
     stamp = (root / "README.txt").stat().st_mtime_ns

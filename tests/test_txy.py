@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 from cassi_fit.errors import DataFormatError, MissingDataError, OutputExistsError
+from cassi_fit.pellets import first_valid_line
 from cassi_fit.txy import (
     FRAME_STEP_US,
     PELLET_NAMES,
     UNTRACKED,
     PelletTrack,
-    first_valid_frame,
     pad_untracked,
     read_txy,
     require_tracked,
@@ -48,7 +48,7 @@ def test_fixture_crlf_leading_untracked_and_per_value_marker():
     assert track.times[0] == 0.0
     np.testing.assert_allclose(np.diff(track.times), FRAME_STEP_US * 1e-6)
     assert not track.valid[:3].any() and np.isnan(track.positions[:3]).all()
-    assert first_valid_frame(track) == 3
+    assert first_valid_line(track).index == 3
     np.testing.assert_array_equal(track.pellet("MNM")[3], [-43.5, -3.1])
     np.testing.assert_array_equal(track.pellet("ul")[3], [14.9, 17.8])
     # frame 5: only x of T4 is untracked
@@ -166,14 +166,14 @@ def test_first_valid_frame_and_require_tracked(tmp_path):
     valid[:, 7, 1] = False  # MNM y never tracked
     valid[4, 7, 1] = True
     t = PelletTrack(track.times, track.positions, valid, path=tmp_path / "j.txy")
-    assert first_valid_frame(t, ("MNI", "MNM")) == 4
+    assert first_valid_line(t, pellets=("MNI", "MNM")).index == 4
     require_tracked(t, ("MNI", "MNM"))
     valid[4, 7, 1] = False
     t = PelletTrack(track.times, track.positions, valid, path=tmp_path / "j.txy")
     with pytest.raises(MissingDataError, match=r"j\.txy.*MNM"):
         require_tracked(t)
     with pytest.raises(MissingDataError, match=r"j\.txy"):
-        first_valid_frame(t, ("MNI", "MNM"))
+        first_valid_line(t, pellets=("MNI", "MNM"))
 
 
 def test_track_contract():

@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
 from cassi_fit._cli._corpus import add_run_arguments, finish, run_options
 from cassi_fit.options import (
+    ALL_JAW_METHODS,
     ANIMATION_SUFFIXES,
     COLLISION_MODES,
     GAP_POLICIES,
-    JAW_METHODS,
+    JAW_SENSOR_SETS,
     JAW_WEIGHTS,
     MODES,
     TONGUE_ANCHORS,
@@ -25,9 +27,34 @@ def add_recording_argument(parser: argparse.ArgumentParser) -> None:
         "recording",
         nargs="+",
         metavar="RECORDING",
-        help="a pellet file (.txy), or three words DATASET SUBJECT TASK: a dataset folder "
-        "(per-subject folders or flat files) and the subject and task in it",
+        help="a pellet file (.txy) or an articulograph file (EST Track .ema, Carstens .pos, "
+        "NDI Wave .tsv, mview .mat, a .npy/.npz/.csv array; docs/EMA.md), or three words "
+        "DATASET SUBJECT TASK: a dataset folder (per-subject folders or flat files) and the "
+        "subject and task in it",
     )
+    add_source_arguments(parser)
+
+
+def add_source_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options an articulograph file may need (``dataset.load_recording``'s)."""
+    parser.add_argument("--sensor-map", metavar="MAP", default=None,
+                        help="articulograph sensor map: a built-in name (auto, mocha, mngu0, "
+                        "sparc, synthetic) or a .toml file (default: sensors.toml beside the "
+                        "files, else the built-in names)")
+    parser.add_argument("--layout", default=None,
+                        help="array files: a built-in layout (sparc, mngu0) or comma-separated "
+                        "column names")
+    parser.add_argument("--rate", type=float, default=None,
+                        help="array files (and headerless .pos files): the sampling rate, Hz")
+    parser.add_argument("--bite-plane", metavar="FILE", default=None,
+                        help="articulograph files: the bite-plane recording (default: a *bite* "
+                        "file beside)")
+
+
+def source_options(args: argparse.Namespace) -> dict:
+    """``dataset.load_recording``'s keywords from :func:`add_source_arguments`' options."""
+    return {"sensor_map": args.sensor_map, "layout": args.layout, "rate": args.rate,
+            "bite_plane": args.bite_plane}
 
 
 def add_model_arguments(parser: argparse.ArgumentParser) -> None:
@@ -42,11 +69,21 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--jaw",
-        choices=JAW_METHODS,
+        choices=ALL_JAW_METHODS,
         default=None,
-        help="how the jaw moves: the paper's closed form from the two jaw pellets (default), "
-        "or a least-squares fit: per frame (frame-fit), about one pivot for the whole "
-        "recording (fixed-pivot), or about a pivot that moves smoothly (smooth-pivot)",
+        help="how the jaw moves: the paper's closed form from the two jaw pellets (the "
+        "default with two jaw sensors), or a least-squares fit: per frame (frame-fit), about "
+        "one pivot for the whole recording (fixed-pivot), or about a pivot that moves "
+        "smoothly (smooth-pivot); with one jaw sensor (most EMA corpora) the default is "
+        "coupled-rotation (the rotation coupled to the sensor's displacement, learned from "
+        "two-sensor recordings; docs/JAW.md), and the pivot fits run on a stated prior",
+    )
+    parser.add_argument(
+        "--jaw-sensors",
+        choices=JAW_SENSOR_SETS,
+        default=None,
+        help="the jaw sensors to use (default: every jaw pellet the recording tracks); MNI "
+        "alone animates as a one-sensor recording would be",
     )
     parser.add_argument(
         "--stride",
@@ -158,6 +195,10 @@ def register(subparsers) -> None:
         "front teeth; lips in teeth), before and after any projection, to CSV",
     )
     parser.add_argument("--no-audio", action="store_true", help="leave the sound out of an .mp4")
+    parser.add_argument("--accept-mismatch", action="store_true",
+                        help="use sound or labels whose length does not fit the recording "
+                        "(a wrong sample rate, a cut file, labels in other units): a warning "
+                        "instead of the error")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     # DATASET alone with --out DIR: every recording to DIR/SUBJECT/TASK.mp4 (run_dataset)
@@ -191,24 +232,26 @@ def parse_views(text: str) -> tuple[str, ...]:
     return views
 
 
-def load_recording_args(words):
-    """A ``Recording`` from ``[PATH]`` or ``[DATASET, SUBJECT, TASK]``."""
+def load_recording_args(words, args: argparse.Namespace | None = None):
+    """A ``Recording`` from ``[PATH]`` or ``[DATASET, SUBJECT, TASK]``, with the
+    articulograph options of :func:`add_source_arguments` in ``args``."""
     from cassi_fit.errors import CassiError
 
+    options = source_options(args) if args is not None else {}
     if len(words) == 1:
         from cassi_fit.dataset import load_recording
 
         path = Path(words[0])
-        if not path.is_file():
-            raise CassiError(f"{path}: no such pellet file")
-        return load_recording(path)
+        if not os.path.lexists(path):  # anything else load_recording names (a pipe, ...)
+            raise CassiError(f"{path}: no such recording file")
+        return load_recording(path, **options)  # a pipe, device or folder: one line saying which
     if len(words) == 3:
         from cassi_fit.dataset import Dataset
 
         root = Path(words[0])
         if not root.is_dir():
             raise CassiError(f"{root}: no such dataset folder")
-        return Dataset(root).load(words[1], words[2])
+        return Dataset(root, sensor_map=options.get("sensor_map")).load(words[1], words[2])
     raise CassiError(f"RECORDING is a pellet file or DATASET SUBJECT TASK, got {len(words)} words")
 
 
@@ -221,7 +264,8 @@ def spec_from_args(args: argparse.Namespace):
     return run_spec(mode, calibration=getattr(args, "calibration", None) or None,
                     jaw=args.jaw, stride=args.stride, jaw_weights=args.jaw_weights,
                     tongue_anchor=args.tongue_anchor, gap_policy=args.gap,
-                    collisions=args.collisions, tongue_shape=args.tongue_shape)
+                    collisions=args.collisions, tongue_shape=args.tongue_shape,
+                    jaw_sensors=getattr(args, "jaw_sensors", None))
 
 
 def run_args(recording, args):
@@ -252,7 +296,7 @@ def run(args) -> int:
     out = Path(args.out) if args.out else None
     if out is not None and out.suffix.lower() not in ANIMATION_SUFFIXES:
         raise CassiError(f"--out {out}: must end in {', '.join(ANIMATION_SUFFIXES)}")
-    recording = load_recording_args(args.recording)
+    recording = load_recording_args(args.recording, args)
     out = out or Path(f"{recording.subject}_{recording.task}.mp4")
     csv_out = Path(args.penetration) if args.penetration else None
     from cassi_fit._io import check_outputs  # before any work: no input, no clash, no overwrite
@@ -292,6 +336,7 @@ def write_output(out: Path, run, size, views, args) -> Path:
         print(f"sound: {recording.audio}", file=sys.stderr)
     return video.write_recording_video(out, run, size=size, views=views, markers=args.markers,
                                        audio=not args.no_audio, progress=not args.quiet,
+                                       accept_mismatch=args.accept_mismatch,
                                        overwrite=args.force)
 
 

@@ -61,7 +61,7 @@ def run(args) -> int:
         raise CassiError(f"--out {out}: must end in {', '.join(SUFFIXES)}")
     if args.max_keyframes < 0 or args.max_keyframes == 1:
         raise CassiError(f"--max-keyframes must be 0 or at least 2, got {args.max_keyframes}")
-    recording = load_recording_args(args.recording)
+    recording = load_recording_args(args.recording, args)
     check_outputs([out], overwrite=args.force)  # before any work: never an input or data file
     run = run_args(recording, args)
     animation, model = run.animation, run.state.model

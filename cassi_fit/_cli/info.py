@@ -72,7 +72,26 @@ def _describe(recording) -> dict:
         "extras_median_mm": _medians(track.extra_positions, track.extra_valid,
                                      track.extra_names),
         "sensors": None if sensors is None else sensors.to_dict(),
+        "sound": _sound(recording),
     }
+
+
+def _sound(recording) -> dict | None:
+    """The sound checked against the pellets (``sound.check_sound``), or its error."""
+    import warnings
+
+    from cassi_fit.errors import CassiError
+    from cassi_fit.sound import check_sound, recording_seconds
+
+    if recording.audio is None:
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the report carries the message
+        try:
+            return check_sound(recording.audio, recording_seconds(recording.track.times),
+                               accept_mismatch=True).to_dict()
+        except CassiError as exc:
+            return {"error": str(exc)}
 
 
 def _quietly(load, *args):
@@ -107,7 +126,8 @@ def collect(path: Path, list_only: bool = False, *, sensor_map=None, layout=None
 
     if isinstance(layout, str) and "," in layout:
         layout = [c.strip() for c in layout.split(",") if c.strip()]
-    if path.exists() and not path.is_dir():  # a file (load_recording refuses a FIFO)
+    if (path.exists() or path.is_symlink()) and not path.is_dir():
+        # a file (load_recording refuses a FIFO, a device, a broken or looping link)
         load = partial(load_recording, sensor_map=sensor_map, layout=layout, rate=rate,
                        bite_plane=bite_plane)
         rec = _quietly(load, path)
@@ -116,9 +136,7 @@ def collect(path: Path, list_only: bool = False, *, sensor_map=None, layout=None
     if not path.is_dir():
         raise MissingDataError(f"{path}: no such file or folder")
     ds = Dataset(path, sensor_map=sensor_map)
-    if not ds.subjects():
-        raise MissingDataError(f"{path}: no pellet files or articulograph recordings (.txy, "
-                               ".ema, .pos, .tsv, .mat) found")
+    ds.check_selection()  # nothing found: one line naming the folder and what was looked for
     subjects = {}
     for subject in ds.subjects():
         tasks = {}
@@ -156,12 +174,19 @@ def _print_file(report: dict, out) -> None:
           f"{report['pharynx_points'] or '-'} points  head measures "
           f"{'DEFAULTS' if report['head_is_default'] else 'from file'}  audio "
           f"{report['audio'] or '-'}", file=out)  # fmt: skip
-    print("  pellet  valid%  mistracked", file=out)
+    print("  pellet  valid%  mistracked  reasons", file=out)
+    reasons = q.get("mistrack_reasons") or {}
     for name, frac in q["valid_fraction"].items():
-        print(f"  {name:<6}  {_pct(frac):>6}  {q['n_mistracked'][name]:>10}", file=out)
+        why = ", ".join(f"{r} {c}" for r, c in reasons.get(name, {}).items())
+        print(f"  {name:<6}  {_pct(frac):>6}  {q['n_mistracked'][name]:>10}  {why}".rstrip(),
+              file=out)
     print(f"  all     {_pct(q['all_valid_fraction']):>6}", file=out)
     print(f"  jaw distance MNI-MNM: median {_mm(q['jaw_distance_median_mm'])} mm, "
           f"SD {_mm(q['jaw_distance_sd_mm'], 3)} mm", file=out)  # fmt: skip
+    sound = report.get("sound")
+    if sound:
+        print(f"  sound: {sound.get('error') or sound['message'] or 'length fits the pellets'}",
+              file=out)
     if report.get("sensors"):
         _print_sensors(report, out)
 

@@ -1,21 +1,23 @@
 """``cassi jaw RECORDING --method ... --csv OUT.csv``: jaw rotation per frame, as a table,
 and truth-free diagnostics of the fit beside it (``OUT.diagnostics.csv``); with labels
-beside the pellet file, a label column and ``OUT.segments.csv``.
-``cassi jaw DATASET --out DIR``: the same for every recording (``corpus.jaw_corpus``)."""
+beside the pellet file, a label column and ``OUT.segments.csv``. ``--jaw-sensors MNI`` (or
+``MNM``) fits one jaw sensor and predicts the other (``MNM_pred_x_mm`` ...).
+``cassi jaw DATASET --out DIR``: the same for every recording (``jaw_table.jaw_corpus``)."""
 
 from __future__ import annotations
 
 import os
-import stat
 from pathlib import Path
 
-from cassi_fit.options import JAW_METHODS, SOLVERS
+from cassi_fit.options import ALL_JAW_METHODS, JAW_SENSOR_SETS, SOLVERS
 
 from ._corpus import add_run_arguments, finish, run_options
+from .animate import add_source_arguments, load_recording_args
 
-DIAGNOSTIC_COLUMNS = ("method", "frames_used", "jaw_distance_sd_mm", "jaw_distance_range_mm",
-                      "residual_median_mm", "pivot_iqr_x_mm", "pivot_iqr_y_mm",
-                      "pivot_plausible_fraction")
+DIAGNOSTIC_COLUMNS = ("method", "jaw_sensors", "frames_used", "jaw_distance_sd_mm",
+                      "jaw_distance_range_mm", "residual_median_mm", "pivot_iqr_x_mm",
+                      "pivot_iqr_y_mm", "pivot_plausible_fraction", "hidden_error_median_mm",
+                      "hidden_error_p95_mm", "prior")
 # Names of files that hold a recording's data (lower case): never replaced by an output,
 # whether or not this command reads them (issue 12).
 _DATA_NAMES = ("pal.dat", "pha.dat", "headmeasures.txt")
@@ -34,20 +36,35 @@ def register(subparsers) -> None:
         "truth (jaw-pellet distance spread, pivot spread, share of anatomically plausible "
         "pivots) are printed and written to OUT.diagnostics.csv; see docs/JAW.md. Phone or "
         "word labels beside the pellet file (X.lab, X.TextGrid) add a label column and "
-        "OUT.segments.csv (peak jaw opening and lip aperture per segment). With a DATASET "
+        "OUT.segments.csv (peak jaw opening and lip aperture per segment). --jaw-sensors MNI "
+        "(or MNM) uses that jaw sensor alone, as most EMA corpora have one: the rotation is "
+        "then not determined by the data, closed-form and frame-fit refuse, the pivot methods "
+        "rest on a pivot prior and coupled-rotation on a coupling learned from two-sensor "
+        "recordings (the prior is written to the diagnostics); the table gains the other "
+        "sensor's predicted position (MNM_pred_x_mm, MNM_pred_y_mm) and, where the file has "
+        "it, the diagnostics its error. With a DATASET "
         "folder alone and --out DIR: every recording, in parallel, to DIR/SUBJECT/TASK.jaw.csv "
         "(and TASK.segments.csv) and the corpus table DIR/jaw_corpus.csv (and .parquet).",
     )
     parser.add_argument("recording", nargs="+", metavar="RECORDING",
                         help="PELLET_FILE, or DATASET_DIR SUBJECT TASK, or DATASET_DIR "
                         "(with --out)")
-    parser.add_argument("--method", choices=JAW_METHODS, default="closed-form")
-    parser.add_argument("--solver", choices=SOLVERS, default="optimistix-lm")
+    parser.add_argument("--method", choices=ALL_JAW_METHODS, default=None,
+                        help="default: the paper's closed form with two jaw sensors, "
+                        "coupled-rotation with one")
+    parser.add_argument("--jaw-sensors", default=None, metavar="S",
+                        help=f"the jaw sensors to use: {', '.join(JAW_SENSOR_SETS)} "
+                        "(default: the jaw pellets the recording tracks)")
+    add_source_arguments(parser)
+    parser.add_argument("--solver", choices=SOLVERS, default=None,
+                        help="iterative solver (default: the method's own: the closed form "
+                        "for frame-fit, optimistix-lm for the pivot methods)")
     parser.add_argument("--smoothness", type=float, default=1.0, metavar="W",
                         help="smooth-pivot: weight of the pivot-path smoothness prior "
                         "(finite, > 0)")
     parser.add_argument("--compare-methods", action="store_true",
-                        help="diagnostics for all four methods, not only --method")
+                        help="diagnostics for every method that can run with the jaw "
+                        "sensors, not only --method")
     parser.add_argument("--csv", metavar="OUT.csv", help="table to write (one recording)")
     parser.add_argument("--out", metavar="DIR", help="output folder (DATASET form)")
     parser.add_argument("--no-labels", action="store_true",
@@ -58,41 +75,17 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-def _regular_file(path) -> Path:
-    """``path`` if it is a regular file; one clear error for anything else (a FIFO would
-    block the reader forever, a folder or device gives no pellet data)."""
-    from cassi_fit.errors import MissingDataError
-
-    path = Path(path)
-    try:
-        mode = os.stat(path).st_mode
-    except OSError:
-        raise MissingDataError(f"{path}: no such pellet file") from None
-    if not stat.S_ISREG(mode):
-        raise MissingDataError(f"{path}: not a regular file (a folder, pipe or device); "
-                               f"give a pellet (.txy) file")
-    return path
-
-
-def _load_track(parts):
-    """The PelletTrack named by ``[path]`` or ``[dataset_dir, subject, task]``."""
+def _load_recording(args):
+    """The recording named by ``[path]`` or ``[dataset_dir, subject, task]`` (any format the
+    toolkit reads; the articulograph options of ``add_source_arguments``); the head
+    measures' default warning is left out (the jaw fit does not use them)."""
     import warnings
 
-    from cassi_fit.errors import CassiError
+    from cassi_fit.dataset import DefaultHeadMeasuresWarning
 
-    if len(parts) == 1:
-        from cassi_fit.txy import read_txy
-
-        return read_txy(_regular_file(parts[0]))
-    if len(parts) == 3:
-        from cassi_fit.dataset import Dataset
-
-        dataset = Dataset(parts[0])
-        _regular_file(dataset.pellet_path(parts[1], parts[2]))
-        with warnings.catch_warnings():  # head measures are not used by the jaw fit
-            warnings.simplefilter("ignore", UserWarning)
-            return dataset.load(parts[1], parts[2]).track
-    raise CassiError(f"RECORDING is a pellet file or DATASET_DIR SUBJECT TASK, got {parts}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DefaultHeadMeasuresWarning)
+        return load_recording_args(args.recording, args)
 
 
 def _check_output(out: Path, inputs: list[Path], force: bool) -> None:
@@ -129,14 +122,11 @@ def segments_path(out: Path) -> Path:
 
 
 def format_diagnostics(rows) -> str:
-    """CSV text of :class:`cassi_fit.jaw_fit.JawDiagnostics` rows."""
-    lines = [",".join(DIAGNOSTIC_COLUMNS)]
-    for row in rows:
-        d = row.to_dict()
-        lines.append(",".join(d[c] if isinstance(d[c], str) else
-                              (str(d[c]) if isinstance(d[c], int) else f"{d[c]:.4f}")
-                              for c in DIAGNOSTIC_COLUMNS))
-    return "\n".join(lines) + "\n"
+    """CSV text of :class:`cassi_fit.jaw_fit.JawDiagnostics` rows (``tables.csv_text``,
+    4 decimals)."""
+    from cassi_fit.tables import csv_text
+
+    return csv_text([row.to_dict() for row in rows], DIAGNOSTIC_COLUMNS, digits=4)
 
 
 def print_diagnostics(rows) -> None:
@@ -146,9 +136,13 @@ def print_diagnostics(rows) -> None:
     print(f"diagnostics (jaw-pellet distance SD/range mm; median residual mm; pivot IQR x/y "
           f"mm; share of pivots in x {X[0]:.0f}..{X[1]:.0f}, y {Y[0]:.0f}..{Y[1]:.0f} mm):")
     for r in rows:
-        print(f"  {r.method:13s} distance {r.jaw_distance_sd_mm:.3f}/{r.jaw_distance_range_mm:.3f}"
+        hidden = ("" if r.hidden_error_median_mm != r.hidden_error_median_mm else
+                  f"  hidden sensor error {r.hidden_error_median_mm:.2f} median, "
+                  f"{r.hidden_error_p95_mm:.2f} p95")
+        print(f"  {r.method:16s} distance {r.jaw_distance_sd_mm:.3f}/{r.jaw_distance_range_mm:.3f}"
               f"  residual {r.residual_median_mm:.3f}  pivot IQR {r.pivot_iqr_x_mm:.1f}/"
-              f"{r.pivot_iqr_y_mm:.1f}  plausible {100 * r.pivot_plausible_fraction:.0f} %")
+              f"{r.pivot_iqr_y_mm:.1f}  plausible {100 * r.pivot_plausible_fraction:.0f} %"
+              f"{hidden}")
 
 
 def run(args) -> int:
@@ -173,15 +167,16 @@ def run(args) -> int:
 
 def run_dataset(args) -> int:
     """``cassi jaw DATASET --out DIR``."""
-    from cassi_fit.jaw_corpus import jaw_corpus
-    from cassi_fit.jaw_fit import jaw_method
+    from cassi_fit.jaw_table import jaw_corpus
 
-    jaw_method(args.method, solver=args.solver, smoothness=args.smoothness)  # checks W
+    # jaw_corpus checks the method, its options and the sensors before anything starts
     run, written = jaw_corpus(args.recording[0], args.out, method=args.method,
                               solver=args.solver, smoothness=args.smoothness,
-                              labels=not args.no_labels, **run_options(args))
+                              jaw_sensors=args.jaw_sensors, labels=not args.no_labels,
+                              **run_options(args))
     ok = len(run.results) - len(run.failed)
-    print(f"{ok} of {len(run.results)} recordings fitted ({args.method}) on {run.workers} "
+    what = args.method or "closed-form, or coupled-rotation with one jaw sensor"
+    print(f"{ok} of {len(run.results)} recordings fitted ({what}) on {run.workers} "
           f"worker(s); tables: {', '.join(str(p) for p in written)}")
     return finish(run)
 
@@ -194,31 +189,53 @@ def run_recording(args) -> int:
     # is a quotient by sin(theta/2)), so the command computes in float64.
     jax.config.update("jax_enable_x64", True)
     from cassi_fit._io import atomic_write
-    from cassi_fit.jaw_corpus import csv_text, jaw_frame_csv
-    from cassi_fit.jaw_fit import jaw_diagnostics, jaw_from_track, jaw_method
+    from cassi_fit.jaw_fit import (
+        check_sensors,
+        jaw_diagnostics,
+        jaw_from_track,
+        jaw_method,
+        jaw_sensor_set,
+        method_for_sensors,
+        tracked_jaw_sensors,
+    )
+    from cassi_fit.jaw_table import jaw_frame_csv
     from cassi_fit.labels import SEGMENT_COLUMNS, labels_for, segment_summary
+    from cassi_fit.sound import recording_seconds
     from cassi_fit.status import Status
+    from cassi_fit.tables import csv_text
     from cassi_fit.txy import JAW_PELLETS, pellet_index
 
-    method = jaw_method(args.method, solver=args.solver, smoothness=args.smoothness)
+    chosen = None if args.method is None else jaw_method(args.method, solver=args.solver,
+                                                         smoothness=args.smoothness)
+    if chosen is not None and args.jaw_sensors is not None:  # refuse before any work
+        check_sensors(chosen, jaw_sensor_set(args.jaw_sensors))
     out = Path(args.csv)
     diag_out, seg_out = diagnostics_path(out), segments_path(out)
     inputs = [Path(args.recording[0])] if len(args.recording) == 1 else []
     for path in (out, diag_out, seg_out):  # refuse before the (slower) fit
         _check_output(path, inputs, args.force)
-    track = _load_track(args.recording)
+    recording = _load_recording(args)
+    track = recording.track
     if track.path is not None:
         for path in (out, diag_out, seg_out):
             _check_output(path, [track.path], args.force)
-    labels = None if args.no_labels or track.path is None else labels_for(track.path)
-    fit = jaw_from_track(track, method=method)
+    sensors = (tracked_jaw_sensors(track.valid) if args.jaw_sensors is None
+               else jaw_sensor_set(args.jaw_sensors))
+    method = method_for_sensors(chosen, sensors)  # by default, by the recording's sensors
+    args.method = method.name
+    labels = None if args.no_labels or recording.path is None else labels_for(
+        recording.path, recording_s=recording_seconds(track.times))
+    fit = jaw_from_track(track, method=method, jaw_sensors=sensors)
     jaw_points = track.positions[:, [pellet_index(p) for p in JAW_PELLETS], :]
     rows = [jaw_diagnostics(fit, jaw_points)]
     if args.compare_methods:
         others = [jaw_method(m, solver=args.solver, smoothness=args.smoothness)
-                  for m in JAW_METHODS if m != args.method]
-        rows += [jaw_diagnostics(jaw_from_track(track, method=m), jaw_points) for m in others]
-    atomic_write(out, jaw_frame_csv(track.times, fit, labels), overwrite=args.force)
+                  for m in ALL_JAW_METHODS if m != args.method]
+        others = [m for m in others if len(sensors) in m.jaw_sensors_needed]
+        rows += [jaw_diagnostics(jaw_from_track(track, method=m, jaw_sensors=sensors),
+                                 jaw_points) for m in others]
+    atomic_write(out, jaw_frame_csv(track.times, fit, labels, track.mistracks.frame_labels()),
+                 overwrite=args.force)
     atomic_write(diag_out, format_diagnostics(rows), overwrite=args.force)
     if labels is not None:
         segments = segment_summary(track.times, fit.theta, track.positions, labels,
@@ -228,9 +245,12 @@ def run_recording(args) -> int:
     ok = int((fit.status <= 1).sum())
     mistracked = int((fit.status == Status.MISTRACKED).sum())
     print(f"{out}: {track.n_frames} frames, {ok} fitted ({args.method}"
-          f"{'' if args.method == 'closed-form' else ', ' + fit.solver}), "
+          f"{'' if args.method == 'closed-form' else ', ' + fit.solver}"
+          f"{'' if len(sensors) == 2 else ', ' + sensors[0] + ' alone'}), "
           f"{mistracked} mistracked, noise estimate {fit.noise_mm:.3f} mm"
-          f"{'' if fit.converged else ', NOT converged'}")
+          f"{'' if fit.converged else ', NOT converged (' + fit.failure.label + ')'}")
+    if fit.prior:
+        print(f"prior: {fit.prior}")
     print_diagnostics(rows)
     print(f"{diag_out}: diagnostics written")
     return 0

@@ -59,6 +59,14 @@ def register(subparsers) -> None:
         "a recording frame (docs/EMA.md): est (EST Track binary, 200 Hz), est-ascii (500 Hz), "
         "ag501 (Carstens .pos, 250 Hz), wave (NDI Wave .tsv, 100 Hz), mview (.mat, 100 Hz)",
     )
+    parser.add_argument(
+        "--sensors",
+        default="xrmb",
+        choices=("xrmb", "mocha"),
+        help="articulograph formats: which sensors are recorded: xrmb (the default: one per "
+        "XRMB pellet, two on the jaw, four on the tongue) or mocha (MOCHA-TIMIT's set: one "
+        "jaw sensor on the lower incisor; tongue tip, blade and dorsum)",
+    )
     parser.add_argument("--no-audio", action="store_true", help="do not write .wav files")
     parser.add_argument("--force", action="store_true", help="overwrite existing files")
     parser.set_defaults(func=run)
@@ -71,6 +79,10 @@ def run(args: argparse.Namespace) -> int:
         for spec in TASKS.values():
             print(f"{spec.name:8s} {spec.kind:12s} {spec.prompt}")
         return 0
+    if args.format == "xrmb" and args.sensors != "xrmb":
+        from ..errors import CassiError
+
+        raise CassiError("--sensors chooses an articulograph's sensors: give --format too")
     if args.format != "xrmb":
         from ..ema.synthetic import write_ema_corpus
 
@@ -85,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
             overwrite=args.force,
             jaw_kinematics=args.jaw_kinematics,
             noise_family=args.noise_family,
+            sensors=args.sensors,
         )
         print(f"wrote a synthetic {args.format} EMA corpus of {args.subjects} subjects to {out} "
               f"(seed {args.seed})")

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from .._io import check_output_folder, check_outputs
 from ..errors import CassiError, OutputExistsError
 from ..status import Status
 from ..tables import ID_COLUMNS
@@ -219,6 +220,8 @@ def run_corpus(
     if out_dir is None and resume:
         raise CassiError("resume needs an output folder (its completion markers)")
     out = None if out_dir is None else Path(out_dir).absolute()  # workers: another folder
+    if out is not None:
+        check_output_folder(out)  # a file or a pipe: one line now, not a failure per item
     markers = None if out is None else out / MARKER_DIR
     if (markers is not None and not (resume or overwrite) and markers.is_dir()
             and any(markers.iterdir())):
@@ -402,6 +405,7 @@ def refuse_existing(paths: Sequence[str | os.PathLike], run_options: Mapping[str
     """Before a run: an ``OutputExistsError`` naming the first of ``paths`` that exists,
     unless ``run_options`` say ``overwrite`` or ``resume`` (a table is refused before the
     run, not after it)."""
+    check_outputs(paths, overwrite=True)  # never a pipe, device, input or folder, even forced
     if run_options.get("overwrite") or run_options.get("resume"):
         return
     existing = [str(p) for p in paths if Path(p).exists()]

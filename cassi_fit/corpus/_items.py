@@ -108,21 +108,25 @@ def dataset_items(dataset: Dataset | str | os.PathLike, *, subjects: Iterable[st
 def require_items(items: list[CorpusItem], dataset: object,
                   subjects: Iterable[str] | None = None, tasks: Iterable[str] | None = None
                   ) -> list[CorpusItem]:
-    """``items`` if there are any; else a ``MissingDataError`` naming the folder and what
-    was looked for (the subjects and tasks asked for, or any recording at all)."""
-    if items:
-        return items
+    """``items`` if there are any and every subject and task asked for is there
+    (``dataset.Dataset.check_selection``); else a ``MissingDataError`` naming the folder
+    and what was looked for: no recordings at all (and the special files skipped), a
+    subject or task that is not there, or none of the subjects and tasks asked for."""
+    from ..dataset import Dataset
     from ..errors import MissingDataError
 
-    root = getattr(dataset, "root", dataset)
+    ds = dataset if isinstance(dataset, Dataset) else Dataset(os.path.abspath(dataset))
+    ds.check_selection(None if subjects is None else list(subjects),
+                       None if tasks is None else list(tasks))
+    if items:
+        return items
     wanted = []
     if tasks is not None:
         wanted.append("the task(s) " + ", ".join(str(t) for t in tasks))
     if subjects is not None:
         wanted.append("the subject(s) " + ", ".join(str(s) for s in subjects))
-    what = " for ".join(wanted) if wanted else "any recording (pellet files)"
-    raise MissingDataError(f"{root}: found none of {what}" if wanted
-                           else f"{root}: found no recordings (pellet files)")
+    raise MissingDataError(f"{ds.root}: found none of {' for '.join(wanted)} (it has "
+                           f"{', '.join(ds.subjects())})")
 
 
 def item_rng(item: CorpusItem, seed: int = 0) -> np.random.Generator:

@@ -63,6 +63,9 @@ REFERENCES = {"UI": (1.0, 5.0, 0.0), "NAS": (8.0, 70.0, 0.0), "LMA": (-88.0, 22.
 #: Bite-plane sensors, toolkit frame (mm): the plate between the teeth.
 BITE = {"OS": (0.0, 0.0, 0.0), "MS": (-42.0, 0.0, 0.0), "OL": (-38.0, 0.0, 22.0),
         "OR": (-38.0, 0.0, -22.0)}
+#: Sensor sets: every XRMB pellet as a sensor, or MOCHA-TIMIT's (one jaw sensor on the lower
+#: incisor; tongue tip, blade and dorsum: no molar sensor, no fourth tongue sensor).
+SENSOR_SETS = {"xrmb": PELLET_NAMES, "mocha": ("UL", "LL", "T1", "T2", "T3", "MNI")}
 LIP_CORNER_MM = (-10.0, 25.0)  # LC: x offset from the lips' midpoint, distance to the left
 BITE_SECONDS = 2.0
 COMPLETE_LINE = "complete: yes"
@@ -123,12 +126,14 @@ def _resample(times: np.ndarray, values: np.ndarray, new: np.ndarray) -> np.ndar
     return np.where(w == 0, a, out)
 
 
-def _layout(track_positions: np.ndarray) -> tuple[tuple[str, ...], np.ndarray]:
-    """Sensor names and toolkit-frame 3D positions ``(n, k, 3)`` of one recording."""
+def _layout(track_positions: np.ndarray, roles: tuple[str, ...] = PELLET_NAMES
+            ) -> tuple[tuple[str, ...], np.ndarray]:
+    """Sensor names and toolkit-frame 3D positions ``(n, k, 3)`` of one recording, with a
+    sensor for each of ``roles`` (pellet names)."""
     n = track_positions.shape[0]
-    names = [ROLE_NAMES[r] for r in PELLET_NAMES]
+    names = [ROLE_NAMES[r] for r in roles]
     pos = np.zeros((n, len(names) + 1 + len(REFERENCES), 3))
-    pos[:, : len(names), :2] = track_positions
+    pos[:, : len(names), :2] = track_positions[:, [PELLET_NAMES.index(r) for r in roles]]
     lips = 0.5 * (track_positions[:, 0] + track_positions[:, 1])
     pos[:, len(names), 0] = lips[:, 0] + LIP_CORNER_MM[0]
     pos[:, len(names), 1] = lips[:, 1]
@@ -191,7 +196,8 @@ def _truth_rows(times, rotation, translation, names, toolkit):
     return rows
 
 
-def _convert_subject(src: Path, dst: Path, index: int, fmt: str, seed: int) -> None:
+def _convert_subject(src: Path, dst: Path, index: int, fmt: str, seed: int,
+                     sensors: str = "xrmb") -> None:
     """One subject of the XRMB corpus ``src`` into the EMA corpus folder ``dst``."""
     from ..txy import read_txy
 
@@ -213,7 +219,7 @@ def _convert_subject(src: Path, dst: Path, index: int, fmt: str, seed: int) -> N
         track = read_txy(txy, check=False)
         times = np.arange(0.0, track.times[-1] + 1e-9, 1.0 / rate)
         pellets = _resample(track.times, track.positions, times)
-        names, toolkit = _layout(pellets)
+        names, toolkit = _layout(pellets, SENSOR_SETS[sensors])
         motion_rng = np.random.default_rng(_seed(seed, index, task))
         rotation, translation = _head_motion(motion_rng, times, m, origin)
         device = _to_device(toolkit, m, origin, rotation, translation)
@@ -263,24 +269,33 @@ def write_ema_corpus(out_dir: str | os.PathLike, *, format: str, n_subjects: int
                      noise_scale: float = 1.0, audio: bool = True, overwrite: bool = False,
                      jaw_kinematics: str | Sequence[str] | None = None,
                      noise_family: str = "realistic",
-                     from_corpus: str | os.PathLike | None = None) -> Path:
+                     from_corpus: str | os.PathLike | None = None,
+                     sensors: str = "xrmb") -> Path:
     """Write the synthetic EMA corpus (module docstring) in ``format`` (one of
     :data:`FORMATS`) to ``out_dir``; the other arguments are
     :func:`cassi_fit.synth.generate_corpus`'s, or ``from_corpus`` names a complete
     synthetic XRMB corpus to measure instead (its own subjects, tasks and seed; ``seed``
-    then only draws the recording frames and head movements). Written into a temporary
+    then only draws the recording frames and head movements). ``sensors``: a set of
+    :data:`SENSOR_SETS` (``"mocha"``: one jaw sensor and three tongue sensors, as
+    MOCHA-TIMIT records them; the truth still holds every pellet). Written into a temporary
     sibling folder and moved into place, ``README.txt`` (its last line marks a complete
     corpus) last; an existing corpus is refused unless ``overwrite``."""
     from ..synth import generate_corpus
 
     if format not in FORMATS:
         raise CassiError(f"unknown EMA format {format!r} (formats: {', '.join(FORMATS)})")
+    if sensors not in SENSOR_SETS:
+        raise CassiError(f"unknown sensor set {sensors!r} (sets: {', '.join(SENSOR_SETS)})")
     out_dir = Path(out_dir)
     if (out_dir / "README.txt").exists() and not overwrite:
         raise OutputExistsError(f"{out_dir / 'README.txt'}: a corpus exists (pass "
                                 "overwrite=True / --force)")
     if out_dir.exists() and not out_dir.is_dir():
         raise OutputExistsError(f"{out_dir}: exists and is not a folder")
+    if out_dir.is_dir():  # never into a real dataset, whatever overwrite says (issue 24)
+        from .._io import refuse_foreign_data
+
+        refuse_foreign_data(out_dir, writer="cassi synth --format")
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
     try:
@@ -299,13 +314,14 @@ def write_ema_corpus(out_dir: str | os.PathLike, *, format: str, n_subjects: int
         subjects = sorted(p for p in xrmb.iterdir() if p.is_dir())
         for index, folder in enumerate(subjects):
             (ema / folder.name).mkdir()
-            _convert_subject(folder, ema / folder.name, index, format, seed)
+            _convert_subject(folder, ema / folder.name, index, format, seed, sensors)
         shutil.copyfile(xrmb / "Headmeasures.txt", ema / "Headmeasures.txt")
         readme = (xrmb / "README.txt").read_text(encoding="utf-8").splitlines()
         lines = [f"cassi_fit synthetic EMA corpus, format {format} (NOT real data)",
                  "Made by cassi_fit.ema.synthetic.write_ema_corpus / `cassi synth --format`; "
                  "see docs/EMA.md.",
                  f"ema_format: {format}", f"ema_rate_hz: {FORMATS[format][1]:g}",
+                 f"ema_sensors: {sensors}",
                  "From the synthetic XRMB corpus:"]
         lines += [f"  {line}" for line in readme if line and line != COMPLETE_LINE]
         lines.append(COMPLETE_LINE)

@@ -67,10 +67,11 @@ def evaluate_recording(
 
     spec = _spec(spec, dict(changes))
     run = run_recording(recording, spec, model=model)
+    settings = {**_settings(spec), "jaw": run.animation.jaw_method}  # the method used
     return RecordingRow.evaluated(
         recording.subject, recording.task, measure(run.state, run.animation),
         frames=int(run.animation.n_frames),
-        calibration=spec.calibration_label(run.state.calibration), **_settings(spec))
+        calibration=spec.calibration_label(run.state.calibration), **settings)
 
 
 def evaluate_task(item: CorpusItem, out_dir: str | None, *, spec: RunSpec,
@@ -81,7 +82,7 @@ def evaluate_task(item: CorpusItem, out_dir: str | None, *, spec: RunSpec,
     derived from the measures afterwards (:func:`evaluation_result`). Writes no file."""
     recording = load_item(item, quiet=True)
     row = evaluate_recording(recording, spec=spec, model=worker_model())
-    out = {"frames": row.frames, "calibration": row.calibration}
+    out = {"frames": row.frames, "calibration": row.calibration, "jaw": row.jaw}
     out.update((MEASURE_PREFIX + k, float(v)) for k, v in sorted(row.measures.items()))
     return TaskResult(out)
 
@@ -102,7 +103,8 @@ def evaluation_result(run: CorpusRun, spec: RunSpec) -> EvaluationResult:
         measures = {k[len(MEASURE_PREFIX):]: float(v) for k, v in r.row.items()
                     if k.startswith(MEASURE_PREFIX)}
         rows.append(RecordingRow.evaluated(s, t, measures, frames=int(r.row["frames"]),
-                                           calibration=r.row["calibration"], **common))
+                                           calibration=r.row["calibration"],
+                                           **{**common, "jaw": r.row["jaw"]}))
     subjects = list(dict.fromkeys(r.subject for r in rows))
     per_subject = [SubjectRow.of_recordings(s, [r for r in rows if r.subject == s], **common)
                    for s in subjects]

@@ -1,0 +1,150 @@
+"""The sound beside a recording (``X.wav``), checked against the pellets' length.
+
+An XRMB recording's sound and pellets start together (sample 0 = time 0) and last about
+as long (JW11 task 5: 5.03 s of sound, 5.01 s of pellets). :func:`check_sound` reads the
+``.wav`` header only and compares: a sound within ``max(SOUND_TOLERANCE_S, 5 %)`` of the
+recording is ``"ok"``; otherwise one line says the numbers and the likely cause:
+
+* ``"rate"`` (an error): the samples would fill the recording at a standard rate other
+  than the header's (16 kHz samples with a 44.1 kHz header give 1.8 s of sound for a 5 s
+  recording; an 8 kHz header gives 10 s): the sound would play at the wrong speed and
+  drift against the pellets. A file cut to exactly half or a quarter also fits a
+  standard rate; the message names both causes.
+* ``"shorter"``: less sound than pellets; an error when it covers less than half of the
+  recording (a cut file, 0.1 s of sound), a warning otherwise (the end is silent).
+* ``"longer"``: more sound than pellets, a warning (a video keeps the part the pellets
+  cover).
+
+``accept_mismatch=True`` turns every error into a :class:`SoundMismatchWarning` (the
+sound is then used as it is: padded or cut, never resampled). The video writer and
+``cassi info`` call it; this module is the standard library's ``wave`` only.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+import wave
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from jaxtyping import Float
+
+from .errors import DataFormatError
+
+#: Below this difference (s), or 5 % of the recording, sound and pellets agree.
+SOUND_TOLERANCE_S = 0.25
+SOUND_TOLERANCE_FRACTION = 0.05
+#: Rates a ``.wav`` header plausibly holds (Hz); the XRMB sound is 16 kHz or resampled.
+STANDARD_RATES_HZ = (8000, 11025, 16000, 22050, 24000, 32000, 44100, 48000, 96000)
+#: How close (relative) the implied rate must be to a standard one to be named.
+RATE_MATCH = 0.02
+_FRAME_STEP_S = 6866e-6
+
+
+class SoundMismatchWarning(UserWarning):
+    """The sound's length does not fit the pellets' (accepted or only a warning)."""
+
+
+@dataclass(frozen=True)
+class SoundCheck:
+    """The sound against the recording (JSON-ready through :meth:`to_dict`).
+
+    ``rate_hz`` and ``n_samples`` from the header; ``sound_s`` = ``n_samples / rate_hz``;
+    ``recording_s`` the pellets' length; ``status`` ``"ok"``, ``"rate"``, ``"shorter"``
+    or ``"longer"``; ``likely_rate_hz`` the standard rate at which the samples would fill
+    the recording (None if none fits); ``message`` the one line (None when ok)."""
+
+    path: str
+    rate_hz: int
+    n_samples: int
+    sound_s: float
+    recording_s: float
+    status: str
+    likely_rate_hz: int | None
+    message: str | None
+
+    def to_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+
+def recording_seconds(times: Float[np.ndarray, " n"]) -> float:
+    """A recording's length (s) from its frame times ``(n,)`` s: time 0 to the end of its
+    last frame (the last time plus one frame step)."""
+    times = np.asarray(times, np.float64)
+    if times.size == 0:
+        return 0.0
+    step = float(np.median(np.diff(times))) if times.size > 1 else _FRAME_STEP_S
+    return float(times[-1] + step)
+
+
+def read_header(path: str | os.PathLike) -> wave._wave_params:
+    """The parameters of a PCM ``.wav`` (header only); :class:`DataFormatError` naming the
+    file if it is missing, not a WAVE file, compressed or float, or has a rate or channel
+    count of 0."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataFormatError(path, None, "sound file not found (or not a regular file)")
+    try:
+        with wave.open(str(path), "rb") as src:
+            params = src.getparams()
+    except (wave.Error, EOFError, OSError) as exc:
+        reason = str(exc) or "empty or truncated header"
+        if "unknown format: 3" in reason:
+            reason = "float samples; only integer PCM is read"
+        raise DataFormatError(path, None, f"not a readable PCM .wav file ({reason})") from None
+    if params.framerate <= 0 or params.nchannels <= 0:
+        raise DataFormatError(path, None, f"bad .wav header: rate {params.framerate} Hz, "
+                              f"{params.nchannels} channels")
+    return params
+
+
+def _likely_rate(n_samples: int, recording_s: float, header_hz: int) -> int | None:
+    if recording_s <= 0:
+        return None
+    implied = n_samples / recording_s
+    for rate in STANDARD_RATES_HZ:
+        if rate != header_hz and abs(implied - rate) <= RATE_MATCH * rate:
+            return rate
+    return None
+
+
+def check_sound(path: str | os.PathLike, recording_s: float, *,
+                accept_mismatch: bool = False) -> SoundCheck:
+    """Compare the ``.wav`` at ``path`` with a recording of ``recording_s`` seconds (e.g.
+    :func:`recording_seconds` of the pellet times); see the module docstring.
+
+    Returns a :class:`SoundCheck`. A mismatch that would make a wrong result raises
+    :class:`DataFormatError` naming the file (one line: the numbers and the likely
+    cause), unless ``accept_mismatch``; a lesser one, or an accepted one, warns
+    (:class:`SoundMismatchWarning`).
+    """
+    path = Path(path)
+    params = read_header(path)
+    rate, n = int(params.framerate), int(params.nframes)
+    sound_s = n / rate
+    recording_s = float(recording_s)
+    tolerance = max(SOUND_TOLERANCE_S, SOUND_TOLERANCE_FRACTION * recording_s)
+    likely = _likely_rate(n, recording_s, rate)
+    numbers = (f"{sound_s:.3g} s of sound ({n} samples at {rate} Hz) for {recording_s:.3g} s "
+               "of pellets")
+    if abs(sound_s - recording_s) <= tolerance:
+        return SoundCheck(str(path), rate, n, sound_s, recording_s, "ok", None, None)
+    if likely is not None:
+        status, error = "rate", True
+        cause = (f"the header's rate is likely wrong: the samples fill the recording at "
+                 f"{likely} Hz")
+        if sound_s < recording_s:
+            cause += ", or the file is cut"
+    elif sound_s < recording_s:
+        status, error = "shorter", sound_s < 0.5 * recording_s
+        cause = (f"the file looks cut: a video would be silent after {sound_s:.3g} s")
+    else:
+        status, error = "longer", False
+        cause = f"a video keeps the first {recording_s:.3g} s"
+    message = f"{numbers}: {cause}"
+    if error and not accept_mismatch:
+        raise DataFormatError(path, None, message + " (accept it with accept_mismatch=True)")
+    warnings.warn(f"{path}: {message}", SoundMismatchWarning, stacklevel=2)
+    return SoundCheck(str(path), rate, n, sound_s, recording_s, status, likely, message)
