@@ -56,7 +56,7 @@ def test_the_tongue_is_a_closed_outward_tube_of_adult_volume():
     assert all(n == 1 and edges.get((b, a)) == 1 for (a, b), n in edges.items())
     assert ADULT_ML[0] < REST_ML < ADULT_ML[1]
     # the volume does not depend on where the origin is (closed mesh)
-    shifted = closed_mesh_volume(jnp.asarray(REST) + jnp.array([40.0, -7.0, 3.0]), faces)
+    shifted = closed_mesh_volume(jnp.asarray(REST) + jnp.array([[40.0, -7.0, 3.0]]), faces)
     assert float(shifted) / 1000 == pytest.approx(REST_ML, rel=1e-9)
 
 
