@@ -7,6 +7,9 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+# The real XRMB recording for the real referee (read-only; never copied into the project):
+# beside the checkout, or the shared copy; `make experiments XRMB_JW11=DIR` names another.
+XRMB_JW11 ?= $(firstword $(wildcard ../shared/data/xrmb_jw11 /work/shared/data/xrmb_jw11))
 
 .PHONY: demo test venv pictures bench experiments lint docs clean
 
@@ -41,8 +44,13 @@ experiments: $(STAMP)
 	$(BIN)/python experiments/single_sensor_jaw.py --out experiments/output --docs docs/generated --force
 	$(BIN)/python experiments/synthetic_realism.py --out experiments/output --docs docs/generated --force
 	$(BIN)/python experiments/subject_fitting.py --out experiments/output --docs docs/generated --force
+	$(BIN)/python experiments/calibration_limits.py --out experiments/output --docs docs/generated --force
 	$(BIN)/python experiments/cassi_mode.py --subjects 5 --tasks tp011 tp040 --stride 1
 	$(BIN)/python experiments/tongue_volume.py --subjects 2 --stride 1
+	@if [ -d "$(XRMB_JW11)" ]; then \
+	  $(BIN)/python experiments/real_referee.py $(XRMB_JW11) --out experiments/output \
+	    --docs docs/generated --force; \
+	else echo "real_referee: skipped, no real recording (make experiments XRMB_JW11=DIR)"; fi
 	$(BIN)/python experiments/mistrack_detection.py --docs docs/generated --force
 	$(BIN)/python experiments/quote_tables.py
 

@@ -32,12 +32,13 @@ if TYPE_CHECKING:
     from .animate import Animation as Animation
     from .calibrate import calibrate_dataset as calibrate_dataset
     from .calibrate import calibrate_subject as calibrate_subject
-    from .calibrate import calibration_choice as calibration_choice
-    from .calibrate import load_calibrations as load_calibrations
-    from .calibrate import read_calibration as read_calibration
-    from .calibrate import write_calibration as write_calibration
     from .calibrate_corpus import calibrate_corpus as calibrate_corpus
-    from .conformation import Calibration as Calibration
+    from .calibration import Calibration as Calibration
+    from .calibration import CalibrationWarning as CalibrationWarning
+    from .calibration import calibration_choice as calibration_choice
+    from .calibration import load_calibrations as load_calibrations
+    from .calibration import read_calibration as read_calibration
+    from .calibration import write_calibration as write_calibration
     from .corpus import CorpusItem as CorpusItem
     from .corpus import CorpusRun as CorpusRun
     from .corpus import dataset_items as dataset_items
@@ -53,6 +54,7 @@ if TYPE_CHECKING:
     from .deform import model_pellets as model_pellets
     from .deform import vertex_normals as vertex_normals
     from .ema import SensorReport as SensorReport
+    from .ema.synthetic import write_ema_corpus as write_ema_corpus
     from .errors import CassiError as CassiError
     from .errors import DataFormatError as DataFormatError
     from .errors import DegenerateGeometryError as DegenerateGeometryError
@@ -199,6 +201,7 @@ _PUBLIC = {
     "Recording": "dataset",
     "load_recording": "dataset",
     "recording_from_array": "dataset",
+    "write_ema_corpus": "ema.synthetic",
     "DefaultHeadMeasuresWarning": "dataset",
     "SpecialFileWarning": "dataset",
     # ema (data): articulograph files
@@ -273,15 +276,16 @@ _PUBLIC = {
     "PivotPrior": "jaw_fit",
     "JawCoupling": "jaw_fit",
     "learn_jaw_coupling": "jaw_fit",
-    # conformation (fitting)
-    "Calibration": "conformation",
+    # calibration (fitting): the record and its file
+    "Calibration": "calibration",
+    "CalibrationWarning": "calibration",
+    "read_calibration": "calibration",
+    "write_calibration": "calibration",
+    "load_calibrations": "calibration",
+    "calibration_choice": "calibration",
     # calibrate (fitting)
     "calibrate_subject": "calibrate",
     "calibrate_dataset": "calibrate",
-    "read_calibration": "calibrate",
-    "write_calibration": "calibrate",
-    "load_calibrations": "calibrate",
-    "calibration_choice": "calibrate",
     # initialize (pipeline)
     "initialize": "initialize",
     "SubjectState": "initialize",
@@ -324,8 +328,8 @@ _PUBLIC = {
 _MODULES = ("animate", "deform", "rigid", "synth")
 
 __all__ = [
-    "Animation", "Calibration", "CassiError", "ClosedForm", "CorpusItem", "CorpusRun",
-    "CoupledRotation", "JawCoupling", "PivotPrior", "learn_jaw_coupling",
+    "Animation", "Calibration", "CalibrationWarning", "CassiError", "ClosedForm", "CorpusItem",
+    "CorpusRun", "CoupledRotation", "JawCoupling", "PivotPrior", "learn_jaw_coupling",
     "DEFAULT_HEAD_MEASURES", "DataFormatError", "Dataset", "DefaultHeadMeasuresWarning",
     "DegenerateGeometryError", "Dogleg", "EvaluationResult", "FaceModel", "FaceParams",
     "FixedPivot", "FrameFit", "GaussNewton", "HeadMeasures", "InvalidChoiceError", "JAW_METHODS",
@@ -346,7 +350,7 @@ __all__ = [
     "load_recording", "load_truth", "make_subject", "midsagittal_figure", "mistrack_report",
     "model_pellets", "pellet_index",
     "quality_report", "read_calibration", "read_headmeasures", "read_lab", "read_labels",
-    "read_outline", "read_textgrid", "read_txy", "recording_from_array", "repair",
+    "read_outline", "read_textgrid", "read_txy", "recording_from_array", "write_ema_corpus", "repair",
     "require_tracked", "rigid", "SensorReport",
     "run_corpus", "segment_summary", "subject_traces", "synth", "synth_recording",
     "tongue_volume", "tongue_volumes", "vertex_normals", "with_palate", "build_pharynx",

@@ -515,19 +515,73 @@ def terminate_as_interrupt() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
-def read_json(path: str | os.PathLike, what: str) -> Any:
-    """The JSON document in ``path``, registered as an input: ``MissingDataError`` if
-    there is no such file (``what`` names it), ``DataFormatError`` naming the file and
-    the line if it is not valid JSON."""
-    import json
+def decode_text(path: str | os.PathLike, raw: bytes) -> str:
+    """A text file's bytes as a text editor may have written them: UTF-8 with or without
+    a byte-order mark, or UTF-16 with one (little- or big-endian). ``DataFormatError``
+    naming the file and the line of the first byte that is not such text (UTF-16
+    without a byte-order mark, Latin-1 ...)."""
+    import codecs
+
+    from .errors import DataFormatError
+
+    if raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        encoding, body = "utf-16", raw  # the codec reads the mark and the byte order
+    else:
+        encoding, body = "utf-8", raw.removeprefix(codecs.BOM_UTF8)
+    try:
+        text = body.decode(encoding)
+    except UnicodeDecodeError as exc:
+        line = body[: exc.start].decode(encoding, errors="replace").count("\n") + 1
+        raise DataFormatError(path, line, f"not text in UTF-8 or UTF-16 with a byte-order "
+                              f"mark (byte {body[exc.start]:#04x}); save it as UTF-8") from None
+    if "\x00" in text:
+        line = text[: text.index("\x00")].count("\n") + 1
+        raise DataFormatError(path, line, "a NUL character: UTF-16 without a byte-order mark? "
+                              "save it as UTF-8")
+    return text
+
+
+def read_text(path: str | os.PathLike, what: str) -> str:
+    """The text of ``path`` (:func:`decode_text`), registered as an input:
+    ``MissingDataError`` if there is no such file (``what`` names it),
+    ``DataFormatError`` if it is not a regular file (a FIFO would block) or not text."""
+    import stat
 
     from .errors import DataFormatError, MissingDataError
 
     path = Path(path)
-    if not path.is_file():
-        raise MissingDataError(f"{path}: {what} not found")
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise MissingDataError(f"{path}: {what} not found") from None
+    except OSError as exc:
+        raise DataFormatError(path, None, f"cannot read: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(mode):
+        kind = "a folder" if stat.S_ISDIR(mode) else "a pipe, device or socket"
+        raise DataFormatError(path, None, f"{what} expected, found {kind}")
     register_input(path)
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise DataFormatError(path, None, f"cannot read: {exc.strerror or exc}") from None
+    return decode_text(path, raw)
+
+
+def parse_json(path: str | os.PathLike, text: str) -> Any:
+    """The JSON document ``text`` (read from ``path``): ``DataFormatError`` naming the
+    file and the line if it is not valid JSON."""
+    import json
+
+    from .errors import DataFormatError
+
+    try:
+        return json.loads(text)
     except json.JSONDecodeError as exc:
         raise DataFormatError(path, exc.lineno, f"invalid JSON: {exc.msg}") from None
+
+
+def read_json(path: str | os.PathLike, what: str) -> Any:
+    """The JSON document in ``path`` (:func:`read_text`, :func:`parse_json`), registered
+    as an input: ``MissingDataError`` if there is no such file (``what`` names it),
+    ``DataFormatError`` naming the file and the line if it is not valid JSON."""
+    return parse_json(path, read_text(path, what))

@@ -38,19 +38,25 @@ own residuals; ``"joint"`` fits all of them and the scale at once. Mouth width a
 protrusion come straight from Headmeasures (no pellet sees them). A subject without
 Headmeasures keeps the model's jaw shape, face width, mouth and nose.
 
-The result, :class:`Calibration`, is written one JSON file per subject
-(``<SUBJECT>.calibration.json``) by ``cassi calibrate`` and read back by
-``cassi animate --calibration`` and ``initialize(..., calibration=...)``. The record
-itself, :class:`~cassi_fit.conformation.Calibration`, lives with the rest of the subject's
-conformation in :mod:`cassi_fit.conformation`; the unknowns of the fit are the named
+The result, :class:`~cassi_fit.calibration.Calibration`, is written one JSON file per
+subject (``<SUBJECT>.calibration.json``) by ``cassi calibrate`` and read back by
+``cassi animate --calibration`` and ``initialize(..., calibration=...)``. The record,
+its file (schema, reading, writing, the folder layout) and the command line's choice
+live in :mod:`cassi_fit.calibration`; ``Calibration``, ``read_calibration``,
+``write_calibration``, ``load_calibrations``, ``calibration_path`` and
+``calibration_choice`` stay importable from here. The unknowns of the fit are the named
 pytree :class:`Unknowns`.
+
+A fit that fails says so: a stage that does not converge, a jaw shape at its anatomical
+bound (held there while the rest is solved again: :func:`_solve_stage`), both recorded
+in the calibration and its file and warned (``CalibrationWarning``); the lower lip's
+unobservable bias is reported with its size (:func:`lower_lip_bias`).
 """
 
 from __future__ import annotations
 
 import math
-import warnings
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import equinox as eqx
@@ -60,19 +66,26 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
-from .conformation import (
+from .calibration import (
     BOUND_HIT_FRACTION,
-    FORMAT,
     JAW_SCALE_BOUND,
     JAW_TURN_BOUND_RAD,
-    Calibration,
-    lips_ahead,
+    calibration_records,
     plain,
-    skin_landmarks,
-    with_values,
+    warn_problems,
 )
+
+# The record and its file live in cassi_fit.calibration; these names stay importable here.
+from .calibration import Calibration as Calibration
+from .calibration import CalibrationWarning as CalibrationWarning
+from .calibration import calibration_choice as calibration_choice
+from .calibration import calibration_path as calibration_path
+from .calibration import load_calibrations as load_calibrations
+from .calibration import read_calibration as read_calibration
+from .calibration import write_calibration as write_calibration
+from .conformation import lips_ahead, skin_landmarks, with_values
 from .dataset import Dataset, Recording, recording_source
-from .errors import CassiError, DataFormatError, DegenerateGeometryError, MissingDataError
+from .errors import CassiError, DegenerateGeometryError, MissingDataError
 from .face_model import FaceModel
 from .options import CALIBRATION_METHODS, check_choice
 from .pellets import LL, MNI, MNM, PELLET_NAMES, UL, first_valid_line
@@ -145,6 +158,10 @@ def _first_line(recording):
     """``(first index, pellets (8, 2) mm with NaN for pellets never tracked)``."""
     source = recording_source(recording)
     first, tracked = first_valid_line(recording.track, source)
+    missing = [name for name in ("MNI", "MNM") if name not in tracked]
+    if missing:  # one jaw sensor starts an animation, but p/d is the two sensors' distance
+        raise MissingDataError(f"{source}: calibration needs both jaw pellets (the scale p/d "
+                               f"is their distance); {', '.join(missing)} is never tracked")
     pellets = np.array(recording.track.positions[first], np.float64)
     for j, name in enumerate(PELLET_NAMES):
         if name not in tracked:
@@ -175,6 +192,48 @@ def _data(model, pellets, head):
         "mouth_width": np.asarray(float(head.mouth_width)),
         "nose": np.asarray(float(head.nose_protrusion)),
     }
+
+
+#: The share of subjects whose lower-lip bias lies within :func:`lower_lip_bias`'s range
+#: (a normal's central 95 %: mean +- 1.96 SD).
+LOWER_LIP_BIAS_COVERAGE_SD = 1.96
+
+
+def lower_lip_bias(
+    model: FaceModel, pellets: Float[np.ndarray, "r 8 2"], scale: float
+) -> tuple[float, float]:
+    """``(low, high)`` subject mm: the range (:data:`LOWER_LIP_BIAS_COVERAGE_SD`, 95 %) of
+    the lower-lip estimate's error, estimate minus truth, that the unobserved incisor tip
+    causes, from the first valid lines ``pellets (r, 8, 2)`` subject mm and ``scale`` p/d.
+
+    No pellet sees the lower incisor tip: the estimate places the *model's* tip on the
+    subject's jaw pellets, so it is off by how much further ahead of MNI, along the jaw
+    line MNM -> MNI, the subject's tip lies than the model's (docs/CALIBRATION.md). The
+    model's is known; the subject's is ``depth sin(phi) - labial cos(phi)``, with MNI
+    ``depth`` below the incisal edge along the crown and ``labial`` ahead of it, and
+    ``phi`` the crown's tilt forward of vertical less the jaw line's fall (the fall seen
+    on the first lines, median over them). ``depth``, ``labial`` and the tilt take the
+    dental norms of ``synth.NORMS`` (``mni_depth``, ``mni_labial``, ``incisor_tilt_deg``,
+    with their sources in docs/SYNTHETIC.md); their spread is carried to first order.
+    The synthetic corpus draws its subjects from the same norms, so it cannot test this
+    range, only its geometry; a real speaker's pellet may sit elsewhere on the crown.
+    """
+    from .synth import NORMS
+
+    v = np.asarray(model.vertices, np.float64)[:, :2]
+    mni, mnm, tip = (v[model.landmarks[k]] for k in ("MNI", "MNM", "lower_incisor_tip"))
+    forward = (mni - mnm) / np.linalg.norm(mni - mnm)
+    model_ahead = float(np.dot(tip - mni, forward)) / float(scale)
+    line = np.asarray(pellets, np.float64)[:, MNI] - np.asarray(pellets, np.float64)[:, MNM]
+    fall = float(np.median(np.arctan2(-line[:, 1], line[:, 0])))
+    (depth, sd_depth), (labial, sd_labial) = NORMS["mni_depth"], NORMS["mni_labial"]
+    tilt, sd_tilt = (math.radians(a) for a in NORMS["incisor_tilt_deg"])
+    phi = tilt - fall
+    mean = depth * math.sin(phi) - labial * math.cos(phi)
+    sd = math.hypot(math.hypot(math.sin(phi) * sd_depth, math.cos(phi) * sd_labial),
+                    (depth * math.cos(phi) + labial * math.sin(phi)) * sd_tilt)
+    half = LOWER_LIP_BIAS_COVERAGE_SD * sd
+    return (mean - half - model_ahead, mean + half - model_ahead)
 
 
 class _Problem:
@@ -284,13 +343,13 @@ class _Problem:
 # ------------------------------------------------------------------------ the fit
 
 _GROUPS = ("jaw_pellets", "upper_lip", "lower_lip", "jaw_shape", "face_width", "collision")
-_STAGES = {  # method -> [(free unknowns, residual groups)]
+_STAGES = {  # method -> [(stage name (calibration.STAGES), free unknowns, residual groups)]
     "separate": [
-        (("jaw_theta", "log_jaw_scale"), ("jaw_shape",)),
-        (("face_width",), ("face_width",)),
-        (("upper_lip", "lower_lip"), ("upper_lip", "lower_lip", "collision")),
+        ("jaw_shape", ("jaw_theta", "log_jaw_scale"), ("jaw_shape",)),
+        ("face_width", ("face_width",), ("face_width",)),
+        ("lips", ("upper_lip", "lower_lip"), ("upper_lip", "lower_lip", "collision")),
     ],
-    "joint": [(UNKNOWN_NAMES, _GROUPS)],
+    "joint": [("joint", UNKNOWN_NAMES, _GROUPS)],
 }
 # Without Headmeasures only these unknowns are seen by any residual.
 _UNMEASURED = ("log_scale", "upper_lip", "lower_lip")
@@ -299,8 +358,11 @@ _UNMEASURED = ("log_scale", "upper_lip", "lower_lip")
 @eqx.filter_jit
 def _stage_kernel(model, data, measured, x, mask, weights):
     """One compiled solver per (model topology, head measured): which unknowns are free
-    (``mask``, an ``Unknowns`` of 0/1) and which residual groups count (``weights``) are
-    arrays, so every stage of both methods, with or without the penalty, shares it."""
+    (``mask``, an ``Unknowns`` of 0/1, per element) and which residual groups count
+    (``weights``) are arrays, so every stage of both methods, with or without the penalty,
+    and its re-solve with a bound held (:func:`_solve_stage`), share it. Returns ``(x,
+    converged, gradient)``, the gradient of half the squared residuals over the flat
+    unknowns at the answer (0 for the held ones)."""
     from .jaw_fit import solve
 
     problem = _Problem(model, data, measured)
@@ -312,17 +374,73 @@ def _stage_kernel(model, data, measured, x, mask, weights):
         return jnp.concatenate([weights[k] * jnp.atleast_1d(g[k]) for k in _GROUPS if k in g])
 
     y, converged = solve(residuals, flat, flat, "optimistix-lm")
-    return unravel(flat + free * (y - flat)), converged
+    gradient = jax.grad(lambda z: 0.5 * jnp.sum(residuals(z, flat) ** 2))(y)
+    return unravel(flat + free * (y - flat)), converged, gradient
+
+
+def _pressing_on_a_bound(x, gradient, free):
+    """Flat 0/1 over the unknowns: the free jaw-shape unknowns of ``x`` that sit at
+    (``BOUND_HIT_FRACTION`` of) their bound while the cost still falls outwards (the
+    gradient's sign opposite to the unknown's: the constrained optimum is on the bound)."""
+    theta, log_scale = (np.asarray(a, np.float64) for a in bounded_jaw(x))
+    zero = np.zeros(())
+    near = Unknowns(zero, zero, zero, zero, np.abs(theta) / JAW_TURN_BOUND_RAD,
+                    np.abs(log_scale) / math.log(JAW_SCALE_BOUND))
+    near = np.asarray(ravel_pytree(near)[0]) >= BOUND_HIT_FRACTION
+    u = np.asarray(ravel_pytree(x)[0], np.float64)
+    outwards = np.asarray(gradient, np.float64) * u < 0
+    return (near & outwards & (free > 0)).astype(np.float64)
+
+
+def _stage_weights(groups, collisions, dtype):
+    """The residual groups' weights of a stage: 1 for ``groups`` (the penalty only with
+    ``collisions``), 0 for the others."""
+    weights = {g: jnp.asarray(float(g in groups), dtype) for g in _GROUPS}
+    weights["collision"] = weights["collision"] * float(bool(collisions))
+    return weights
 
 
 def _solve_stage(model, data, measured, x, free, groups, collisions):
     """Least squares over the unknowns named in ``free`` (others held at ``x``) of the
-    residual ``groups``; returns ``(x, converged)``."""
+    residual ``groups``; returns ``(x, converged)``.
+
+    A jaw-shape unknown whose optimum lies beyond its anatomical bound never converges in
+    the bounded parameterisation (:func:`bounded_jaw`: the solver walks ``u`` out along
+    ``tanh``'s flat tail, gaining less and less, until its step budget ends; S09 of the
+    default corpus, docs/CALIBRATION.md). Such an unknown is held where it is, within
+    ``1 - BOUND_HIT_FRACTION`` of the bound (an active bound, as a bounded solver would
+    hold it), and the others are solved again: ``converged`` is that solve's verdict, and
+    the bound is reported by :func:`bounds_hit`.
+    """
     dtype = x.log_scale.dtype
-    weights = {g: jnp.asarray(float(g in groups), dtype) for g in _GROUPS}
-    weights["collision"] = weights["collision"] * float(bool(collisions))
-    y, converged = _stage_kernel(model, data, measured, x, Unknowns.mask(free, dtype), weights)
+    weights = _stage_weights(groups, collisions, dtype)
+    mask = Unknowns.mask(free, dtype)
+    y, converged, gradient = _stage_kernel(model, data, measured, x, mask, weights)
+    if bool(converged):
+        return y, True
+    flat_mask, unravel = ravel_pytree(mask)
+    held = _pressing_on_a_bound(y, gradient, np.asarray(flat_mask))
+    if not held.any():
+        return y, False
+    mask = unravel(jnp.asarray(np.asarray(flat_mask) * (1.0 - held), dtype))
+    y, converged, _ = _stage_kernel(model, data, measured, y, mask, weights)
     return y, bool(converged)
+
+
+def _prepare(recordings, model):
+    """What every stage starts from: ``(data, measured, x0, lines)``: the residuals'
+    arrays (:func:`_data`), whether the subject has Headmeasures, the unknowns at the
+    start (the model's shape, ``s = p / d`` with ``d`` the median first-line jaw pellet
+    distance) and each recording's ``(first valid line, its pellets)``."""
+    lines = [_first_line(r) for r in recordings]
+    pellets = np.stack([p for _, p in lines])
+    head, measured = recordings[0].head, not bool(recordings[0].head_is_default)
+    dtype = jnp.asarray(model.vertices).dtype
+    data = jax.tree.map(lambda a: jnp.asarray(a, dtype), _data(model, pellets, head))
+    sites = np.asarray(model.vertices)[[model.landmarks["MNI"], model.landmarks["MNM"]], :2]
+    s0 = float(np.linalg.norm(sites[0] - sites[1])) / float(np.median(np.asarray(data["d"])))
+    x = eqx.tree_at(lambda u: u.log_scale, Unknowns.zeros(dtype), jnp.asarray(math.log(s0), dtype))
+    return data, measured, x, lines
 
 
 def calibrate_subject(
@@ -332,9 +450,17 @@ def calibrate_subject(
     """Calibrate the face model to one subject from its recordings (``dataset.Recording``
     objects, one or more, all of the same subject). Returns a :class:`Calibration`.
 
-    Raises ``CassiError`` for an unknown method or recordings of different subjects,
-    ``MissingDataError`` if no recording is given or a jaw pellet is never tracked,
-    ``DegenerateGeometryError`` for coincident jaw pellets on a first valid line.
+    A stage that does not converge, a jaw shape that reaches its anatomical bound, or a
+    value outside the calibration file's plausible ranges (``calibration.SCHEMA``; such
+    a calibration is not written) is recorded in the result (``converged``,
+    ``unconverged``, ``bounds_hit``) and warned (one ``calibration.CalibrationWarning``
+    per line of ``Calibration.problems()``); the lower lip's unobservable bias is in
+    ``lower_lip_bias`` (:func:`lower_lip_bias`).
+
+    Raises ``CassiError`` for an unknown method, recordings of different subjects or a
+    non-finite result; ``MissingDataError`` if no recording is given or a jaw pellet is
+    never tracked; ``DegenerateGeometryError`` for coincident jaw pellets on a first
+    valid line.
     """
     from .face_model import load_model
 
@@ -346,33 +472,23 @@ def calibrate_subject(
     if len(subjects) != 1:
         raise CassiError(f"recordings of several subjects given: {', '.join(sorted(subjects))}")
     model = load_model() if model is None else model
-    lines = [_first_line(r) for r in recordings]
-    pellets = np.stack([p for _, p in lines])
-    head, measured = recordings[0].head, not bool(recordings[0].head_is_default)
-    dtype = jnp.asarray(model.vertices).dtype
-    data = jax.tree.map(lambda a: jnp.asarray(a, dtype), _data(model, pellets, head))
-    sites = np.asarray(model.vertices)[[model.landmarks["MNI"], model.landmarks["MNM"]], :2]
-    s0 = float(np.linalg.norm(sites[0] - sites[1])) / float(np.median(np.asarray(data["d"])))
-    x = eqx.tree_at(lambda u: u.log_scale, Unknowns.zeros(dtype), jnp.asarray(math.log(s0), dtype))
-    converged = True
-    for free, groups in _STAGES[method]:
+    data, measured, x, lines = _prepare(recordings, model)
+    unconverged = []
+    for stage, free, groups in _STAGES[method]:
         if not measured:
             free = tuple(k for k in free if k in _UNMEASURED)
             groups = tuple(g for g in groups if g not in ("jaw_shape", "face_width"))
         if not free:
             continue
         x, ok = _solve_stage(model, data, measured, x, free, groups, bool(collisions))
-        converged &= ok
+        if not ok:
+            unconverged.append(stage)
     problem = _Problem(model, data, measured)
-    result = _summarise(problem, x, method, collisions, converged, recordings, lines)
-    if result.bounds_hit:
-        warnings.warn(f"subject {result.subject}: the jaw shape reached its anatomical bound "
-                      f"({', '.join(result.bounds_hit)}; conformation.JAW_SCALE_BOUND, "
-                      "JAW_TURN_BOUND_RAD): its Headmeasures do not fit an adult jaw of the "
-                      "model's proportions", stacklevel=2)
+    result = _summarise(problem, x, method, collisions, tuple(unconverged), recordings, lines)
     if not all(np.isfinite(v) for v in (result.scale, result.upper_lip_thickness,
                                         result.lower_lip_thickness, result.face_width)):
         raise CassiError(f"subject {result.subject}: calibration gave a non-finite value")
+    warn_problems(result, stacklevel=2)
     return result
 
 
@@ -391,7 +507,7 @@ def _summary_arrays(model, data, measured, x):
             problem.lip_rest_offset(v, s))
 
 
-def _summarise(problem, x, method, collisions, converged, recordings, lines):
+def _summarise(problem, x, method, collisions, unconverged, recordings, lines):
     s = float(np.exp(x.log_scale))
     v, groups, model_t, obs, lips_depth, params, lip_rest = _summary_arrays(
         problem.model, problem.data, problem.measured, x)
@@ -442,123 +558,14 @@ def _summarise(problem, x, method, collisions, converged, recordings, lines):
         first_lines=tuple(int(f) + 1 for f, _ in lines),
         head_is_default=not problem.measured,
         collisions=bool(collisions),
-        converged=bool(converged),
+        converged=not unconverged,
         bounds_hit=bounds_hit(x) if problem.measured else (),
+        unconverged=unconverged,
+        lower_lip_bias=lower_lip_bias(problem.model, np.asarray(problem.data["pellets"]), s),
     )
 
 
-# ------------------------------------------------------------------------- files
-
-
-def calibration_path(folder: str | Path, subject: str) -> Path:
-    """``folder/SUBJECT.calibration.json``."""
-    return Path(folder) / f"{subject.upper()}.calibration.json"
-
-
-def write_calibration(
-    path: str | Path, calibration: Calibration, *, overwrite: bool = False
-) -> Path:
-    """Write one subject's calibration as JSON (atomically; an existing file only with
-    ``overwrite``)."""
-    from ._io import atomic_write
-
-    return atomic_write(Path(path), calibration.to_json(), overwrite=overwrite)
-
-
-_REQUIRED = ("subject", "method", "scale", "upper_lip_thickness", "lower_lip_thickness",
-             "face_width", "params")
-
-
-def read_calibration(path: str | Path) -> Calibration:
-    """Read a ``<SUBJECT>.calibration.json``; ``DataFormatError`` naming the file (and the
-    line, for invalid JSON) if it is not one."""
-    from ._io import read_json
-
-    path = Path(path)
-    data = read_json(path, "calibration file")
-    if not isinstance(data, dict) or data.get("format") != FORMAT:
-        raise DataFormatError(path, None, f"not a calibration file (format {FORMAT!r})")
-    missing = [k for k in _REQUIRED if k not in data]
-    if missing:
-        raise DataFormatError(path, None, f"missing {', '.join(missing)}")
-    known = {f for f in Calibration.__dataclass_fields__}
-    data = {k: v for k, v in data.items() if k in known}
-    defaults = {"mouth_width": float("nan"), "nose_protrusion": float("nan"),
-                "gonion": (math.nan, math.nan), "gnathion": (math.nan, math.nan),
-                "lip_rest_offset": (0.0, 0.0),
-                "residuals": {}, "observed": {}, "recordings": (), "first_lines": (),
-                "head_is_default": False, "collisions": False, "converged": True,
-                "bounds_hit": ()}
-    for k, v in defaults.items():
-        data.setdefault(k, v)
-    params = data["params"]
-    allowed = {"upper_lip_thickness": (), "lower_lip_thickness": (), "face_width": (),
-               "mouth_width": (), "nose_tip": (2,), "jaw_shape_theta": (),
-               "jaw_shape_translation": (2,), "jaw_shape_scale": (2,)}
-    if not isinstance(params, dict):
-        raise DataFormatError(path, None, "params must be an object")
-    for k, v in params.items():
-        if k not in allowed:
-            raise DataFormatError(path, None, f"unknown parameter {k!r}")
-        a = np.asarray(v, float) if _numeric(v) else None
-        if a is None or a.shape != allowed[k] or not np.all(np.isfinite(a)):
-            raise DataFormatError(path, None, f"parameter {k}: expected {allowed[k] or 'a number'}")
-    for k in ("scale", "upper_lip_thickness", "lower_lip_thickness", "face_width"):
-        if not _numeric(data[k]) or not math.isfinite(float(data[k])) or float(data[k]) <= 0:
-            raise DataFormatError(path, None, f"{k} must be a positive number")
-    offset = data["lip_rest_offset"]
-    if not _numeric(offset) or np.shape(offset) != (2,) or not np.all(np.isfinite(offset)):
-        raise DataFormatError(path, None, "lip_rest_offset must be two numbers (mm)")
-    data["lip_rest_offset"] = tuple(float(d) for d in offset)
-    hit = data["bounds_hit"]
-    if not isinstance(hit, (list, tuple)) or not all(isinstance(h, str) for h in hit):
-        raise DataFormatError(path, None, "bounds_hit must be a list of names")
-    data["bounds_hit"] = tuple(hit)
-    data["gonion"], data["gnathion"] = tuple(data["gonion"]), tuple(data["gnathion"])
-    data["recordings"], data["first_lines"] = tuple(data["recordings"]), tuple(data["first_lines"])
-    return Calibration(**data)
-
-
-def _numeric(v) -> bool:
-    try:
-        np.asarray(v, float)
-    except (TypeError, ValueError):
-        return False
-    return True
-
-
-def load_calibrations(folder: str | Path) -> dict[str, Calibration]:
-    """All ``*.calibration.json`` in ``folder``: subject (upper case) -> Calibration."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise MissingDataError(f"{folder}: calibration folder not found")
-    out = {}
-    for path in sorted(folder.glob("*.calibration.json")):
-        cal = read_calibration(path)
-        if cal.subject in out:
-            raise DataFormatError(path, None, f"a second calibration of subject {cal.subject}")
-        out[cal.subject] = cal
-    if not out:
-        raise MissingDataError(f"{folder}: no *.calibration.json files")
-    return out
-
-
-def calibration_choice(
-    path: str | Path | None = None, subject: str = "", *, cassi: bool = False
-) -> Calibration | str | None:
-    """``initialize``'s ``calibration`` for the command line's ``--calibration PATH`` and
-    ``--cassi``: ``"cassi"``, ``None`` (the default conformation), or the
-    :class:`Calibration` read from ``PATH`` (a folder written by ``cassi calibrate``, whose
-    ``SUBJECT.calibration.json`` is used, or one such file). ``CassiError`` if both are
-    given."""
-    if path and cassi:
-        raise CassiError("--cassi and --calibration exclude each other")
-    if cassi:
-        return "cassi"
-    if not path:
-        return None
-    path = Path(path)
-    return read_calibration(calibration_path(path, subject) if path.is_dir() else path)
+# ------------------------------------------------------------------ datasets
 
 
 def calibrate_dataset(
@@ -567,8 +574,10 @@ def calibrate_dataset(
     model: FaceModel | None = None, progress: bool = False,
 ) -> dict[str, Calibration]:
     """Calibrate every subject of a ``dataset.Dataset`` (or its folder): subject ->
-    Calibration. ``tasks``: the tasks whose first valid lines are used (default: all the
-    subject's tasks)."""
+    Calibration. ``tasks``: the tasks whose first valid lines are used, chosen as every
+    dataset run chooses them (``corpus.chosen_tasks``; default: all the subject's tasks).
+    Each subject's problems are warned (``CalibrationWarning``) as
+    :func:`calibrate_subject` does."""
     import warnings
 
     from .corpus import chosen_tasks
@@ -598,19 +607,11 @@ def calibrate_dataset(
 
 
 def write_summary(
-    path: str | Path, calibrations: dict[str, Calibration], *, overwrite: bool = False
+    path: str | Path, calibrations: Mapping[str, Calibration], *, overwrite: bool = False
 ) -> Path:
-    """A CSV, one row per subject: scale, the calibrated measures and the residuals."""
-    from ._io import atomic_write
+    """A CSV, one row per subject (``calibration.calibration_records``): scale, the
+    calibrated measures, convergence, bounds hit, the lower lip's possible bias and the
+    residuals (mm)."""
+    from .tables import write_table
 
-    res_keys = sorted({k for c in calibrations.values() for k in c.residuals})
-    header = ["subject", "method", "scale", "upper_lip_thickness_mm", "lower_lip_thickness_mm",
-              "face_width_mm", "converged", "bounds_hit"] + [f"residual_{k}_mm" for k in res_keys]
-    rows = [",".join(header)]
-    for name, c in calibrations.items():
-        values = [name, c.method, f"{c.scale:.6f}", f"{c.upper_lip_thickness:.3f}",
-                  f"{c.lower_lip_thickness:.3f}", f"{c.face_width:.3f}", str(c.converged),
-                  ";".join(c.bounds_hit)]
-        values += [f"{c.residuals.get(k, float('nan')):.4f}" for k in res_keys]
-        rows.append(",".join(values))
-    return atomic_write(Path(path), "\n".join(rows) + "\n", overwrite=overwrite)
+    return write_table(calibration_records(calibrations), path, overwrite=overwrite)[0]

@@ -22,6 +22,7 @@ from .calibrate import (
     write_calibration,
     write_summary,
 )
+from .calibration import CalibrationWarning
 from .corpus import (
     CorpusItem,
     CorpusRun,
@@ -56,12 +57,16 @@ def calibrate_task(item: CorpusItem, out_dir: str, *, tasks: Sequence[str] | Non
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         recordings = [ds.load(item.subject, t) for t in wanted]
-    cal = calibrate_subject(recordings, worker_model(), method=method, collisions=collisions)
+    with warnings.catch_warnings():  # the row carries the problems; a worker's raw warning
+        warnings.simplefilter("ignore", CalibrationWarning)  # would only repeat them
+        cal = calibrate_subject(recordings, worker_model(), method=method,
+                                collisions=collisions)
     path = write_calibration(calibration_path(out_dir, item.subject), cal, overwrite=overwrite)
     row = {"method": cal.method, "recordings": len(recordings), "scale": float(cal.scale),
            "upper_lip_thickness_mm": float(cal.upper_lip_thickness),
            "lower_lip_thickness_mm": float(cal.lower_lip_thickness),
-           "face_width_mm": float(cal.face_width), "converged": bool(cal.converged)}
+           "face_width_mm": float(cal.face_width), "converged": bool(cal.converged),
+           "problems": "; ".join(cal.problems())}
     return TaskResult(row, (str(path),))
 
 

@@ -7,13 +7,15 @@ Three sources (``initialize(..., calibration=...)``, docs/PIPELINE.md):
   (its future work), face and mouth width and nose from Headmeasures and the lip
   thickness (:func:`lip_thickness`) from Headmeasures or the first valid line;
 * ``mode="cassi"``: only what the paper did (the jaw shape);
-* a :class:`Calibration`: the subject's shape fitted through the model by
-  ``cassi_fit.calibrate`` (``cassi calibrate``), read back from its JSON file.
+* a :class:`~cassi_fit.calibration.Calibration`: the subject's shape fitted through the
+  model by ``cassi_fit.calibrate`` (``cassi calibrate``), read back from its JSON file;
+  the record, its file and its bounds live in :mod:`cassi_fit.calibration` (re-exported
+  here: ``Calibration``, ``JAW_SCALE_BOUND``, ``JAW_TURN_BOUND_RAD``).
 
 Gonion and gnathion in Headmeasures are bone points (paper section 3); the model's are
 skin vertices: :func:`skin_landmarks` maps the one onto the other by the soft-tissue
 thickness of ``headmeasures.SOFT_TISSUE_THICKNESS_MM``. A fitted jaw shape is kept within
-:data:`JAW_SCALE_BOUND` and :data:`JAW_TURN_BOUND_RAD` (adult proportions); a subject
+``calibration.JAW_SCALE_BOUND`` and ``JAW_TURN_BOUND_RAD`` (adult proportions); a subject
 whose values hit a bound is flagged (``Calibration.bounds_hit``).
 
 Lip thickness is Headmeasures' (docs/FORMATS.md): how far the lip pellet sits ahead of
@@ -22,9 +24,6 @@ the incisor tip at rest; :func:`lips_ahead` measures it on one data line.
 
 from __future__ import annotations
 
-import json
-from dataclasses import asdict, dataclass, field
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -32,6 +31,9 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from . import rigid
+from .calibration import JAW_SCALE_BOUND as JAW_SCALE_BOUND
+from .calibration import JAW_TURN_BOUND_RAD as JAW_TURN_BOUND_RAD
+from .calibration import Calibration as Calibration
 from .dataset import Recording
 from .deform import FaceParams, default_params
 from .face_model import FaceModel
@@ -39,89 +41,6 @@ from .headmeasures import SOFT_TISSUE_THICKNESS_MM, HeadMeasures
 from .jaw import closed_form
 from .options import CONFORMATIONS, check_choice
 from .pellets import LL, MNI, MNM, UL
-
-#: The ``format`` entry of a calibration file.
-FORMAT = "cassi_fit calibration 1"
-
-#: The fitted jaw's proportions (x and y scale about the lower incisor tip, relative to
-#: the model after the p/d scaling) stay within 1 / b .. b, b = 1.30. Two spreads add up
-#: in that ratio: the jaw itself (the model's bony gonion is 77 mm behind its lower
-#: incisor tip, at the short end of adult jaws, whose gonion lies 80-100 mm behind the
-#: incisors: condyle 90-100 mm, ramus set 2-10 mm ahead of it, the norms of
-#: docs/SYNTHETIC.md), up to 1.25; and p/d, whose pellet spacing MNI-MNM (37-45 mm
-#: against the model's 43.3) scales the whole subject by up to 1.17 although the jaw
-#: is not that much larger. 1.30 admits the first and most of the second; a fit that
-#: wants more is fitting a mismatch (bone read as skin, a wrong measure), not a jaw.
-JAW_SCALE_BOUND = 1.30
-#: The fitted jaw shape's turn stays within +-10 deg: the mandibular plane angle (to
-#: SN) is 32 +- 5 deg in adults, so 2 SD.
-JAW_TURN_BOUND_RAD = float(np.radians(10.0))
-#: A bound counts as hit when the fitted value reaches this fraction of it (the bounded
-#: parameterisation approaches a bound only asymptotically).
-BOUND_HIT_FRACTION = 0.95
-
-
-@dataclass(frozen=True)
-class Calibration:
-    """One subject's calibrated face. Lengths in the subject's mm unless named ``model``.
-
-    ``scale``: model mm per subject mm (``p/d``). ``params``: the model's conformation
-    parameters (``deform.FaceParams`` names, model units). ``residuals``: what is left of
-    each residual group, subject mm (rms over recordings where there are several).
-    ``observed``: the per-recording first-line estimates of the lip thicknesses.
-    ``lip_rest_offset``: (upper, lower) model mm, how far above the model's UL and LL
-    sites the lip pellets sit on the first valid lines; animation measures the lips'
-    vertical displacement from there, so that the lips are together (at rest) where the
-    first valid line has them, as the report assumes, instead of being pushed into each
-    other or apart by a pellet placed higher or lower on the lip than the model's site.
-    ``bounds_hit``: the jaw-shape unknowns (``"jaw_scale_x"``, ``"jaw_scale_y"``,
-    ``"jaw_turn"``) that reached their anatomical bound (:data:`JAW_SCALE_BOUND`,
-    :data:`JAW_TURN_BOUND_RAD`); empty when the fit stayed inside.
-    """
-
-    subject: str
-    method: str
-    scale: float
-    upper_lip_thickness: float
-    lower_lip_thickness: float
-    face_width: float
-    mouth_width: float
-    nose_protrusion: float
-    gonion: tuple
-    gnathion: tuple
-    params: dict
-    lip_rest_offset: tuple
-    residuals: dict
-    observed: dict
-    recordings: tuple
-    first_lines: tuple
-    head_is_default: bool
-    collisions: bool
-    converged: bool
-    format: str = field(default=FORMAT)
-    bounds_hit: tuple = field(default=())
-
-    def face_params(self, dtype: type | np.dtype = float) -> FaceParams:
-        """The conformation as a ``deform.FaceParams`` (no animation)."""
-        values = {k: jnp.asarray(v, dtype) for k, v in self.params.items()}
-        return with_values(default_params(dtype=dtype), values)
-
-    def to_json(self) -> str:
-        """The calibration file's text (JSON, one subject)."""
-        return json.dumps(plain(asdict(self)), indent=1) + "\n"
-
-
-def plain(x: object) -> object:
-    """``x`` with numpy arrays and scalars turned into lists and Python numbers (for JSON)."""
-    if isinstance(x, dict):
-        return {k: plain(v) for k, v in x.items()}
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, (list, tuple)):
-        return [plain(v) for v in x]
-    if isinstance(x, (np.floating, np.integer, np.bool_)):
-        return x.item()
-    return x
 
 
 def with_values(params: FaceParams, values: dict) -> FaceParams:

@@ -82,6 +82,21 @@ class SubjectState(eqx.Module):
     calibration: object = eqx.field(static=True, default=None)
 
     @property
+    def calibration_problems(self) -> tuple[str, ...]:
+        """What is wrong with the fitted calibration used (``Calibration.problems``: a fit
+        that did not converge, a bound reached, an implausible value), one line each;
+        empty without one or when it is fine."""
+        cal = self.calibration
+        return tuple(cal.problems()) if isinstance(cal, Calibration) else ()
+
+    @property
+    def calibration_caveats(self) -> tuple[str, ...]:
+        """The limits every fitted calibration has, with their size
+        (``Calibration.caveats``: the lower lip's unobservable offset, ...)."""
+        cal = self.calibration
+        return tuple(cal.caveats()) if isinstance(cal, Calibration) else ()
+
+    @property
     def jaw_sensors(self) -> tuple[str, ...]:
         """The jaw pellets the recording tracks, ``("MNI", "MNM")`` or one of them."""
         return tuple(p for p in ("MNI", "MNM") if p in self.tracked_pellets)

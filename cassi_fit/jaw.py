@@ -27,10 +27,10 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 from jaxtyping import Float
 
-from . import rigid
 from .status import Status
 
 # Status codes of a jaw motion (``JawMotion.status``; also used per frame by ``JawFit``): the
@@ -96,29 +96,100 @@ def _safe_inputs(reference, current):
     )
 
 
+def _atan_coefficients(degree: int = 5) -> np.ndarray:
+    """``P`` (highest power first) with ``atan(w) ~ w + w z P(z)``, ``z = w^2``, for
+    ``|w| <= tan(pi/8)``: least squares on Chebyshev nodes, in float64. Max error 4e-11 rad,
+    far below float32's resolution (6e-8 at pi)."""
+    zmax = np.tan(np.pi / 8.0) ** 2
+    z = zmax * (1.0 - np.cos(np.pi * (np.arange(200) + 0.5) / 200)) / 2.0
+    w = np.sqrt(z)
+    return np.polyfit(z, (np.arctan(w) - w) / (w * z), degree)
+
+
+_ATAN_P = tuple(float(c) for c in _atan_coefficients())
+
+
+def _atan2_float32(y, x):
+    """``atan2(y, x)`` in (-pi, pi] from arithmetic alone, for float32 and narrower.
+
+    XLA's CPU arctangent is a scalar loop (about 60 ns an element here; numpy's SIMD one
+    under 1 ns), so the closed form computes it from vectorisable operations: the ratio of
+    the smaller to the larger of ``|x|, |y|``, reduced to ``|w| <= tan(pi/8)`` by
+    ``atan(r) = pi/4 + atan((r - 1)/(r + 1))``, a polynomial (:func:`_atan_coefficients`),
+    and the octant restored. Callers pass ``(x, y) != (0, 0)``. ``y = -0.0`` with ``x < 0``
+    gives +pi, as the closed form's range asks.
+    """
+    ax, ay = jnp.abs(x), jnp.abs(y)
+    swap = ay > ax
+    r = jnp.where(swap, ax, ay) / jnp.where(swap, ay, ax)  # in [0, 1]
+    big = r > np.tan(np.pi / 8.0)
+    w = jnp.where(big, (r - 1.0) / (r + 1.0), r)
+    z = w * w
+    poly = jnp.zeros_like(z)
+    for c in _ATAN_P:
+        poly = poly * z + c
+    a = w + w * z * poly
+    a = jnp.where(big, np.pi / 4.0 + a, a)
+    a = jnp.where(swap, np.pi / 2.0 - a, a)
+    a = jnp.where(x < 0.0, np.pi - a, a)
+    return jnp.where(y < 0.0, -a, a)
+
+
 def _turn_angle(u, v):
-    """The theta with ``R(theta) u`` parallel to ``v`` (Eq 3: alpha - beta), in (-pi, pi].
+    """The theta with ``R(theta) u`` parallel to ``v`` (Eq 3: alpha - beta), in (-pi, pi],
+    and its cosine and sine.
 
     ``u, v``: (2,) direction vectors. One ``atan2(cross, dot)`` replaces the two
-    arctangents of ratios, so the quadrant is right and there is no division. Returns
-    ``(theta, ok)``; where a vector has zero length (``ok`` False) theta is 0 with zero
-    gradient: the atan2 arguments are swapped for ``(0, 1)`` before use (double-``where``).
+    arctangents of ratios, so the quadrant is right and there is no division (in float32
+    it is :func:`_atan2_float32`); ``cos`` and ``sin`` are ``(dot, cross) / |(dot,
+    cross)|``, no further transcendental. Returns ``(theta, cos, sin, ok)``; where a vector
+    has zero length (``ok`` False) theta is 0, cos 1, sin 0, with zero gradient: the
+    arguments are swapped for ``(0, 1)`` before use (double-``where``).
     """
     cross = v[0] * u[1] - v[1] * u[0]  # sin(alpha - beta) |u||v|
     dot = u[0] * v[0] + u[1] * v[1]  # cos(alpha - beta) |u||v|
     ok = jnp.any(u != 0.0) & jnp.any(v != 0.0)
-    theta = jnp.arctan2(jnp.where(ok, cross, 0.0), jnp.where(ok, dot, 1.0))
-    # atan2(-0.0, negative) is -pi: fold it to +pi so that the range is (-pi, pi].
+    cross, dot = jnp.where(ok, cross, 0.0), jnp.where(ok, dot, 1.0)
+    if jnp.finfo(cross.dtype).bits <= 32:
+        theta = _atan2_float32(cross, dot)
+    else:
+        theta = jnp.arctan2(cross, dot)
+    # atan2(-0.0, negative) is -pi (and so, once rounded, is atan2(-tiny, negative)): fold it
+    # to +pi so that the range is (-pi, pi].
     theta = jnp.where(theta == -jnp.pi, jnp.pi, theta)
-    return jnp.where(ok, theta, 0.0), ok
+    norm = jnp.sqrt(cross**2 + dot**2)  # |u||v| > 0 where ok
+    return jnp.where(ok, theta, 0.0), dot / norm, cross / norm, ok
 
 
-def _finish(theta, t, ok, finite):
-    """Assemble a :class:`JawMotion` from ``(theta, t)`` and the validity flags."""
+def _rotate(c, s, p):
+    """``R(theta) p`` from ``cos``, ``sin`` (Eqs 4-5; as :func:`cassi_fit.rigid.apply`)."""
+    return jnp.stack([c * p[0] + s * p[1], -s * p[0] + c * p[1]])
+
+
+def _fixed_point(c, s, t):
+    """The motion's fixed point ``q = (I - R)^-1 t`` from ``cos``, ``sin`` (Eqs 6-7, as
+    :func:`cassi_fit.rigid.pivot`) and whether it exists (theta != 0).
+
+    ``(I - R)^-1 t = (t + k t_perp) / 2`` with ``t_perp = (ty, -tx)`` and ``k = cot(theta/2)
+    = sin / (1 - cos) = (1 + cos) / sin``: the second form where ``cos >= 0`` (no
+    cancellation near theta = 0, where the pivot recedes to infinity as ``1/theta``), the
+    first elsewhere. At theta = 0 (``sin = 0``, ``cos > 0``) it is undefined: (0, 0) with
+    zero gradient (double-``where``)."""
+    near = c >= 0.0
+    den = jnp.where(near, s, 1.0 - c)
+    defined = den != 0.0
+    k = jnp.where(near, 1.0 + c, s) / jnp.where(defined, den, 1.0)
+    q = 0.5 * (t + k * jnp.stack([t[1], -t[0]]))
+    return jnp.where(defined, q, jnp.zeros_like(q)), defined
+
+
+def _finish(theta, c, s, t, ok, finite):
+    """Assemble a :class:`JawMotion` from ``(theta, cos, sin, t)`` and the validity flags."""
     good = ok & finite
     theta = jnp.where(good, theta, 0.0)
+    c, s = jnp.where(good, c, 1.0), jnp.where(good, s, 0.0)
     t = jnp.where(good, t, jnp.zeros_like(t))
-    pivot, defined = rigid.pivot((theta, t))
+    pivot, defined = _fixed_point(c, s, t)
     defined = defined & good
     status = jnp.where(
         ~finite,
@@ -141,9 +212,9 @@ def closed_form(reference: Float[Array, "2 2"], current: Float[Array, "2 2"]) ->
     """
     reference, current = jnp.asarray(reference), jnp.asarray(current)
     reference, current, finite = _safe_inputs(reference, current)
-    theta, ok = _turn_angle(reference[0] - reference[1], current[0] - current[1])
-    t = current[0] - rigid.apply(theta, jnp.zeros(2, current.dtype), reference[0])
-    return _finish(theta, t, ok, finite)
+    theta, c, s, ok = _turn_angle(reference[0] - reference[1], current[0] - current[1])
+    t = current[0] - _rotate(c, s, reference[0])
+    return _finish(theta, c, s, t, ok, finite)
 
 
 def procrustes(reference: Float[Array, "2 2"], current: Float[Array, "2 2"]) -> JawMotion:
@@ -157,9 +228,9 @@ def procrustes(reference: Float[Array, "2 2"], current: Float[Array, "2 2"]) -> 
     reference, current = jnp.asarray(reference), jnp.asarray(current)
     reference, current, finite = _safe_inputs(reference, current)
     c_ref, c_cur = jnp.mean(reference, axis=0), jnp.mean(current, axis=0)
-    theta, ok = _turn_angle(reference[0] - c_ref, current[0] - c_cur)
-    t = c_cur - rigid.apply(theta, jnp.zeros(2, current.dtype), c_ref)
-    return _finish(theta, t, ok, finite)
+    theta, c, s, ok = _turn_angle(reference[0] - c_ref, current[0] - c_cur)
+    t = c_cur - _rotate(c, s, c_ref)
+    return _finish(theta, c, s, t, ok, finite)
 
 
 _closed_form_frames = jax.jit(jax.vmap(closed_form, in_axes=(None, 0)))
@@ -171,10 +242,10 @@ def closed_form_frames(reference: Float[Array, "2 2"], current: Float[Array, "n 
     (2, 2) mm, compiled once per shape and dtype: a :class:`JawMotion` whose leaves have a
     leading ``n`` axis (theta (n,) rad, translation (n, 2) mm, pivot (n, 2) mm,
     pivot_defined (n,), status (n,)). The toolkit's one compiled closed form."""
-    return _closed_form_frames(jnp.asarray(reference), jnp.asarray(current))
+    return _closed_form_frames(reference, current)  # jit takes numpy and JAX arrays
 
 
 def procrustes_frames(reference: Float[Array, "2 2"], current: Float[Array, "n 2 2"]) -> JawMotion:
     """:func:`procrustes` for every frame of ``current`` (n, 2, 2) mm, compiled once per shape
     and dtype; leaves as :func:`closed_form_frames`."""
-    return _procrustes_frames(jnp.asarray(reference), jnp.asarray(current))
+    return _procrustes_frames(reference, current)

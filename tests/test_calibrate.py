@@ -22,6 +22,7 @@ import zoo
 
 from cassi_fit import calibrate
 from cassi_fit.animate import animate
+from cassi_fit.calibration import CalibrationWarning
 from cassi_fit.cli import main as cli
 from cassi_fit.dataset import Dataset
 from cassi_fit.deform import deform
@@ -146,6 +147,31 @@ def test_separate_calibration_reproduces_the_documented_recovery(corpus, separat
         assert cal.bounds_hit == ()  # the synthetic jaws are adult jaws (issue 14 bounds)
 
 
+LIMITS = ROOT / "docs" / "generated" / "calibration_limits.md"
+
+
+def test_the_documented_limits_are_this_calibrations(corpus, separate):
+    """docs/generated/calibration_limits.md (experiments/calibration_limits.py), rows
+    S01-S03: the jaw stage as solved now, the lower lip's error and its reported range,
+    to their printed precision; so a change to the calibration not followed by ``make
+    experiments`` fails here."""
+    jaw, _, lower = _doc_tables(LIMITS)
+    jaw, lower = {r["subject"]: r for r in jaw}, {r["subject"]: r for r in lower}
+    model = load_model()
+    for cal in separate.values():
+        row = jaw[cal.subject]
+        assert row["now: converged"] == "true" and row["now: bounds hit"] == ""
+        assert cal.params["jaw_shape_scale"][0] == pytest.approx(
+            float(row["now: x scale"]), abs=_half_unit(row["now: x scale"]))
+        row = lower[cal.subject]
+        error = _errors(corpus, cal, model)["lower_mm"]
+        assert error == pytest.approx(float(row["error mm"]), abs=0.006)
+        low, high = cal.lower_lip_bias
+        assert low == pytest.approx(float(row["range low mm"]), abs=0.006)
+        assert high == pytest.approx(float(row["range high mm"]), abs=0.006)
+        assert (low <= error <= high) == (row["error inside"] == "true")
+
+
 def test_separate_scale_is_p_over_the_median_first_line_jaw_pellet_distance(corpus, separate):
     model = load_model()
     v = np.asarray(model.vertices)[:, :2]
@@ -186,11 +212,53 @@ def test_the_penalty_keeps_an_implausible_lip_out_of_the_teeth(corpus):
     track = dataclasses.replace(rec.track, positions=positions)
     bad = [dataclasses.replace(rec, track=track)]
     with jax.enable_x64(True):
-        free = calibrate.calibrate_subject(bad, collisions=False)
-        held = calibrate.calibrate_subject(bad, collisions=True)
+        # the lip lands behind the incisor tip: flagged, penalised or not (never written)
+        with pytest.warns(CalibrationWarning) as caught:
+            free = calibrate.calibrate_subject(bad, collisions=False)
+            held = calibrate.calibrate_subject(bad, collisions=True)
+    said = [str(w.message) for w in caught]
+    assert len(said) == 2 and all(s.startswith("S03: implausible calibration, "
+                                               "upper_lip_thickness: -") for s in said)
     assert free.residuals["lips_in_teeth"] > 1.0
     assert held.residuals["lips_in_teeth"] < 0.2 * free.residuals["lips_in_teeth"]
     assert held.upper_lip_thickness > free.upper_lip_thickness
+
+
+def test_one_jaw_sensor_cannot_give_the_scale_and_is_refused_in_one_line(corpus):
+    rec = _recordings(corpus, "S01")[0]
+    valid = np.array(rec.track.valid)
+    valid[:, MNM] = False  # an articulograph's one jaw sensor: enough to animate, not to scale
+    positions = np.where(valid, np.asarray(rec.track.positions), np.nan)
+    one = dataclasses.replace(rec, track=dataclasses.replace(rec.track, valid=valid,
+                                                             positions=positions))
+    with pytest.raises(MissingDataError, match=r"calibration needs both jaw pellets .*MNM is "
+                                               "never tracked"):
+        calibrate.calibrate_subject([one])
+
+
+def test_a_jaw_beyond_its_bound_is_held_there_and_the_fit_converges(corpus, monkeypatch):
+    """S09's stall, made on purpose: S01's Headmeasures gonion moved 20 mm back asks for a
+    jaw longer than JAW_SCALE_BOUND allows. The bounded jaw-shape stage then walks out along
+    tanh's flat tail until its budget ends; the calibration holds the bound and solves the
+    rest again, so it converges and reports the bound. Without that (stubbed), it does not."""
+    recs = _recordings(corpus, "S01")
+    head = dataclasses.replace(recs[0].head, gonion_x=-110.0)
+    long = [dataclasses.replace(r, head=head) for r in recs]
+    with jax.enable_x64(True):
+        with pytest.warns(CalibrationWarning, match=r"S01: the jaw shape reached its "
+                                                    r"anatomical bound \(jaw_scale_x 1.300"):
+            cal = calibrate.calibrate_subject(long)
+        monkeypatch.setattr(calibrate, "_pressing_on_a_bound", lambda y, g, free: 0 * free)
+        with pytest.warns(CalibrationWarning) as caught:
+            stalled = calibrate.calibrate_subject(long)
+    assert cal.converged and cal.unconverged == () and cal.bounds_hit == ("jaw_scale_x",)
+    assert cal.params["jaw_shape_scale"][0] == pytest.approx(calibrate.JAW_SCALE_BOUND, rel=1e-6)
+    assert not stalled.converged and stalled.unconverged == ("jaw_shape",)
+    # the same face either way: the stall was at the bound, only the verdict differs
+    assert cal.params["jaw_shape_scale"] == pytest.approx(stalled.params["jaw_shape_scale"],
+                                                          abs=1e-6)
+    assert [str(w.message) for w in caught] == stalled.problems()
+    assert len(stalled.problems()) == 2 and "not converge (stage jaw_shape)" in stalled.problems()[0]
 
 
 def test_calibration_files_round_trip_and_bad_files_are_named(tmp_path, separate):
@@ -282,7 +350,13 @@ def test_calibration_choice_reads_a_folder_or_a_file_and_excludes_cassi(tmp_path
     cal = separate["S01"]
     path = calibrate.write_calibration(calibrate.calibration_path(tmp_path, "S01"), cal)
     assert calibrate.calibration_choice(tmp_path, "s01") == cal
-    assert calibrate.calibration_choice(path, "S02") == cal  # a file is taken as it is
+    assert calibrate.calibration_choice(path, "S01") == cal
+    assert calibrate.calibration_choice(path) == cal  # no subject named: the file as it is
+    # one line naming the file (or the folder and what it holds)
+    with pytest.raises(CassiError, match=r"S01.calibration.json: a calibration of subject S01, not S02"):
+        calibrate.calibration_choice(path, "S02")
+    with pytest.raises(MissingDataError, match=r"no calibration of subject S02 .*it has S01"):
+        calibrate.calibration_choice(tmp_path, "S02")
     assert calibrate.calibration_choice(None, "S01") is None
     assert calibrate.calibration_choice(None, "S01", cassi=True) == "cassi"
     with pytest.raises(CassiError, match="exclude each other"):

@@ -188,6 +188,29 @@ def test_fits_beat_the_closed_form_under_noise():
     assert np.mean(pivot_errors["closed-form"]) > 5.0
 
 
+def test_frame_fit_is_the_closed_form_and_agrees_with_the_iterative_fit(references):
+    """By default frame-fit solves the two-point problem in closed form (no solver); given a
+    solver it iterates, from 10 degrees / 20 mm away, to the same motion, residuals,
+    covariance (s^2 (J^T J)^-1 at the solution) and noise estimate."""
+    current = references[0]
+    closed = fit_jaw(REFERENCE, current, method=FrameFit())
+    iterated = fit_jaw(REFERENCE, current, method=far_method("frame-fit", LevenbergMarquardt()))
+    assert closed.solver == "procrustes" and iterated.solver == "optimistix-lm"
+    assert jaw_method("frame-fit") == FrameFit() and not FrameFit().iterative
+    assert closed.converged and iterated.converged
+    np.testing.assert_allclose(closed.theta, iterated.theta, atol=1e-9)
+    np.testing.assert_allclose(closed.translation, iterated.translation, atol=1e-7)
+    np.testing.assert_allclose(closed.residual, iterated.residual, atol=1e-7)
+    np.testing.assert_allclose(closed.covariance, iterated.covariance, rtol=1e-6, atol=1e-14)
+    assert closed.noise_mm == pytest.approx(iterated.noise_mm, rel=1e-6)
+    # the covariance is the Gauss-Newton one: s^2 (J^T J)^-1 of the rigid residuals
+    k = 40
+    jac = np.asarray(jax.jacfwd(jaw_fit.rigid_residuals)(
+        np.r_[closed.theta[k], closed.translation[k]], (REFERENCE, current[k])))
+    np.testing.assert_allclose(closed.covariance[k],
+                               closed.noise_mm**2 * np.linalg.inv(jac.T @ jac), rtol=1e-9)
+
+
 def test_frame_fit_lm_confirms_the_procrustes_start_at_once():
     """From its default start (the minimum) LM must stop within 2 steps for every frame
     (the vmapped loop runs until the slowest frame stops)."""

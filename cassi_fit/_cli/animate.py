@@ -308,6 +308,10 @@ def run(args) -> int:
 
     written = write_output(out, run, size, views, args)
     print(f"wrote {written} ({animation.n_frames} frames, stride {animation.stride})")
+    for line in state.calibration_problems:  # said once on reading, kept beside the output
+        print(f"calibration problem: {line}")
+    for line in state.calibration_caveats:
+        print(f"calibration: {line}")
     print(penetration_summary(animation))
     print(tongue_volume_summary(state.model, animation))
     if csv_out is not None:

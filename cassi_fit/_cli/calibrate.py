@@ -3,6 +3,7 @@ jaw shape, scale), fitted through the differentiable model; see ``cassi_fit.cali
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from cassi_fit.options import CALIBRATION_METHODS
@@ -20,8 +21,11 @@ def register(subparsers) -> None:
         "model (docs/CALIBRATION.md). Writes OUT/SUBJECT.calibration.json per subject "
         "(use it with 'cassi animate --calibration OUT'), OUT/calibration_summary.csv and "
         "OUT/calibration_corpus.csv (every subject, failed ones with their error). Subjects "
-        "are independent tasks: run in parallel (--jobs, --scheduler), resumable (--resume); "
-        "the exit status is 1 if any subject failed.",
+        "are independent tasks: run in parallel (--jobs, --scheduler), resumable (--resume). "
+        "A subject whose fit did not converge or whose jaw shape reached its anatomical "
+        "bound is written with that recorded in its file and named on stderr, one line "
+        "each. Exit status: 1 if any subject failed; else 3 if any calibration has such a "
+        "problem, unless --accept-unconverged; else 0.",
     )
     parser.add_argument("dataset", metavar="DATASET", help="a dataset folder")
     parser.add_argument("--out", default="calibration", metavar="DIR",
@@ -36,6 +40,10 @@ def register(subparsers) -> None:
                         "(default: all of the subject's)")
     parser.add_argument("--no-collisions", action="store_true",
                         help="leave out the penalty that keeps the lips out of the teeth")
+    parser.add_argument("--accept-unconverged", action="store_true",
+                        help="exit 0 even if a subject's fit did not converge or reached "
+                        "an anatomical bound (still named on stderr and recorded in its "
+                        "file)")
     add_run_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
@@ -46,8 +54,10 @@ def _words(text):
 
 
 def run(args) -> int:
-    from cassi_fit.calibrate import calibration_path
+    import warnings
+
     from cassi_fit.calibrate_corpus import calibrate_corpus
+    from cassi_fit.calibration import CalibrationWarning, calibration_path
     from cassi_fit.dataset import Dataset
     from cassi_fit.errors import CassiError, OutputExistsError
 
@@ -62,16 +72,32 @@ def run(args) -> int:
         if existing:
             raise OutputExistsError(f"{existing[0]}: file exists (pass --force to replace it "
                                     "or --resume to continue)")
-    run, cals = calibrate_corpus(root, out, subjects=subjects, tasks=_words(args.tasks),
-                                 method=args.method, collisions=not args.no_collisions,
-                                 **run_options(args))
-    print(f"{'subject':8} {'scale':>7} {'UL mm':>7} {'LL mm':>7} {'face mm':>8}  residuals (mm)")
+    with warnings.catch_warnings():  # the problems are printed below, one line each
+        warnings.simplefilter("ignore", CalibrationWarning)
+        run, cals = calibrate_corpus(root, out, subjects=subjects, tasks=_words(args.tasks),
+                                     method=args.method, collisions=not args.no_collisions,
+                                     **run_options(args))
+    print(f"{'subject':8} {'scale':>7} {'UL mm':>7} {'LL mm':>7} {'LL bias mm':>12} "
+          f"{'face mm':>8}  residuals (mm)")
     for subject, c in cals.items():
         worst = max(c.residuals.items(), key=lambda kv: kv[1])
+        bias = (f"{c.lower_lip_bias[0]:+.1f}..{c.lower_lip_bias[1]:+.1f}"
+                if len(c.lower_lip_bias) == 2 else "?")
         flag = "" if c.converged else "  NOT CONVERGED"
+        flag += f"  AT BOUND ({', '.join(c.bounds_hit)})" if c.bounds_hit else ""
         print(f"{subject:8} {c.scale:7.4f} {c.upper_lip_thickness:7.2f} "
-              f"{c.lower_lip_thickness:7.2f} {c.face_width:8.1f}  largest {worst[0]} "
-              f"{worst[1]:.2f}{flag}")
+              f"{c.lower_lip_thickness:7.2f} {bias:>12} {c.face_width:8.1f}  largest "
+              f"{worst[0]} {worst[1]:.2f}{flag}")
     print(f"wrote {len(cals)} calibration file(s), calibration_summary.csv and "
-          f"calibration_corpus.csv to {out} ({run.workers} worker(s))")
-    return finish(run)
+          f"calibration_corpus.csv to {out} ({run.workers} worker(s)); LL bias: the lower "
+          "lip's possible error (estimate minus truth, 95 % of the dental norms) from the "
+          "incisor tip no pellet sees")
+    status = finish(run)
+    problems = [line for c in cals.values() for line in c.problems()]
+    for line in problems:
+        print(f"cassi: {line}", file=sys.stderr)
+    if problems and not args.accept_unconverged:
+        print(f"cassi: {len(problems)} problem(s) in the calibrations (recorded in their "
+              "files); pass --accept-unconverged to accept them", file=sys.stderr)
+        return status or 3
+    return status

@@ -163,10 +163,18 @@ def run(args) -> int:
     renderer = None
     recordings = _corpus_recordings(args.subject)  # [jaw wagging, sentence]
     if not cassi:
+        import warnings
+
         from cassi_fit.calibrate import calibrate_subject, calibration_path, write_calibration
+        from cassi_fit.calibration import CalibrationWarning
 
         print(f"calibrating {recordings[0].subject} ...", file=sys.stderr)
-        calibration = calibrate_subject(recordings)
+        with warnings.catch_warnings():  # said once below, beside the outputs
+            warnings.simplefilter("ignore", CalibrationWarning)
+            calibration = calibrate_subject(recordings)
+        for line in calibration.problems():
+            print(f"cassi: warning: {calibration.subject}: calibration: {line}",
+                  file=sys.stderr)
         written.append(write_calibration(calibration_path(out, calibration.subject),
                                          calibration, overwrite=True))
         spec = spec.replace(calibration=calibration)

@@ -62,6 +62,10 @@ def run(args: argparse.Namespace) -> int:
     run, result = evaluate_corpus(dataset, out, spec=spec, tasks=_words(args.tasks),
                                   subjects=_words(args.subjects), run_options=run_options(args))
     print(markdown_table(result), end="")
+    flagged = {r.item.subject: r.row["calibration_problems"] for r in run.results
+               if r.row.get("calibration_problems")}
+    for subject, problems in flagged.items():  # a fitted calibration that is not trusted
+        print(f"cassi: warning: {subject}: calibration: {problems}", file=sys.stderr)
     # all or nothing: an interrupted run leaves none of the tables and figure
     written = write_report(result, out, overwrite=args.force or args.resume,
                            summary_name=SUMMARY_NAME)

@@ -63,15 +63,20 @@ def evaluate_recording(
     ``collisions="project"``, ``jaw=``, ``stride=``, ``mode="cassi"`` ...). Errors
     propagate (``CassiError``).
     """
+    return _evaluate(recording, _spec(spec, dict(changes)), model)[0]
+
+
+def _evaluate(recording, spec, model):
+    """``(RecordingRow, SubjectState)`` of one recording run with ``spec``."""
     from ..pipeline import run_recording
 
-    spec = _spec(spec, dict(changes))
     run = run_recording(recording, spec, model=model)
     settings = {**_settings(spec), "jaw": run.animation.jaw_method}  # the method used
-    return RecordingRow.evaluated(
+    row = RecordingRow.evaluated(
         recording.subject, recording.task, measure(run.state, run.animation),
         frames=int(run.animation.n_frames),
         calibration=spec.calibration_label(run.state.calibration), **settings)
+    return row, run.state
 
 
 def evaluate_task(item: CorpusItem, out_dir: str | None, *, spec: RunSpec,
@@ -81,8 +86,9 @@ def evaluate_task(item: CorpusItem, out_dir: str | None, *, spec: RunSpec,
     ``calibration`` (its label) and every measure as ``measure.NAME``; ratings are
     derived from the measures afterwards (:func:`evaluation_result`). Writes no file."""
     recording = load_item(item, quiet=True)
-    row = evaluate_recording(recording, spec=spec, model=worker_model())
-    out = {"frames": row.frames, "calibration": row.calibration, "jaw": row.jaw}
+    row, state = _evaluate(recording, spec, worker_model())
+    out = {"frames": row.frames, "calibration": row.calibration, "jaw": row.jaw,
+           "calibration_problems": "; ".join(state.calibration_problems)}
     out.update((MEASURE_PREFIX + k, float(v)) for k, v in sorted(row.measures.items()))
     return TaskResult(out)
 
@@ -106,10 +112,19 @@ def evaluation_result(run: CorpusRun, spec: RunSpec) -> EvaluationResult:
                                            calibration=r.row["calibration"],
                                            **{**common, "jaw": r.row["jaw"]}))
     subjects = list(dict.fromkeys(r.subject for r in rows))
-    per_subject = [SubjectRow.of_recordings(s, [r for r in rows if r.subject == s], **common)
+    per_subject = [SubjectRow.of_recordings(s, [r for r in rows if r.subject == s],
+                                            **{**common, "jaw": _jaw_used(rows, s, spec)})
                    for s in subjects]
-    return EvaluationResult(rows, per_subject,
-                            {**common, "calibration": spec.calibration_label()})
+    return EvaluationResult(rows, per_subject, {**common, "jaw": _jaw_used(rows, None, spec),
+                                                "calibration": spec.calibration_label()})
+
+
+def _jaw_used(rows: Sequence[RecordingRow], subject: str | None, spec: RunSpec) -> str:
+    """The jaw methods the evaluated rows (of ``subject``, or all) used, in order of first
+    use (the default picks by each recording's jaw sensors); the spec's name if none ran."""
+    used = dict.fromkeys(r.jaw for r in rows if r.status != Status.FAILED
+                         and (subject is None or r.subject == subject))
+    return ", ".join(used) or spec.jaw_name
 
 
 def _check_calibrations(spec: RunSpec, items: Sequence[CorpusItem]) -> None:

@@ -77,8 +77,11 @@ def initial_pivot(reference: np.ndarray, current: np.ndarray, usable: np.ndarray
     return rhs.sum(axis=0) / gain
 
 
-#: The step budget of the default solver of the pivot methods with one jaw sensor.
-ONE_SENSOR_MAX_STEPS = 1000
+#: The step budget of the pivot methods' default solver: their pivot can lie in a long,
+#: shallow valley (one jaw sensor; or a jaw that translates as it turns, as real ones do),
+#: where Levenberg-Marquardt reaches the answer but crawls to its convergence test; their
+#: steps are cheap (a few parameters). The per-frame fit keeps ``DEFAULT_MAX_STEPS``.
+PIVOT_MAX_STEPS = 1000
 
 
 def _optional_solver(solver):
@@ -86,12 +89,11 @@ def _optional_solver(solver):
     return None if solver is None else as_solver(solver)
 
 
-def _default_solver(method, k: int = 2) -> Solver:
-    """The method's solver, else :class:`LevenbergMarquardt` (``ONE_SENSOR_MAX_STEPS`` steps
-    with ``k = 1`` sensor)."""
+def _default_solver(method, max_steps: int | None = None) -> Solver:
+    """The method's solver, else :class:`LevenbergMarquardt` (with ``max_steps``, if given)."""
     if method.solver is not None:
         return method.solver
-    return LevenbergMarquardt() if k == 2 else LevenbergMarquardt(max_steps=ONE_SENSOR_MAX_STEPS)
+    return LevenbergMarquardt() if max_steps is None else LevenbergMarquardt(max_steps=max_steps)
 
 
 def _optional_array(shape_doc):
@@ -254,11 +256,10 @@ class FrameFit(JawMethod):
 class FixedPivot(JawMethod):
     """Parke's fixed pivot: one pivot for the recording, one angle per frame (projected out).
 
-    solver: a solver object or an alias (None: :class:`LevenbergMarquardt`, with
-    ``ONE_SENSOR_MAX_STEPS`` steps with one sensor, whose pivot lies in a long, shallow
-    valley). start: None (linear least squares on the Procrustes motions, ``t_k = (I - R_k)
-    q``; with one sensor the prior's mean) or the initial pivot (2,) mm. pivot_prior: a
-    :class:`PivotPrior` added as residuals; None: none with both jaw sensors,
+    solver: a solver object or an alias (None: :class:`LevenbergMarquardt` with
+    ``PIVOT_MAX_STEPS`` steps). start: None (linear least squares on the Procrustes motions,
+    ``t_k = (I - R_k) q``; with one sensor the prior's mean) or the initial pivot (2,) mm.
+    pivot_prior: a :class:`PivotPrior` added as residuals; None: none with both jaw sensors,
     :data:`POPULATION_CONDYLE` with one (the sensor's short arc alone fixes the pivot
     badly, or not at all: a free one-sensor pivot may run off to infinity, where the motion
     is a translation); :data:`PIVOT_FROM_DATA`: none, explicitly.
@@ -278,7 +279,7 @@ class FixedPivot(JawMethod):
         dtype = jnp.asarray(reference).dtype
         n = current.shape[0]
 
-        solver = _default_solver(self, reference.shape[0])
+        solver = _default_solver(self, PIVOT_MAX_STEPS)
 
         def solve_with(noise_mm, start):
             return fixed_pivot_kernel(
@@ -350,7 +351,7 @@ class SmoothPivot(JawMethod):
         prior = _pivot_prior(self, reference.shape[0])
         pivot0 = _start_pivot(self, prior, reference, current, usable)
         dtype = jnp.asarray(reference).dtype
-        solver = _default_solver(self, reference.shape[0])
+        solver = _default_solver(self, PIVOT_MAX_STEPS)
         tol = solver.tolerances(dtype)[0]
         config = (bool(solver.damped), int(solver.max_steps), float(tol), spacing)
 

@@ -123,11 +123,12 @@ class JawCoupling:
 #: JW11 task 5 (one speaker; experiments/single_sensor_jaw.py derives these numbers and
 #: tests/test_jaw_single_sensor.py checks them against the recording when it is present).
 #: The coefficient SD is the difference between this coupling and the one learned from
-#: the synthetic corpus: a stand-in for the unmeasured spread between speakers.
+#: the synthetic corpus's families not tuned to JW11 (docs/generated/single_sensor_jaw.md):
+#: a stand-in for the spread between speakers, which one speaker cannot measure.
 _JW11 = "the real XRMB recording JW11 task 5 (one speaker)"
 DEFAULT_COUPLINGS: dict[str, JawCoupling] = {
-    "MNI": JawCoupling("MNI", (-0.00616384, -0.00748067), 0.00559477, (0.00083, 0.00197), 724,
+    "MNI": JawCoupling("MNI", (-0.00616384, -0.00748067), 0.00559477, (0.00075, 0.00087), 724,
                        _JW11),
-    "MNM": JawCoupling("MNM", (-0.00838916, -0.0117919), 0.00839470, (0.00678, 0.00026), 724,
+    "MNM": JawCoupling("MNM", (-0.00838916, -0.0117919), 0.00839470, (0.00288, 0.00008), 724,
                        _JW11),
 }
