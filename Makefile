@@ -2,6 +2,7 @@
 #   make demo   -- build the venv if needed, then run `cassi demo` on the synthetic corpus
 #   make test   -- build the venv if needed, then run the whole test suite
 #   make lint   -- ruff, the import-linter contracts and the public annotations check
+#   make docs   -- the API reference from the docstrings, into build/docs_site/ (index.html)
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
@@ -10,12 +11,12 @@ STAMP  := $(VENV)/.installed
 # beside the checkout, or the shared copy; `make experiments XRMB_JW11=DIR` names another.
 XRMB_JW11 ?= $(firstword $(wildcard ../shared/data/xrmb_jw11 /work/shared/data/xrmb_jw11))
 
-.PHONY: demo test venv pictures bench experiments lint clean
+.PHONY: demo test venv pictures bench experiments lint docs clean
 
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test,corpus]'
+	$(BIN)/python -m pip install --quiet -e '.[test,corpus,docs]'
 	$(BIN)/python -m ipykernel install --prefix $(VENV) --name python3 >/dev/null
 	@touch $(STAMP)
 
@@ -60,6 +61,11 @@ lint: $(STAMP)
 	$(BIN)/ruff check cassi_fit tests experiments benchmarks model
 	$(BIN)/lint-imports --no-cache
 	$(BIN)/python -m pytest -q -p no:cacheprovider tests/test_architecture.py
+
+# The API reference (mkdocs.yml): every public name's docstring, built with --strict so that a
+# warning fails (tests/test_docs_api.py builds it the same way).
+docs: $(STAMP)
+	$(BIN)/mkdocs build --strict
 
 clean:
 	rm -rf $(VENV) demo_output

@@ -18,6 +18,8 @@ keeps the two in step.
 from __future__ import annotations
 
 import importlib
+import sys
+import types
 from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
@@ -110,6 +112,7 @@ if TYPE_CHECKING:
     from .labels import write_lab as write_lab
     from .labels import write_textgrid as write_textgrid
     from .mistracks import MistrackReport as MistrackReport
+    from .mistracks import detect_mistracks as detect_mistracks
     from .mistracks import mistrack_report as mistrack_report
     from .options import JAW_METHODS as JAW_METHODS
     from .options import SOLVERS as SOLVERS
@@ -127,7 +130,6 @@ if TYPE_CHECKING:
     from .pipeline import RecordingRun as RecordingRun
     from .pipeline import run_recording as run_recording
     from .quality import QualityReport as QualityReport
-    from .quality import detect_mistracks as detect_mistracks
     from .quality import quality_report as quality_report
     from .render import Renderer as Renderer
     from .render import midsagittal_figure as midsagittal_figure
@@ -207,8 +209,8 @@ _PUBLIC = {
     # quality (data)
     "QualityReport": "quality",
     "quality_report": "quality",
-    "detect_mistracks": "quality",
     # mistracks (data)
+    "detect_mistracks": "mistracks",  # its home (quality uses it)
     "MistrackReport": "mistracks",
     "mistrack_report": "mistracks",
     # gaps (data)
@@ -373,3 +375,23 @@ def __getattr__(name: str) -> object:
 
 def __dir__() -> list[str]:
     return list(__all__)
+
+
+class _PublicSurface(types.ModuleType):
+    """The package's module type. Importing a submodule binds it to the package under its
+    own name, so the public functions named as their modules (``initialize``, ``run_spec``,
+    ``jaw_corpus``, ``calibrate_corpus``) would turn into modules as soon as anything
+    imported those (``from cassi_fit import run_recording, initialize`` gave the module
+    ``initialize``). Such a binding is refused here: the name keeps meaning the function.
+    ``sys.modules`` still holds the module: ``from cassi_fit.initialize import ...`` and
+    ``importlib.import_module`` work as ever (``import cassi_fit.initialize as m``, which
+    reads the package's attribute, gives the function)."""
+
+    def __setattr__(self, name: str, value: object) -> None:
+        if (name in _PUBLIC and isinstance(value, types.ModuleType)
+                and value.__name__ == f"{__name__}.{name}"):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _PublicSurface

@@ -113,10 +113,10 @@ def _wall_distance(q, wall, far, outward, y_occ):
     ab = b - a
     length2 = jnp.sum(ab * ab, -1)
     safe = jnp.where(length2 > 0, length2, 1.0)
-    t_raw = jnp.sum((p - a) * ab, -1) / safe
+    t_raw = jnp.sum((p[None] - a) * ab, -1) / safe
     t = jnp.clip(t_raw, 0.0, 1.0)
     closest = a + t[:, None] * ab
-    d2 = jnp.sum((p - closest) ** 2, -1)
+    d2 = jnp.sum((p[None] - closest) ** 2, -1)
     j = jnp.argmin(d2)
     n = _perp(ab[j])
     n_len = jnp.sqrt(jnp.maximum(jnp.sum(n * n), 1e-24))

@@ -98,10 +98,10 @@ def conformation(model: FaceModel, v: Float[Array, "V 3"], p: FaceParams) -> Flo
     z = z * jnp.where(_mask(model, ("skin", "eyes")), p.face_width, 1.0)
     x = v[:, 0] + p.upper_lip_thickness * f["upper_vermilion"] \
         + p.lower_lip_thickness * f["lower_vermilion"]
-    xy = jnp.stack([x, v[:, 1]], -1) + p.nose_tip * f["nose"][:, None]
+    xy = jnp.stack([x, v[:, 1]], -1) + p.nose_tip[None] * f["nose"][:, None]
     if p.jaw_shape_scale is not None:  # jaw proportions: scaled about the lower incisor tip
         centre = jnp.asarray(model.vertices)[model.landmarks["lower_incisor_tip"], :2]
-        xy = xy + f["jaw_shape"][:, None] * (p.jaw_shape_scale - 1.0) * (xy - centre)
+        xy = xy + f["jaw_shape"][:, None] * (p.jaw_shape_scale - 1.0)[None] * (xy - centre[None])
     xy = _move_by_fraction((p.jaw_shape_theta, p.jaw_shape_translation), f["jaw_shape"], xy)
     return jnp.concatenate([xy, z[:, None]], -1)
 
@@ -119,7 +119,8 @@ def lips(
     """Stage 3: lip displacements, the nose tip coupling (CASSI section 3) and, with
     ``rounding`` (static; CASSI's future work, so off in its reproduction), lip rounding."""
     f = model.fields
-    xy = v[:, :2] + p.upper_lip * f["upper_lip"][:, None] + p.lower_lip * f["lower_lip"][:, None]
+    xy = (v[:, :2] + p.upper_lip[None] * f["upper_lip"][:, None]
+          + p.lower_lip[None] * f["lower_lip"][:, None])
     xy = xy.at[:, 1].add(_smooth_positive(p.upper_lip[1]) * f["nose_rise"])
     if not rounding:
         return jnp.concatenate([xy, v[:, 2:]], -1)

@@ -122,7 +122,7 @@ def _parametric_hard(outline, front_half_width, back_half_width, front_edge_drop
     half = front_half_width + (back_half_width - front_half_width) * jnp.sin(jnp.pi / 2 * u)
     drop = front_edge_drop + (back_edge_drop - front_edge_drop) * u
     left = jnp.stack([centre[:, 0], centre[:, 1] - drop, half], -1)
-    return centre, left * jnp.array([1.0, 1.0, -1.0], left.dtype), left
+    return centre, left * jnp.array([[1.0, 1.0, -1.0]], left.dtype), left
 
 
 def _joined_hard(outline, arch):
@@ -165,7 +165,7 @@ def _velum(centre, right, left, wall, thickness):
     d = jnp.array([-jnp.cos(a), -jnp.sin(a)], dtype)
     normal = jnp.array([-jnp.sin(a), jnp.cos(a)], dtype)
     f = jnp.arange(1, N_VELUM + 1, dtype=dtype) / N_VELUM
-    c = pns + (VELUM_LENGTH_MM * f)[:, None] * d
+    c = pns[None] + (VELUM_LENGTH_MM * f)[:, None] * d[None]
     t = jnp.asarray(_VELUM_PROFILE, dtype) * VELUM_THICKNESS_MM
     if wall is not None:
         wall = jnp.asarray(wall, dtype)
@@ -178,7 +178,7 @@ def _velum(centre, right, left, wall, thickness):
     half = half_back + (UVULA_HALF_WIDTH_MM - half_back) * f
     drop = drop_back + (2.0 - drop_back) * jnp.minimum(1.0, 2.0 * f)
     lv = jnp.stack([c[:, 0], c[:, 1] - drop, half], -1)
-    return c, lv * jnp.array([1.0, 1.0, -1.0], dtype), lv, t, normal
+    return c, lv * jnp.array([[1.0, 1.0, -1.0]], dtype), lv, t, normal
 
 
 def build_palate(
@@ -231,7 +231,7 @@ def build_palate(
     up = jnp.array([0.0, 1.0, 0.0], dtype)
     offset = jnp.concatenate([
         jnp.broadcast_to(thickness * up, (N_HARD, 3)),
-        vt[:, None] * jnp.array([vn[0], vn[1], 0.0], dtype)])
+        vt[:, None] * jnp.array([[vn[0], vn[1], 0.0]], dtype)])
     nasal = oral + offset[:, None, :]
     return jnp.concatenate([oral.reshape(-1, 3), nasal.reshape(-1, 3)]), palate_faces()
 

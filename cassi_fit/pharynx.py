@@ -152,7 +152,7 @@ def build_pharynx(
     y = jnp.broadcast_to(mid[:, 1:], (N_HEIGHT, N_ACROSS))
     z = half * v
     front = jnp.stack([x, y, z], -1).reshape(-1, 3)
-    back = front - jnp.array([thickness, 0.0, 0.0], dtype)
+    back = front - jnp.array([[thickness, 0.0, 0.0]], dtype)
     return jnp.concatenate([front, back]), wall_faces()
 
 

@@ -44,13 +44,13 @@ def tongue_displacement(
     d = jnp.broadcast_to(displacement[0], (s.shape[0], 2))
     for k in range(3):  # telescoping sum: segment k contributes fully once passed
         u = (s - site_s[k]) / (site_s[k + 1] - site_s[k])
-        d = d + (displacement[k + 1] - displacement[k]) * _blend(u)
+        d = d + (displacement[k + 1] - displacement[k])[None] * _blend(u)
     behind = (s - site_s[3])
     if anchor == "fixed":
-        d = d - displacement[3] * jnp.clip(behind / (anchor_s - site_s[3]), 0.0, 1.0)
+        d = d - displacement[3][None] * jnp.clip(behind / (anchor_s - site_s[3]), 0.0, 1.0)
     elif anchor == "none":
         trend = jnp.clip(behind / (site_s[3] - site_s[2]), 0.0, 0.5)
-        d = d + (displacement[3] - displacement[2]) * trend
+        d = d + (displacement[3] - displacement[2])[None] * trend
     return d
 
 

@@ -1,4 +1,7 @@
-"""Shared test set-up: float64 on (precision is asserted), and the synthetic subject zoo.
+"""Shared test set-up: float64 on (precision is asserted), rank promotion raising (an
+array of one rank is never silently broadcast against another: write ``x[None]`` or
+``jnp.broadcast_to``), and the synthetic subject zoo. The library's default, float32, is
+run by tests/test_float32.py in a process of its own.
 
 One JAX compilation cache for the whole session, shared with every process the tests start
 (the CLI in subprocesses, notebook kernels, corpus workers): the same functions are compiled
@@ -24,3 +27,4 @@ os.environ["CASSI_COMPILE_CACHE"] = os.environ.get("JAX_COMPILATION_CACHE_DIR") 
 import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_numpy_rank_promotion", "raise")

@@ -220,23 +220,106 @@ def test_stride(state, recording, stride, animation):
     assert anim.stride == stride
 
 
+def _jaw_pivots(sites):
+    """The fixed point of the jaw's motion from frame 0 to each frame, from the model's
+    jaw sites ``sites (m, 8, 2)`` by hand (Eqs 1-7: the turn of the MNI-MNM line, then
+    ``(I - R) p = t``); NaN where the turn is under 1 degree (no pivot to speak of)."""
+    line = sites[:, MNI] - sites[:, MNM]
+    angle = np.arctan2(line[:, 1], line[:, 0])
+    theta = angle[0] - angle  # opening > 0; p' = R p + t, R = [[c, s], [-s, c]]
+    c, s = np.cos(theta), np.sin(theta)
+    rotation = np.stack([np.stack([c, s], -1), np.stack([-s, c], -1)], -2)
+    shift = sites[:, MNI] - np.einsum("kij,j->ki", rotation, sites[0, MNI])
+    pivots = np.full((len(theta), 2), np.nan)
+    for k in np.flatnonzero(np.abs(theta) > np.radians(1.0)):
+        pivots[k] = np.linalg.solve(np.eye(2) - rotation[k], shift[k])
+    return pivots
+
+
 @pytest.mark.slow
-def test_jaw_fits_and_options(state, recording, model):
+def test_the_fixed_pivot_fit_turns_the_jaw_about_one_point(state, recording, animation):
+    """The closed form gives every frame its own pivot (the pellet noise scatters it by
+    mm); the fixed-pivot fit turns the model's jaw about one point in every frame, and
+    still fits the jaw pellets."""
     fit = animate(state, recording, jaw="fixed-pivot", stride=5)
-    assert fit.jaw_method == "fixed-pivot" and np.all(np.isfinite(np.asarray(fit.vertices)))
+    assert fit.jaw_method == "fixed-pivot" and animation.jaw_method == "closed-form"
+    fixed = _jaw_pivots(np.asarray(fit.pellets_model))
+    closed = _jaw_pivots(np.asarray(animation.pellets_model)[::5])
+    assert np.isfinite(fixed[:, 0]).sum() >= 5 and np.isfinite(closed[:, 0]).sum() >= 5
+    assert np.nanstd(fixed, axis=0).max() < 1e-6
+    assert np.nanstd(closed, axis=0).max() > 1.0
+    jaw = [MNI, MNM]
+    error = np.linalg.norm(np.asarray(fit.pellets_model)[:, jaw] - fit.pellets_measured[:, jaw],
+                           axis=2)
+    assert np.sqrt(np.mean(error**2)) < 0.5  # the pellet noise is about 0.25 mm
+
+
+def test_bad_jaw_choices_and_strides_are_refused(state, recording):
     with pytest.raises(InvalidChoiceError, match="jaw method"):
         animate(state, recording, jaw="magic")
     with pytest.raises(CassiError, match="stride"):
         animate(state, recording, stride=0)
+
+
+@pytest.mark.slow
+def test_parke_weights_and_fixed_tongue_anchors(recording, model, animation):
+    """Parke's weights move the lower teeth 90 % of the jaw's motion (CASSI's: 100 %);
+    with fixed anchors the tongue behind them moves with the jaw only, whatever the
+    tongue pellets do."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    from cassi_fit.deform import deform
+
     parke = initialize(recording, model, jaw_weights="parke", tongue_anchor="fixed")
     anim = animate(parke, recording, stride=5)
-    assert np.all(np.isfinite(np.asarray(anim.vertices)))
+
+    def teeth_share(frames):  # least squares: model MNI displacement / measured one
+        m = np.asarray(frames.pellets_model)[:, MNI]
+        x = frames.pellets_measured[:, MNI]
+        dm, dx = (m - m[0]).ravel(), (x - x[0]).ravel()
+        return dm @ dx / (dx @ dx)
+
+    assert teeth_share(anim) == pytest.approx(0.9, abs=0.01)
+    assert teeth_share(animation) == pytest.approx(1.0, abs=0.01)
+
+    tongue = np.asarray(model.regions["tongue"])
+    behind = tongue[np.asarray(model.fields["tongue_s"])[tongue] >= model.measures["tongue_anchor_s"]]
+    assert len(behind) > 20
+
+    # the same frames with the tongue pellets at rest: the vertices behind the anchors
+    # stay where they are (with following anchors they would move by up to about 12 mm)
+    still = eqx.tree_at(lambda p: p.tongue, anim.params, jnp.zeros_like(anim.params.tongue))
+    style = {"tongue_anchor": "fixed", "jaw_weights": "parke", "tongue_shape": parke.tongue_shape}
+    rest = jax.jit(jax.vmap(lambda p: deform(parke.model, p, **style)))(still)
+    moved = np.abs(np.asarray(anim.vertices)[:, behind, :2] - np.asarray(rest)[:, behind, :2])
+    assert moved.max() < 1e-9
+    assert np.abs(np.asarray(anim.vertices)[:, behind, :2] - np.asarray(anim.vertices)[0, behind, :2]).max() > 1.0  # they do move (with the jaw)
 
 
-def test_default_head_measures_still_initialize(model):
-    rec, _ = make_recording(seconds=0.6, seed=5, head_is_default=True)
-    state = initialize(rec, model)
-    assert np.all(np.isfinite(np.asarray(state.rest_pellets)))
+def test_without_headmeasures_the_lips_come_from_the_first_line(model):
+    """No Headmeasures for the subject: no jaw shape, face or nose change (the model's
+    own), and the upper lip's thickness is the first valid line's (the UL pellet's
+    distance ahead of the incisor tip, scaled): the model's UL site at rest is there.
+    With Headmeasures, the same recording takes its shape from them."""
+    from cassi_fit.deform import default_params
+
+    own = default_params(model)
+    for default in (True, False):
+        rec, _ = make_recording(seconds=0.6, seed=5, head_is_default=default)
+        state = initialize(rec, model)
+        first = state.scale * rec.track.positions[state.first_frame]
+        shape = {name: np.asarray(getattr(state.conformation, name)) for name in
+                 ("jaw_shape_theta", "jaw_shape_translation", "face_width", "mouth_width",
+                  "nose_tip")}  # fmt: skip
+        unchanged = [np.array_equal(v, np.asarray(getattr(own, k))) for k, v in shape.items()]
+        ul_x = float(state.rest_pellets[UL, 0])
+        if default:
+            assert all(unchanged), shape
+            assert ul_x == pytest.approx(first[UL, 0], abs=1e-9)
+        else:
+            assert not any(unchanged), shape
+            assert abs(ul_x - first[UL, 0]) > 0.1
 
 
 def test_a_bad_choice_raises_one_error_type_everywhere(state, recording, model):

@@ -33,6 +33,14 @@ def sentence(corpus):
     return subject, dataset.load(subject, synth.SENTENCE_TASK)
 
 
+@pytest.fixture(scope="module")
+def every_40th(sentence):
+    """The sentence at every 40th line, improved mode, in this process: ``RecordingRun``."""
+    from cassi_fit.pipeline import run_recording
+
+    return run_recording(sentence[1], stride=40)
+
+
 def _expected_frames(recording, stride):
     from cassi_fit.pellets import first_valid_line
 
@@ -109,23 +117,29 @@ def test_animate_pellet_file_to_gif_and_png(sentence, tmp_path, capsys):
     assert code == 0
     frames = iio.imread(gif)
     assert frames.shape[0] == _expected_frames(recording, 40)
+
+
+def test_animate_to_png_draws_the_frame_asked_for(sentence, every_40th, tmp_path, capsys):
+    """``--out X.png --frame 2``: the still is animation frame 2, all five views with the
+    subject's traces and its caption, as the renderer draws it here (not frame 0)."""
+    from cassi_fit.options import VIEWS
+    from cassi_fit.render import Renderer
+    from cassi_fit.video import animation_frames, subject_traces
+
+    _, recording = sentence
     png = tmp_path / "still.png"
-    code, _, _ = _run(
-        capsys,
-        "animate",
-        recording.path,
-        "--stride",
-        40,
-        "--size",
-        SIZE,
-        "--out",
-        png,
-        "--frame",
-        2,
-    )
-    image = iio.imread(png)
-    assert code == 0 and image.shape[:2] == (120, 160)
-    assert image.std() > 10  # not a blank image
+    code, _, err = _run(capsys, "animate", recording.path, "--stride", 40, "--size", SIZE,
+                        "--out", png, "--frame", 2)
+    assert code == 0, err
+    image = iio.imread(png)[..., :3].astype(int)
+    state, animation = every_40th.state, every_40th.animation
+    with Renderer(state.model, size=(160, 120), views=VIEWS, grid=True,
+                  traces=subject_traces(recording, state.scale)) as renderer:
+        frame0, frame2 = animation_frames(animation, renderer, subject=recording.subject,
+                                          task=recording.task, progress=False, indices=[0, 2])
+    assert image.shape == frame2.shape
+    assert np.abs(image - frame2).mean() < 0.5  # the same picture
+    assert np.abs(image - frame0).mean() > 2 * np.abs(image - frame2).mean() + 0.5
 
 
 def test_animate_midsagittal_view_alone(sentence, tmp_path, capsys):
@@ -143,26 +157,37 @@ def test_animate_midsagittal_view_alone(sentence, tmp_path, capsys):
     assert grey.sum() > 20
 
 
+def _tongue_volumes(stdout):
+    """The frames' least and greatest tongue volume (mL) that ``cassi animate`` prints."""
+    (line,) = [ln for ln in stdout.splitlines() if ln.startswith("tongue volume, mL:")]
+    low, _, high = line.split(":")[1].split()[:3]
+    return float(low), float(high)
+
+
 def test_animate_in_cassi_mode(sentence, tmp_path, capsys):
+    """``--mode cassi`` draws CASSI's flat tongue, a sheet of no volume, where the
+    improved mode's tongue keeps an adult's volume; the two stills differ in the views."""
     _, recording = sentence
-    png = tmp_path / "cassi.png"
-    code, text, err = _run(capsys, "animate", recording.path, "--mode", "cassi", "--stride", 40,
-                           "--size", SIZE, "--out", png, "--frame", 2)
-    assert code == 0, err
-    image = iio.imread(png)
-    assert image.shape[:2] == (120, 160) and image.std() > 10
+    stills, volumes = {}, {}
+    for mode in ("cassi", "improved"):
+        png = tmp_path / f"{mode}.png"
+        code, text, err = _run(capsys, "animate", recording.path, "--mode", mode, "--stride", 40,
+                               "--size", SIZE, "--out", png, "--frame", 2)
+        assert code == 0, err
+        stills[mode], volumes[mode] = iio.imread(png)[..., :3].astype(int), _tongue_volumes(text)
+    assert max(map(abs, volumes["cassi"])) < 0.01, volumes
+    assert 50.0 < volumes["improved"][0] <= volumes["improved"][1] < 120.0, volumes
+    changed = np.abs(stills["cassi"] - stills["improved"]).sum(axis=2) > 30
+    assert changed.mean() > 0.005
 
 
-def test_every_view_is_non_blank(sentence):
-    from cassi_fit.animate import animate
-    from cassi_fit.initialize import initialize
+def test_every_view_is_non_blank(sentence, every_40th):
     from cassi_fit.options import VIEWS
     from cassi_fit.render import Renderer
     from cassi_fit.video import subject_traces
 
     _, recording = sentence
-    state = initialize(recording)
-    animation = animate(state, recording, stride=40)
+    state, animation = every_40th.state, every_40th.animation
     renderer = Renderer(state.model, size=(160, 120), views=VIEWS,
                         traces=subject_traces(recording, state.scale))  # fmt: skip
     views = renderer.render_views(animation.vertices[1])
@@ -212,7 +237,19 @@ def test_export_glb_and_obj(corpus, sentence, tmp_path, capsys):
     code, _, _ = _run(
         capsys, "export", recording.path, "--out", obj, "--frame", 3, "--stride", STRIDE
     )
-    assert code == 0 and obj.stat().st_size > 1000
+    assert code == 0
+    # the mesh of animation frame 3: every vertex where the animation puts it
+    import trimesh
+
+    from cassi_fit.pipeline import run_recording
+
+    run = run_recording(recording, stride=STRIDE)
+    mesh = trimesh.load(obj, process=False)
+    expected = np.asarray(run.animation.vertices[3])
+    assert mesh.vertices.shape == expected.shape
+    assert len(mesh.faces) == len(run.state.model.faces)
+    np.testing.assert_allclose(mesh.vertices, expected, atol=1e-5)
+    assert np.abs(expected - np.asarray(run.animation.vertices[0])).max() > 0.5  # not frame 0
 
 
 def test_demo_writes_everything_and_reruns(corpus, tmp_path, capsys, monkeypatch):

@@ -210,7 +210,7 @@ def test_the_generated_numbers_are_this_codes():
 @pytest.mark.slow
 def test_notebook_runs_and_shows_figures(tmp_path):
     nb = nbformat.read(ROOT / "notebooks" / "jaw_comparison.ipynb", as_version=4)
-    NotebookClient(nb, timeout=300, kernel_name="python3",
+    NotebookClient(nb, timeout=None, kernel_name="python3",
                    resources={"metadata": {"path": str(ROOT / "notebooks")}}).execute()
     outputs = [o for cell in nb.cells if cell.cell_type == "code" for o in cell.outputs]
     assert sum("image/png" in o.get("data", {}) for o in outputs) == 2

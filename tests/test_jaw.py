@@ -60,9 +60,9 @@ def test_noise_free_motion_recovered_exactly():
 
 def test_paper_form_fails_where_the_sound_form_does_not():
     """Reproduction, not repair: Eqs 6-7 divide by zero at theta = 0, Eq 1 is quadrant-blind."""
-    _, a, _ = jaw.closed_form_paper(REFERENCE, REFERENCE + jnp.array([1.0, 0.0]))
+    _, a, _ = jaw.closed_form_paper(REFERENCE, REFERENCE + jnp.array([[1.0, 0.0]]))
     assert not np.isfinite(a)
-    motion = jaw.closed_form(REFERENCE, REFERENCE + jnp.array([1.0, 0.0]))
+    motion = jaw.closed_form(REFERENCE, REFERENCE + jnp.array([[1.0, 0.0]]))
     assert int(motion.status) == jaw.STATUS_PIVOT_UNDEFINED
     np.testing.assert_allclose(motion.translation, [1.0, 0.0])
     turned = rigid.apply(2.5, jnp.zeros(2), REFERENCE)

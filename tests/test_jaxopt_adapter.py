@@ -36,7 +36,7 @@ def test_import_warning_never_reaches_users():
     code = ("import jax.numpy as jnp\nfrom cassi_fit.jaw_fit import _jaxopt_adapter as a\n"
             "print(int(a.least_squares(lambda p, x: p - x, jnp.zeros(2), 1.0)[1]) == 0)")
     out = subprocess.run([sys.executable, "-W", "error", "-c", code], capture_output=True,
-                         text=True, timeout=120)
+                         text=True)
     assert out.returncode == 0, out.stderr
     assert "maintained" not in out.stderr and "True" in out.stdout
 

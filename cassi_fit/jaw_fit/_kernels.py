@@ -105,7 +105,7 @@ def smooth_pivot_kernel(config, reference, current, weight, smoothness, knots0, 
                                                         max_steps=max_steps, tol=tol)
     _, _, _, (diag, upper) = system(knots)
     ridge = 1e-12 * jnp.max(jnp.abs(jnp.diagonal(diag, axis1=1, axis2=2)))
-    c_diag, c_up = block_tridiagonal_inverse_blocks(diag + ridge * jnp.eye(2), upper)
+    c_diag, c_up = block_tridiagonal_inverse_blocks(diag + ridge * jnp.eye(2)[None], upper)
     k = jnp.arange(n)
     j = k // spacing
     f = ((k % spacing) / spacing)[:, None, None]

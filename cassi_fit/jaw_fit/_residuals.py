@@ -25,7 +25,7 @@ def rigid_residuals(params: Float[Array, "3"], args: Any) -> Float[Array, "4"]:
 def frame_scale(reference: Float[Array, "2 2"]) -> tuple[Float[Array, "2"], Float[Array, ""]]:
     """Centroid ``c`` (2,) mm and rms radius ``ell`` (mm) of the reference jaw points."""
     centre = jnp.mean(reference, axis=0)
-    return centre, jnp.sqrt(jnp.mean(jnp.sum((reference - centre) ** 2, axis=-1)))
+    return centre, jnp.sqrt(jnp.mean(jnp.sum((reference - centre[None]) ** 2, axis=-1)))
 
 
 def scaled_rigid_residuals(z: Float[Array, "3"], args: Any) -> Float[Array, "4"]:
@@ -39,7 +39,7 @@ def scaled_rigid_residuals(z: Float[Array, "3"], args: Any) -> Float[Array, "4"]
     reference, current = args
     centre, ell = frame_scale(reference)
     theta = z[0] / ell
-    return (rigid.apply(theta, z[1:], reference - centre) + centre - current).ravel()
+    return (rigid.apply(theta, z[1:], reference - centre[None]) + centre[None] - current).ravel()
 
 
 def unscale(z: Float[Array, "3"], reference: Float[Array, "2 2"]) -> Float[Array, "3"]:
@@ -64,7 +64,7 @@ def best_angle_about(pivot: Float[Array, "2"], reference: Float[Array, "k 2"],
     number of points ``k`` (the two jaw pellets, or one). Where both sums vanish (pellets on
     the pivot) theta is 0, gradient 0 (double-where).
     """
-    u, v = reference - pivot, current - pivot
+    u, v = reference - pivot[None], current - pivot[None]
     cross = jnp.sum(v[:, 0] * u[:, 1] - v[:, 1] * u[:, 0])
     dot = jnp.sum(u * v)
     ok = (cross != 0.0) | (dot != 0.0)
@@ -165,7 +165,7 @@ def smooth_pivot_system(knots, reference, current, weight, smoothness, spacing, 
         diag = jnp.zeros((m, 2, 2), a.dtype).at[j].add(w0[:, None, None] ** 2 * a)
         diag = diag.at[j + 1].add(w1[:, None, None] ** 2 * a)
         upper = jnp.zeros((m - 1, 2, 2), a.dtype).at[j].add((w0 * w1)[:, None, None] * a)
-        return diag + lam * ends[:, None, None] * eye, upper - lam * eye
+        return diag + lam * ends[:, None, None] * eye[None], upper - lam * eye[None]
 
     step = knots[1:] - knots[:-1]
     grad = jnp.zeros((m, 2), g.dtype).at[j].add(w0[:, None] * g).at[j + 1].add(w1[:, None] * g)
@@ -174,10 +174,10 @@ def smooth_pivot_system(knots, reference, current, weight, smoothness, spacing, 
     gn, mat = blocks(a_gn), (blocks(a_step) if newton else None)
     if prior is not None:
         mean, w = prior
-        off = w * (knots - mean)
+        off = w[None] * (knots - mean[None])
         cost = cost + 0.5 * jnp.sum(off**2)
-        grad = grad + w * off
+        grad = grad + w[None] * off
         ridge = jnp.diag(w**2)
-        gn = (gn[0] + ridge, gn[1])
-        mat = None if mat is None else (mat[0] + ridge, mat[1])
+        gn = (gn[0] + ridge[None], gn[1])
+        mat = None if mat is None else (mat[0] + ridge[None], mat[1])
     return cost, grad, (gn if mat is None else mat), gn

@@ -172,7 +172,7 @@ def minimise_block_tridiagonal(
 
     def stationary(knots, cost, grad, gn):
         # a rounding-level ridge keeps knots without data finite
-        newton = block_tridiagonal_solve(gn[0] + ridge * jnp.eye(2), gn[1], -grad)
+        newton = block_tridiagonal_solve(gn[0] + ridge * jnp.eye(2)[None], gn[1], -grad)
         small = jnp.max(jnp.abs(newton)) <= tol * (1.0 + jnp.max(jnp.abs(knots)))
         decrement = -jnp.sum(grad * newton)
         floor = jnp.maximum(tol**2, 100 * jnp.finfo(knots.dtype).eps)
@@ -188,7 +188,7 @@ def minimise_block_tridiagonal(
 
     def body(s):
         diag, upper = s["mat"]
-        delta = block_tridiagonal_solve(diag + s["lam"] * jnp.eye(2), upper, -s["grad"])
+        delta = block_tridiagonal_solve(diag + s["lam"] * jnp.eye(2)[None], upper, -s["grad"])
         trial = s["knots"] + delta
         t_cost, t_grad, t_mat, t_gn = system(trial)
         predicted = -(jnp.sum(s["grad"] * delta) + 0.5 * block_quadratic(diag, upper, delta))
