@@ -83,6 +83,18 @@ _NO_CACHE_HELP = ("compile everything afresh and keep nothing (default: JAX's pe
                   "compilation cache, see 'cassi --help')")
 
 
+def _one_line_warnings() -> None:
+    """Warnings as the user reads them: ``cassi: warning: <message>``, one line (not
+    Python's ``file:line: Category: message`` and a source line)."""
+    import warnings
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = " ".join(str(message).split()) or category.__name__
+        print(f"cassi: warning: {text}", file=file or sys.stderr)
+
+    warnings.showwarning = show
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the ``cassi`` command with ``argv`` (default: the process's arguments); the
     exit status. ``argv`` None is the program itself: after an interruption (or a signal
@@ -93,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     program = argv is None
     if program:  # what a signal does outside the command's own handling: end at once
         exit_on_signal()
+        _one_line_warnings()  # the program's own output (a caller's warnings stay its own)
     args = None
     try:
         with interruptible():  # before anything else: parsing may be interrupted too

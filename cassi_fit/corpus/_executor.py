@@ -355,9 +355,16 @@ def _collect(pool, task, todo, out, options, fingerprint, jax_settings, progress
                                    jax_settings)
 
     try:
-        if pool.executor is None:
-            for item in todo:
-                record(run_item(task, item, out, options, fingerprint, jax_settings))
+        if pool.executor is None:  # in this process: its own float64 setting comes back
+            before = _current_x64()
+            try:
+                for item in todo:
+                    record(run_item(task, item, out, options, fingerprint, jax_settings))
+            finally:
+                if before is not None and _current_x64() != before:
+                    import jax
+
+                    jax.config.update("jax_enable_x64", before)
         else:
             _run_on_pool(pool, submit, todo, record)
         return results
