@@ -20,6 +20,10 @@ if os.environ.get("CASSI_TEST_JAX_CACHE", "1") != "0" and "JAX_COMPILATION_CACHE
     atexit.register(shutil.rmtree, _cache, ignore_errors=True)
     os.environ["JAX_COMPILATION_CACHE_DIR"] = _cache
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
+    # every process on this folder keeps JAX's size-capped (locked, LRU) layout, as the
+    # command line's does: a folder written both ways breaks the eviction's bookkeeping
+    # (2 GiB: cassi_fit.corpus._process.COMPILE_CACHE_MAX_BYTES; set before JAX is imported)
+    os.environ.setdefault("JAX_COMPILATION_CACHE_MAX_SIZE", str(2 * 1024**3))
 # The command line and corpus workers use the same folder (cassi_fit.corpus._process), or
 # none: never the user's own cache (~/.cache/cassi_fit/jax), whatever the environment says.
 os.environ["CASSI_COMPILE_CACHE"] = os.environ.get("JAX_COMPILATION_CACHE_DIR") or "off"

@@ -108,12 +108,12 @@ def test_report():
     json.dumps(report.to_dict())  # machine-readable as is
 
 
-def test_report_without_jaw():
+def test_report_without_a_second_jaw_pellet():
     t, pos = _speech_like(n=50)
     valid = np.ones(pos.shape, bool)
-    valid[:, 7] = False
+    valid[:, 7] = False  # one jaw sensor (most EMA corpora): a first valid line, no jaw pair
     report = quality_report(PelletTrack(t, pos, valid))
-    assert report.first_valid_frame is None and report.first_jaw_frame is None
+    assert report.first_valid_frame == 0 and report.first_jaw_frame is None
     assert report.jaw_distance_median_mm is None and report.jaw_distance_sd_mm is None
     assert report.valid_fraction["MNM"] == 0.0
 
