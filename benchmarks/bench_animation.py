@@ -79,7 +79,7 @@ CPU = "CPU time of render + encode (this process and ffmpeg)"
 
 
 class OneStep:
-    """A renderer seen through ``render`` alone: ``video.animation_frames`` then draws
+    """A renderer seen through ``render`` alone: ``recording_video.animation_frames`` then draws
     each frame whole in the main thread, as before issue 23."""
 
     def __init__(self, renderer):
@@ -90,9 +90,9 @@ class OneStep:
 def helper_path(out, animation, renderer) -> None:
     """The MP4 with each frame's 2D drawing in a helper thread (``helper_thread=True``) and
     the writer thread."""
-    from cassi_fit import video
+    from cassi_fit import recording_video, video
 
-    frames = video.animation_frames(animation, renderer, subject="BENCH", task="sentence",
+    frames = recording_video.animation_frames(animation, renderer, subject="BENCH", task="sentence",
                                     progress=False, helper_thread=True)
     video.write_video(out, frames, video.frame_rate(animation.frame_step_s), overwrite=True)
 
@@ -100,9 +100,9 @@ def helper_path(out, animation, renderer) -> None:
 def old_path(out, animation, renderer) -> None:
     """The MP4 as before issue 23: each frame drawn whole in the main thread, which then
     writes it to ffmpeg and waits (no helper thread, no writer thread)."""
-    from cassi_fit import video
+    from cassi_fit import recording_video, video
 
-    frames = video.animation_frames(animation, OneStep(renderer), subject="BENCH",
+    frames = recording_video.animation_frames(animation, OneStep(renderer), subject="BENCH",
                                     task="sentence", progress=False)
     writer = video.VideoWriter(out, video.frame_rate(animation.frame_step_s),
                                overwrite=True, writer_thread=False)
@@ -174,7 +174,7 @@ def main(argv=None) -> int:
     import jax
     import numpy as np
 
-    from cassi_fit import video
+    from cassi_fit import recording_video, video
     from cassi_fit.animate import animate
     from cassi_fit.face_model import load_model
     from cassi_fit.frames import geometry
@@ -203,7 +203,7 @@ def main(argv=None) -> int:
     _timed("OpenGL start-up", lambda: Renderer(model, size=(16, 16), views=("front",)).close(),
            results)  # fmt: skip
     common = time.perf_counter() - wall  # initialize, animate, geometry, OpenGL start-up
-    traces = video.subject_traces(recording, state.scale)
+    traces = recording_video.subject_traces(recording, state.scale)
 
     cpus = {}  # CPU seconds of render + encode (this process's threads and ffmpeg's)
 
@@ -216,7 +216,7 @@ def main(argv=None) -> int:
         _timed(
             f"render + encode MP4{label}",
             (lambda: path(out, animation, renderer)) if path else lambda: (
-                video.write_animation(out, animation, renderer, subject="BENCH",
+                recording_video.write_animation(out, animation, renderer, subject="BENCH",
                                       task="sentence", progress=False, overwrite=True)),
             best,
         )  # fmt: skip

@@ -131,6 +131,10 @@ if TYPE_CHECKING:
     from .pipeline import run_recording as run_recording
     from .quality import QualityReport as QualityReport
     from .quality import quality_report as quality_report
+    from .recording_video import animate_corpus as animate_corpus
+    from .recording_video import subject_traces as subject_traces
+    from .recording_video import write_animation as write_animation
+    from .recording_video import write_recording_video as write_recording_video
     from .render import Renderer as Renderer
     from .render import midsagittal_figure as midsagittal_figure
     from .reports import jaw_comparison_plot as jaw_comparison_plot
@@ -156,10 +160,6 @@ if TYPE_CHECKING:
     from .txy import read_txy as read_txy
     from .txy import require_tracked as require_tracked
     from .txy import write_txy as write_txy
-    from .video import animate_corpus as animate_corpus
-    from .video import subject_traces as subject_traces
-    from .video import write_animation as write_animation
-    from .video import write_recording_video as write_recording_video
 
 _PUBLIC = {
     # errors (base)
@@ -301,9 +301,9 @@ _PUBLIC = {
     "Renderer": "render",
     "midsagittal_figure": "render",
     # video (outputs)
-    "write_animation": "video",
-    "write_recording_video": "video",
-    "subject_traces": "video",
+    "write_animation": "recording_video",
+    "write_recording_video": "recording_video",
+    "subject_traces": "recording_video",
     # reports (outputs)
     "write_penetration_csv": "reports",
     "jaw_comparison_plot": "reports",
@@ -319,7 +319,7 @@ _PUBLIC = {
     "jaw_corpus": "jaw_table",
     "evaluate_corpus": "evaluate",
     "calibrate_corpus": "calibrate_corpus",
-    "animate_corpus": "video",
+    "animate_corpus": "recording_video",
     "dataset_items": "corpus",
     "CorpusItem": "corpus",
     "CorpusRun": "corpus",

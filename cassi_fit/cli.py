@@ -8,7 +8,7 @@ Errors: a :class:`~cassi_fit.errors.CassiError` (and any other exception) is pri
 line, ``cassi: error: ...``, with exit code 2 (1 for unexpected exceptions); the
 traceback is shown only with ``--debug``. Ctrl-C (SIGINT) and SIGTERM at any moment print
 ``cassi: interrupted`` and exit 130: the command turns them into ``KeyboardInterrupt``
-where that is safe (``cassi_fit._io.interruptible``), so that every writer removes its
+where that is safe (``cassi_fit._signals.interruptible``), so that every writer removes its
 temporary files, ffmpeg and the corpus workers are stopped and the OpenGL context is
 released; the program then ends without the interpreter's shutdown (``os._exit``), where
 JAX's and Mesa's threads could crash it. A closed output pipe exits 141 quietly.
@@ -100,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
     exit status. ``argv`` None is the program itself: after an interruption (or a signal
     while it exits) the process ends at once with status 130 (see the module's doc);
     with an ``argv`` list, as from Python, 130 is returned."""
-    from ._io import INTERRUPT_EXIT_STATUS, exit_on_signal, interruptible
+    from ._signals import INTERRUPT_EXIT_STATUS, exit_on_signal, interruptible
 
     program = argv is None
     if program:  # what a signal does outside the command's own handling: end at once
@@ -128,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"cassi: error: {message}", file=sys.stderr)
         status = 2 if isinstance(exc, CassiError) else 1
     if program and status == INTERRUPT_EXIT_STATUS:
-        from ._io import _flush_and_exit
+        from ._signals import _flush_and_exit
 
         _flush_and_exit(status, None)  # no interpreter shutdown after an interrupt
     return status

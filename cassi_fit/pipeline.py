@@ -6,7 +6,7 @@ once (docs/ARCHITECTURE.md): load (:mod:`cassi_fit.dataset`, with the data layer
 and the mistrack detector), :func:`cassi_fit.initialize.initialize` (the subject's model,
 CASSI's initialization), :func:`cassi_fit.animate.animate` (every frame; the jaw method of
 :mod:`cassi_fit.jaw_fit` inside), then an output stage: a video
-(:func:`cassi_fit.video.write_recording_video`), an export (:mod:`cassi_fit.export`) or the
+(:func:`cassi_fit.recording_video.write_recording_video`), an export (:mod:`cassi_fit.export`) or the
 evaluation's measures (:mod:`cassi_fit.evaluate`). :func:`run_recording` runs the two
 pipeline stages; every command (``cassi animate``, ``export``, ``evaluate``, ``demo``), the
 corpus tasks and the Python API call it, so they cannot drift apart.

@@ -30,26 +30,21 @@ import subprocess
 import tempfile
 import threading
 import wave
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable
 from fractions import Fraction
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
-from jaxtyping import Float, UInt8
+from jaxtyping import UInt8
 
 from ._io import atomic_output_path, atomic_write, commit_output, register_input, remove_quietly
 from .errors import CassiError, DataFormatError
 
 if TYPE_CHECKING:
-    from .animate import Animation
-    from .labels import Labels
-    from .render import Renderer
+    pass
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
-TRAIL_S = 0.1
-"""Seconds of pellet trail behind each pellet in the midsagittal view (at least 2 of the
-animation's frames back)."""
 
 
 class VideoError(CassiError):
@@ -64,12 +59,6 @@ def frame_rate(frame_step_s: float) -> Fraction:
     if not step_us >= 1:
         raise CassiError(f"frame step must be at least 1 us, got {frame_step_s!r} s")
     return Fraction(1_000_000, step_us)
-
-
-def trail_frames(animation: Animation) -> int:
-    """How many frames back the midsagittal view's pellet trail reaches: ``TRAIL_S`` of
-    the recording, at least 2 frames."""
-    return max(2, round(TRAIL_S / animation.frame_step_s))
 
 
 def _ffmpeg() -> str:
@@ -146,6 +135,35 @@ def slice_wav(
             dst.writeframes(bytes(out))
 
     return atomic_write(destination, write, overwrite=True, binary=True, data_file=True)
+
+
+#: Frames in flight at most (each is an image in memory): waiting for the encoder, or drawn
+#: ahead of the one being finished (``recording_video``).
+PIPELINE_DEPTH = 3
+
+
+def _put(q, item, stop) -> None:
+    """``q.put(item)``, giving up when ``stop`` is set (the reader has left)."""
+    import queue
+
+    while stop is None or not stop.is_set():
+        try:
+            q.put(item, timeout=0.1)
+            return
+        except queue.Full:
+            if stop is None:
+                _drain(q)
+
+
+def _drain(q) -> None:
+    import queue
+
+    while True:
+        try:
+            q.get_nowait()
+        except queue.Empty:
+            return
+
 
 
 # --------------------------------------------------------------------------- writers
@@ -428,337 +446,3 @@ def count_frames(path: str | os.PathLike) -> int:
     if not counts:
         raise VideoError(f"{path}: no video frames found")
     return int(counts[-1])
-
-
-# --------------------------------------------------------------------------- animations
-
-
-def frame_caption(subject: str, task: str, time_s: float, line: int, status: str = "ok",
-                  label: str = "") -> str:
-    """The caption of one frame: subject, task, recording time, (1-based) data line, the
-    frame's status unless "ok", and the current phone/word ``label`` (quoted) if any."""
-    text = f"{subject} {task}   t = {time_s:7.3f} s   line {line + 1}"
-    if status != "ok":
-        text = f"{text}   [{status}]"
-    return f'{text}   "{label}"' if label else text
-
-
-def animation_frames(
-    animation: Animation,
-    renderer: Renderer,
-    *,
-    subject: str = "",
-    task: str = "",
-    markers: bool = False,
-    progress: bool = True,
-    indices: Iterable[int] | None = None,
-    labels: Labels | None = None,
-    helper_thread: bool = False,
-) -> Iterator[UInt8[np.ndarray, "h w 3"]]:
-    """Render the frames ``indices`` (default all) of an ``animate.Animation`` with
-    ``renderer`` (a ``render.Renderer``); yields ``uint8 (H, W, 3)`` images. ``markers``:
-    draw the measured pellets and the model's pellet sites (never-tracked pellets left
-    out); ``labels`` (``labels.Labels``): the label at each frame's time is captioned.
-    A renderer with the ``midsagittal`` view gets, whatever ``markers`` says, the
-    measured pellets with a trail of their last ``TRAIL_S`` seconds and the time.
-    ``helper_thread``: draw each frame's OpenGL views in this thread and its 2D
-    part (midsagittal view, caption) in a helper thread while the next frame's views are
-    drawn (the same bytes); it pays only where a core is free: on 2 cores OpenGL's own
-    threads and ffmpeg keep both busy and the helper thread was slower in
-    ``benchmarks/bench_animation.py``, so the default is one step.
-    The progress bar goes to stderr."""
-    import sys
-
-    from tqdm import tqdm
-
-    from .mistracks import mistrack_labels
-    from .status import Status
-
-    vertices = np.asarray(animation.vertices)
-    measured = np.asarray(animation.pellets_measured)
-    model_sites = np.asarray(animation.pellets_model)
-    shown = np.isfinite(measured).all(axis=(0, 2))
-    section = "midsagittal" in getattr(renderer, "views", ())
-    trail = trail_frames(animation) if section else 0
-    current = (labels.at(np.asarray(animation.times, np.float64)) if labels is not None
-               else np.full(animation.n_frames, "", dtype=str))
-    indices = range(animation.n_frames) if indices is None else indices
-    reasons = getattr(animation, "mistrack_reasons", None)  # the detector's, per pellet
-
-    def frame(k):
-        """(vertices, render keywords) of frame ``k``."""
-        kwargs = {}
-        if section:
-            kwargs["trails"] = {"measured": measured[max(k - trail, 0) : k + 1, shown]}
-            kwargs["time"] = float(animation.times[k])
-        if markers:
-            kwargs["markers"] = {
-                "measured": _in_3d(measured[k][shown]),
-                "model": _in_3d(model_sites[k][shown]),
-            }
-        status = Status(int(animation.frame_status[k])).label
-        if reasons is not None and reasons[k].any():  # which pellet, and why
-            status = f"{status} {mistrack_labels(reasons[k])}"
-        kwargs["caption"] = frame_caption(
-            subject, task, float(animation.times[k]), int(animation.frame_index[k]), status,
-            str(current[k]),
-        )
-        return vertices[k], kwargs
-
-    shown_indices = tqdm(indices, desc="rendering", unit="frame", file=sys.stderr,
-                         disable=not progress, leave=False)
-    if not (helper_thread and hasattr(renderer, "render_gl")):  # one step
-        for k in shown_indices:
-            points, kwargs = frame(k)
-            yield renderer.render(points, **kwargs)
-        return
-    yield from _two_step(renderer, (frame(k) for k in shown_indices))
-
-
-#: Frames drawn ahead of the one being finished (bounded: each is an image in memory).
-PIPELINE_DEPTH = 3
-
-
-def _two_step(renderer: Any, frames: Iterator[tuple]) -> Iterator[np.ndarray]:
-    """Each frame's OpenGL views in this thread (the context's), its 2D drawing
-    (midsagittal view, caption: ``renderer.finish_frame``) in a helper thread while the
-    next frame's OpenGL views are drawn; the finished frames in order. Any error or
-    interrupt stops the helper before it passes on."""
-    import queue
-    import threading
-
-    todo: queue.Queue = queue.Queue(maxsize=PIPELINE_DEPTH)
-    done: queue.Queue = queue.Queue(maxsize=PIPELINE_DEPTH)
-    stop = threading.Event()
-
-    def finish() -> None:
-        while not stop.is_set():
-            job = todo.get()
-            if job is None:
-                return
-            image, points, kwargs = job
-            try:
-                result = (renderer.finish_frame(image, points, **kwargs), None)
-            except BaseException as exc:  # noqa: BLE001 -- passed to the main thread
-                result = (None, exc)
-            _put(done, result, stop)
-            if result[1] is not None:
-                return
-
-    def take() -> np.ndarray:
-        image, error = done.get()
-        if error is not None:
-            raise error
-        return image
-
-    helper = threading.Thread(target=finish, name="cassi-finish-frames", daemon=True)
-    helper.start()
-    pending = 0
-    try:
-        for points, kwargs in frames:
-            image, checked = renderer.render_gl(points, markers=kwargs.get("markers"))
-            if pending == PIPELINE_DEPTH:  # the helper is that far behind: wait for it
-                yield take()
-                pending -= 1
-            todo.put((image, checked, kwargs))
-            pending += 1
-        for _ in range(pending):
-            yield take()
-        pending = 0
-    finally:
-        stop.set()
-        _drain(done)
-        _put(todo, None, None)
-        helper.join()
-
-
-def _put(q, item, stop) -> None:
-    """``q.put(item)``, giving up when ``stop`` is set (the reader has left)."""
-    import queue
-
-    while stop is None or not stop.is_set():
-        try:
-            q.put(item, timeout=0.1)
-            return
-        except queue.Full:
-            if stop is None:
-                _drain(q)
-
-
-def _drain(q) -> None:
-    import queue
-
-    while True:
-        try:
-            q.get_nowait()
-        except queue.Empty:
-            return
-
-
-def subject_traces(recording: Any, scale: float) -> dict[str, Float[np.ndarray, "n 2"] | None]:
-    """The midsagittal view's traces of a ``dataset.Recording``: its subject's palate
-    (PAL.DAT) and pharyngeal wall (PHA.DAT) in the model frame, i.e. the pellet frame's
-    mm times ``scale`` (``SubjectState.scale``); None where the file is absent."""
-    out = {}
-    for name in ("palate", "pharynx"):
-        points = getattr(recording, name, None)
-        out[name] = None if points is None else np.asarray(points, np.float64) * float(scale)
-    return out
-
-
-def _in_3d(points_2d: np.ndarray) -> np.ndarray:
-    """Pellet (x, y) in the midsagittal plane as model points (x, y, 0)."""
-    return np.concatenate([points_2d, np.zeros((len(points_2d), 1))], axis=1)
-
-
-def write_animation(
-    path: str | os.PathLike,
-    animation: Animation,
-    renderer: Renderer,
-    *,
-    subject: str = "",
-    task: str = "",
-    audio: str | os.PathLike | None = None,
-    markers: bool = False,
-    progress: bool = True,
-    overwrite: bool = False,
-    labels: Labels | None = None,
-) -> Path:
-    """Render ``animation`` to an MP4/GIF at the recording's pace
-    (``frame_rate(animation.frame_step_s)``);
-    an MP4 carries ``audio`` (a ``.wav`` on the recording's clock) aligned so that the
-    first frame sounds at its own recording time; ``labels`` (``labels.Labels``, e.g.
-    ``labels.labels_for(pellet_path)``) put the current phone/word in each caption.
-    Returns the path written."""
-    fps = frame_rate(animation.frame_step_s)
-    start = float(animation.times[0])
-    frames = animation_frames(
-        animation, renderer, subject=subject, task=task, markers=markers, progress=progress,
-        labels=labels,
-    )
-    return write_video(path, frames, fps, audio=audio, audio_start=start, overwrite=overwrite)
-
-
-# ------------------------------------------------------------- a recording's video
-def write_recording_video(
-    path: str | os.PathLike,
-    run: Any,
-    *,
-    renderer: Renderer | None = None,
-    size: tuple[int, int] = (640, 480),
-    views: Sequence[str] | None = None,
-    markers: bool = False,
-    audio: bool = True,
-    labels: Labels | bool | None = True,
-    accept_mismatch: bool = False,
-    progress: bool = True,
-    overwrite: bool = False,
-) -> Path:
-    """The video of a ``pipeline.RecordingRun``: the one place that sets up the renderer
-    for a recording (the model, its ``views`` (default all of ``options.VIEWS``, in a
-    grid) at ``size``, the subject's palate and pharynx traces in the midsagittal view)
-    and writes :func:`write_animation`, with the recording's sound in an MP4 when
-    ``audio`` and a ``.wav`` is there (a GIF has none; the sound is checked against the
-    recording's length first, ``sound.check_sound``), the current label in the captions
-    (``labels``: True for the labels beside the recording, ``labels.labels_for``, checked
-    against its length; a ``Labels``; or None/False for none). ``accept_mismatch``: keep
-    sound or labels whose length does not fit the recording (with a warning) instead of
-    the error. ``renderer``: reuse an open ``render.Renderer`` of the same model (its
-    traces are replaced). Returns the path written."""
-    from .options import VIEWS
-    from .render import Renderer
-    from .sound import check_sound, recording_seconds
-
-    recording, state = run.recording, run.state
-    length_s = recording_seconds(recording.track.times)
-    if labels is True:
-        from .labels import labels_for
-
-        labels = labels_for(recording.path, recording_s=length_s,
-                            accept_mismatch=accept_mismatch) if recording.path else None
-    labels = labels or None
-    sound = recording.audio if audio and Path(path).suffix.lower() == ".mp4" else None
-    if sound is not None:
-        check_sound(sound, length_s, accept_mismatch=accept_mismatch)
-    traces = subject_traces(recording, state.scale)
-    own = renderer is None
-    if own:
-        views = tuple(views or VIEWS)
-        renderer = Renderer(state.model, size=tuple(size), views=views, grid=len(views) > 1,
-                            traces=traces)
-    else:
-        renderer.set_traces(traces)
-    try:
-        return write_animation(path, run.animation, renderer, subject=recording.subject,
-                               task=recording.task, audio=sound, markers=markers,
-                               progress=progress, overwrite=overwrite, labels=labels)
-    finally:
-        if own:
-            renderer.close()
-
-
-def video_output_path(out_dir: str | os.PathLike, item: Any, suffix: str = ".mp4") -> Path:
-    """``out_dir/SUBJECT/TASK.mp4`` (or the given suffix) of a ``corpus.CorpusItem``."""
-    return Path(out_dir) / item.subject / f"{item.task}{suffix}"
-
-
-def animate_task(item: Any, out_dir: str, *, spec: Any, suffix: str = ".mp4",
-                 size: tuple[int, int] = (640, 480), views: Sequence[str] | None = None,
-                 audio: bool = True, markers: bool = False, labels: bool = True,
-                 overwrite: bool = False) -> Any:
-    """``cassi animate DATASET``'s task: run one recording (``pipeline.run_recording``
-    with the ``run_spec.RunSpec`` ``spec`` and the worker's model) and write
-    ``out_dir/SUBJECT/TASK.mp4`` (or ``.gif``) by :func:`write_recording_video`, the
-    current label (``labels.labels_for``) in each frame's caption. Row: frames, stride,
-    the video, the label file, the tongue's volume range."""
-    from .corpus import TaskResult, load_item, worker_model
-    from .labels import labels_for
-    from .pipeline import run_recording
-    from .sound import recording_seconds
-    from .tongue import tongue_volumes
-
-    run = run_recording(load_item(item, quiet=True), spec, model=worker_model())
-    found = labels_for(run.recording.path, recording_s=recording_seconds(
-        run.recording.track.times)) if labels else None
-    path = write_recording_video(video_output_path(out_dir, item, suffix), run, size=size,
-                                 views=views, markers=markers, audio=audio, labels=found,
-                                 progress=False, overwrite=overwrite)
-    volume = tongue_volumes(run.state.model, run.animation.vertices)
-    row = {"frames": int(run.animation.n_frames), "stride": int(run.animation.stride),
-           "video": str(Path(path).relative_to(Path(out_dir))),
-           "label_file": found.path.name if found is not None and found.path else "",
-           "tongue_volume_min_ml": round(float(volume.min()), 3),
-           "tongue_volume_max_ml": round(float(volume.max()), 3)}
-    return TaskResult(row, (str(path),))
-
-
-def animate_corpus(dataset: Any, out_dir: str | os.PathLike, *, spec: Any = None,
-                   subjects: Iterable[str] | None = None, tasks: Iterable[str] | None = None,
-                   video_options: dict[str, Any] | None = None,
-                   run_options: dict[str, Any] | None = None, **changes: Any) -> tuple:
-    """``cassi animate DATASET --out DIR``: :func:`animate_task` on every recording (the
-    run ``spec``, a ``run_spec.RunSpec`` or a preset's name, with ``changes``;
-    ``video_options``: ``suffix``, ``size``, ``views``, ``audio``, ``markers``, ``labels``),
-    then ``DIR/animate_corpus.csv`` (and ``.parquet``): one row per recording, failed ones
-    with their error. ``run_options`` go to ``corpus.run_corpus``. Returns ``(run, the
-    table files written)``."""
-    from .corpus import (
-        dataset_items,
-        refuse_existing,
-        replaces,
-        require_items,
-        run_corpus,
-        write_table,
-    )
-    from .run_spec import run_spec
-
-    spec = run_spec(spec, **changes)
-    run_options = dict(run_options or {})
-    table = Path(out_dir) / "animate_corpus.csv"
-    refuse_existing([table], run_options)
-    run_options.setdefault("desc", "animate")
-    options = {**(video_options or {}), "spec": spec}
-    items = require_items(dataset_items(dataset, subjects=subjects, tasks=tasks), dataset,
-                          subjects, tasks)
-    run = run_corpus(animate_task, items, out_dir, options=options, **run_options)
-    return run, write_table(run.rows(), table, overwrite=replaces(run_options))

@@ -123,8 +123,8 @@ def test_animate_to_png_draws_the_frame_asked_for(sentence, every_40th, tmp_path
     """``--out X.png --frame 2``: the still is animation frame 2, all five views with the
     subject's traces and its caption, as the renderer draws it here (not frame 0)."""
     from cassi_fit.options import VIEWS
+    from cassi_fit.recording_video import animation_frames, subject_traces
     from cassi_fit.render import Renderer
-    from cassi_fit.video import animation_frames, subject_traces
 
     _, recording = sentence
     png = tmp_path / "still.png"
@@ -183,8 +183,8 @@ def test_animate_in_cassi_mode(sentence, tmp_path, capsys):
 
 def test_every_view_is_non_blank(sentence, every_40th):
     from cassi_fit.options import VIEWS
+    from cassi_fit.recording_video import subject_traces
     from cassi_fit.render import Renderer
-    from cassi_fit.video import subject_traces
 
     _, recording = sentence
     state, animation = every_40th.state, every_40th.animation

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from cassi_fit import _io, synth
+from cassi_fit import _signals, synth
 
 HERE = Path(__file__).resolve().parent
 
@@ -28,7 +28,7 @@ class ExtensionFileLoader:
     def create_module(self, spec):
         os.kill(os.getpid(), signal.SIGTERM)
         _python_call()  # the handler runs here, inside the "initialisation"
-        self.pending_when_done = _io._STATE.pending
+        self.pending_when_done = _signals._STATE.pending
         self.finished = True
 
 
@@ -38,7 +38,7 @@ def _python_call():
 
 def test_an_interrupt_waits_until_an_extension_module_is_initialised():
     loader = ExtensionFileLoader()
-    with _io.interruptible():
+    with _signals.interruptible():
         with pytest.raises(KeyboardInterrupt):
             loader.create_module(None)
             signal.pause()  # the deferred interrupt comes back (its timer) and is raised
@@ -56,7 +56,7 @@ def test_an_interrupt_a_gc_callback_swallowed_is_delivered_again(capfd):
 
     gc.callbacks.append(callback)
     try:
-        with _io.interruptible():
+        with _signals.interruptible():
             with pytest.raises(KeyboardInterrupt):
                 gc.collect()
                 signal.pause()  # delivered again
@@ -68,9 +68,9 @@ def test_an_interrupt_a_gc_callback_swallowed_is_delivered_again(capfd):
 
 def test_defer_interrupts_raises_at_the_end_of_the_block():
     done = []
-    with _io.interruptible():
+    with _signals.interruptible():
         with pytest.raises(KeyboardInterrupt):
-            with _io.defer_interrupts():
+            with _signals.defer_interrupts():
                 os.kill(os.getpid(), signal.SIGTERM)
                 _python_call()
                 done.append("block finished")

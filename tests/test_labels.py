@@ -206,7 +206,7 @@ def test_read_labels_refuses_other_suffixes(tmp_path):
 def test_video_captions_carry_the_current_label():
     from types import SimpleNamespace
 
-    from cassi_fit.video import animation_frames, frame_caption
+    from cassi_fit.recording_video import animation_frames, frame_caption
 
     n = 4
     animation = SimpleNamespace(

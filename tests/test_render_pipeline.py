@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cassi_fit import synth, video
+from cassi_fit import recording_video, synth, video
 from cassi_fit.animate import animate
 from cassi_fit.dataset import Recording
 from cassi_fit.initialize import initialize
@@ -35,7 +35,7 @@ def run():
 def renderer(run):
     recording, state, _ = run
     with Renderer(state.model, size=(200, 120), views=VIEWS,
-                  traces=video.subject_traces(recording, state.scale)) as r:
+                  traces=recording_video.subject_traces(recording, state.scale)) as r:
         yield r
 
 
@@ -43,8 +43,8 @@ def test_two_steps_give_the_same_frames_byte_for_byte(run, renderer):
     _, _, animation = run
     options = {"subject": "JWT", "task": "sentence", "markers": True, "progress": False,
                "indices": range(0, animation.n_frames, 9)}
-    two = list(video.animation_frames(animation, renderer, helper_thread=True, **options))
-    one = list(video.animation_frames(animation, renderer, **options))  # the default
+    two = list(recording_video.animation_frames(animation, renderer, helper_thread=True, **options))
+    one = list(recording_video.animation_frames(animation, renderer, **options))  # the default
     assert len(two) == len(one) == len(options["indices"]) > video.PIPELINE_DEPTH
     for a, b in zip(two, one, strict=True):
         assert a.dtype == np.uint8 and a.shape == b.shape
@@ -63,7 +63,7 @@ def test_an_error_in_the_helper_thread_reaches_the_caller(run, renderer, monkeyp
 
     monkeypatch.setattr(renderer, "finish_frame", broken)
     with pytest.raises(ValueError, match="the 2D drawing failed"):
-        list(video.animation_frames(animation, renderer, progress=False, indices=range(8),
+        list(recording_video.animation_frames(animation, renderer, progress=False, indices=range(8),
                                     helper_thread=True))
     assert calls and calls[0] != threading.main_thread().name
     assert not [t for t in threading.enumerate() if t.name == "cassi-finish-frames"]
@@ -71,7 +71,7 @@ def test_an_error_in_the_helper_thread_reaches_the_caller(run, renderer, monkeyp
 
 def test_a_consumer_that_stops_early_stops_the_helper(run, renderer):
     _, _, animation = run
-    frames = video.animation_frames(animation, renderer, progress=False, helper_thread=True)
+    frames = recording_video.animation_frames(animation, renderer, progress=False, helper_thread=True)
     next(frames)
     frames.close()
     assert not [t for t in threading.enumerate() if t.name == "cassi-finish-frames"]

@@ -10,6 +10,7 @@ import pytest
 
 from cassi_fit import _io
 from cassi_fit.errors import CassiError, DataFormatError, OutputExistsError
+from cassi_fit.recording_video import write_animation
 from cassi_fit.txy import FRAME_STEP_US
 from cassi_fit.video import (
     VideoWriter,
@@ -18,7 +19,6 @@ from cassi_fit.video import (
     frame_rate,
     media_info,
     slice_wav,
-    write_animation,
     write_video,
 )
 
@@ -264,15 +264,13 @@ def test_an_interrupt_while_encoding_a_gif_leaves_nothing(tmp_path, monkeypatch)
 
 
 def test_an_interrupt_while_finishing_an_mp4_leaves_nothing(tmp_path, monkeypatch):
-    import cassi_fit.video as video
-
     wav = _write_wav(tmp_path / "s.wav", np.zeros(RATE))
 
     def interrupted(cmd, *args, **kwargs):  # the audio mux, the MP4's last step
         open(cmd[-1], "wb").write(b"half an mp4")
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(video.subprocess, "run", interrupted)
+    monkeypatch.setattr(subprocess, "run", interrupted)
     with pytest.raises(KeyboardInterrupt):
         write_video(tmp_path / "talk.mp4", _frames(5), 10, audio=wav)
     _only(tmp_path, "s.wav")
@@ -295,7 +293,7 @@ def test_an_interrupt_between_frames_stops_ffmpeg_and_leaves_nothing(tmp_path):
 _INTERRUPTED_WRITER = """
 import os, signal, sys
 import numpy as np
-from cassi_fit._io import terminate_as_interrupt
+from cassi_fit._signals import terminate_as_interrupt
 from cassi_fit.video import VideoWriter
 
 signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C's, even if SIGINT was ignored

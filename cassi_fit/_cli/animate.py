@@ -320,8 +320,8 @@ def run(args) -> int:
 
 
 def write_output(out: Path, run, size, views, args) -> Path:
-    """The run's still (``.png``, frame ``--frame``) or video (``video.write_recording_video``)."""
-    from cassi_fit import video
+    """The run's still (``.png``, frame ``--frame``) or video (``recording_video.write_recording_video``)."""
+    from cassi_fit import recording_video as video
     from cassi_fit.errors import CassiError
 
     recording, animation = run.recording, run.animation
@@ -346,10 +346,10 @@ def write_output(out: Path, run, size, views, args) -> Path:
 
 def run_dataset(args) -> int:
     """``cassi animate DATASET --out DIR``: one video per recording
-    (``video.animate_corpus``) with the same run spec as one recording, in parallel; exit
+    (``recording_video.animate_corpus``) with the same run spec as one recording, in parallel; exit
     1 if any failed."""
     from cassi_fit.errors import CassiError
-    from cassi_fit.video import animate_corpus
+    from cassi_fit.recording_video import animate_corpus
 
     if not args.out or Path(args.out).suffix.lower() in ANIMATION_SUFFIXES:
         raise CassiError(f"{args.recording[0]}: a dataset folder; give --out DIR for its videos")

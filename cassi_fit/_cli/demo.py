@@ -110,10 +110,10 @@ def _comparison(path: Path, run, size, caption="calibrated + collisions"):
 
 def _stills(out: Path, renderer, recording, animation):
     """The five views alone and the grid, at the frame of widest jaw opening (the
-    midsagittal view with the pellets' trails of the last ``video.TRAIL_S``)."""
+    midsagittal view with the pellets' trails of the last ``recording_video.TRAIL_S``)."""
     import numpy as np
 
-    from cassi_fit import video
+    from cassi_fit import recording_video as video
     from cassi_fit.render import save_png
 
     k = int(np.argmax(np.asarray(animation.params.jaw_theta)))
@@ -143,7 +143,7 @@ def _stills(out: Path, renderer, recording, animation):
 
 
 def run(args) -> int:
-    from cassi_fit import video
+    from cassi_fit import recording_video as video
     from cassi_fit.export import export_glb
     from cassi_fit.labels import labels_for
     from cassi_fit.options import VIEWS

@@ -38,7 +38,7 @@ subject for per-subject work such as calibration) and collects one summary row p
 This package holds only the executor (``_executor``), the items (``_items``), the
 resume markers (``_markers``), the set-up of a computing process (``_process``) and the
 connection to a Dask cluster (``_cluster``). Each command's task lives beside the command:
-``evaluate.evaluate_corpus``, ``calibrate.calibrate_corpus``, ``video.animate_corpus``
+``evaluate.evaluate_corpus``, ``calibrate.calibrate_corpus``, ``recording_video.animate_corpus``
 (``cassi jaw DATASET``'s in ``jaw_corpus``);
 :func:`write_table` writes a corpus table as CSV, and as Parquet when pyarrow is importable
 (``cassi_fit.tables``).

@@ -12,15 +12,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .._io import (
-    check_output_folder,
-    check_outputs,
-    defer_interrupts,
-    end_worker,
-    in_task,
-    is_worker,
-    signals_blocked,
-)
+from .._io import check_output_folder, check_outputs
+from .._signals import defer_interrupts, end_worker, in_task, is_worker, signals_blocked
 from ..errors import CassiError, OutputExistsError
 from ..status import Status
 from ..tables import ID_COLUMNS
@@ -117,10 +110,10 @@ def run_item(task: Callable[..., TaskResult], item: CorpusItem, out_dir: str | N
 
 def _init_worker(jax_settings: JaxSettings) -> None:
     """A local pool's worker, before any task (and before JAX starts): its share of the
-    threads, the signals (:func:`cassi_fit._io.worker_signals`: Ctrl-C is the parent's to
+    threads, the signals (:func:`cassi_fit._signals.worker_signals`: Ctrl-C is the parent's to
     handle; SIGTERM ends a task as an interrupt, with its clean-up, and the worker
     quietly), the compilation cache and float64."""
-    from .._io import worker_signals
+    from .._signals import worker_signals
 
     if jax_settings.threads is not None:
         limit_threads(jax_settings.threads)

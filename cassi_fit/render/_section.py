@@ -457,7 +457,7 @@ def midsagittal_figure(
     ``face_material`` and optionally ``regions``, ``landmarks``, ``measures``);
     ``vertices (V, 3)`` mm: the posed frame (e.g. ``animation.vertices[k]``); ``traces``:
     ``{"palate": (n, 2), "pharynx": (m, 2)}`` mm in the model frame
-    (``video.subject_traces(recording, state.scale)``); ``pellets (k, 2)`` mm and
+    (``recording_video.subject_traces(recording, state.scale)``); ``pellets (k, 2)`` mm and
     ``trail (T, k, 2)`` mm (the last T positions, oldest first); ``time`` in seconds for
     the title; ``ax``: draw into these axes instead of a new figure. Returns the figure.
     Lines carry the part's name as their label (``"tongue"``, ``"palate trace"``,
