@@ -1,6 +1,7 @@
 # Two commands do all set-up on a fresh machine (Python 3.11 only):
 #   make demo   -- build the venv if needed, then run `cassi demo` on the synthetic corpus
-#   make test   -- build the venv if needed, then run the whole test suite
+#   make test   -- build the venv if needed, then run the whole test suite (two pytest-xdist
+#                  workers, one test file each at a time, each on its share of the cores)
 #   make lint   -- ruff, the import-linter contracts and the public annotations check
 #   make docs   -- the API reference from the docstrings, into build/docs_site/ (index.html)
 PYTHON ?= python3
@@ -26,7 +27,7 @@ demo: $(STAMP)
 	$(BIN)/cassi demo --out demo_output
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -p no:cacheprovider
+	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadfile
 
 pictures: $(STAMP)
 	$(BIN)/python model/render_pictures.py --out model/pictures

@@ -28,6 +28,14 @@ if os.environ.get("CASSI_TEST_JAX_CACHE", "1") != "0" and "JAX_COMPILATION_CACHE
 # none: never the user's own cache (~/.cache/cassi_fit/jax), whatever the environment says.
 os.environ["CASSI_COMPILE_CACHE"] = os.environ.get("JAX_COMPILATION_CACHE_DIR") or "off"
 
+# Under pytest-xdist (`make test` runs two workers), each worker computes on its share of
+# the cores, as a corpus run's workers do: two XLA thread pools each as wide as the machine
+# only fight over it. Set before JAX starts; the processes a test starts inherit it.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    from cassi_fit.corpus._process import limit_threads, threads_per_worker
+
+    limit_threads(threads_per_worker(int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))))
+
 import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
