@@ -31,7 +31,7 @@ VIDEO_WARM_X, VIDEO_CLEAN_X = 1.5, 2.0
 
 
 def _recording_default() -> Path | None:
-    for base in (ROOT.parents[1], ROOT.parents[2], Path("/work")):
+    for base in (*ROOT.parents, Path("/work")):  # ../shared beside the checkout, or above
         candidate = base / "shared/data/xrmb_jw11/jw11_tp005.txy"
         if candidate.is_file():
             return candidate
