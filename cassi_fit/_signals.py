@@ -32,8 +32,9 @@ from typing import Any
 # * after the command, while the interpreter shuts down with JAX's and Mesa's threads
 #   still running: a segmentation fault.
 #
-# So here the handler defers the interrupt while an extension module initialises (and in
-# explicit ``defer_interrupts()`` blocks), re-delivers one that a callback swallowed
+# So here the handler defers the interrupt while an extension module initialises or JAX
+# writes a compilation cache entry (stopped half-way, it breaks the folder for every later
+# process: cassi_fit.corpus._process), and in explicit ``defer_interrupts()`` blocks, re-delivers one that a callback swallowed
 # (``sys.unraisablehook``), both through a 20 ms timer (SIGALRM), and leaves the clean-up
 # of the first interrupt undisturbed by further signals (a third one ends the process at
 # once). A command run as a program (``cli.main()``) ends with ``os._exit`` after its
@@ -45,6 +46,10 @@ INTERRUPT_EXIT_STATUS = 130
 _RETRY_S = 0.02  # seconds before a deferred or swallowed interrupt is delivered again
 _EXTENSION_INIT = frozenset({"ExtensionFileLoader.create_module",
                              "ExtensionFileLoader.exec_module"})
+#: Where an interrupt also waits: JAX writing a compilation cache entry and its last-use
+#: file (``jax._src.lru_cache``); stopped between the two, the folder is left with an
+#: entry that breaks every later write of the size-limited cache.
+_NO_INTERRUPT = _EXTENSION_INIT | {"LRUCache.put", "LRUCache.get"}
 
 
 class _Interrupts:
@@ -67,8 +72,10 @@ _STATE = _Interrupts()
 
 
 def _in_extension_init(frame: Any) -> bool:
+    """Whether ``frame`` (or a caller) is no place for an interrupt: an extension module
+    initialising, or JAX writing a cache entry."""
     while frame is not None:
-        if getattr(frame.f_code, "co_qualname", "") in _EXTENSION_INIT:
+        if getattr(frame.f_code, "co_qualname", "") in _NO_INTERRUPT:
             return True
         frame = frame.f_back
     return False

@@ -43,6 +43,48 @@ def test_a_folder_that_cannot_be_written_is_one_warning_and_no_cache(tmp_path, m
         assert use_compile_cache(blocker / "jax", inherit=False) is None
 
 
+def test_a_folder_with_an_entry_missing_its_last_use_is_repaired(tmp_path, monkeypatch):
+    """An entry written without the size limit (or by a process killed between JAX's two
+    writes) has no last-use file; JAX's size-limited cache then fails every later write.
+    Using the folder repairs it first, under JAX's own lock: JAX's cache class itself then
+    writes, and the repaired entry is the first to be evicted."""
+    from jax._src.lru_cache import LRUCache
+
+    folder = tmp_path / "jax"
+    folder.mkdir()
+    (folder / "old-cache").write_bytes(b"x" * 10)  # no old-atime beside it
+    with pytest.raises(FileNotFoundError):  # JAX as it is, on such a folder
+        LRUCache(str(folder), max_size=1 << 20).put("new", b"y" * 10)
+    for name in ("JAX_COMPILATION_CACHE_DIR", "CASSI_COMPILE_CACHE",
+                 "JAX_COMPILATION_CACHE_MAX_SIZE", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS",
+                 "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"):
+        monkeypatch.setenv(name, os.environ.get(name, ""))  # restored after the test
+    assert _process.repair_compile_cache(folder) == 1
+    assert _process.repair_compile_cache(folder) == 0  # nothing left to repair
+    assert int.from_bytes((folder / "old-atime").read_bytes(), "little") == 0
+    cache = LRUCache(str(folder), max_size=25)
+    cache.put("new", b"y" * 10)
+    cache.put("newer", b"z" * 10)  # over 25 bytes: the repaired entry goes first
+    assert not (folder / "old-cache").exists() and (folder / "new-cache").exists()
+
+
+class LRUCache:  # named as JAX's cache class (jax._src.lru_cache): its put's frame
+    def put(self):
+        from cassi_fit import _signals
+
+        return _signals._in_extension_init(sys._getframe())
+
+
+def test_an_interrupt_waits_while_jax_writes_a_cache_entry():
+    from jax._src import lru_cache
+
+    from cassi_fit import _signals
+
+    assert lru_cache.LRUCache.put.__qualname__ == "LRUCache.put"  # the name looked for
+    assert LRUCache().put()
+    assert not _signals._in_extension_init(sys._getframe())
+
+
 def test_worker_threads_are_limited_before_jax_starts():
     given = {"XLA_FLAGS": "--xla_dump_to=/tmp/d --xla_cpu_multi_thread_eigen=true"}
     env = worker_thread_env(1, given)

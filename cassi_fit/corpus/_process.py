@@ -25,6 +25,14 @@ through writing. (A failed read is not fatal in JAX either: it warns and compile
 Entries are keyed by the function, the shapes, the JAX version and the flags (float64 or
 not), so a run with other settings adds entries beside the old ones.
 
+*A folder written without the limit.* With the limit, JAX keeps beside every entry
+(``KEY-cache``) its last use (``KEY-atime``) and, at every write, reads them all; one
+entry without it (written by a process without the limit, or by one killed between the
+two writes) makes every later write fail with a warning. So each process, before it uses
+the folder, gives such entries a last use of 0 (the first to be evicted) under JAX's own
+lock (:func:`repair_compile_cache`); and an interrupt waits while JAX writes an entry
+(``cassi_fit._signals``).
+
 **Threads.** XLA runs one computation on as many threads as the process may use. With
 ``--jobs N`` on C cores each worker is limited to ``C // N`` of them
 (:func:`worker_thread_env`: XLA's Eigen thread pool off or to that size, and the
@@ -85,6 +93,35 @@ def _usable(folder: Path) -> str | None:
     return None
 
 
+#: JAX's names in a size-limited cache folder: an entry and its last use
+#: (``jax._src.lru_cache``).
+_ENTRY_SUFFIX, _LAST_USE_SUFFIX = "-cache", "-atime"
+
+
+def repair_compile_cache(folder: str | os.PathLike, timeout_s: float = 10.0) -> int:
+    """Give every entry of the cache ``folder`` that has no last-use file one (time 0:
+    evicted first), under JAX's lock on the folder, so that JAX's size limit can work on
+    it (see the module's doc); returns how many were given one. A folder that cannot be
+    locked or written is left as it is (0): JAX then warns and compiles, as before."""
+    try:
+        import filelock
+    except ImportError:  # no limit without it (compile_cache_settings), so nothing to do
+        return 0
+    folder = Path(folder)
+    repaired = 0
+    try:
+        with filelock.FileLock(os.fspath(folder / ".lockfile"), timeout=timeout_s):
+            for entry in folder.glob(f"*{_ENTRY_SUFFIX}"):
+                key = entry.name[: -len(_ENTRY_SUFFIX)]
+                last_use = folder / f"{key}{_LAST_USE_SUFFIX}"
+                if not last_use.exists():
+                    last_use.write_bytes((0).to_bytes(8, "little"))
+                    repaired += 1
+    except (OSError, filelock.Timeout):
+        pass
+    return repaired
+
+
 def compile_cache_settings(folder: str | os.PathLike) -> dict[str, str]:
     """JAX's settings (as environment variables) for a compilation cache in ``folder``:
     the folder, every entry kept, the size limit that makes JAX lock the folder."""
@@ -120,6 +157,8 @@ def use_compile_cache(folder: str | os.PathLike | None, *, inherit: bool = True
                           "compiling without it", CompileCacheWarning, stacklevel=2)
             folder = None
     settings = {} if folder is None else compile_cache_settings(folder)
+    if "JAX_COMPILATION_CACHE_MAX_SIZE" in settings:
+        repair_compile_cache(folder)
     if inherit and folder is None:
         os.environ.pop("JAX_COMPILATION_CACHE_DIR", None)
         os.environ[COMPILE_CACHE_ENV] = "off"  # for the processes this one starts
