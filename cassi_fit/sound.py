@@ -79,21 +79,33 @@ def recording_seconds(times: Float[np.ndarray, " n"]) -> float:
     return float(times[-1] + step)
 
 
-def read_header(path: str | os.PathLike) -> wave._wave_params:
-    """The parameters of a PCM ``.wav`` (header only); :class:`DataFormatError` naming the
-    file if it is missing, not a WAVE file, compressed or float, or has a rate or channel
-    count of 0."""
+def open_pcm(path: str | os.PathLike, *, samples: bool = True
+             ) -> tuple[wave._wave_params, bytes]:
+    """``(parameters, sample bytes)`` of the integer-PCM ``.wav`` at ``path`` (``b""``
+    without ``samples``: the header only), nothing checked beyond what :mod:`wave` reads;
+    :class:`DataFormatError` naming the file if it is missing, not a WAVE file, truncated,
+    compressed or float."""
     path = Path(path)
     if not path.is_file():
         raise DataFormatError(path, None, "sound file not found (or not a regular file)")
     try:
         with wave.open(str(path), "rb") as src:
             params = src.getparams()
+            data = src.readframes(params.nframes) if samples else b""
     except (wave.Error, EOFError, OSError) as exc:
         reason = str(exc) or "empty or truncated header"
         if "unknown format: 3" in reason:
             reason = "float samples; only integer PCM is read"
         raise DataFormatError(path, None, f"not a readable PCM .wav file ({reason})") from None
+    return params, data
+
+
+def read_header(path: str | os.PathLike) -> wave._wave_params:
+    """The parameters of a PCM ``.wav`` (header only); :class:`DataFormatError` naming the
+    file if it is missing, not a WAVE file, compressed or float, or has a rate or channel
+    count of 0."""
+    path = Path(path)
+    params, _ = open_pcm(path, samples=False)
     if params.framerate <= 0 or params.nchannels <= 0:
         raise DataFormatError(path, None, f"bad .wav header: rate {params.framerate} Hz, "
                               f"{params.nchannels} channels")

@@ -40,6 +40,7 @@ from jaxtyping import UInt8
 
 from ._io import atomic_output_path, atomic_write, commit_output, register_input, remove_quietly
 from .errors import CassiError, DataFormatError
+from .sound import open_pcm
 
 if TYPE_CHECKING:
     pass
@@ -82,17 +83,7 @@ def check_wav(path: str | os.PathLike) -> wave._wave_params:
 def _read_pcm(path: str | os.PathLike) -> tuple[wave._wave_params, bytes]:
     """(parameters, sample bytes) of a PCM ``.wav``, checked as :func:`check_wav` says."""
     path = Path(path)
-    if not path.is_file():
-        raise DataFormatError(path, None, "sound file not found (or not a regular file)")
-    try:
-        with wave.open(str(path), "rb") as src:
-            params = src.getparams()
-            data = src.readframes(params.nframes)
-    except (wave.Error, EOFError, OSError) as exc:
-        reason = str(exc) or "empty or truncated header"
-        if "unknown format: 3" in reason:
-            reason = "float samples; only integer PCM is read"
-        raise DataFormatError(path, None, f"not a readable PCM .wav file ({reason})") from None
+    params, data = open_pcm(path)
     register_input(path)
     if params.framerate <= 0 or params.nchannels <= 0 or params.sampwidth not in (1, 2, 3, 4):
         raise DataFormatError(
