@@ -40,3 +40,30 @@ import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
+
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+
+@pytest.fixture
+def solvers_return_their_start(monkeypatch):
+    """Every jaw solver's solve step replaced by one that returns its start and reports
+    success (the least-squares step and the block-tridiagonal one), for the meta-tests that
+    show a far-start test fails without its solver; compiled kernels (which hold the real
+    solver) are dropped before and after."""
+    from cassi_fit.jaw_fit import _solve, _solvers
+    from cassi_fit.status import SolverResult
+
+    success = np.int32(SolverResult.SUCCESSFUL)
+    monkeypatch.setattr(_solve, "_minimise",
+                        lambda solver, residuals, params0, args, gradient_stop:
+                        (params0, success))
+    monkeypatch.setattr(_solvers, "minimise_block_tridiagonal",
+                        lambda system, knots0, **kw: (knots0, success))
+    jax.clear_caches()
+    try:
+        yield
+    finally:
+        monkeypatch.undo()
+        jax.clear_caches()

@@ -426,25 +426,13 @@ def test_diagnostics_tell_a_rigid_fixed_pivot_from_a_scattered_closed_form():
 
 
 # ------------------------------------------------------------------------ meta-test
-def test_far_start_tests_fail_when_the_solver_returns_its_start(monkeypatch, references):
+def test_far_start_tests_fail_when_the_solver_returns_its_start(references,
+                                                               solvers_return_their_start):
     """The far-start tests above can fail: with the solve step replaced by one that returns
     its start, every one of them raises AssertionError."""
-    from cassi_fit.jaw_fit import _solve, _solvers
-
-    success = np.int32(SolverResult.SUCCESSFUL)
-    monkeypatch.setattr(_solve, "_minimise",
-                        lambda solver, residuals, params0, args, gradient_stop:
-                        (params0, success))
-    monkeypatch.setattr(_solvers, "minimise_block_tridiagonal",
-                        lambda system, knots0, **kw: (knots0, success))
-    jax.clear_caches()  # compiled kernels hold the real solver
-    try:
-        for kind, name in FAR_CASES:
-            with pytest.raises(AssertionError):
-                check_far_start(kind, name, references)
-    finally:
-        monkeypatch.undo()
-        jax.clear_caches()
+    for kind, name in FAR_CASES:
+        with pytest.raises(AssertionError):
+            check_far_start(kind, name, references)
 
 
 def test_a_file_whose_every_line_looks_mistracked_says_why():
