@@ -245,7 +245,7 @@ def test_hair_and_eyebrows_sit_where_an_adults_do():
     front = (np.abs(p[:, 2]) < 1e-6) & (p[:, 0] > -40.0) & (p[:, 1] > 90.0)
     order = np.argsort(p[front, 1])
     trichion = np.interp(0.0, h[front][order], p[front, 1][order])
-    glabella = 84.0  # the model's glabella row (model/build_model.py ROWS)
+    glabella = 84.0  # the model's glabella row (model/skin_rows.py ROWS)
     assert 55.0 <= trichion - glabella <= 65.0, trichion
     assert np.all(h[p[:, 1] > 150.0] > 0)  # the crown
     back = (p[:, 0] < -170.0) & (p[:, 1] > 30.0)
