@@ -29,6 +29,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 
@@ -160,7 +161,7 @@ def markdown(results: dict, note: str, ratios: dict | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(argv=None) -> int:
+def _arguments(argv):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", default="640x480")
     parser.add_argument("--seconds", type=float, default=5.0)
@@ -168,22 +169,23 @@ def main(argv=None) -> int:
     parser.add_argument("--docs", metavar="DIR", help="also write DIR/bench_animation.md")
     parser.add_argument("--rounds", type=int, default=2,
                         help="render each grid this many times, alternating; best kept")
-    args = parser.parse_args(argv)
-    width, height = (int(v) for v in args.size.split("x"))
+    return parser.parse_args(argv)
 
+
+def _common(seconds: float, results: dict) -> SimpleNamespace:
+    """What both grids share, timed into ``results``: initialize, animate, the geometry
+    of every frame (compiled: best of three) and OpenGL's start-up; ``common`` their wall
+    time."""
     import jax
-    import numpy as np
 
-    from cassi_fit import recording_video, video
+    from cassi_fit import recording_video
     from cassi_fit.animate import animate
     from cassi_fit.face_model import load_model
     from cassi_fit.frames import geometry
     from cassi_fit.initialize import initialize
-    from cassi_fit.render import PAPER_VIEWS, VIEWS, Renderer
+    from cassi_fit.render import Renderer
 
-    results = {}
-    load = os.getloadavg()[0]
-    recording = synthetic_recording(args.seconds)
+    recording = synthetic_recording(seconds)
     model = load_model()
     wall = time.perf_counter()
     state = _timed("initialize", lambda: initialize(recording, model), results)
@@ -202,21 +204,30 @@ def main(argv=None) -> int:
     # set-up carries it; it is counted in both totals.
     _timed("OpenGL start-up", lambda: Renderer(model, size=(16, 16), views=("front",)).close(),
            results)  # fmt: skip
-    common = time.perf_counter() - wall  # initialize, animate, geometry, OpenGL start-up
-    traces = recording_video.subject_traces(recording, state.scale)
+    return SimpleNamespace(state=state, animation=animation, common=time.perf_counter() - wall,
+                           traces=recording_video.subject_traces(recording, state.scale))
 
-    cpus = {}  # CPU seconds of render + encode (this process's threads and ffmpeg's)
+
+def _grids(args, run: SimpleNamespace, results: dict, cpus: dict) -> tuple[int, int]:
+    """Every grid rendered ``args.rounds`` times, alternating (so that a burst of load hits
+    all alike), each row kept as its best; the frames in the four- and five-view MP4s."""
+    import numpy as np
+
+    from cassi_fit import recording_video, video
+    from cassi_fit.render import PAPER_VIEWS, VIEWS, Renderer
+
+    width, height = (int(v) for v in args.size.split("x"))
 
     def job(views, label, out, path=None):
         """Set-up and render + encode of one grid; each kept as its best over the rounds."""
         best = {}
         renderer = _timed(f"renderer set-up{label}", lambda: Renderer(
-            state.model, size=(width, height), views=views, traces=traces), best)
+            run.state.model, size=(width, height), views=views, traces=run.traces), best)
         cpu = time.process_time() + _children_cpu()
         _timed(
             f"render + encode MP4{label}",
-            (lambda: path(out, animation, renderer)) if path else lambda: (
-                recording_video.write_animation(out, animation, renderer, subject="BENCH",
+            (lambda: path(out, run.animation, renderer)) if path else lambda: (
+                recording_video.write_animation(out, run.animation, renderer, subject="BENCH",
                                       task="sentence", progress=False, overwrite=True)),
             best,
         )  # fmt: skip
@@ -228,32 +239,44 @@ def main(argv=None) -> int:
 
     with tempfile.TemporaryDirectory() as folder:
         out = Path(args.out) if args.out else Path(folder) / "bench.mp4"
-        for _ in range(args.rounds):  # alternating, so that a burst of load hits both alike
+        for _ in range(args.rounds):
             frames = job(PAPER_VIEWS, "", out)
             frames5 = job(VIEWS, f", {FIVE}", out.with_name(out.stem + "_five.mp4"))
             job(VIEWS, f", {ONE_STEP}", out.with_name(out.stem + "_one.mp4"), old_path)
             job(VIEWS, f", {HELPER}", out.with_name(out.stem + "_helper.mp4"), helper_path)
-        results["total wall time"] = (
-            common + results["renderer set-up"] + results["render + encode MP4"]
-        )
-        results[f"total wall time, {FIVE}"] = (
-            common + results[f"renderer set-up, {FIVE}"]
-            + results[f"render + encode MP4, {FIVE}"]
-        )  # fmt: skip
-    total = results["total wall time"]
+    return frames, frames5
+
+
+def _ratios(results: dict, cpus: dict, common: float) -> dict:
+    """The totals (into ``results``) and the ratios between the grids; the one-step and
+    helper-thread rows leave ``results`` (table 1 keeps its rows)."""
+    for label in ("", f", {FIVE}"):
+        results[f"total wall time{label}"] = (
+            common + results[f"renderer set-up{label}"] + results[f"render + encode MP4{label}"])
+    render = lambda label: results[f"render + encode MP4{label}"]
     ratios = {
-        "render + encode MP4": results[f"render + encode MP4, {FIVE}"]
-        / results["render + encode MP4"],
-        "total wall time": results[f"total wall time, {FIVE}"] / total,
+        "render + encode MP4": render(f", {FIVE}") / render(""),
+        "total wall time": results[f"total wall time, {FIVE}"] / results["total wall time"],
         CPU: cpus[f", {FIVE}"] / cpus[""],
-        ONE_STEP: results[f"render + encode MP4, {ONE_STEP}"]
-        / results[f"render + encode MP4, {FIVE}"],
-        HELPER: results[f"render + encode MP4, {HELPER}"]
-        / results[f"render + encode MP4, {FIVE}"],
+        ONE_STEP: render(f", {ONE_STEP}") / render(f", {FIVE}"),
+        HELPER: render(f", {HELPER}") / render(f", {FIVE}"),
     }
-    for name in (ONE_STEP, HELPER):  # in the ratios only: table 1 keeps its rows
+    for name in (ONE_STEP, HELPER):
         for key in (f"renderer set-up, {name}", f"render + encode MP4, {name}"):
             results.pop(key)
+    return ratios
+
+
+def main(argv=None) -> int:
+    args = _arguments(argv)
+    width, height = (int(v) for v in args.size.split("x"))
+    results, cpus = {}, {}  # cpus: CPU seconds of render + encode (this process and ffmpeg)
+    load = os.getloadavg()[0]
+    run = _common(args.seconds, results)
+    m = run.animation.n_frames
+    frames, frames5 = _grids(args, run, results, cpus)
+    ratios = _ratios(results, cpus, run.common)
+    total = results["total wall time"]
     note = (
         f"{m} frames, {frames} in the MP4, {width}x{height} 2x2 grid, "
         f"{m / results['render + encode MP4']:.0f} frames/s rendered "

@@ -45,7 +45,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-import subject_fitting as sf
+import subject_rows as sf
 
 #: Step budgets at which a stalled stage is shown (the calibration's is 100).
 TRACE_STEPS = (5, 10, 20, 50, 100, 200, 400)

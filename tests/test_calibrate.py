@@ -36,7 +36,7 @@ N_SUBJECTS = 3
 ROOT = Path(__file__).resolve().parents[1]
 RECOVERY = ROOT / "docs" / "generated" / "calibration_recovery.md"
 sys.path.insert(0, str(ROOT / "experiments"))
-import subject_fitting as sf  # noqa: E402
+import subject_rows as sf  # noqa: E402
 
 
 def _doc_tables(path):

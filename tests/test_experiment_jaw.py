@@ -12,6 +12,8 @@ from nbclient import NotebookClient
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "experiments"))
 import jaw_comparison  # noqa: E402
+import jaw_regimes  # noqa: E402
+import jaw_truth  # noqa: E402
 
 # What `make experiments` runs; the generated docs file must name exactly this command.
 MAKE_COMMAND = ("python experiments/jaw_comparison.py --out experiments/output "
@@ -33,11 +35,11 @@ def test_trust_threshold_finds_the_first_trustworthy_bin():
     rows = [{"method": "closed-form", "noise": "white-0.25", "family": "physiological",
              "theta_lo_deg": lo, "median_pivot_err_mm": e}
             for lo, e in ((0, 40.0), (2, 9.0), (4, 3.0), (8, 1.0))]  # fmt: skip
-    assert jaw_comparison.trust_threshold(rows) == 4
+    assert jaw_regimes.trust_threshold(rows) == 4
     rows[1]["median_pivot_err_mm"] = 1.0
-    assert jaw_comparison.trust_threshold(rows) == 2
+    assert jaw_regimes.trust_threshold(rows) == 2
     rows[3]["median_pivot_err_mm"] = 50.0
-    assert jaw_comparison.trust_threshold(rows) is None
+    assert jaw_regimes.trust_threshold(rows) is None
 
 
 def _recs(values_per_recording):
@@ -47,40 +49,40 @@ def _recs(values_per_recording):
 def test_the_weighted_percentile_is_numpys_on_unit_counts_and_resamples_recordings():
     rng = np.random.default_rng(0)
     recs = _recs([rng.normal(size=k) for k in (30, 7, 12)])
-    values, owner = jaw_comparison._stack(recs, "m")
+    values, owner = jaw_regimes._stack(recs, "m")
     for q in (50, 95):
-        got = jaw_comparison.weighted_percentile(values, owner, np.ones((1, 3), int), q)
+        got = jaw_regimes.weighted_percentile(values, owner, np.ones((1, 3), int), q)
         assert got[0] == np.percentile(values, q, method="inverted_cdf")
     # a resample holding recording 1 twice and no other is recording 1's own percentile
-    got = jaw_comparison.weighted_percentile(values, owner, np.array([[0, 2, 0]]), 50)
+    got = jaw_regimes.weighted_percentile(values, owner, np.array([[0, 2, 0]]), 50)
     assert got[0] == np.percentile(recs[1]["m"], 50, method="inverted_cdf")
 
 
 def test_a_winner_is_named_only_when_the_paired_interval_excludes_zero():
     rng = np.random.default_rng(1)
     base = [rng.gamma(2.0, 1.0, size=200) for _ in range(12)]
-    counts = jaw_comparison._resamples(12, rng)
+    counts = jaw_regimes._resamples(12, rng)
     # b is a's error plus 0.5 mm on every frame: a wins clearly
     clear = {"a": _recs(base), "b": _recs([v + 0.5 for v in base])}
-    assert jaw_comparison.verdict(clear, "m", 50, counts) == ("a", "a")
+    assert jaw_regimes.verdict(clear, "m", 50, counts) == ("a", "a")
     # b differs from a by recording-level noise that averages out: no winner
     shift = rng.normal(0.0, 0.5, size=12)
     shift -= shift.mean()
     tie = {"a": _recs(base), "b": _recs([v + d for v, d in zip(base, shift, strict=True)])}
-    text, best = jaw_comparison.verdict(tie, "m", 50, counts)
+    text, best = jaw_regimes.verdict(tie, "m", 50, counts)
     assert best is None and text.startswith("tie: ") and set(text[5:].split(", ")) == {"a", "b"}
     # frames a method did not use (NaN) are left out of both sides of the pair
     gaps = {"a": _recs([np.where(np.arange(200) < 100, v, np.nan) for v in base]),
             "b": _recs([v + 0.5 for v in base])}
-    assert jaw_comparison.verdict(gaps, "m", 50, counts)[1] == "a"
+    assert jaw_regimes.verdict(gaps, "m", 50, counts)[1] == "a"
 
 
 def test_every_recording_has_its_own_seed():
     """The old seed ``(subject_seed, len(task), 7)`` gave tp106 and tp040 the same noise."""
-    seeds = {jaw_comparison.recording_seed(f, s, t) for f in ("speech", "thrust")
+    seeds = {jaw_truth.recording_seed(f, s, t) for f in ("speech", "thrust")
              for s in ("X01", "X02") for t in ("tp106", "tp040")}
     assert len(seeds) == 8
-    recs = list(jaw_comparison._recordings(True, tasks=("tp106", "tp040"), noises=("white-0.25",),
+    recs = list(jaw_truth._recordings(True, tasks=("tp106", "tp040"), noises=("white-0.25",),
                                            families=("fixed-condyle",)))
     (_, _, _, a, ta, _), (_, _, _, b, tb, _) = recs
     n = min(a.n_frames, b.n_frames)
@@ -98,20 +100,20 @@ def test_the_errors_are_measured_against_the_true_motion():
     anatomy = synth.make_subject("X01", np.random.default_rng(300), jaw_kinematics="fixed-condyle")
     track, truth = synth.synth_recording(anatomy, "tp106", seed=1, noise_mm=0.0, duration_s=2.0,
                                          dropouts=False, mistracks=False)  # fmt: skip
-    fixed = jaw_comparison.frame_errors(track, truth, anatomy, "fixed-pivot")
+    fixed = jaw_truth.frame_errors(track, truth, anatomy, "fixed-pivot")
     assert fixed["theta_deg"].max() > 8.0
     pivot_err = fixed["pivot_err_mm"]  # NaN where the true motion has no pivot (theta 0)
     assert np.isfinite(pivot_err).sum() > 100 and np.nanmax(pivot_err) < 0.05
     assert np.isfinite(fixed["chin_err_mm"]).sum() > 100  # NaN: frames the fit did not use
     assert np.nanmax(fixed["chin_err_mm"]) < 0.05 and np.nanmax(fixed["angle_err_deg"]) < 0.01
-    closed = jaw_comparison.frame_errors(track, truth, anatomy, "closed-form")
+    closed = jaw_truth.frame_errors(track, truth, anatomy, "closed-form")
     assert np.nanmax(closed["angle_err_deg"]) < 0.01
     assert np.nanmax(closed["incisor_err_mm"]) < 0.05
     # The physiological truth moves its pivot: Parke's fixed pivot then misses the chin.
     anatomy = synth.make_subject("X01", np.random.default_rng(300), jaw_kinematics="physiological")
     track, truth = synth.synth_recording(anatomy, "tp106", seed=1, noise_mm=0.0, duration_s=2.0,
                                          dropouts=False, mistracks=False)  # fmt: skip
-    biased = jaw_comparison.frame_errors(track, truth, anatomy, "fixed-pivot")
+    biased = jaw_truth.frame_errors(track, truth, anatomy, "fixed-pivot")
     assert np.nanpercentile(biased["chin_err_mm"], 90) > 0.3
 
 
@@ -123,10 +125,10 @@ def test_small_run_reports_every_method_per_regime_with_intervals(small_run):
 
     regimes = {(r["family"], r["noise"], r["method"]) for r in rows}
     assert regimes == {(f, n, m) for f in synth.JAW_KINEMATICS
-                       for n in jaw_comparison.NOISE_FAMILIES for m in JAW_METHODS}
+                       for n in jaw_truth.NOISE_FAMILIES for m in JAW_METHODS}
     inside = []
     for r in rows:
-        for key in jaw_comparison.STATISTICS:
+        for key in jaw_truth.STATISTICS:
             value, lo, hi = float(r[key]), float(r[f"{key}_lo"]), float(r[f"{key}_hi"])
             if np.isfinite(value):
                 assert lo <= hi, (r, key)
@@ -140,7 +142,7 @@ def test_small_run_reports_every_method_per_regime_with_intervals(small_run):
     assert text == (small_run / "docs" / "jaw_comparison.md").read_text()
     for title in QUOTED:
         body = jaw_comparison.section(text, title)
-        assert body.count("\n| ") >= len(synth.JAW_KINEMATICS) * len(jaw_comparison.NOISE_FAMILIES)
+        assert body.count("\n| ") >= len(synth.JAW_KINEMATICS) * len(jaw_truth.NOISE_FAMILIES)
     assert "] |" in text and "[" in text  # medians with [lo, hi] intervals
     for name in ("pivot_error_vs_theta.png", "point_error_vs_noise.png"):
         assert (small_run / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -181,17 +183,17 @@ def test_the_generated_numbers_are_this_codes():
     from cassi_fit.jaw_fit import jaw_method
 
     text = GENERATED.read_text()
-    recordings = list(jaw_comparison._recordings(False, noises=("xrmb",), families=("speech",)))
-    assert len(recordings) == jaw_comparison.N_SUBJECTS * len(jaw_comparison.TASKS)
+    recordings = list(jaw_truth._recordings(False, noises=("xrmb",), families=("speech",)))
+    assert len(recordings) == jaw_truth.N_SUBJECTS * len(jaw_truth.TASKS)
     title = "chin point error (mm), median [95 % interval]"
     for name in ("closed-form", "frame-fit"):
         method = jaw_method(name, solver="optimistix-lm")
-        errs = [jaw_comparison.frame_errors(track, truth, anatomy, method)
+        errs = [jaw_truth.frame_errors(track, truth, anatomy, method)
                 for *_, track, truth, anatomy in recordings]
         theta = np.concatenate([e["theta_deg"] for e in errs])
         chin = np.concatenate([e["chin_err_mm"] for e in errs])
         printed = _full_table_row(text, title, "speech", "xrmb", name)
-        bins = list(zip(jaw_comparison.THETA_BINS_DEG[:-1], jaw_comparison.THETA_BINS_DEG[1:],
+        bins = list(zip(jaw_truth.THETA_BINS_DEG[:-1], jaw_truth.THETA_BINS_DEG[1:],
                         strict=True))
         checked = 0
         for (lo, hi), cell in zip(bins, printed, strict=True):

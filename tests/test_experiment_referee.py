@@ -14,6 +14,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "experiments"))
 import real_referee  # noqa: E402
+import referee_parts  # noqa: E402
+import referee_report  # noqa: E402
+import referee_rows  # noqa: E402
 import zoo  # noqa: E402
 
 GENERATED = ROOT / "docs" / "generated" / "real_referee.csv"
@@ -60,7 +63,7 @@ def pure_rotation():
 def test_the_baselines_and_a_wrong_pivot_score_their_known_errors(pure_rotation):
     q, theta, mni0, mnm0, track = pure_rotation
     chord = 2.0 * np.abs(np.sin(theta / 2.0))  # |(R - I) v| = 2 |sin(theta/2)| |v|
-    [part] = real_referee.jaw_part(track, "MNI")
+    [part] = referee_parts.jaw_part(track, "MNI")
     frames = part.frames
     assert part.part == "jaw: MNM from MNI" and 0 not in frames and len(frames) == 599
     np.testing.assert_allclose(part.errors["static"], chord[frames] * np.linalg.norm(mnm0 - q),
@@ -72,12 +75,12 @@ def test_the_baselines_and_a_wrong_pivot_score_their_known_errors(pure_rotation)
     assert part.errors["two-pellet pivot, seen angle"].max() < 1e-6
     # a pivot 12 mm off, with the true angles: every point misses by 2 |sin(theta/2)| 12 mm
     wrong = q + np.array([12.0 * 0.6, -12.0 * 0.8])
-    predicted = real_referee.rotate_about(wrong, theta, mnm0)
-    errors = real_referee.point_errors(predicted, track.positions[:, 7])
+    predicted = referee_parts.rotate_about(wrong, theta, mnm0)
+    errors = referee_parts.point_errors(predicted, track.positions[:, 7])
     np.testing.assert_allclose(errors, 12.0 * chord, atol=1e-9)
     assert errors.max() > 1.0
     # the seen sensor's angle about the true pivot is the true angle
-    np.testing.assert_allclose(real_referee.angle_about(q, mni0, track.positions[:, 6]), theta,
+    np.testing.assert_allclose(referee_parts.angle_about(q, mni0, track.positions[:, 6]), theta,
                                atol=1e-12)
 
 
@@ -90,10 +93,10 @@ def test_the_truth_scores_zero_on_a_synthetic_recording():
     anatomy = synth.make_subject("X01", np.random.default_rng(300), jaw_kinematics="fixed-condyle")
     track, truth = synth.synth_recording(anatomy, "tp106", seed=1, noise_mm=0.0, duration_s=4.0,
                                          dropouts=False, mistracks=False)  # fmt: skip
-    fit = real_referee.two_pellet_fit(track)
+    fit = referee_parts.two_pellet_fit(track)
     np.testing.assert_allclose(fit[2], truth.condyle[0], atol=0.05)  # the pivot is the condyle
     for seen in ("MNI", "MNM"):
-        [part] = real_referee.jaw_part(track, seen, fit)
+        [part] = referee_parts.jaw_part(track, seen, fit)
         assert len(part.frames) > 500
         assert part.errors["two-pellet fixed pivot"].max() < 0.01
         assert part.errors["two-pellet pivot, seen angle"].max() < 0.01
@@ -104,14 +107,14 @@ def test_the_truth_scores_zero_on_a_synthetic_recording():
 def test_distance_to_a_polyline_and_the_arc_to_its_foot():
     line = np.array([[[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]] * 4)
     points = np.array([[4.0, 3.0], [12.0, 5.0], [-3.0, -4.0], [13.0, 14.0]])
-    dist, arc = real_referee.polyline_distance(points, line)
+    dist, arc = referee_parts.polyline_distance(points, line)
     np.testing.assert_allclose(dist, [3.0, 2.0, 5.0, 5.0])
     np.testing.assert_allclose(arc, [4.0, 15.0, 0.0, 20.0])
-    np.testing.assert_allclose(real_referee.arc_lengths(line)[0], [0.0, 10.0, 20.0])
+    np.testing.assert_allclose(referee_parts.arc_lengths(line)[0], [0.0, 10.0, 20.0])
 
 
 def _result(values, other, step_s=6866e-6, part="p"):
-    return real_referee.PartResult(part, "position", {"a": values, "b": other},
+    return referee_parts.PartResult(part, "position", {"a": values, "b": other},
                                    {"a": "method", "b": "baseline"}, step_s)
 
 
@@ -122,9 +125,9 @@ def test_the_bootstrap_interval_of_a_median_of_independent_frames():
     rng = np.random.default_rng(5)
     n, sigma = 4000, 2.0
     values = 10.0 + sigma * rng.standard_normal(n)
-    result = _result(values, values + 0.5, step_s=real_referee.BLOCK_S)  # block = 1 frame
+    result = _result(values, values + 0.5, step_s=referee_parts.BLOCK_S)  # block = 1 frame
     assert result.block == 1
-    row = real_referee.recording_rows("d", "S", "t", result)[0]
+    row = referee_rows.recording_rows("d", "S", "t", result)[0]
     half = 1.96 * np.sqrt(np.pi / 2) * sigma / np.sqrt(n)
     assert row["median_hi_mm"] - row["median_lo_mm"] == pytest.approx(2 * half, rel=0.25)
     assert row["median_lo_mm"] < np.median(values) < row["median_hi_mm"]
@@ -143,9 +146,9 @@ def test_the_block_bootstrap_follows_correlated_frames():
         series[:, k] = rho * series[:, k - 1] + shocks[:, k]
     true_width = np.subtract(*np.percentile(np.median(series[1:], axis=1), [97.5, 2.5]))
     widths = {}
-    for step in (real_referee.BLOCK_S / 100, real_referee.BLOCK_S):  # blocks of 100, 1
+    for step in (referee_parts.BLOCK_S / 100, referee_parts.BLOCK_S):  # blocks of 100, 1
         result = _result(series[0], series[0], step_s=step)
-        row = real_referee.recording_rows("d", "S", "t", result)[0]
+        row = referee_rows.recording_rows("d", "S", "t", result)[0]
         widths[result.block] = row["median_hi_mm"] - row["median_lo_mm"]
     assert widths[100] == pytest.approx(true_width, rel=0.3)
     assert widths[1] < 0.5 * true_width
@@ -154,14 +157,14 @@ def test_the_block_bootstrap_follows_correlated_frames():
 def test_paired_rows_say_tie_unless_the_interval_excludes_zero():
     rng = np.random.default_rng(2)
     values = np.abs(rng.standard_normal(700))
-    rows = real_referee.recording_rows("d", "S", "t", _result(values, values + 0.3))
+    rows = referee_rows.recording_rows("d", "S", "t", _result(values, values + 0.3))
     [paired] = [r for r in rows if r["versus"] == "b"]
     assert paired["median_mm"] == pytest.approx(-0.3)
     assert paired["median_lo_mm"] == pytest.approx(-0.3) and paired["median_verdict"] == "better"
-    rows = real_referee.recording_rows("d", "S", "t", _result(values + 0.3, values))
+    rows = referee_rows.recording_rows("d", "S", "t", _result(values + 0.3, values))
     assert [r["p95_verdict"] for r in rows if r["versus"]] == ["worse"]
     noisy = values + 0.05 * rng.standard_normal(700)  # no real difference
-    rows = real_referee.recording_rows("d", "S", "t", _result(values, noisy))
+    rows = referee_rows.recording_rows("d", "S", "t", _result(values, noisy))
     assert [r["median_verdict"] for r in rows if r["versus"]] == ["tie"]
 
 
@@ -171,11 +174,11 @@ def test_pooled_rows_resample_subjects():
     rng = np.random.default_rng(3)
     results = [(s, t, _result(offset + 0.1 * rng.standard_normal(400), np.zeros(400) + offset))
                for s, offset in (("S1", 1.0), ("S2", 2.0)) for t in ("t1", "t2")]
-    [row] = [r for r in real_referee.pooled_rows("d", results) if r["predictor"] == "a"
+    [row] = [r for r in referee_rows.pooled_rows("d", results) if r["predictor"] == "a"
              and not r["versus"]]
     assert (row["recordings"], row["subjects"], row["frames"]) == (4, 2, 1600)
     assert row["median_lo_mm"] < 1.2 and row["median_hi_mm"] > 1.8
-    [one] = [r for r in real_referee.pooled_rows("d", results[:2]) if r["predictor"] == "a"
+    [one] = [r for r in referee_rows.pooled_rows("d", results[:2]) if r["predictor"] == "a"
              and not r["versus"]]
     assert one["median_hi_mm"] - one["median_lo_mm"] < 0.1
 
@@ -185,16 +188,16 @@ def test_pooled_rows_resample_subjects():
 def generated():
     if not GENERATED.exists():
         pytest.fail(f"{GENERATED} missing: run `make experiments`")
-    return real_referee.parse_rows(GENERATED.read_text())
+    return referee_rows.parse_rows(GENERATED.read_text())
 
 
 @pytest.fixture(scope="module")
 def couplings():
-    return real_referee.parse_rows(GENERATED_COUPLINGS.read_text())
+    return referee_rows.parse_rows(GENERATED_COUPLINGS.read_text())
 
 
 def test_couplings_are_learned_on_other_speakers_only():
-    couplings = real_referee.Couplings({("a", "S1"): [], ("a", "S2"): [], ("a", "S3"): [],
+    couplings = referee_parts.Couplings({("a", "S1"): [], ("a", "S2"): [], ("a", "S3"): [],
                                         ("real", "JW11"): []})
     assert couplings.training("a", "S2") == [("a", "S1"), ("a", "S3")]
     assert couplings.training("real", "JW11") == [("a", "S1"), ("a", "S2"), ("a", "S3")]
@@ -222,14 +225,14 @@ def _compare(fresh, generated):
 def _slice(dataset, subject, task, recording, couplings):
     """The cheap parts of the experiment on one recording: the jaw (its coupling read from
     the couplings table) and the lips."""
-    learned = {c["sensor"]: real_referee.coupling_from_row(c) for c in couplings
+    learned = {c["sensor"]: referee_parts.coupling_from_row(c) for c in couplings
                if (c["dataset"], c["subject"]) == (dataset, subject)}
-    single = real_referee.single_sensor_predictor(learned.__getitem__)
-    fit = real_referee.two_pellet_fit(recording.track)
-    parts = [p for seen in real_referee.JAW
-             for p in real_referee.jaw_part(recording.track, seen, fit, single)]
-    parts += real_referee.lips_part(recording.track)
-    return parts, [row for p in parts for row in real_referee.recording_rows(dataset, subject,
+    single = referee_parts.single_sensor_predictor(learned.__getitem__)
+    fit = referee_parts.two_pellet_fit(recording.track)
+    parts = [p for seen in referee_parts.JAW
+             for p in referee_parts.jaw_part(recording.track, seen, fit, single)]
+    parts += referee_parts.lips_part(recording.track)
+    return parts, [row for p in parts for row in referee_rows.recording_rows(dataset, subject,
                                                                              task, p)]
 
 
@@ -240,7 +243,7 @@ def test_a_synthetic_slice_reproduces_the_generated_table(tmp_path_factory, gene
 
     corpus = zoo.small_corpus(tmp_path_factory)
     recording = load_recording(next((corpus / "S01").glob("[Tt][Pp]040.[Tt][Xx][Yy]")))
-    _, fresh = _slice(real_referee.SYNTHETIC_LABEL, "S01", "tp040", recording, couplings)
+    _, fresh = _slice(referee_parts.SYNTHETIC_LABEL, "S01", "tp040", recording, couplings)
     _compare(fresh, generated)
 
 
@@ -260,7 +263,7 @@ def test_the_real_recording_reproduces_the_table_and_the_issues_hand_measurement
     # issue 20's hand measurements (MNM from MNI, 724 frames): median (95th percentile)
     [mnm] = [p for p in parts if p.part == "jaw: MNM from MNI"]
     assert len(mnm.frames) == 723  # every tracked frame but the reference
-    reproduced = {k: v for k, v in real_referee.ISSUE_JW11.items() if not v[3]}
+    reproduced = {k: v for k, v in referee_parts.ISSUE_JW11.items() if not v[3]}
     assert len(reproduced) == 3
     for name, (_, median, p95, _) in reproduced.items():
         assert np.round(np.percentile(mnm.errors[name], [50, 95]), 1).tolist() == [median, p95]
@@ -272,11 +275,11 @@ def test_the_markdown_is_the_csv_rendered(generated, couplings):
     assert first.startswith("<!-- written by `python experiments/real_referee.py ")
     assert "--docs docs/generated" in first
     command = first.split("`")[1]
-    assert real_referee.markdown(generated, command, couplings) == text
+    assert referee_report.markdown(generated, command, couplings) == text
     methods = {r["predictor"] for r in generated if r["role"] == "method"
                and r["part"].startswith("jaw")}
-    assert methods == set(real_referee.single_sensor_methods(lambda sensor: None))
-    assert {r["dataset"] for r in generated} >= {real_referee.SYNTHETIC_LABEL}
+    assert methods == set(referee_parts.single_sensor_methods(lambda sensor: None))
+    assert {r["dataset"] for r in generated} >= {referee_parts.SYNTHETIC_LABEL}
     if JW11 is not None:
         assert JW11.name in {r["dataset"] for r in generated}
         assert "one recording of one speaker" in text

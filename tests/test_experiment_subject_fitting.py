@@ -15,10 +15,12 @@ from nbclient import NotebookClient
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "experiments"))
 import subject_fitting as sf  # noqa: E402
+import subject_report  # noqa: E402
+import subject_rows  # noqa: E402
 
 RECOVERY = ROOT / "docs" / "generated" / "calibration_recovery.md"
 #: the subjects of the small plan (the notebook's and the small run's)
-SMALL_SUBJECTS = tuple(f"S{i:02d}" for i in range(1, sf.SMALL.n_subjects + 1))
+SMALL_SUBJECTS = tuple(f"S{i:02d}" for i in range(1, subject_rows.SMALL.n_subjects + 1))
 
 
 def _doc_tables(path):
@@ -66,7 +68,7 @@ def _rows():
                          "S02": _calibration(12.0, 15.6, 133.0, 0.8, {"gonion": 2.0})},
             "joint": {"S01": _calibration(9.9, 20.0, 101.0, 1.0, {"upper_lip": 0.2},
                                           converged=False)}}
-    return sf.recovery_rows(cals, TRUTHS)
+    return subject_rows.recovery_rows(cals, TRUTHS)
 
 
 def _csv(path):
@@ -75,8 +77,8 @@ def _csv(path):
 
 
 def test_percent_error_is_signed_and_relative():
-    assert sf.percent_error(10.5, 10.0) == pytest.approx(5.0)
-    assert sf.percent_error(9.0, 12.0) == pytest.approx(-25.0)
+    assert subject_rows.percent_error(10.5, 10.0) == pytest.approx(5.0)
+    assert subject_rows.percent_error(9.0, 12.0) == pytest.approx(-25.0)
 
 
 def test_recovery_rows_compare_each_calibration_with_its_subject():
@@ -94,7 +96,7 @@ def test_recovery_rows_compare_each_calibration_with_its_subject():
     assert s1["residual_upper_lip_mm"] == 0.1 and np.isnan(s1["residual_gonion_mm"])
     assert s2["residual_gonion_mm"] == 2.0 and np.isnan(s2["residual_upper_lip_mm"])
     # without truth: the estimates and residuals only
-    plain = sf.recovery_rows({"joint": {"S01": _calibration(1, 2, 3, 4, {})}})
+    plain = subject_rows.recovery_rows({"joint": {"S01": _calibration(1, 2, 3, 4, {})}})
     assert plain == [{"method": "joint", "subject": "S01", "converged": True,
                       "head_is_default": False, "upper_lip_thickness_mm": 1.0,
                       "lower_lip_thickness_mm": 2.0, "face_width_mm": 3.0, "scale": 4.0}]
@@ -105,12 +107,12 @@ def test_recovery_rows_carry_the_lower_lip_error_and_the_tip_offset_difference()
                   "tip_offset_difference_mm": 1.0} for k, v in TRUTHS.items()}
     cals = {m: {"S01": _calibration(10.0, 21.2, 100.0, 1.0, {"gonion": 0.5, "gnathion": 2.0,
                                                              "lips_in_teeth": 0.0})}
-            for m in sf.METHODS}
-    rows = sf.recovery_rows(cals, truths)
+            for m in subject_rows.METHODS}
+    rows = subject_rows.recovery_rows(cals, truths)
     assert rows[0]["lower_lip_thickness_error_mm"] == pytest.approx(1.2)
     assert rows[0]["tip_offset_difference_mm"] == 1.0
-    text = sf.recovery_markdown(rows)
-    assert text.startswith(f"<!-- written by `{sf.DOCS_COMMAND}`")
+    text = subject_report.recovery_markdown(rows)
+    assert text.startswith(f"<!-- written by `{subject_report.DOCS_COMMAND}`")
     # the summary: what remains of the lower-lip error once the offset is accounted for
     summary, per_subject = _tables(text)
     assert summary[0]["lower minus offset, worst mm"] == "0.20"
@@ -120,25 +122,25 @@ def test_recovery_rows_carry_the_lower_lip_error_and_the_tip_offset_difference()
     assert per_subject[0]["lower error mm (separate)"] == "+1.20"
     # without the geometry columns (no truth of it) the table cannot be written
     with pytest.raises(KeyError):
-        sf.recovery_markdown(_rows())
+        subject_report.recovery_markdown(_rows())
 
 
 def test_worst_errors_and_the_tolerance():
     rows = _rows()
-    worst = sf.worst_errors(rows)
+    worst = subject_rows.worst_errors(rows)
     assert worst[("separate", "lower_lip_thickness")] == pytest.approx(5.0)
     assert worst[("separate", "upper_lip_thickness")] == pytest.approx(3.0)
     assert worst[("joint", "face_width")] == pytest.approx(1.0)
     assert worst[("separate", "face_width")] == pytest.approx(5.0)
     # exactly 5 % is not within 5 %; the joint row alone is
-    assert not sf.all_within(rows)
-    assert sf.all_within(rows[2:])
-    assert sf.all_within(rows[2:], tolerance=1.0 + 1e-9)
-    assert not sf.all_within(rows[2:], tolerance=1.0 - 1e-9)
+    assert not subject_rows.all_within(rows)
+    assert subject_rows.all_within(rows[2:])
+    assert subject_rows.all_within(rows[2:], tolerance=1.0 + 1e-9)
+    assert not subject_rows.all_within(rows[2:], tolerance=1.0 - 1e-9)
     rows[2]["face_width_error_percent"] = float("nan")
-    assert not sf.all_within(rows[2:])
-    assert np.isnan(sf.worst_errors(rows)[("joint", "face_width")])
-    assert not sf.all_within([])
+    assert not subject_rows.all_within(rows[2:])
+    assert np.isnan(subject_rows.worst_errors(rows)[("joint", "face_width")])
+    assert not subject_rows.all_within([])
 
 
 def test_noise_summary_takes_median_and_max_per_level_and_method():
@@ -148,7 +150,7 @@ def test_noise_summary_takes_median_and_max_per_level_and_method():
             rows.append({"noise_scale": noise, "method": "separate", "subject": f"S{k}",
                          "upper_lip_thickness_mm": 10.0 + e, "true_upper_lip_thickness_mm": 10.0,
                          "upper_lip_thickness_error_percent": 10.0 * e})
-    out = sf.noise_summary(rows, quantities=("upper_lip_thickness",))
+    out = subject_rows.noise_summary(rows, quantities=("upper_lip_thickness",))
     assert [(r["noise_scale"], r["subjects"]) for r in out] == [(0.0, 3), (2.0, 3)]
     assert out[0]["median_abs_error_mm"] == pytest.approx(0.1)
     assert out[0]["max_abs_error_mm"] == pytest.approx(0.2)
@@ -163,16 +165,16 @@ def test_depth_percentiles_take_the_deepest_key_per_frame():
     zeros = np.zeros(101)
     depths = {"tongue_upper_teeth": frames, "tongue_lower_teeth": frames[::-1],
               "tongue_palate": zeros, "lips_upper_teeth": zeros, "lips_lower_teeth": frames / 10}
-    out = sf.depth_percentiles(depths)
+    out = subject_rows.depth_percentiles(depths)
     # per frame max(k, 100 - k): 50 once, 51 .. 100 twice each; the 96th of 101 sorted is 98
     assert out["tongue_in_teeth"] == pytest.approx(98.0)
     assert out["tongue_in_palate"] == 0.0
     assert out["lips_in_teeth"] == pytest.approx(9.5)
-    assert sf.depth_percentiles(depths, q=50)["lips_in_teeth"] == pytest.approx(5.0)
+    assert subject_rows.depth_percentiles(depths, q=50)["lips_in_teeth"] == pytest.approx(5.0)
 
 
 def test_csv_text_writes_the_first_rows_columns():
-    text = sf.csv_text([{"a": 1.23456789, "b": "x"}, {"a": 2.0, "b": True}])
+    text = subject_rows.csv_text([{"a": 1.23456789, "b": "x"}, {"a": 2.0, "b": True}])
     assert text == "a,b\n1.23457,x\n2,True\n"
 
 
@@ -203,14 +205,14 @@ def test_small_run_explains_the_lower_lip_and_writes_the_docs_tables(tmp_path, c
     summary, per_subject = _documented()
     out, docs = tmp_path / "out", tmp_path / "docs"
     assert sf.main(["--small", "--out", str(out), "--docs", str(docs)]) == 0
-    for name in sf.output_names(synthetic=True):
+    for name in subject_report.output_names(synthetic=True):
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
-    for name in sf.DOC_TABLES:
+    for name in subject_report.DOC_TABLES:
         first = (docs / name).read_text(encoding="utf-8").splitlines()[0]
-        assert first.startswith(f"<!-- written by `{sf.DOCS_COMMAND}`"), name
+        assert first.startswith(f"<!-- written by `{subject_report.DOCS_COMMAND}`"), name
     rows = _csv(out / "calibration_recovery.csv")
     assert sorted((r["method"], r["subject"]) for r in rows) == [
-        (m, s) for m in sorted(sf.METHODS) for s in SMALL_SUBJECTS]
+        (m, s) for m in sorted(subject_rows.METHODS) for s in SMALL_SUBJECTS]
     for r in rows:
         worst = summary[r["method"]]
         assert r["converged"] == "True"
@@ -226,7 +228,7 @@ def test_small_run_explains_the_lower_lip_and_writes_the_docs_tables(tmp_path, c
         # the estimates are not the truth copied: the lips carry the pellet noise
         assert float(r["upper_lip_thickness_mm"]) != float(r["true_upper_lip_thickness_mm"])
     noise = _csv(out / "lip_noise.csv")
-    assert sorted({float(r["noise_scale"]) for r in noise}) == list(sf.NOISE_SCALES)
+    assert sorted({float(r["noise_scale"]) for r in noise}) == list(subject_rows.NOISE_SCALES)
     # without noise the upper lip (seen directly) is exact, with noise it is not; the
     # lower lip without noise is off by the largest offset difference, not 0
     at = {(float(r["noise_scale"]), r["method"], r["quantity"]): r for r in noise}
@@ -236,7 +238,7 @@ def test_small_run_explains_the_lower_lip_and_writes_the_docs_tables(tmp_path, c
     assert float(at[0.0, "separate", "lower_lip_thickness"]["max_abs_error_mm"]) == pytest.approx(
         max(offsets), abs=_bound(summary["separate"]["lower minus offset, worst mm"]))
     penetration = _csv(out / "penetration.csv")
-    assert len(penetration) == len(SMALL_SUBJECTS) * len(sf.SMALL.tasks)
+    assert len(penetration) == len(SMALL_SUBJECTS) * len(subject_rows.SMALL.tasks)
     assert all(r["status"] == "ok" for r in penetration)
     # projection leaves (almost) nothing of the tongue in the teeth
     for r in penetration:
@@ -256,14 +258,14 @@ def test_small_run_explains_the_lower_lip_and_writes_the_docs_tables(tmp_path, c
 @pytest.mark.slow
 def test_dataset_run_has_residuals_but_no_truth(tmp_path, capsys):
     summary, _ = _documented()
-    corpus = sf.make_corpus(tmp_path / "corpus", sf.Plan(1, ("tp106", "tp040"), 1))
+    corpus = subject_rows.make_corpus(tmp_path / "corpus", subject_rows.Plan(1, ("tp106", "tp040"), 1))
     out = tmp_path / "out"
     assert sf.main(["--dataset", str(corpus), "--out", str(out), "--stride", "5"]) == 0
-    for name in sf.output_names(synthetic=False):
+    for name in subject_report.output_names(synthetic=False):
         assert (out / name).is_file(), name
     assert not (out / "calibration_recovery.csv").exists()
     rows = _csv(out / "calibration_residuals.csv")
-    assert [r["method"] for r in rows] == list(sf.METHODS)
+    assert [r["method"] for r in rows] == list(subject_rows.METHODS)
     assert not any(k.startswith("true_") or k.endswith("_percent") for k in rows[0])
     # S01 is one of the documented subjects: its jaw-shape residuals lie in the documented
     # ranges (0.05 mm: the scale here comes from 2 first lines instead of 3)

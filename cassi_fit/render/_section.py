@@ -344,7 +344,6 @@ class Section:
         from PIL import Image, ImageDraw
 
         from ._images import _font
-        from ._pieces import _EXTRA_MARKER_COLOURS, MARKER_COLOURS
 
         left, top, right, bottom = box
         w, h = right - left, bottom - top
@@ -371,6 +370,15 @@ class Section:
             self._base = (key, base)
         pil = self._base[1].copy()
         draw = ImageDraw.Draw(pil)
+        self._draw_contours(draw, px, line, vertices, colours)
+        self._draw_points(draw, px, line, markers or {}, trails or {})
+        if time is not None:
+            draw.text((4 * line, 3 * line), f"t = {float(time):.3f} s", fill=(40, 40, 40),
+                      font=_font(max(10, h // 18)))  # fmt: skip
+        image[top:bottom, left:right] = np.asarray(pil)
+
+    def _draw_contours(self, draw, px, line: int, vertices, colours: Mapping[str, Any]) -> None:
+        """The parts' outlines in the plane (filled where closed), the jaw's dashed."""
         contours = self.contours(vertices)
         jaw = contours.pop("jaw", ())
         for points, _ in jaw:
@@ -383,11 +391,18 @@ class Section:
                     draw.polygon(xy, fill=fill)
                 draw.line(xy + (xy[:2] if closed else []), fill=ink, width=2 * line,
                           joint="curve" if line > 1 else None)  # fmt: skip
-        labels = sorted(dict.fromkeys([*(trails or {}), *(markers or {})]),
-                        key=lambda name: name != "model")  # fmt: skip
+
+    @staticmethod
+    def _draw_points(draw, px, line: int, markers: Mapping[str, Any],
+                     trails: Mapping[str, Any]) -> None:
+        """Each label's trail (faded) and its points: the model's sites as rings, under
+        the data's filled dots."""
+        from ._pieces import _EXTRA_MARKER_COLOURS, MARKER_COLOURS
+
+        labels = sorted(dict.fromkeys([*trails, *markers]), key=lambda name: name != "model")
         for i, label in enumerate(labels):
             colour = MARKER_COLOURS.get(label, _EXTRA_MARKER_COLOURS[i % 3])
-            trail = np.asarray((trails or {}).get(label, np.zeros((0, 0, 2))), np.float64)
+            trail = np.asarray(trails.get(label, np.zeros((0, 0, 2))), np.float64)
             if trail.ndim == 3 and trail.shape[0] >= 2:
                 faded = _rgb(tuple(0.45 * c + 0.55 * b / 255 for c, b in zip(colour, _BACKGROUND,
                                                                                  strict=True)))
@@ -396,7 +411,7 @@ class Section:
                     path = path[np.all(np.isfinite(path), axis=1)]
                     if len(path) >= 2:
                         draw.line(px(path), fill=faded, width=2 * line)
-            points = (markers or {}).get(label)
+            points = markers.get(label)
             if points is None and trail.ndim == 3 and len(trail):
                 points = trail[-1]
             if points is None:
@@ -410,10 +425,6 @@ class Section:
                                  outline=_rgb(colour), width=max(1, line))  # fmt: skip
                 else:
                     draw.ellipse((x - r, y - r, x + r, y + r), fill=_rgb(colour))
-        if time is not None:
-            draw.text((4 * line, 3 * line), f"t = {float(time):.3f} s", fill=(40, 40, 40),
-                      font=_font(max(10, h // 18)))  # fmt: skip
-        image[top:bottom, left:right] = np.asarray(pil)
 
 
 @functools.lru_cache(maxsize=64)
