@@ -9,8 +9,8 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 # The real XRMB recording for the real referee (read-only; never copied into the project):
-# beside the checkout, or the shared copy; `make experiments XRMB_JW11=DIR` names another.
-XRMB_JW11 ?= $(firstword $(wildcard ../shared/data/xrmb_jw11 /work/shared/data/xrmb_jw11))
+# beside the checkout (../shared); `make experiments XRMB_JW11=DIR` names another.
+XRMB_JW11 ?= $(wildcard ../shared/data/xrmb_jw11)
 
 .PHONY: demo test venv pictures bench experiments lint docs clean
 

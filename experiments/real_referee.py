@@ -83,7 +83,12 @@ from referee_rows import parse_rows, run
 
 # ------------------------------------------------------------------------------- main
 def _command(argv) -> str:
-    return " ".join(["python experiments/real_referee.py", *argv])
+    """The command line as the Markdown header names it; an absolute path as seen from the
+    current folder (the checkout, under make), so the header names no one machine's path."""
+    import os
+
+    return " ".join(["python experiments/real_referee.py",
+                     *(os.path.relpath(a) if os.path.isabs(a) else a for a in argv)])
 
 
 def main(argv=None) -> int:

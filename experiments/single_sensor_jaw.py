@@ -8,7 +8,8 @@ with one of them alone, and each single-sensor method predicts the other; the er
 distance between the prediction and the measured pellet (mm), over the frames where both are
 tracked and neither is mistracked (the same frames for every method: paired). Two sources:
 
-* the real recordings of ``--real`` (default: /work/shared/data/xrmb_jw11, the XRMB speaker
+* the real recordings of ``--real`` (default: shared/data/xrmb_jw11 in a folder above the
+  checkout, the XRMB speaker
   JW11, task 5: one recording of one speaker; skipped when absent);
 * a synthetic corpus made here in memory (``--subjects`` subjects x the speech tasks
   ``TASKS``, ``DURATION_S`` each, no dropouts or mistracks; ``cassi_fit.synth``).
@@ -37,7 +38,10 @@ from pathlib import Path
 
 import numpy as np
 
-REAL_DEFAULT = Path("/work/shared/data/xrmb_jw11")
+#: shared/data/xrmb_jw11 in the first folder above the checkout that has it
+REAL_DEFAULT = next((p / "shared" / "data" / "xrmb_jw11" for p in Path(__file__).resolve().parents
+                     if (p / "shared" / "data" / "xrmb_jw11").is_dir()),
+                    Path("../shared/data/xrmb_jw11"))
 TASKS = ("tp011", "tp020", "tp040")  # VCV, words, a sentence: speech
 DURATION_S = 5.0  # one length for every synthetic recording: the fits compile once
 BLOCK_FRAMES = 73  # 0.5 s: neighbouring frames' errors are correlated

@@ -36,8 +36,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-REAL = (ROOT.parent / "shared" / "data" / "xrmb_jw11" / "jw11_tp005.txy").resolve()
-REAL_FALLBACK = Path("/work/shared/data/xrmb_jw11/jw11_tp005.txy")
+# the real recording in a "shared" folder beside the checkout or above it
+REALS = [p / "shared" / "data" / "xrmb_jw11" / "jw11_tp005.txy" for p in ROOT.parents]
 TASK = "tp005"
 N_FRAMES = 730  # as the real file
 SEED = 20
@@ -47,7 +47,7 @@ DT = 6866e-6
 
 
 def real_path() -> Path | None:
-    for path in (REAL, REAL_FALLBACK):
+    for path in REALS:
         if path.is_file():
             return path
     return None

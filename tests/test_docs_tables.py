@@ -162,3 +162,30 @@ def test_quoted_thresholds_are_the_code_constants():
     assert len(quoted) >= 10
     for name, value in quoted:
         assert getattr(ev, name) == pytest.approx(float(value)), name
+
+
+def test_every_figure_quoted_inline_is_its_source_cell_now():
+    # figures in prose sit between "<!-- quoted from docs/generated/X.md, table K, row R,
+    # column C, number N -->" and "<!-- end quote -->"; quote_tables.py rewrites them
+    inline = 0
+    for doc in documents():
+        text = doc.read_text(encoding="utf-8")
+        inline += len(quote_tables.INLINE.findall(text))
+        assert quote_tables.requote_inline(text, doc.name) == text, f"{doc.name}: make experiments"
+        assert text.count("<!-- end quote -->") == len(quote_tables.INLINE.findall(text)), doc.name
+    assert inline >= 20  # the single-sensor figures of README, JAW, EMA and ONE_SENSOR
+
+
+def test_an_inline_quote_takes_its_cell_and_names_what_is_missing(tmp_path):
+    gen = tmp_path / "docs" / "generated"
+    gen.mkdir(parents=True)
+    (gen / "t.md").write_text("<!-- written by x -->\n| m | median [CI] |\n|---|---|\n"
+                              "| a | 0.68 [0.49, 0.93] |\n| b | 1.5 |\n")
+    mark = "<!-- quoted from docs/generated/t.md, table 1, row {}, column 2{} -->{}<!-- end quote -->"
+    doc = "x " + mark.format('"a"', ", number 1", "9.9") + " mm, " + mark.format(2, "", "?") + "\n"
+    want = "x " + mark.format('"a"', ", number 1", "0.68") + " mm, " + mark.format(2, "", "1.5") + "\n"
+    assert quote_tables.requote(doc, "doc.md", tmp_path) == want
+    assert quote_tables.requote(want, "doc.md", tmp_path) == want
+    for row, number, message in (('"c"', "", "no one row"), ('"a"', ", number 4", "no number 4")):
+        with pytest.raises(ValueError, match=f"doc.md:1: .*{message}"):
+            quote_tables.requote(mark.format(row, number, "") + "\n", "doc.md", tmp_path)
