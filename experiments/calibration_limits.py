@@ -299,11 +299,16 @@ def limits_markdown(jaw: list[dict], trace: list[dict], lower: list[dict]) -> st
                                        "once_x_scale": 7, "once_cost_mm2": 4,
                                        "now_x_scale": 7, "now_cost_mm2": 4,
                                        "now_slope_mm2": 2}, headers=JAW_HEADERS)
-    text += ("\nThe single solve of each subject that did not converge, against the step "
-             "budget (the calibration's is 100): u walks out along tanh's flat tail while "
-             "the scale creeps to the bound and the cost barely moves.\n\n")
-    text += markdown_text(trace, digits={"u": 3, "x_scale": 7, "cost_mm2": 6},
-                          headers={"x_scale": "x scale", "cost_mm2": "cost mm^2"})
+    if trace:
+        text += ("\nThe single solve of each subject that did not converge, against the step "
+                 "budget (the calibration's is 100): u walks out along tanh's flat tail while "
+                 "the scale creeps to the bound and the cost barely moves.\n\n")
+        text += markdown_text(trace, digits={"u": 3, "x_scale": 7, "cost_mm2": 6},
+                              headers={"x_scale": "x scale", "cost_mm2": "cost mm^2"})
+    else:
+        text += ("\nEvery subject's single solve converged: no stall to trace (one is made "
+                 "on purpose in tests/test_calibrate.py: S01 with its gonion moved back to "
+                 "x = -110 mm).\n")
     text += (f"\nThe lower lip: the calibration's error (estimate minus truth, mm), the true "
              "tip-offset difference that predicts it (how much further ahead of MNI, along "
              "the jaw line, the subject's incisor tip lies than the model's), and the range "

@@ -155,7 +155,8 @@ def test_the_documented_limits_are_this_calibrations(corpus, separate):
     S01-S03: the jaw stage as solved now, the lower lip's error and its reported range,
     to their printed precision; so a change to the calibration not followed by ``make
     experiments`` fails here."""
-    jaw, _, lower = _doc_tables(LIMITS)
+    tables = _doc_tables(LIMITS)  # the stall trace (table 2) only when a subject stalls
+    jaw, lower = tables[0], tables[-1]
     jaw, lower = {r["subject"]: r for r in jaw}, {r["subject"]: r for r in lower}
     model = load_model()
     for cal in separate.values():
@@ -237,8 +238,9 @@ def test_one_jaw_sensor_cannot_give_the_scale_and_is_refused_in_one_line(corpus)
 
 
 def test_a_jaw_beyond_its_bound_is_held_there_and_the_fit_converges(corpus, monkeypatch):
-    """S09's stall, made on purpose: S01's Headmeasures gonion moved 20 mm back asks for a
-    jaw longer than JAW_SCALE_BOUND allows. The bounded jaw-shape stage then walks out along
+    """A stall at the bound, made on purpose (S09's on the default corpus of generator
+    version 5): S01's Headmeasures gonion moved back to x = -110 mm asks for a jaw longer
+    than JAW_SCALE_BOUND allows. The bounded jaw-shape stage then walks out along
     tanh's flat tail until its budget ends; the calibration holds the bound and solves the
     rest again, so it converges and reports the bound. Without that (stubbed), it does not."""
     recs = _recordings(corpus, "S01")

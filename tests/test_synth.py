@@ -568,3 +568,19 @@ def test_cassi_synth_in_process(tmp_path, capsys):
     args = ["synth", str(tmp_path / "z"), "--subjects", "1", "--tasks", "tp020", "--no-audio"]
     assert main([*args, "--jaw-kinematics", "fixed-condyle", "--noise-family", "drift"]) == 0
     assert synth.load_anatomy(tmp_path / "z", "S01").jaw_kinematics == "fixed-condyle"
+
+
+def test_the_default_subjects_jaws_have_adult_proportions():
+    """Gonial angle (condyle-gonion-gnathion) and mandibular body (gonion-gnathion) of the
+    default corpus's 15 subjects within Jarabak & Fizzell's adult norms (130 +- 7 degrees,
+    Go-Me 71 +- 5 mm) +- 2.5 SD; generator version 5 drew 101-110 degrees and 87-97 mm,
+    which asked the calibration for jaws at its bound (docs/SYNTHETIC.md, "Anatomy")."""
+    for i in range(15):
+        s = synth.make_subject(f"S{i + 1:02d}", np.random.default_rng([0, 1, i]))
+        go = np.array([s.head.gonion_x, s.head.gonion_y])
+        gn = np.array([s.head.gnathion_x, s.head.gnathion_y])
+        a, b = s.condyle_rest - go, gn - go
+        angle = np.degrees(np.arccos(a @ b / np.linalg.norm(a) / np.linalg.norm(b)))
+        assert 130.0 - 17.5 <= angle <= 130.0 + 17.5, (s.name, angle)
+        assert 71.0 - 12.5 <= np.linalg.norm(b) <= 71.0 + 12.5, (s.name, np.linalg.norm(b))
+        assert 50.0 <= np.linalg.norm(a) <= 60.0  # the ramus height drawn

@@ -132,6 +132,7 @@ NORMS = {
     "jaw_width": (96.0, 6.0),  # bigonial breadth
     "mouth_width": (51.0, 3.5),  # cheilion to cheilion
     "nose_protrusion": (20.0, 2.0),  # subnasale to pronasale
+    "gonial_angle_deg": (130.0, 7.0),  # at the gonion, ramus to mandibular body (Jarabak)
 }
 
 
@@ -170,6 +171,34 @@ def _incisor_and_mni(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     return tip, mni
 
 
+def _quantile_drawn(u: float, mean: float, sd: float) -> float:
+    """:func:`_drawn` from one uniform ``u`` in (0, 1) (the normal quantile, cut at +-2.5
+    sd): one uniform draw, so the draws after it stay as they were."""
+    from scipy.special import ndtri
+
+    return float(mean + sd * np.clip(ndtri(np.clip(u, 1e-12, 1.0 - 1e-12)), -2.5, 2.5))
+
+
+def _gonion(condyle: np.ndarray, gnathion: np.ndarray, ramus: float,
+            angle_deg: float) -> np.ndarray:
+    """The gonion ``ramus`` mm from the condyle, where the ramus (gonion to condyle) and
+    the mandibular body (gonion to gnathion) meet at ``angle_deg`` (the gonial angle),
+    on the lower side of the condyle-gnathion line.
+
+    The triangle condyle-gonion-gnathion has two sides and the angle between them fixed,
+    its third side ``d`` by the condyle and gnathion: the body is ``b = r cos a +
+    sqrt(d^2 - r^2 sin^2 a)`` (law of cosines) and the ramus leaves the condyle at the
+    angle ``g`` below the line to the gnathion, ``cos g = (r^2 + d^2 - b^2) / (2 r d)``.
+    """
+    a = np.deg2rad(angle_deg)
+    to_gn = gnathion - condyle
+    d = float(np.linalg.norm(to_gn))
+    body = ramus * np.cos(a) + np.sqrt(d * d - (ramus * np.sin(a)) ** 2)
+    g = np.arccos((ramus**2 + d * d - body**2) / (2.0 * ramus * d))
+    heading = np.arctan2(to_gn[1], to_gn[0]) - g  # clockwise: below the line
+    return condyle + ramus * np.array([np.cos(heading), np.sin(heading)])
+
+
 def make_subject(
     name: str, rng: np.random.Generator, *, jaw_kinematics: str | None = None
 ) -> SubjectAnatomy:
@@ -187,7 +216,11 @@ def make_subject(
     mnm = mni + spacing * np.array([-np.cos(slope), np.sin(slope)])
     condyle = tip + np.array([-r(90.0, 100.0), r(20.0, 30.0)])
     gnathion = tip + np.array([r(-1.0, 4.0), -r(38.0, 46.0)])
-    gonion = condyle + np.array([r(2.0, 10.0), -r(50.0, 60.0)])
+    # the gonion from the gonial angle and the ramus height (condyle to gonion), so that
+    # the jaw has adult proportions (docs/SYNTHETIC.md, "Anatomy"); one uniform draw each,
+    # in the two draws' place that set the gonion straight below the condyle until v5
+    angle = _quantile_drawn(r(0.0, 1.0), *NORMS["gonial_angle_deg"])
+    gonion = _gonion(condyle, gnathion, r(50.0, 60.0), angle)
     ul_thick = _drawn(rng, *NORMS["upper_lip_thickness"])
     ll_thick = _drawn(rng, *NORMS["lower_lip_thickness"])
     scale = r(0.95, 1.05)  # vocal tract size

@@ -27,7 +27,7 @@ from ._measurement import DEFAULT_NOISE_MM, MAX_NOISE_SCALE, NOISE_FAMILIES, _si
 from ._tasks import DEFAULT_TASKS, TASKS, get_task
 from ._truth import _anatomy_json, _parse_anatomy, _parse_truth, _truth_text
 
-GENERATOR_VERSION = 5  # bump when the generated numbers change (invalidates the cache)
+GENERATOR_VERSION = 6  # bump when the generated numbers change (invalidates the cache)
 
 
 def _find_ci(folder: Path, name: str) -> Path | None:
