@@ -14,12 +14,17 @@ import re
 import stat
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from jaxtyping import Float
 
 from .._io import register_input
 from ..errors import DataFormatError, MissingDataError
+
+if TYPE_CHECKING:
+    from ..labels import Labels
+    from ..sound import Sound
 
 #: Axis suffixes of position channels (``ul_x``, ``T1_py``, ``UL.X``), and of orientation or
 #: quality channels that are kept aside (never mistaken for a position).
@@ -50,6 +55,10 @@ class RawEma:
         orientation: ``(n, k, q)`` sensor orientation values (angles or quaternions) as in
             the file, or None.
         notes: anything the reader decided that a user should know (unused channels...).
+        sound: the sound stored inside the file (a :class:`cassi_fit.sound.Sound`: mview's
+            ``AUDIO`` channel, an EMU bundle's media file), or None.
+        labels: the label tiers stored inside the file (:class:`cassi_fit.labels.Labels`:
+            mview ``WORDS``/``PHONES``/``LABELS``, an EMU bundle's levels), or ``()``.
     """
 
     format: str
@@ -63,6 +72,8 @@ class RawEma:
     path: Path | None = None
     orientation: np.ndarray | None = None
     notes: tuple[str, ...] = field(default=())
+    sound: Sound | None = None
+    labels: tuple[Labels, ...] = field(default=())
 
     def __post_init__(self):
         times = np.asarray(self.times, dtype=np.float64)
@@ -80,6 +91,7 @@ class RawEma:
         object.__setattr__(self, "positions", positions)
         object.__setattr__(self, "names", names)
         object.__setattr__(self, "notes", tuple(self.notes))
+        object.__setattr__(self, "labels", tuple(self.labels))
         if self.path is not None:
             object.__setattr__(self, "path", Path(self.path))
 
