@@ -170,7 +170,7 @@ def _raw_from_tracks(where, tracks: list[tuple[str, SsffTrack]], defs: list[dict
             raise DataFormatError(track.path, None, f"the DBconfig's track {d.get('name')!r} "
                                   f"names column {column!r}, which this file lacks (it has "
                                   f"{', '.join(track.columns)})")
-    sensors = []
+    sensors, zeros = [], {}
     for ext, track in tracks:
         columns = _position_columns(track)
         if not columns:
@@ -180,10 +180,12 @@ def _raw_from_tracks(where, tracks: list[tuple[str, SsffTrack]], defs: list[dict
         if zero.any():
             tail = track.n_records - int(np.flatnonzero(~zero)[-1]) - 1 if (~zero).any() \
                 else track.n_records
-            where_zero = (f"the last {tail}" if tail == zero.sum() else f"{int(zero.sum())}")
-            notes.append(f"track {ext}: {where_zero} record(s) all exactly 0 (EMU padding): "
-                         "untracked")
+            what = f"the last {tail}" if tail == zero.sum() else f"{int(zero.sum())}"
+            zeros.setdefault(what, []).append(ext)
         sensors.append((ext, track, columns, zero))
+    for what, exts in zeros.items():
+        notes.append(f"{what} record(s) of track(s) {', '.join(exts)} are all exactly 0 (EMU "
+                     "padding): untracked")
     if not sensors:
         raise DataFormatError(where, None, "no SSFF track holds sensor positions (columns "
                               "such as tt_posx, tt_posy, tt_posz)")
@@ -385,3 +387,88 @@ def sensor_map_for(raw: RawEma):
     if raw.format == "emu" and {n.lower() for n in raw.names} == IPS_SENSORS:
         return builtin_map("ips")
     return None
+
+
+# ----------------------------------------------------------------------- writers
+#: Records an EMU export pads the end of each track with (all exactly 0): 0.2 s at 200 Hz.
+PAD_RECORDS = 40
+
+
+def track_extension(sensor: str) -> str:
+    """The SSFF file extension :func:`write_bundle` gives a sensor's track."""
+    return f"trk_{sensor.lower()}"
+
+
+def _annotation(name: str, session: str, tiers, rate: float) -> dict:
+    """An EMU annotation: one SEGMENT level per tier and, for a tier named ``Segment``, an
+    ITEM level ``Word`` above it (one item linked to every segment)."""
+    levels, links, next_id = [], [], 0
+    for tier in tiers:
+        items = []
+        for seg in tier.segments():
+            start = int(round(seg.start * rate))
+            items.append({"id": next_id, "sampleStart": start,
+                          "sampleDur": max(int(round(seg.end * rate)) - start, 0),
+                          "labels": [{"name": tier.tier, "value": seg.label}]})
+            next_id += 1
+        levels.append({"name": tier.tier, "type": "SEGMENT", "items": items})
+        if tier.tier == "Segment" and items:
+            word = {"id": next_id, "labels": [{"name": "Word",
+                                               "value": "_".join(tier.labels)}]}
+            levels.insert(0, {"name": "Word", "type": "ITEM", "items": [word]})
+            links += [{"fromID": next_id, "toID": it["id"]} for it in items]
+            next_id += 1
+    return {"name": name, "annotates": f"{session}{SESSION_SUFFIX}/{name}{BUNDLE_SUFFIX}/"
+            f"{name}.wav", "sampleRate": rate, "levels": levels, "links": links}
+
+
+def write_bundle(folder: str | os.PathLike, session: str, name: str, raw: RawEma, *,
+                 wav: str | os.PathLike | None = None, tiers=(), annotation_rate: float = 16000.0,
+                 pad_records: int = PAD_RECORDS, overwrite: bool = False) -> Path:
+    """Write ``raw`` as the bundle ``folder/<name>_bndl/`` of an emuDB session folder: one
+    SSFF track per sensor (:func:`track_extension`; columns ``<sensor>_posx/posy/posz``
+    and three orientation columns, FLOAT), the last ``pad_records`` records replaced by
+    exact zeros as EMU exports pad them, the ``.wav`` copied in, the ``tiers`` (``Labels``)
+    as the annotation's levels. Returns the bundle folder."""
+    from .._io import atomic_write
+    from .ssff import ssff_bytes
+
+    bundle = Path(folder) / f"{name}{BUNDLE_SUFFIX}"
+    n = raw.n_frames
+    pad = np.zeros(n, bool)
+    pad[max(n - pad_records, 0):] = True
+    for j, sensor in enumerate(raw.names):
+        pos = np.where(pad[:, None], 0.0, raw.positions[:, j, :])
+        columns = {f"{sensor}_pos{'xyz'[c]}": pos[:, c] for c in range(raw.dims)}
+        columns.update({f"{sensor}_ori{a}": np.where(pad, 0.0, v) for a, v in
+                        zip("xyz", (1.0, 0.0, 0.0), strict=True)})
+        atomic_write(bundle / f"{name}.{track_extension(sensor)}",
+                     ssff_bytes(columns, raw.rate_hz, start_s=float(raw.times[0])),
+                     overwrite=overwrite, data_file=True)
+    if wav is not None:
+        atomic_write(bundle / f"{name}.wav", Path(wav).read_bytes(), overwrite=overwrite,
+                     data_file=True)
+    annotation = _annotation(name, session, tiers, annotation_rate)
+    atomic_write(bundle / f"{name}{ANNOT_SUFFIX}", json.dumps(annotation, indent=1) + "\n",
+                 overwrite=overwrite)
+    return bundle
+
+
+def write_dbconfig(root: str | os.PathLike, name: str, sensors, *, dims: int = 3,
+                   levels=("Word", "Segment"), overwrite: bool = False) -> Path:
+    """Write ``root/<name>_DBconfig.json`` naming, as the IPS database does, only the
+    ``posy`` and ``posz`` columns of each sensor's track (readers must use ``posx`` too)."""
+    from .._io import atomic_write
+
+    defs = [{"name": f"{s}_pos{a}", "columnName": f"{s}_pos{a}",
+             "fileExtension": track_extension(s)} for s in sensors for a in "yz"[: dims - 1]]
+    kinds = {"Word": "ITEM"}
+    config = {"name": name, "UUID": "00000000-0000-0000-0000-000000000000",
+              "mediafileExtension": "wav", "ssffTrackDefinitions": defs,
+              "levelDefinitions": [{"name": lv, "type": kinds.get(lv, "SEGMENT"),
+                                    "attributeDefinitions": [{"name": lv, "type": "STRING"}]}
+                                   for lv in levels],
+              "linkDefinitions": [{"type": "ONE_TO_MANY", "superlevelName": "Word",
+                                   "sublevelName": "Segment"}]}
+    return atomic_write(Path(root) / f"{name}{DBCONFIG_SUFFIX}",
+                        json.dumps(config, indent=1) + "\n", overwrite=overwrite)
