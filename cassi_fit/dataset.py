@@ -338,6 +338,9 @@ def _bite_for(path: Path, given: str | os.PathLike | None) -> Path | None:
         return None
     found = sorted(p for p in _listing(path.parent).values()
                    if _is_bite(p) and p.suffix.lower() == path.suffix.lower())
+    if _emu.is_bundle_folder(path):  # a bite-plane bundle of the session
+        found = sorted(p for p in path.parent.iterdir() if _emu.is_bundle_folder(p)
+                       and _is_bite(p))
     if len(found) > 1:
         raise DataFormatError(path.parent, None, f"{len(found)} bite-plane recordings "
                               f"({', '.join(p.name for p in found)}): give one (bite_plane=)")
@@ -351,7 +354,7 @@ def _ema_track(path: Path, *, fmt: str | None = None, sensor_map: SensorMapLike 
     smap = _sensor_map_for(path, sensor_map)
     if smap.name == "auto" and sensor_map is None:
         smap = _emu.sensor_map_for(raw) or smap  # the IPS Munich set has a built-in map
-    bite_path = None if path.is_dir() else _bite_for(path, bite_plane)
+    bite_path = _bite_for(path, bite_plane)
     if bite_path is None:
         return (*ema_to_track(raw, smap), raw)
     bite = read_ema(bite_path, rate=rate)
@@ -493,7 +496,8 @@ class Dataset:
         if _emu.find_dbconfig(folder) is None:
             return
         for session, bundle, path in _emu.database_bundles(folder):
-            self._add((session.upper(), bundle.lower()), path, path.parent)
+            if not _is_bite(path):
+                self._add((session.upper(), bundle.lower()), path, path.parent)
 
     def _scan_folder(self, folder: Path, subject_folder: bool) -> None:
         # stacklevel: warn -> _warn_special -> _scan_folder -> __init__ -> the caller

@@ -26,7 +26,8 @@ real exports: ``cassi_synth_DBconfig.json`` naming only the ``posy``/``posz`` co
 session folders ``<SUBJECT>_ses`` holding each task as a bundle ``<task>_bndl/`` with
 the sound inside, an annotation (``Segment``: the prompt's words spread evenly over the
 recording, NOT aligned to the sound; ``Word``: an item above them) and one SSFF track per
-sensor whose last 40 records are exact zeros (EMU's padding); no bite-plane recording.
+sensor whose last 40 records are exact zeros (EMU's padding); the bite-plane recording is
+the session's bundle ``bite_bndl``.
 
 Every subject folder also holds a **bite-plane recording** (``bite.<ext>``: sensors
 ``OS`` at the incisor tip, ``MS`` 42 mm behind it, ``OL``/``OR`` at the molars, with the
@@ -241,17 +242,17 @@ def _convert_subject(src: Path, dst: Path, index: int, fmt: str, seed: int,
         if fmt == "mview" and wav is not None:
             audio = _wav_samples(wav)
         if fmt == "emu":
-            from .emu import write_bundle
+            from .emu import PAD_RECORDS, write_bundle
 
             write_bundle(dst, src.name, task, raw, wav=wav, tiers=_prompt_tiers(task, times),
                          overwrite=True)
+            toolkit = toolkit.copy()
+            toolkit[-PAD_RECORDS:] = np.nan  # the export's padding: not in the file
         else:
             _write(fmt, dst / f"{task}{suffix}", raw, audio)
         write_table(_truth_rows(times, rotation, translation, names, toolkit),
                     dst / f"{task}.head.csv", overwrite=True)
     _write_frame_json(dst, fmt, rate, m, origin)
-    if fmt == "emu":  # an emuDB has no bite-plane convention: none written
-        return names
     # the bite-plane recording: bite sensors and the references, its own head movement
     times = np.arange(0.0, BITE_SECONDS, 1.0 / rate)
     bite_names = tuple(BITE) + tuple(REFERENCES)
@@ -262,7 +263,12 @@ def _convert_subject(src: Path, dst: Path, index: int, fmt: str, seed: int,
     raw = RawEma(format=fmt, times=times, names=bite_names,
                  positions=_to_device(toolkit, m, origin, rotation, translation),
                  rate_hz=rate, units="mm", axes="synthetic device frame")
-    _write(fmt, dst / f"bite{suffix}", raw)
+    if fmt == "emu":  # a bundle of the session, named bite
+        from .emu import write_bundle
+
+        write_bundle(dst, src.name, "bite", raw, overwrite=True)
+    else:
+        _write(fmt, dst / f"bite{suffix}", raw)
     if fmt in ("ag501", "wave"):  # their files number the channels: name them
         atomic_write(dst / "sensors.toml", _sensor_map_text(names or ()), overwrite=True)
         atomic_write(dst / "bite.sensors.toml", _sensor_map_text(bite_names), overwrite=True)
@@ -358,7 +364,7 @@ def write_ema_corpus(out_dir: str | os.PathLike, *, format: str, n_subjects: int
         if format == "emu" and names:
             from .emu import write_dbconfig
 
-            write_dbconfig(ema, EMU_DB_NAME, names)
+            write_dbconfig(ema, EMU_DB_NAME, tuple(names) + tuple(BITE))  # bite bundles too
         shutil.copyfile(xrmb / "Headmeasures.txt", ema / "Headmeasures.txt")
         readme = (xrmb / "README.txt").read_text(encoding="utf-8").splitlines()
         lines = [f"cassi_fit synthetic EMA corpus, format {format} (NOT real data)",
