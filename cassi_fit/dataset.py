@@ -80,6 +80,11 @@ class DefaultHeadMeasuresWarning(UserWarning):
     """A recording uses ``DEFAULT_HEAD_MEASURES`` because its subject has no measures."""
 
 
+class CompanionFileWarning(UserWarning):
+    """A file beside an articulograph recording (a palate trace in another format) could
+    not be read and is not used; the recording is."""
+
+
 class SpecialFileWarning(UserWarning):
     """Discovery skipped special files (pipes, devices, sockets, broken links) in a
     dataset's folder: they are never opened, so they are never a recording, an outline or
@@ -284,7 +289,18 @@ def _assemble(path: Path, subject: str, task: str, own: Path | None, shared: lis
 
     def outline(kind: str, name: str):
         found = _find(own_l, prefixed(kind) + bare(kind)) or _find(shared, prefixed(kind))
-        return None if found is None else read_outline(found, kind=name)
+        if found is None:
+            return None
+        try:
+            return read_outline(found, kind=name)
+        except DataFormatError as exc:
+            if ema is None:  # an XRMB subject's own PAL.DAT/PHA.DAT: its errors stand
+                raise
+            # beside an articulograph file (MOCHA-TIMIT's fsew0_pal.dat, decimal numbers in
+            # its own units): a companion never refuses the recording
+            warnings.warn(f"{exc}; not an XRMB {name} trace (whole micrometres): not used",
+                          CompanionFileWarning, stacklevel=4)
+            return None
 
     inside: dict = {}
     if ema is None:
