@@ -49,9 +49,9 @@ from jaxtyping import Float
 
 from ._io import special_kind
 from .ema import RawEma, SensorMap, SensorReport, ema_to_track, read_ema
+from .ema import emu as _emu
 from .ema.arrays import raw_from_array
 from .ema.detect import detect_format
-from .ema import emu as _emu
 from .ema.sensor_map import sensor_map as _sensor_map
 from .errors import DataFormatError, MissingDataError
 from .headmeasures import DEFAULT_HEAD_MEASURES, HeadMeasures, read_headmeasures

@@ -58,7 +58,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import DataFormatError, MissingDataError
+from ..errors import DataFormatError
 from ..pellets import PELLET_NAMES
 
 TONGUE = ("T1", "T2", "T3", "T4")
@@ -198,7 +198,6 @@ def read_sensor_map(path: str | os.PathLike) -> SensorMap:
     """Read a TOML sensor map (module docstring); a :class:`DataFormatError` naming the
     file for a syntax error, an unknown table or key, a value of the wrong kind."""
     import tomllib
-
 
     from ._raw import read_bytes  # regular files only: a FIFO would block for ever
 
