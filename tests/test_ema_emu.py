@@ -208,3 +208,23 @@ def test_a_definition_naming_a_missing_column_is_an_error(emudb, tmp_path):
     with pytest.raises(DataFormatError, match="nothing_posy") as err:
         read_emu(db / "S01_ses" / "tp040_bndl")
     assert ".trk_" in str(err.value)
+
+
+def test_commands_run_on_an_emudb(tmp_path, capsys):
+    from cassi_fit import cli
+
+    db = tmp_path / "db"
+    assert cli.main(["synth", "--format", "emu", str(db), "--subjects", "1", "--tasks",
+                     "tp040"]) == 0
+    assert cli.main(["info", str(db)]) == 0
+    out = capsys.readouterr().out
+    assert "S01" in out and "tp040" in out and "bite" not in out.split("\n", 2)[2]
+    assert cli.main(["info", str(db / "S01_ses" / "tp040_bndl")]) == 0
+    out = capsys.readouterr().out
+    assert "sound (EMU media" in out and "labels: in the file: Word (1), Segment (11)" in out
+    csv = tmp_path / "jaw.csv"
+    assert cli.main(["jaw", str(db), "S01", "tp040", "--csv", str(csv), "--quiet"]) == 0
+    rows = csv.read_text().splitlines()
+    column = rows[0].split(",").index("label")
+    assert "She" in {r.split(",")[column] for r in rows[1:]}
+    assert (tmp_path / "jaw.segments.csv").is_file()
