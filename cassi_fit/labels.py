@@ -518,32 +518,26 @@ WORD_TIERS = ("words", "word", "wrd")
 
 
 def choose_tier(tiers, tier: str | None = None, where=None) -> Labels | None:
-    """One of ``tiers`` (a sequence of :class:`Labels`): the one named ``tier``
-    (case-insensitive; a :class:`MissingDataError` listing them if none is), else the
-    first phone tier (:data:`PHONE_TIERS`), else a word tier, else the first; None for
-    no tiers."""
+    """The tier named ``tier`` (any case; else a :class:`MissingDataError` listing them),
+    else the first of :data:`PHONE_TIERS`, then :data:`WORD_TIERS`, then the first tier."""
     tiers = list(tiers)
     by_name = {t.tier.lower(): t for t in reversed(tiers)}
-    if tier is not None:
-        if tier.lower() in by_name:
-            return by_name[tier.lower()]
+    if tier is not None and tier.lower() not in by_name:
         raise MissingDataError(f"{where or 'the recording'}: no label tier {tier!r} (tiers: "
                                f"{', '.join(t.tier for t in tiers) or 'none'})")
-    for name in PHONE_TIERS + WORD_TIERS:
-        if name in by_name:
-            return by_name[name]
-    return tiers[0] if tiers else None
+    if tier is not None:
+        return by_name[tier.lower()]
+    found = [by_name[n] for n in PHONE_TIERS + WORD_TIERS if n in by_name]
+    return found[0] if found else (tiers[0] if tiers else None)
 
 
 def recording_labels(recording, *, tier: str | None = None, units: str = "auto",
                      recording_s: float | None = None,
                      accept_mismatch: bool = False) -> Labels | None:
-    """The labels every output uses for a ``dataset.Recording``: a ``X.TextGrid`` or
-    ``X.lab`` beside its file (:func:`labels_for`), else the tiers stored inside the file
-    (``recording.labels``: mview ``WORDS``/``PHONES``/``LABELS``, an EMU bundle's levels;
-    ``tier`` chooses one, :func:`choose_tier`), or None when it has none. Checked against
-    the recording's length (:func:`check_labels`; ``recording_s``, default the track's
-    length) as labels beside the file are."""
+    """The labels every output uses for a ``dataset.Recording``: a file beside it
+    (:func:`labels_for`), else the tiers inside it (``recording.labels``: mview
+    ``WORDS``/``PHONES``, EMU levels; :func:`choose_tier`), else None; checked against
+    its length (``recording_s``, default the track's) as :func:`labels_for` checks."""
     from .sound import recording_seconds
 
     if recording_s is None:

@@ -73,6 +73,22 @@ def _candidates(contents: dict) -> dict[str, np.ndarray]:
     return found
 
 
+def _variable(path: Path, found: dict, variable: str | None) -> str:
+    """Which struct variable to read (module docstring)."""
+    if variable is not None:
+        if variable not in found:
+            raise DataFormatError(path, None, f"no mview struct variable {variable!r} (found: "
+                                  f"{', '.join(found) or 'none'})")
+        return variable
+    if len(found) == 1:
+        return next(iter(found))
+    if path.stem in found:
+        return path.stem
+    raise DataFormatError(path, None, f"{len(found)} mview struct variables "
+                          f"({', '.join(found) or 'none with NAME, SRATE, SIGNAL'}): "
+                          "name one (variable=)")
+
+
 def read_mview(path: str | os.PathLike, *, variable: str | None = None) -> RawEma:
     """Read an mview ``.mat`` file into a :class:`RawEma` (seconds from 0 at ``SRATE``,
     mm); see the module docstring for the format and every refusal."""
@@ -89,19 +105,7 @@ def read_mview(path: str | os.PathLike, *, variable: str | None = None) -> RawEm
     except Exception as exc:  # scipy raises many kinds on a damaged file: one error here
         raise DataFormatError(path, None, f"not a readable MATLAB file ({exc})") from None
     found = _candidates(contents)
-    if variable is not None:
-        if variable not in found:
-            raise DataFormatError(path, None, f"no mview struct variable {variable!r} (found: "
-                                  f"{', '.join(found) or 'none'})")
-        key = variable
-    elif len(found) == 1:
-        key = next(iter(found))
-    elif path.stem in found:
-        key = path.stem
-    else:
-        raise DataFormatError(path, None, f"{len(found)} mview struct variables "
-                              f"({', '.join(found) or 'none with NAME, SRATE, SIGNAL'}): "
-                              "name one (variable=)")
+    key = _variable(path, found, variable)
     entries = found[key].ravel()
     names, signals, rates, notes = [], [], [], []
     sound = None
