@@ -13,6 +13,7 @@ import pytest
 from ema_files import MOCHA_CHANNELS, mocha_header, mocha_values
 from special_files import FifoGuard, make_fifo
 
+from cassi_fit import cli
 from cassi_fit.dataset import CompanionFileWarning, DefaultHeadMeasuresWarning, load_recording
 from cassi_fit.ema.carstens import read_pos
 from cassi_fit.ema.est import read_est, write_est
@@ -177,7 +178,8 @@ def test_a_mocha_palate_trace_beside_never_refuses_the_recording(tmp_path):
     ["1200.0 1850.5 she", "1850.5 2400.25 had"],  # milliseconds, a part of the recording
     ["30000 36000.0 she", "36000.0 41000.0 had"],  # samples at 16 kHz, a part
 ])
-def test_labels_all_past_the_end_are_an_error_unless_accepted(tmp_path, corpora, rows):
+def test_labels_all_past_the_end_are_an_error_unless_accepted(tmp_path, corpora, rows,
+                                                              capsys):
     folder = _copy(corpora["xrmb"] / "S01", tmp_path / "S01")
     txy = folder / "TP040.TXY"
     lab = txy.with_suffix(".lab")
@@ -187,6 +189,10 @@ def test_labels_all_past_the_end_are_an_error_unless_accepted(tmp_path, corpora,
     _one_line_naming(err, lab)
     with pytest.warns(LabelMismatchWarning):
         assert len(labels_for(txy, accept_mismatch=True)) == 2
+    out = tmp_path / "jaw.csv"  # --quiet: still one line naming the label file, exit 2
+    assert cli.main(["jaw", str(txy), "--csv", str(out), "--quiet"]) == 2
+    err_text = capsys.readouterr().err
+    assert str(lab) in err_text and err_text.count("\n") == 1 and not out.exists()
 
 
 def test_a_wav_cut_to_half_its_bytes_is_an_error_naming_it(tmp_path, corpora):
