@@ -162,7 +162,7 @@ def fit_jaw_bucketed(track: PelletTrack, *, method: str | None = None,
     from .jaw_fit import jaw_from_track, jaw_sensor_set, method_for_sensors, tracked_jaw_sensors
     from .txy import PelletTrack
 
-    sensors = (tracked_jaw_sensors(track.valid) if jaw_sensors is None
+    sensors = (tracked_jaw_sensors(track.valid, track.path) if jaw_sensors is None
                else jaw_sensor_set(jaw_sensors))
     method = method_for_sensors(method, sensors).name
     jaw_sensors = ",".join(sensors)

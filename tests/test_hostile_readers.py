@@ -208,3 +208,16 @@ def test_a_wav_cut_to_half_its_bytes_is_an_error_naming_it(tmp_path, corpora):
     _one_line_naming(err, wav)
     with pytest.warns(SoundMismatchWarning):
         assert check_sound(wav, seconds, accept_mismatch=True).sound_s < 0.6 * seconds
+
+
+def test_the_untracked_jaw_pellets_error_names_the_file(tmp_path, corpora, capsys):
+    folder = _copy(corpora["xrmb"] / "S01", tmp_path / "S01")
+    txy = folder / "TP040.TXY"
+    lines = txy.read_text().splitlines()
+    cells = [line.split() for line in lines]
+    for c in cells:  # MNI and MNM (the last four columns) untracked on every line
+        c[13:17] = ["1000000"] * 4
+    txy.write_text("\n".join("\t".join(c) for c in cells) + "\n")
+    assert cli.main(["jaw", str(txy), "--csv", str(tmp_path / "jaw.csv")]) == 2
+    err_text = capsys.readouterr().err
+    assert str(txy) in err_text and "never tracked" in err_text

@@ -194,6 +194,7 @@ def run_recording(args) -> int:
     # is a quotient by sin(theta/2)), so the command computes in float64.
     jax.config.update("jax_enable_x64", True)
     from cassi_fit._io import atomic_write
+    from cassi_fit.dataset import recording_source
     from cassi_fit.jaw_fit import (
         check_sensors,
         jaw_diagnostics,
@@ -223,7 +224,8 @@ def run_recording(args) -> int:
     if track.path is not None:
         for path in (out, diag_out, seg_out):
             _check_output(path, [track.path], args.force)
-    sensors = (tracked_jaw_sensors(track.valid) if args.jaw_sensors is None
+    where = recording_source(recording)
+    sensors = (tracked_jaw_sensors(track.valid, where) if args.jaw_sensors is None
                else jaw_sensor_set(args.jaw_sensors))
     method = method_for_sensors(chosen, sensors)  # by default, by the recording's sensors
     args.method = method.name
