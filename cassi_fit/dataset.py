@@ -22,6 +22,11 @@ given to :func:`load_recording` or :class:`Dataset` wins. Other names (an EST fi
 ``.txt``, arrays) are read by :func:`load_recording` alone, which detects the format by
 content. :func:`recording_from_array` makes a recording from a numpy array.
 
+An emuDB (:mod:`cassi_fit.ema.emu`: a folder with ``<name>_DBconfig.json``, the root or
+one in it) gives a recording per bundle ``<session>_ses/<bundle>_bndl/`` (session =
+subject, bundle = task); ``<bundle>_bndl.json`` files are found like other recordings.
+Sound and labels inside a file: :attr:`Recording.sound`, :attr:`Recording.labels`.
+
 Special files (named pipes, devices, sockets, broken links) are never opened: discovery
 skips them with a :class:`SpecialFileWarning` naming them (opening a FIFO for reading
 blocks until a writer comes), and loading one is a :class:`DataFormatError`. A folder in
@@ -44,12 +49,14 @@ from jaxtyping import Float
 
 from ._io import special_kind
 from .ema import RawEma, SensorMap, SensorReport, ema_to_track, read_ema
+from .ema import emu as _emu
 from .ema.arrays import raw_from_array
 from .ema.detect import detect_format
 from .ema.sensor_map import sensor_map as _sensor_map
 from .errors import DataFormatError, MissingDataError
 from .headmeasures import DEFAULT_HEAD_MEASURES, HeadMeasures, read_headmeasures
 from .outlines import outlines_problem, read_outline
+from .sound import Sound
 from .txy import PelletTrack, read_txy
 
 PELLET_SUFFIX = ".txy"
@@ -61,8 +68,8 @@ _TRIAL = re.compile(r"[0-9]+")
 _SHORT_TRIAL = re.compile(r"[0-9]{1,2}")
 _BITE = re.compile(r"bite|occlusal", re.IGNORECASE)
 #: What discovery looks for, in messages.
-LOOKED_FOR = ("pellet files (.txy) or articulograph recordings (.ema, .pos, .tsv, .mat), "
-              "in the folder or its subject folders")
+LOOKED_FOR = ("pellet files (.txy) or articulograph recordings (.ema, .pos, .tsv, .mat, "
+              "EMU bundles), in the folder or its subject folders")
 _MAX_NAMES = 12  # names listed in a message before "..."
 
 #: What a sensor map can be given as (:func:`cassi_fit.ema.sensor_map.sensor_map`).
@@ -71,6 +78,11 @@ SensorMapLike = SensorMap | str | os.PathLike | None
 
 class DefaultHeadMeasuresWarning(UserWarning):
     """A recording uses ``DEFAULT_HEAD_MEASURES`` because its subject has no measures."""
+
+
+class CompanionFileWarning(UserWarning):
+    """A file beside an articulograph recording (a palate trace in another format) could
+    not be read and is not used; the recording is."""
 
 
 class SpecialFileWarning(UserWarning):
@@ -92,6 +104,9 @@ class Recording:
     frame, each sensor's distance from the midsagittal plane:
     :class:`~cassi_fit.ema.report.SensorReport`). The pipeline needs nothing else: the
     track is in the toolkit's frame, mm, at the file's own rate (``track.frame_step_s``).
+    ``file_sound``: the sound stored inside the recording file (mview ``AUDIO``, an EMU
+    bundle's media), or None; ``labels``: the label tiers stored inside it (mview
+    ``WORDS``/``PHONES``/``LABELS``, EMU levels), ``()`` if none.
     """
 
     subject: str
@@ -104,6 +119,16 @@ class Recording:
     audio: Path | None
     path: Path | None
     sensors: SensorReport | None = None
+    file_sound: Sound | None = None
+    labels: tuple = ()
+
+    @property
+    def sound(self) -> Sound | None:
+        """The recording's sound: the ``.wav`` beside its file (``audio``), else the sound
+        stored inside the file (``file_sound``), else None."""
+        if self.audio is not None:
+            return Sound.from_file(self.audio)
+        return self.file_sound
 
     @property
     def format(self) -> str:
@@ -264,14 +289,27 @@ def _assemble(path: Path, subject: str, task: str, own: Path | None, shared: lis
 
     def outline(kind: str, name: str):
         found = _find(own_l, prefixed(kind) + bare(kind)) or _find(shared, prefixed(kind))
-        return None if found is None else read_outline(found, kind=name)
+        if found is None:
+            return None
+        try:
+            return read_outline(found, kind=name)
+        except DataFormatError as exc:
+            if ema is None:  # an XRMB subject's own PAL.DAT/PHA.DAT: its errors stand
+                raise
+            # beside an articulograph file (MOCHA-TIMIT's fsew0_pal.dat, decimal numbers in
+            # its own units): a companion never refuses the recording
+            warnings.warn(f"{exc}; not an XRMB {name} trace (whole micrometres): not used",
+                          CompanionFileWarning, stacklevel=4)
+            return None
 
+    inside: dict = {}
     if ema is None:
         track, report = read_txy(path), None
     else:
-        track, report = _ema_track(path, **ema)
+        track, report, raw = _ema_track(path, **ema)
+        inside = {"file_sound": raw.sound, "labels": raw.labels}
     head, is_default = _head_measures(subject, own_l + shared)
-    audio = _find([path.parent], [f"{path.stem.lower()}.wav"])
+    audio = None if path.is_dir() else _find([path.parent], [f"{path.stem.lower()}.wav"])
     palate, pharynx = outline("pal", "palate"), outline("pha", "pharynx")
     if palate is not None and pharynx is not None:
         problem = outlines_problem(palate, pharynx)
@@ -289,6 +327,7 @@ def _assemble(path: Path, subject: str, task: str, own: Path | None, shared: lis
         audio=audio,
         path=path,
         sensors=report,
+        **inside,
     )
 
 
@@ -315,6 +354,9 @@ def _bite_for(path: Path, given: str | os.PathLike | None) -> Path | None:
         return None
     found = sorted(p for p in _listing(path.parent).values()
                    if _is_bite(p) and p.suffix.lower() == path.suffix.lower())
+    if _emu.is_bundle_folder(path):  # a bite-plane bundle of the session
+        found = sorted(p for p in path.parent.iterdir() if _emu.is_bundle_folder(p)
+                       and _is_bite(p))
     if len(found) > 1:
         raise DataFormatError(path.parent, None, f"{len(found)} bite-plane recordings "
                               f"({', '.join(p.name for p in found)}): give one (bite_plane=)")
@@ -323,14 +365,17 @@ def _bite_for(path: Path, given: str | os.PathLike | None) -> Path | None:
 
 def _ema_track(path: Path, *, fmt: str | None = None, sensor_map: SensorMapLike = None,
                layout=None, rate: float | None = None, bite_plane=None
-               ) -> tuple[PelletTrack, SensorReport]:
+               ) -> tuple[PelletTrack, SensorReport, RawEma]:
     raw = read_ema(path, format=fmt, layout=layout, rate=rate)
     smap = _sensor_map_for(path, sensor_map)
+    if smap.name == "auto" and sensor_map is None:
+        smap = _emu.sensor_map_for(raw) or smap  # the IPS Munich set has a built-in map
     bite_path = _bite_for(path, bite_plane)
     if bite_path is None:
-        return ema_to_track(raw, smap)
+        return (*ema_to_track(raw, smap), raw)
     bite = read_ema(bite_path, rate=rate)
-    return ema_to_track(raw, smap, bite=bite, bite_map=_sensor_map_for(bite_path, sensor_map))
+    return (*ema_to_track(raw, smap, bite=bite,
+                          bite_map=_sensor_map_for(bite_path, sensor_map)), raw)
 
 
 def _split_ema_stem(stem: str, folder_name: str, subject_folder: bool):
@@ -368,7 +413,8 @@ def load_recording(path: str | os.PathLike, *, sensor_map: SensorMapLike = None,
     with a :class:`SpecialFileWarning`.
     """
     path = Path(path)
-    _regular(path)
+    if not _emu.is_bundle_folder(path):
+        _regular(path)
     fmt = "xrmb" if path.suffix.lower() == PELLET_SUFFIX else detect_format(path)
     folder = path.parent.resolve()
     _warn_special(folder, stacklevel=2)  # the subject's files are looked for here
@@ -380,6 +426,11 @@ def load_recording(path: str | os.PathLike, *, sensor_map: SensorMapLike = None,
         ema = {"fmt": fmt, "sensor_map": sensor_map, "layout": layout, "rate": rate,
                "bite_plane": bite_plane}
         subject, task = _split_ema_stem(path.stem, folder.name, subject_folder=False)
+        if fmt == "emu":
+            subject, task = _emu.recording_names(path, folder)
+            if _emu.session_of(path) is not None:  # a database: the session folder
+                return _assemble(path, subject, task, own=folder,
+                                 shared=[folder.parent], ema=ema)
     if subject is None or subject == folder.name.upper():
         subject = folder.name.upper()
         return _assemble(path, subject, task, own=folder, shared=[folder.parent], ema=ema)
@@ -450,9 +501,19 @@ class Dataset:
         self._index: dict[tuple[str, str], tuple[Path, Path | None]] = {}
         self.skipped: list[tuple[Path, str]] = []
         self._scan_folder(self.root, subject_folder=False)
+        self._scan_emu(self.root)
         for sub in (p for p in entries if p.is_dir()):
-            if not sub.name.startswith("."):
+            if not sub.name.startswith(".") and not sub.name.endswith(_emu.SESSION_SUFFIX):
                 self._scan_folder(sub, subject_folder=True)
+                self._scan_emu(sub)
+
+    def _scan_emu(self, folder: Path) -> None:
+        """The bundles of an emuDB at ``folder`` (one holding a ``*_DBconfig.json``)."""
+        if _emu.find_dbconfig(folder) is None:
+            return
+        for session, bundle, path in _emu.database_bundles(folder):
+            if not _is_bite(path):
+                self._add((session.upper(), bundle.lower()), path, path.parent)
 
     def _scan_folder(self, folder: Path, subject_folder: bool) -> None:
         # stacklevel: warn -> _warn_special -> _scan_folder -> __init__ -> the caller
@@ -464,20 +525,22 @@ class Dataset:
             path = names[lower]
             if lower.endswith(PELLET_SUFFIX):
                 subject, task = _split_stem(path.stem, folder.name, names, subject_folder)
+            elif lower.endswith(_emu.BUNDLE_SUFFIX + ".json"):
+                subject, task = _emu.recording_names(path, folder)
             elif path.suffix.lower() in EMA_SUFFIXES and not _is_bite(path):
                 subject, task = _split_ema_stem(path.stem, folder.name, subject_folder)
             else:
                 continue
             own = folder if subject is None or subject == folder.name.upper() else None
             subject = subject or folder.name.upper()
-            key = (subject, task)
-            if key in self._index:
-                warnings.warn(
-                    f"{path}: ignored, {subject} {task} is already {self._index[key][0]}",
-                    stacklevel=3,
-                )
-                continue
-            self._index[key] = (path, own)
+            self._add((subject, task), path, own)
+
+    def _add(self, key: tuple[str, str], path: Path, own: Path | None) -> None:
+        if key in self._index:
+            warnings.warn(f"{path}: ignored, {key[0]} {key[1]} is already "
+                          f"{self._index[key][0]}", stacklevel=4)
+            return
+        self._index[key] = (path, own)
 
     def subjects(self) -> list[str]:
         return sorted({s for s, _ in self._index}, key=_natural_key)
@@ -557,11 +620,14 @@ class Dataset:
         detected by content, as :func:`load_recording` does (a pellet file named ``.ema``
         is read as the pellet file it is)."""
         path = self.pellet_path(subject, task)
-        _regular(path)
+        if not _emu.is_bundle_folder(path):
+            _regular(path)
         subject, task = self._subject(subject), str(task).lower()
         own = self._index[(subject, task)][1]
         # a root that is itself a subject folder: look one folder up, as load_recording does
         shared = [self.root, self.root.parent] if own == self.root else [self.root]
+        if _emu.is_bundle_folder(path):
+            shared = [path.parent.parent, self.root]
         xrmb = path.suffix.lower() == PELLET_SUFFIX or detect_format(path) == "xrmb"
         ema = None if xrmb else {"sensor_map": self.sensor_map}
         return _assemble(path, subject, task, own=own, shared=shared, ema=ema)

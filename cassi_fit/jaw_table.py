@@ -162,7 +162,7 @@ def fit_jaw_bucketed(track: PelletTrack, *, method: str | None = None,
     from .jaw_fit import jaw_from_track, jaw_sensor_set, method_for_sensors, tracked_jaw_sensors
     from .txy import PelletTrack
 
-    sensors = (tracked_jaw_sensors(track.valid) if jaw_sensors is None
+    sensors = (tracked_jaw_sensors(track.valid, track.path) if jaw_sensors is None
                else jaw_sensor_set(jaw_sensors))
     method = method_for_sensors(method, sensors).name
     jaw_sensors = ",".join(sensors)
@@ -203,7 +203,8 @@ def jaw_task(item: CorpusItem, out_dir: str, *, method: str | None = None,
     """``cassi jaw DATASET``'s task: fit the jaw of one pellet file
     (:func:`fit_jaw_bucketed`), write ``out_dir/SUBJECT/TASK.jaw.csv`` (one row per frame)
     and return the summary row (:func:`jaw_summary_row`). When ``labels`` and a label
-    file lies beside the pellet file (``labels.labels_for``), the frame table gets a
+    file lies beside the pellet file or labels are inside it (``labels.recording_labels``),
+    the frame table gets a
     ``label`` column and ``TASK.segments.csv`` holds one row per labelled segment
     (``labels.segment_summary``: peak jaw opening, lip aperture range, ...). With one jaw
     sensor (``jaw_sensors``), the other's prediction is in the frame table and its error,
@@ -211,16 +212,14 @@ def jaw_task(item: CorpusItem, out_dir: str, *, method: str | None = None,
     articulograph's, ``corpus.load_item``); ``method``/``jaw_sensors`` None: as
     :func:`fit_jaw_bucketed`, per recording."""
     from .corpus import load_item
-    from .labels import SEGMENT_COLUMNS, labels_for, segment_summary
+    from .labels import SEGMENT_COLUMNS, recording_labels, segment_summary
     from .pellets import JAW_PELLETS, pellet_index
-    from .sound import recording_seconds
 
     recording = load_item(item, quiet=True)
     track = recording.track
     fit = fit_jaw_bucketed(track, method=method, solver=solver, smoothness=smoothness,
                            jaw_sensors=jaw_sensors)
-    found = labels_for(recording.path, recording_s=recording_seconds(track.times)) \
-        if labels else None
+    found = recording_labels(recording) if labels else None  # beside the file or inside it
     out = jaw_output_path(out_dir, item)
     outputs = [atomic_write(out, jaw_frame_csv(track.times, fit, found,
                                                track.mistracks.frame_labels()),

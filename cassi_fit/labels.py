@@ -31,7 +31,8 @@ the recording that a unit mix-up explains, one line gives the numbers and the li
 cause: times in milliseconds or in samples read as seconds (1000 or 16000 times too
 long), or read as HTK's 100 ns units (10000 or 625 times too short): an error, since every
 label would be shifted or empty, with ``units=`` as the cure. Labels past the end that no
-unit explains warn (:class:`LabelMismatchWarning`; those intervals are never reached).
+unit explains warn (:class:`LabelMismatchWarning`; those intervals are never reached),
+unless every label starts past the end: an error too (nothing would ever be shown).
 ``accept_mismatch=True`` turns the errors into warnings and keeps the labels as they are.
 """
 
@@ -181,6 +182,11 @@ def check_labels(labels: Labels, recording_s: float, *,
     status = "ok"
     if cause is not None and abs(last - recording_s) > tolerance:
         status, message, error = "units", f"{numbers}: likely {cause}", True
+    elif past == n:
+        status, error = "past-end", True
+        message = (f"{numbers}: every label starts after the recording ends, none would be "
+                   "shown (times in other units, labels of another recording, or a "
+                   "different time origin?)")
     elif last > recording_s + tolerance:
         status, error = "past-end", False
         message = (f"{numbers}: labels past the end are never shown (labels of another "
@@ -503,6 +509,47 @@ def _pellet_seconds(pellet_path: Path) -> float | None:
         return (int(last.split()[0]) + FRAME_STEP_US) / 1e6
     except (OSError, IndexError, ValueError):
         return None
+
+
+# ------------------------------------------------------- a recording's own labels
+#: Tier names (lower case) taken first when none is named: phones, then words.
+PHONE_TIERS = ("phones", "phone", "segment", "segments", "phonetic", "phn")
+WORD_TIERS = ("words", "word", "wrd")
+
+
+def choose_tier(tiers, tier: str | None = None, where=None) -> Labels | None:
+    """The tier named ``tier`` (any case; else a :class:`MissingDataError` listing them),
+    else the first of :data:`PHONE_TIERS`, then :data:`WORD_TIERS`, then the first tier."""
+    tiers = list(tiers)
+    by_name = {t.tier.lower(): t for t in reversed(tiers)}
+    if tier is not None and tier.lower() not in by_name:
+        raise MissingDataError(f"{where or 'the recording'}: no label tier {tier!r} (tiers: "
+                               f"{', '.join(t.tier for t in tiers) or 'none'})")
+    if tier is not None:
+        return by_name[tier.lower()]
+    found = [by_name[n] for n in PHONE_TIERS + WORD_TIERS if n in by_name]
+    return found[0] if found else (tiers[0] if tiers else None)
+
+
+def recording_labels(recording, *, tier: str | None = None, units: str = "auto",
+                     recording_s: float | None = None,
+                     accept_mismatch: bool = False) -> Labels | None:
+    """The labels every output uses for a ``dataset.Recording``: a file beside it
+    (:func:`labels_for`), else the tiers inside it (``recording.labels``: mview
+    ``WORDS``/``PHONES``, EMU levels; :func:`choose_tier`), else None; checked against
+    its length (``recording_s``, default the track's) as :func:`labels_for` checks."""
+    from .sound import recording_seconds
+
+    if recording_s is None:
+        recording_s = recording_seconds(recording.track.times)
+    path = getattr(recording, "path", None)
+    if path is not None and label_path_for(path) is not None:
+        return labels_for(path, tier=tier, units=units, recording_s=recording_s,
+                          accept_mismatch=accept_mismatch)
+    chosen = choose_tier(getattr(recording, "labels", ()) or (), tier, path)
+    if chosen is not None:
+        check_labels(chosen, recording_s, accept_mismatch=accept_mismatch)
+    return chosen
 
 
 # ----------------------------------------------------------- per-segment summaries

@@ -6,6 +6,7 @@ for a ``pipeline.RecordingRun``; and ``cassi animate DATASET``'s corpus task."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
@@ -230,26 +231,30 @@ def write_recording_video(
     for a recording (the model, its ``views`` (default all of ``options.VIEWS``, in a
     grid) at ``size``, the subject's palate and pharynx traces in the midsagittal view)
     and writes :func:`write_animation`, with the recording's sound in an MP4 when
-    ``audio`` and a ``.wav`` is there (a GIF has none; the sound is checked against the
-    recording's length first, ``sound.check_sound``), the current label in the captions
-    (``labels``: True for the labels beside the recording, ``labels.labels_for``, checked
-    against its length; a ``Labels``; or None/False for none). ``accept_mismatch``: keep
+    ``audio`` and it has one (``Recording.sound``: a ``.wav`` beside its file or the sound
+    inside it; a GIF has none; checked against the recording's length first,
+    ``sound.check_sound``), the current label in the captions (``labels``: True for the
+    recording's labels, beside its file or inside it, ``labels.recording_labels``,
+    checked against its length; a ``Labels``; or None/False for none). ``accept_mismatch``: keep
     sound or labels whose length does not fit the recording (with a warning) instead of
     the error. ``renderer``: reuse an open ``render.Renderer`` of the same model (its
     traces are replaced). Returns the path written."""
     from .options import VIEWS
     from .render import Renderer
-    from .sound import check_sound, recording_seconds
+    from .sound import Sound, check_sound, recording_seconds
 
     recording, state = run.recording, run.state
     length_s = recording_seconds(recording.track.times)
-    if labels is True:
-        from .labels import labels_for
+    if labels is True:  # beside the file or inside it (labels.recording_labels)
+        from .labels import recording_labels
 
-        labels = labels_for(recording.path, recording_s=length_s,
-                            accept_mismatch=accept_mismatch) if recording.path else None
+        labels = recording_labels(recording, recording_s=length_s,
+                                  accept_mismatch=accept_mismatch)
     labels = labels or None
-    sound = recording.audio if audio and Path(path).suffix.lower() == ".mp4" else None
+    # the sound beside the file or inside it (mview AUDIO, EMU media): dataset.Recording.sound
+    sound = getattr(recording, "sound", None) or (
+        None if getattr(recording, "audio", None) is None else Sound.from_file(recording.audio))
+    sound = sound if audio and Path(path).suffix.lower() == ".mp4" else None
     if sound is not None:
         check_sound(sound, length_s, accept_mismatch=accept_mismatch)
     traces = subject_traces(recording, state.scale)
@@ -261,9 +266,10 @@ def write_recording_video(
     else:
         renderer.set_traces(traces)
     try:
-        return write_animation(path, run.animation, renderer, subject=recording.subject,
-                               task=recording.task, audio=sound, markers=markers,
-                               progress=progress, overwrite=overwrite, labels=labels)
+        with sound.wav_file() if sound is not None else contextlib.nullcontext() as wav:
+            return write_animation(path, run.animation, renderer, subject=recording.subject,
+                                   task=recording.task, audio=wav, markers=markers,
+                                   progress=progress, overwrite=overwrite, labels=labels)
     finally:
         if own:
             renderer.close()
@@ -284,14 +290,12 @@ def animate_task(item: Any, out_dir: str, *, spec: Any, suffix: str = ".mp4",
     current label (``labels.labels_for``) in each frame's caption. Row: frames, stride,
     the video, the label file, the tongue's volume range."""
     from .corpus import TaskResult, load_item, worker_model
-    from .labels import labels_for
+    from .labels import recording_labels
     from .pipeline import run_recording
-    from .sound import recording_seconds
     from .tongue import tongue_volumes
 
     run = run_recording(load_item(item, quiet=True), spec, model=worker_model())
-    found = labels_for(run.recording.path, recording_s=recording_seconds(
-        run.recording.track.times)) if labels else None
+    found = recording_labels(run.recording) if labels else None
     path = write_recording_video(video_output_path(out_dir, item, suffix), run, size=size,
                                  views=views, markers=markers, audio=audio, labels=found,
                                  progress=False, overwrite=overwrite)

@@ -15,16 +15,29 @@ recording is ``"ok"``; otherwise one line says the numbers and the likely cause:
 * ``"longer"``: more sound than pellets, a warning (a video keeps the part the pellets
   cover).
 
+* a **cut file** (an error, before the above): the header claims more samples than the
+  file holds (half of a video would be silence); accepted, the samples held are checked.
+
 ``accept_mismatch=True`` turns every error into a :class:`SoundMismatchWarning` (the
 sound is then used as it is: padded or cut, never resampled). The video writer and
 ``cassi info`` call it; this module is the standard library's ``wave`` only.
+
+**A recording's sound** is a :class:`Sound`: a ``.wav`` beside the recording file, or the
+sound stored inside it (Haskins mview's ``AUDIO`` channel, an EMU bundle's media file),
+used alike: :meth:`Sound.check` compares it with the recording and
+:meth:`Sound.wav_file` gives a ``.wav`` path for the video writer (the file itself, or a
+temporary copy of the sound held in memory).
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
+import tempfile
 import warnings
 import wave
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -122,7 +135,11 @@ def _likely_rate(n_samples: int, recording_s: float, header_hz: int) -> int | No
     return None
 
 
-def check_sound(path: str | os.PathLike, recording_s: float, *,
+def _held_frames(params: wave._wave_params, data: bytes) -> int:
+    return len(data) // max(params.sampwidth * params.nchannels, 1)
+
+
+def check_sound(path: str | os.PathLike | Sound, recording_s: float, *,
                 accept_mismatch: bool = False) -> SoundCheck:
     """Compare the ``.wav`` at ``path`` with a recording of ``recording_s`` seconds (e.g.
     :func:`recording_seconds` of the pellet times); see the module docstring.
@@ -132,9 +149,26 @@ def check_sound(path: str | os.PathLike, recording_s: float, *,
     cause), unless ``accept_mismatch``; a lesser one, or an accepted one, warns
     (:class:`SoundMismatchWarning`).
     """
+    if isinstance(path, Sound):
+        return path.check(recording_s, accept_mismatch=accept_mismatch)
     path = Path(path)
-    params = read_header(path)
+    params, data = open_pcm(path)
+    read_header(path)  # a rate or channel count of 0
+    return _check(str(path), params, _held_frames(params, data), recording_s,
+                  accept_mismatch)
+
+
+def _check(where: str, params: wave._wave_params, held: int, recording_s: float,
+           accept_mismatch: bool) -> SoundCheck:
     rate, n = int(params.framerate), int(params.nframes)
+    if held < n:
+        message = (f"the header claims {n} samples ({n / rate:.3g} s) but the file holds "
+                   f"{held} ({held / rate:.3g} s): the file is cut")
+        if not accept_mismatch:
+            raise DataFormatError(where, None, message + " (accept it with "
+                                  "accept_mismatch=True)")
+        warnings.warn(f"{where}: {message}", SoundMismatchWarning, stacklevel=3)
+        n = held
     sound_s = n / rate
     recording_s = float(recording_s)
     tolerance = max(SOUND_TOLERANCE_S, SOUND_TOLERANCE_FRACTION * recording_s)
@@ -142,7 +176,7 @@ def check_sound(path: str | os.PathLike, recording_s: float, *,
     numbers = (f"{sound_s:.3g} s of sound ({n} samples at {rate} Hz) for {recording_s:.3g} s "
                "of pellets")
     if abs(sound_s - recording_s) <= tolerance:
-        return SoundCheck(str(path), rate, n, sound_s, recording_s, "ok", None, None)
+        return SoundCheck(where, rate, n, sound_s, recording_s, "ok", None, None)
     if likely is not None:
         status, error = "rate", True
         cause = (f"the header's rate is likely wrong: the samples fill the recording at "
@@ -157,6 +191,87 @@ def check_sound(path: str | os.PathLike, recording_s: float, *,
         cause = f"a video keeps the first {recording_s:.3g} s"
     message = f"{numbers}: {cause}"
     if error and not accept_mismatch:
-        raise DataFormatError(path, None, message + " (accept it with accept_mismatch=True)")
-    warnings.warn(f"{path}: {message}", SoundMismatchWarning, stacklevel=2)
-    return SoundCheck(str(path), rate, n, sound_s, recording_s, status, likely, message)
+        raise DataFormatError(where, None, message + " (accept it with accept_mismatch=True)")
+    warnings.warn(f"{where}: {message}", SoundMismatchWarning, stacklevel=3)
+    return SoundCheck(where, rate, n, sound_s, recording_s, status, likely, message)
+
+
+@dataclass(frozen=True, eq=False)
+class Sound:
+    """A recording's sound: a ``.wav`` file (``path``), or PCM ``.wav`` bytes held in
+    memory (``data``: the sound stored inside a recording file), with ``source`` naming it
+    in messages (the path, or ``rec.mat: AUDIO``) and ``kind`` saying where it was found
+    (``"wav beside"``, ``"mview AUDIO"``, ``"EMU media"``)."""
+
+    source: str
+    kind: str
+    path: Path | None = None
+    data: bytes | None = None
+
+    def __post_init__(self):
+        if (self.path is None) == (self.data is None):
+            raise ValueError("Sound: give a path or the .wav bytes (one of them)")
+
+    @classmethod
+    def from_file(cls, path: str | os.PathLike, kind: str = "wav beside") -> Sound:
+        return cls(str(path), kind, path=Path(path))
+
+    @classmethod
+    def from_samples(cls, samples, rate_hz: float, source: str, kind: str) -> Sound:
+        """A sound from float samples in [-1, 1] (``(n,)`` or ``(n, channels)``), stored
+        as 16-bit PCM."""
+        values = np.asarray(samples, np.float64)
+        values = values[:, None] if values.ndim == 1 else values
+        pcm = np.round(np.clip(values, -1.0, 32767 / 32768) * 32768).astype("<i2")
+        buffer = io.BytesIO()
+        with wave.open(buffer, "wb") as out:
+            out.setnchannels(pcm.shape[1])
+            out.setsampwidth(2)
+            out.setframerate(int(round(rate_hz)))
+            out.writeframes(pcm.tobytes())
+        return cls(source, kind, data=buffer.getvalue())
+
+    def _open(self) -> tuple[wave._wave_params, bytes]:
+        if self.path is not None:
+            return open_pcm(self.path)
+        try:
+            with wave.open(io.BytesIO(self.data), "rb") as src:
+                params = src.getparams()
+                return params, src.readframes(params.nframes)
+        except (wave.Error, EOFError) as exc:
+            reason = str(exc) or "empty or truncated header"
+            raise DataFormatError(self.source, None, f"not a readable PCM .wav sound "
+                                  f"({reason})") from None
+
+    def params(self) -> wave._wave_params:
+        """The sound's ``.wav`` parameters (rate, channels, samples...)."""
+        params, _ = self._open()
+        if params.framerate <= 0 or params.nchannels <= 0:
+            raise DataFormatError(self.source, None, f"bad .wav header: rate "
+                                  f"{params.framerate} Hz, {params.nchannels} channels")
+        return params
+
+    def check(self, recording_s: float, *, accept_mismatch: bool = False) -> SoundCheck:
+        """:func:`check_sound` for this sound."""
+        params, data = self._open()
+        self.params()
+        return _check(self.source, params, _held_frames(params, data), recording_s,
+                      accept_mismatch)
+
+    @contextlib.contextmanager
+    def wav_file(self) -> Iterator[Path]:
+        """A ``.wav`` path holding this sound while the context lasts: the file itself, or
+        a temporary file (removed afterwards) for a sound held in memory."""
+        if self.path is not None:
+            yield self.path
+            return
+        with tempfile.TemporaryDirectory(prefix="cassi-sound-") as folder:
+            path = Path(folder) / "sound.wav"
+            path.write_bytes(self.data)
+            yield path
+
+    def describe(self) -> str:
+        """One line: where the sound is, its rate, channels and length."""
+        params = self.params()
+        return (f"{self.source} ({self.kind}): {params.nframes / params.framerate:.3g} s at "
+                f"{params.framerate} Hz, {params.nchannels} channel(s)")

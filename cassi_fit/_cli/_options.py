@@ -33,9 +33,9 @@ def add_recording_argument(parser: argparse.ArgumentParser) -> None:
         nargs="+",
         metavar="RECORDING",
         help="a pellet file (.txy) or an articulograph file (EST Track .ema, Carstens .pos, "
-        "NDI Wave .tsv, mview .mat, a .npy/.npz/.csv array; docs/EMA.md), or three words "
-        "DATASET SUBJECT TASK: a dataset folder (per-subject folders or flat files) and the "
-        "subject and task in it",
+        "NDI Wave .tsv, mview .mat, a .npy/.npz/.csv array, an EMU bundle folder or "
+        "_bndl.json; docs/EMA.md), or three words DATASET SUBJECT TASK: a dataset folder "
+        "(per-subject folders, flat files or an emuDB) and the subject and task in it",
     )
     add_source_arguments(parser)
 

@@ -147,8 +147,9 @@ def write_output(out: Path, run, size, views, args) -> Path:
                 animation, renderer, subject=recording.subject, task=recording.task,
                 markers=args.markers, progress=False, indices=[args.frame])
         return save_png(out, image, overwrite=args.force)
-    if not args.no_audio and out.suffix.lower() == ".mp4" and recording.audio is not None:
-        print(f"sound: {recording.audio}", file=sys.stderr)
+    sound = getattr(recording, "sound", None)  # beside the file or inside it
+    if not args.no_audio and out.suffix.lower() == ".mp4" and sound is not None:
+        print(f"sound: {sound.source}", file=sys.stderr)
     return video.write_recording_video(out, run, size=size, views=views, markers=args.markers,
                                        audio=not args.no_audio, progress=not args.quiet,
                                        accept_mismatch=args.accept_mismatch,

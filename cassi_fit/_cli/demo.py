@@ -145,7 +145,7 @@ def _stills(out: Path, renderer, recording, animation):
 def run(args) -> int:
     from cassi_fit import recording_video as video
     from cassi_fit.export import export_glb
-    from cassi_fit.labels import labels_for
+    from cassi_fit.labels import recording_labels
     from cassi_fit.options import VIEWS
     from cassi_fit.pipeline import run_recording
     from cassi_fit.render import Renderer
@@ -200,7 +200,7 @@ def run(args) -> int:
             else:  # jaw wagging: the closed form against the fits
                 written.append(jaw_plot(out / f"{stem}_jaw.png", run.state, run.animation,
                                         title=f"{stem}: closed form vs pivot fits",
-                                        labels=labels_for(recording.path)))
+                                        labels=recording_labels(recording)))
     finally:
         if renderer is not None:
             renderer.close()

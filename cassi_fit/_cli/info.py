@@ -64,25 +64,50 @@ def _describe(recording) -> dict:
                                      track.extra_names),
         "sensors": None if sensors is None else sensors.to_dict(),
         "sound": _sound(recording),
+        "labels": _labels(recording),
     }
 
 
 def _sound(recording) -> dict | None:
-    """The sound checked against the pellets (``sound.check_sound``), or its error."""
+    """The sound (beside the file or inside it: ``Recording.sound``) checked against the
+    pellets (``sound.check_sound``), or its error; with where it was found."""
     import warnings
 
     from cassi_fit.errors import CassiError
     from cassi_fit.sound import check_sound, recording_seconds
 
-    if recording.audio is None:
+    sound = getattr(recording, "sound", None)
+    if sound is None:
         return None
+    found = {"source": sound.source, "kind": sound.kind}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the report carries the message
         try:
-            return check_sound(recording.audio, recording_seconds(recording.track.times),
-                               accept_mismatch=True).to_dict()
+            return {**check_sound(sound, recording_seconds(recording.track.times),
+                                  accept_mismatch=True).to_dict(), **found}
         except CassiError as exc:
-            return {"error": str(exc)}
+            return {"error": str(exc), **found}
+
+
+def _labels(recording) -> dict:
+    """The label files beside the recording and the tiers inside it, and the tier every
+    output uses (``labels.recording_labels``) or why none can be."""
+    import warnings
+
+    from cassi_fit.errors import CassiError
+    from cassi_fit.labels import label_path_for, recording_labels
+
+    path = getattr(recording, "path", None)
+    beside = None if path is None else label_path_for(path)
+    inside = [{"tier": t.tier, "labels": len(t)} for t in getattr(recording, "labels", ())]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            used = recording_labels(recording, accept_mismatch=True)
+            used = None if used is None else {"tier": used.tier, "labels": len(used)}
+        except CassiError as exc:
+            used = {"error": str(exc)}
+    return {"beside": None if beside is None else str(beside), "inside": inside, "used": used}
 
 
 def _quietly(load, *args):
@@ -117,7 +142,9 @@ def collect(path: Path, list_only: bool = False, *, sensor_map=None, layout=None
 
     if isinstance(layout, str) and "," in layout:
         layout = [c.strip() for c in layout.split(",") if c.strip()]
-    if (path.exists() or path.is_symlink()) and not path.is_dir():
+    from cassi_fit.ema.emu import is_bundle_folder
+
+    if ((path.exists() or path.is_symlink()) and not path.is_dir()) or is_bundle_folder(path):
         # a file (load_recording refuses a FIFO, a device, a broken or looping link)
         load = partial(load_recording, sensor_map=sensor_map, layout=layout, rate=rate,
                        bite_plane=bite_plane)
@@ -176,10 +203,26 @@ def _print_file(report: dict, out) -> None:
           f"SD {_mm(q['jaw_distance_sd_mm'], 3)} mm", file=out)  # fmt: skip
     sound = report.get("sound")
     if sound:
-        print(f"  sound: {sound.get('error') or sound['message'] or 'length fits the pellets'}",
-              file=out)
+        where = ("" if sound.get("kind") == "wav beside"
+                 else f" ({sound['kind']}: {sound['source']})")
+        said = sound.get("error") or sound["message"] or "length fits the pellets"
+        print(f"  sound{where}: {said}", file=out)
+    _print_labels(report.get("labels"), out)
     if report.get("sensors"):
         _print_sensors(report, out)
+
+
+def _print_labels(labels: dict | None, out) -> None:
+    """Where the labels are: a file beside, tiers inside the file, the tier used."""
+    if not labels or not (labels["beside"] or labels["inside"]):
+        return
+    parts = [f"beside: {labels['beside']}"] if labels["beside"] else []
+    if labels["inside"]:
+        parts.append("in the file: " + ", ".join(f"{t['tier']} ({t['labels']})"
+                                                 for t in labels["inside"]))
+    used = labels["used"] or {}
+    parts.append(f"used: {used['tier']}" if "tier" in used else f"error: {used.get('error')}")
+    print(f"  labels: {'; '.join(parts)}", file=out)
 
 
 def _print_sensors(report: dict, out) -> None:

@@ -194,6 +194,7 @@ def run_recording(args) -> int:
     # is a quotient by sin(theta/2)), so the command computes in float64.
     jax.config.update("jax_enable_x64", True)
     from cassi_fit._io import atomic_write
+    from cassi_fit.dataset import recording_source
     from cassi_fit.jaw_fit import (
         check_sensors,
         jaw_diagnostics,
@@ -204,8 +205,7 @@ def run_recording(args) -> int:
         tracked_jaw_sensors,
     )
     from cassi_fit.jaw_table import jaw_frame_csv
-    from cassi_fit.labels import SEGMENT_COLUMNS, labels_for, segment_summary
-    from cassi_fit.sound import recording_seconds
+    from cassi_fit.labels import SEGMENT_COLUMNS, recording_labels, segment_summary
     from cassi_fit.status import Status
     from cassi_fit.tables import csv_text
     from cassi_fit.txy import JAW_PELLETS, pellet_index
@@ -224,12 +224,12 @@ def run_recording(args) -> int:
     if track.path is not None:
         for path in (out, diag_out, seg_out):
             _check_output(path, [track.path], args.force)
-    sensors = (tracked_jaw_sensors(track.valid) if args.jaw_sensors is None
+    where = recording_source(recording)
+    sensors = (tracked_jaw_sensors(track.valid, where) if args.jaw_sensors is None
                else jaw_sensor_set(args.jaw_sensors))
     method = method_for_sensors(chosen, sensors)  # by default, by the recording's sensors
     args.method = method.name
-    labels = None if args.no_labels or recording.path is None else labels_for(
-        recording.path, recording_s=recording_seconds(track.times))
+    labels = None if args.no_labels else recording_labels(recording)  # beside or inside
     fit = jaw_from_track(track, method=method, jaw_sensors=sensors)
     jaw_points = track.positions[:, [pellet_index(p) for p in JAW_PELLETS], :]
     rows = [jaw_diagnostics(fit, jaw_points)]
@@ -246,7 +246,8 @@ def run_recording(args) -> int:
         segments = segment_summary(track.times, fit.theta, track.positions, labels,
                                    usable=fit.status == Status.OK)
         atomic_write(seg_out, csv_text(segments, SEGMENT_COLUMNS), overwrite=args.force)
-        print(f"{seg_out}: {len(segments)} labelled segments ({labels.path.name})")
+        source = labels.path.name if labels.path else labels.tier
+        print(f"{seg_out}: {len(segments)} labelled segments ({source})")
     ok = int((fit.status <= 1).sum())
     mistracked = int((fit.status == Status.MISTRACKED).sum())
     print(f"{out}: {track.n_frames} frames, {ok} fitted ({args.method}"

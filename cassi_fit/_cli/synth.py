@@ -6,7 +6,7 @@ import argparse
 
 #: ``--format`` values: the XRMB corpus, or the same corpus as an articulograph records it
 #: (cassi_fit.ema.synthetic.FORMATS; tests/test_ema_synthetic.py keeps the two in step).
-FORMATS = ("xrmb", "est", "est-ascii", "ag501", "wave", "mview")
+FORMATS = ("xrmb", "est", "est-ascii", "ag501", "wave", "mview", "emu")
 
 
 def register(subparsers) -> None:
@@ -57,7 +57,8 @@ def register(subparsers) -> None:
         help="xrmb (the default: .txy pellet files) or an articulograph's format for the same "
         "subjects and tasks, measured in 3D with reference sensors, a known head movement and "
         "a recording frame (docs/EMA.md): est (EST Track binary, 200 Hz), est-ascii (500 Hz), "
-        "ag501 (Carstens .pos, 250 Hz), wave (NDI Wave .tsv, 100 Hz), mview (.mat, 100 Hz)",
+        "ag501 (Carstens .pos, 250 Hz), wave (NDI Wave .tsv, 100 Hz), mview (.mat, 100 Hz), "
+        "emu (an EMU-SDMS database: SSFF tracks padded with zeros, the sound inside, 200 Hz)",
     )
     parser.add_argument(
         "--sensors",

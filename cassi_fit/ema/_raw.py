@@ -14,12 +14,17 @@ import re
 import stat
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from jaxtyping import Float
 
 from .._io import register_input
 from ..errors import DataFormatError, MissingDataError
+
+if TYPE_CHECKING:
+    from ..labels import Labels
+    from ..sound import Sound
 
 #: Axis suffixes of position channels (``ul_x``, ``T1_py``, ``UL.X``), and of orientation or
 #: quality channels that are kept aside (never mistaken for a position).
@@ -50,6 +55,10 @@ class RawEma:
         orientation: ``(n, k, q)`` sensor orientation values (angles or quaternions) as in
             the file, or None.
         notes: anything the reader decided that a user should know (unused channels...).
+        sound: the sound stored inside the file (a :class:`cassi_fit.sound.Sound`: mview's
+            ``AUDIO`` channel, an EMU bundle's media file), or None.
+        labels: the label tiers stored inside the file (:class:`cassi_fit.labels.Labels`:
+            mview ``WORDS``/``PHONES``/``LABELS``, an EMU bundle's levels), or ``()``.
     """
 
     format: str
@@ -63,6 +72,8 @@ class RawEma:
     path: Path | None = None
     orientation: np.ndarray | None = None
     notes: tuple[str, ...] = field(default=())
+    sound: Sound | None = None
+    labels: tuple[Labels, ...] = field(default=())
 
     def __post_init__(self):
         times = np.asarray(self.times, dtype=np.float64)
@@ -80,6 +91,7 @@ class RawEma:
         object.__setattr__(self, "positions", positions)
         object.__setattr__(self, "names", names)
         object.__setattr__(self, "notes", tuple(self.notes))
+        object.__setattr__(self, "labels", tuple(self.labels))
         if self.path is not None:
             object.__setattr__(self, "path", Path(self.path))
 
@@ -213,3 +225,61 @@ def assemble_channels(path: Path | None, channels: list[str], values: np.ndarray
             notes.append(f"orientation channels of {', '.join(stray)} have no positions: "
                          "ignored")
     return names, positions, orientation, notes
+
+
+#: A position farther than this (mm) from its sensor's median is no measurement (an
+#: articulograph's field is about 300 mm across; a head moves far less): untracked.
+ABSURD_MM = 500.0
+
+
+def untrack_impossible(positions: np.ndarray, names: tuple[str, ...],
+                       references: tuple[str, ...] = ()) -> tuple[np.ndarray, list[str]]:
+    """``positions (n, k, d)`` mm with the values no tracker measures set to NaN, and notes.
+
+    - **dead channels**: a sensor's coordinate that is exactly 0 in every frame (a channel
+      exported as zeros: MOCHA's ``li`` or ``tt`` when the coil failed, a CSV column) makes
+      the whole sensor untracked, never a sensor moving on the axis. In 3D data a
+      coordinate that is 0 for *every* sensor is a midsagittal recording lifted into 3D,
+      not a dead channel.
+    - **dropouts to zero**: frames where at least two coordinates of a sensor are exactly 0
+      (both, in 2D data), e.g. a jaw sensor's x and y zeroed with z kept;
+    - **absurd values**: a position more than :data:`ABSURD_MM` from the sensor's median.
+
+    Head ``references`` are spared the zero rules: a head-normalised export may hold its
+    reference exactly at the origin."""
+    positions = np.array(positions, dtype=np.float64, copy=True)
+    n, k, d = positions.shape
+    notes: list[str] = []
+    if n == 0:
+        return positions, notes
+    tracked = np.isfinite(positions).all(-1)
+    zero = positions == 0.0
+    lifted = [c for c in range(d) if d == 3 and np.all(zero[:, :, c] | ~tracked)]
+    for j, name in enumerate(names):
+        ok = tracked[:, j]
+        if name in references or not ok.any():
+            continue
+        dead = [c for c in range(d) if c not in lifted and ok.sum() > 1
+                and zero[ok, j, c].all()]
+        if dead:
+            positions[:, j] = np.nan
+            notes.append(f"{name}: {'/'.join('xyz'[c] for c in dead)} exactly 0 in every "
+                         "frame (a dead channel): the sensor is untracked")
+            continue
+        drop = ok & (zero[:, j, [c for c in range(d) if c not in lifted]].sum(-1)
+                     >= min(2, d - len(lifted)))
+        if drop.any():
+            positions[drop, j] = np.nan
+            notes.append(f"{name}: {int(drop.sum())} frame(s) with coordinates exactly 0 (a "
+                         "dropout to zero): untracked")
+    for j, name in enumerate(names):
+        ok = np.isfinite(positions[:, j]).all(-1)
+        if not ok.any():
+            continue
+        far = ok & (np.linalg.norm(positions[:, j] - np.median(positions[ok, j], axis=0),
+                                   axis=-1) > ABSURD_MM)
+        if far.any():
+            positions[far, j] = np.nan
+            notes.append(f"{name}: {int(far.sum())} frame(s) more than {ABSURD_MM:g} mm from "
+                         "the sensor's median position (absurd values): untracked")
+    return positions, notes

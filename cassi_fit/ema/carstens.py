@@ -123,6 +123,8 @@ def read_pos(path: str | os.PathLike, *, channels: int | None = None,
                               f"{size - full * frame_bytes} bytes more (byte offset "
                               f"{offset + full * frame_bytes}){hint}")
     values = np.frombuffer(raw, dtype="<f4", offset=offset).astype(np.float64)
+    if fmt == "ag501":
+        _check_channel_count(path, values, n_ch)
     values = values.reshape(-1, n_ch, VALUES_PER_CHANNEL)
     positions = values[..., :3].copy()
     unused = (positions == 0).all(axis=-1)
@@ -137,6 +139,35 @@ def read_pos(path: str | os.PathLike, *, channels: int | None = None,
                   rate_hz=hz, units="mm (x, y, z), degrees (phi, theta)",
                   axes="the articulograph's device frame (Carstens)", frame=None, path=path,
                   orientation=values[..., 3:], notes=tuple(notes))
+
+
+def _median_step(values: np.ndarray, n_ch: int) -> float:
+    """The median frame-to-frame move (mm) of the tracked positions read as ``n_ch``
+    channels (inf when nothing is tracked twice in a row)."""
+    pos = values.reshape(-1, n_ch, VALUES_PER_CHANNEL)[..., :3]
+    pos = np.where((pos == 0).all(-1, keepdims=True), np.nan, pos)
+    steps = np.linalg.norm(np.diff(pos, axis=0), axis=-1)
+    steps = steps[np.isfinite(steps)]
+    return float(np.median(steps)) if steps.size else np.inf
+
+
+def _check_channel_count(path: Path, values: np.ndarray, n_ch: int) -> None:
+    """An error naming the file when the samples fit another channel count far better
+    than the header's: read with the wrong count, consecutive "frames" jump between
+    different sensors (tens of mm) instead of moving a fraction of a millimetre."""
+    total = values.size // VALUES_PER_CHANNEL
+    claimed = _median_step(values, n_ch)
+    if not (np.isfinite(claimed) and claimed > 0.5) or total // n_ch < 4:
+        return
+    fits = {m: _median_step(values, m) for m in range(1, 65)
+            if m != n_ch and total % m == 0 and total // m >= 4}
+    better = [m for m, step in fits.items() if step * 10 < claimed]
+    if better:
+        m = min(better)
+        raise DataFormatError(path, None, f"the header says {n_ch} channels, but the samples "
+                              f"fit {m} channels: read as {n_ch}, each sensor jumps "
+                              f"{claimed:.3g} mm between frames (median), as {m} it moves "
+                              f"{fits[m]:.3g} mm (a wrong NumberOfChannels line)")
 
 
 def ag501_header(n_channels: int, rate_hz: float) -> bytes:

@@ -2,7 +2,8 @@
 
 Content decides where it can: an EST Track header (``EST_File``), a Carstens AG50x
 header (``AG50xDATA_V00``), a MATLAB file header, numpy's ``.npy`` magic or an ``.npz``
-(zip) with that suffix, a Wave export's header (``Wav Time`` ... ``Tx Ty Tz``), an XRMB
+(zip) with that suffix, an EMU bundle (a ``<bundle>_bndl`` folder, or its JSON as the
+EMU-webApp serves it), a Wave export's header (``Wav Time`` ... ``Tx Ty Tz``), an XRMB
 pellet line (17 whole numbers). A file with none of these is named by its suffix only
 where the format has no header: ``.pos`` (a headerless AG500 file), ``.csv`` (an array
 with a layout). So an EST file named ``.txt`` or ``.ema``, a ``.pos`` with or without a
@@ -17,11 +18,11 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from ..errors import DataFormatError, MissingDataError
-from . import arrays, carstens, est, mview, wave
+from . import arrays, carstens, emu, est, mview, wave
 from ._raw import RawEma
 
 #: Formats :func:`detect_format` names (``xrmb`` is read by :mod:`cassi_fit.txy`).
-EMA_FORMATS = ("est", "ag501", "ag500", "wave", "mview", "array")
+EMA_FORMATS = ("est", "ag501", "ag500", "wave", "mview", "array", "emu")
 _HEAD_BYTES = 4096
 
 
@@ -48,6 +49,8 @@ def detect_format(path: str | os.PathLike) -> str:
     """``"xrmb"`` or one of :data:`EMA_FORMATS` for the file at ``path`` (module
     docstring); :class:`DataFormatError` naming the file when it is none of them."""
     path = Path(path)
+    if emu.is_bundle_folder(path):
+        return "emu"
     try:
         with open(path, "rb") as fh:
             head = fh.read(_HEAD_BYTES)
@@ -64,6 +67,8 @@ def detect_format(path: str | os.PathLike) -> str:
         return "ag501"
     if mview.is_mat(head):
         return "mview"
+    if emu.is_bundle_json(head, path):
+        return "emu"
     if head.startswith(b"\x93NUMPY") or (head.startswith(b"PK\x03\x04") and suffix == ".npz"):
         return "array"
     line = _first_line(head)
@@ -80,7 +85,7 @@ def detect_format(path: str | os.PathLike) -> str:
         raise DataFormatError(path, None, "empty file")
     raise DataFormatError(path, None, "not a recording this toolkit reads (XRMB .txy, EST "
                           "Track, Carstens .pos, NDI Wave .tsv, mview .mat, .npy/.npz/.csv "
-                          "arrays; docs/EMA.md)")
+                          "arrays, EMU bundles; docs/EMA.md)")
 
 
 def read_ema(path: str | os.PathLike, *, format: str | None = None,
@@ -100,6 +105,8 @@ def read_ema(path: str | os.PathLike, *, format: str | None = None,
         return wave.read_wave_tsv(path)
     if fmt == "mview":
         return mview.read_mview(path)
+    if fmt == "emu":
+        return emu.read_emu(path)
     if fmt == "array":
         return arrays.read_array(path, layout=layout, rate=rate, **array_options)
     if fmt == "xrmb":

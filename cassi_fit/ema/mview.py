@@ -3,10 +3,20 @@
 The format (mview's own input convention, as documented by its Python port PhonoScape and
 read there with ``scipy.io.loadmat``; see docs/EMA.md): a variable holding a struct array
 with one entry per channel, fields ``NAME`` (text), ``SRATE`` (Hz) and ``SIGNAL``
-(``[samples x dims]``); optional fields (``SOURCE``, ``SENTENCE``, ``COLOR``, ``NCOMPS``,
-``LABELS``...) are ignored. A channel whose ``SIGNAL`` has one column is a scalar (the
-first, ``AUDIO``, is usually the sound) and is not a sensor; a movement channel has 2 or
-3 position columns (mm) and, beyond the third, orientation angles. Haskins' processing
+(``[samples x dims]``); optional fields (``SOURCE``, ``SENTENCE``, ``COLOR``, ``NCOMPS``...)
+are ignored. A channel whose ``SIGNAL`` has one column is a scalar and is not a sensor;
+the first one at an audio rate (``AUDIO``, usually first) is the recording's **sound**
+(:class:`cassi_fit.sound.Sound`, kind ``"mview AUDIO"``; samples in [-1, 1], or 16-bit
+integers which are scaled). A movement channel has 2 or 3 position columns (mm) and,
+beyond the third, orientation angles.
+
+**Labels in the file**: fields ``WORDS``, ``PHONES`` and ``LABELS`` of any entry (usually
+``AUDIO``'s), each a struct array of intervals with a text field (``LABEL``, ``NAME``,
+``WORD``, ``PHONE`` or ``TEXT``) and a time field (``OFFS``, ``OFFSET``, ``OFFSETS``,
+``TIME`` or ``TIMES``: ``[start end]`` seconds, or one time for a point label), become
+label tiers ``words``, ``phones``, ``labels`` (:attr:`RawEma.labels`). Times that only
+fit the recording as milliseconds are read as milliseconds, with a note; a tier whose
+intervals are not in time order is an error naming the file and the tier. Haskins' processing
 leaves data head-corrected in an occlusal frame, but the file does not say which axis is
 which: :mod:`cassi_fit.ema.track` finds the frame (or a sensor map's ``[file]`` table says
 it). NaN is an untracked value.
@@ -63,6 +73,22 @@ def _candidates(contents: dict) -> dict[str, np.ndarray]:
     return found
 
 
+def _variable(path: Path, found: dict, variable: str | None) -> str:
+    """Which struct variable to read (module docstring)."""
+    if variable is not None:
+        if variable not in found:
+            raise DataFormatError(path, None, f"no mview struct variable {variable!r} (found: "
+                                  f"{', '.join(found) or 'none'})")
+        return variable
+    if len(found) == 1:
+        return next(iter(found))
+    if path.stem in found:
+        return path.stem
+    raise DataFormatError(path, None, f"{len(found)} mview struct variables "
+                          f"({', '.join(found) or 'none with NAME, SRATE, SIGNAL'}): "
+                          "name one (variable=)")
+
+
 def read_mview(path: str | os.PathLike, *, variable: str | None = None) -> RawEma:
     """Read an mview ``.mat`` file into a :class:`RawEma` (seconds from 0 at ``SRATE``,
     mm); see the module docstring for the format and every refusal."""
@@ -79,21 +105,10 @@ def read_mview(path: str | os.PathLike, *, variable: str | None = None) -> RawEm
     except Exception as exc:  # scipy raises many kinds on a damaged file: one error here
         raise DataFormatError(path, None, f"not a readable MATLAB file ({exc})") from None
     found = _candidates(contents)
-    if variable is not None:
-        if variable not in found:
-            raise DataFormatError(path, None, f"no mview struct variable {variable!r} (found: "
-                                  f"{', '.join(found) or 'none'})")
-        key = variable
-    elif len(found) == 1:
-        key = next(iter(found))
-    elif path.stem in found:
-        key = path.stem
-    else:
-        raise DataFormatError(path, None, f"{len(found)} mview struct variables "
-                              f"({', '.join(found) or 'none with NAME, SRATE, SIGNAL'}): "
-                              "name one (variable=)")
+    key = _variable(path, found, variable)
     entries = found[key].ravel()
     names, signals, rates, notes = [], [], [], []
+    sound = None
     for i, entry in enumerate(entries):
         name = _text(entry["NAME"])
         if not name:
@@ -108,8 +123,11 @@ def read_mview(path: str | os.PathLike, *, variable: str | None = None) -> RawEm
             raise DataFormatError(path, None, f"{key}({i + 1}) {name}: SRATE {rate!r} is not a "
                                   "rate")
         if signal.ndim == 1 or (signal.ndim == 2 and min(signal.shape) == 1):
-            kind = "sound" if rate >= AUDIO_RATE_MIN_HZ else "a scalar channel"
-            notes.append(f"{name}: {kind} at {rate:g} Hz, not a sensor (not used)")
+            if rate >= AUDIO_RATE_MIN_HZ and sound is None:
+                sound = _sound(path, name, signal.ravel(), rate, notes)
+            else:
+                kind = "sound" if rate >= AUDIO_RATE_MIN_HZ else "a scalar channel"
+                notes.append(f"{name}: {kind} at {rate:g} Hz, not a sensor (not used)")
             continue
         if signal.ndim != 2:
             raise DataFormatError(path, None, f"{key}({i + 1}) {name}: SIGNAL has shape "
@@ -138,10 +156,84 @@ def read_mview(path: str | os.PathLike, *, variable: str | None = None) -> RawEm
             orientation[:, j, : s.shape[1] - dims] = s[:, dims:]
     n = positions.shape[0]
     times = np.arange(n) / rates[0]
+    labels = _label_tiers(path, entries, n / rates[0], notes)
     return RawEma(format="mview", times=times, names=tuple(names), positions=positions,
                   rate_hz=rates[0], units="mm (mview)", path=path, orientation=orientation,
                   axes="not stated by the file (Haskins data are usually head-corrected)",
-                  frame=None, notes=(f"variable {key!r}", *notes))
+                  frame=None, notes=(f"variable {key!r}", *notes), sound=sound,
+                  labels=labels)
+
+
+def _sound(path: Path, name: str, samples: np.ndarray, rate: float, notes: list[str]):
+    from ..sound import Sound
+
+    if not np.isfinite(samples).all():
+        notes.append(f"{name}: sound with non-finite samples (not used)")
+        return None
+    peak = float(np.max(np.abs(samples))) if samples.size else 0.0
+    if peak > 1.0:
+        scale = 32768.0 if peak <= 32768.0 else peak
+        samples = samples / scale
+        notes.append(f"{name}: sound samples up to {peak:.6g} divided by {scale:g}")
+    notes.append(f"{name}: the recording's sound ({samples.size / rate:.3g} s at "
+                 f"{rate:g} Hz)")
+    return Sound.from_samples(samples, rate, f"{path}: {name}", "mview AUDIO")
+
+
+LABEL_FIELDS = {"WORDS": "words", "PHONES": "phones", "LABELS": "labels"}
+_TEXT_FIELDS = ("LABEL", "NAME", "WORD", "PHONE", "TEXT")
+_TIME_FIELDS = ("OFFS", "OFFSET", "OFFSETS", "TIME", "TIMES")
+
+
+def _intervals(path: Path, field_name: str, value) -> list[tuple[float, float, str]]:
+    value = np.asarray(value)
+    names = value.dtype.names or ()
+    text = next((f for f in _TEXT_FIELDS if f in names), None)
+    when = next((f for f in _TIME_FIELDS if f in names), None)
+    if value.size == 0:
+        return []
+    if text is None or when is None:
+        raise DataFormatError(path, None, f"{field_name}: labels need a text field "
+                              f"({'/'.join(_TEXT_FIELDS)}) and a time field "
+                              f"({'/'.join(_TIME_FIELDS)}); it has {', '.join(names) or 'none'}")
+    out = []
+    for k, item in enumerate(value.ravel()):
+        try:
+            times = np.asarray(item[when], np.float64).ravel()
+        except (TypeError, ValueError):
+            times = np.array([])
+        if times.size not in (1, 2):
+            raise DataFormatError(path, None, f"{field_name}({k + 1}): {when} must be [start "
+                                  "end] or one time")
+        out.append((float(times[0]), float(times[-1]), _text(item[text])))
+    return out
+
+
+def _label_tiers(path: Path, entries, length_s: float, notes: list[str]) -> tuple:
+    """The label tiers stored in the struct's ``WORDS``/``PHONES``/``LABELS`` fields."""
+    from ..labels import Labels
+
+    names = entries.dtype.names or ()
+    tiers = []
+    for field_name, tier in LABEL_FIELDS.items():
+        if field_name not in names:
+            continue
+        rows = [r for entry in entries for r in _intervals(path, field_name, entry[field_name])]
+        if not rows:
+            continue
+        rows.sort(key=lambda r: r[0])
+        times = np.array([[a, b] for a, b, _ in rows])
+        last = float(times.max())
+        if last > 1.05 * length_s + 0.25 and last / 1000.0 <= 1.05 * length_s + 0.25:
+            times = times / 1000.0
+            notes.append(f"{field_name}: times read as milliseconds (as seconds they run to "
+                         f"{last:.4g} s, past the recording's {length_s:.3g} s)")
+        try:
+            tiers.append(Labels(times[:, 0], times[:, 1], [r[2] for r in rows], tier, path))
+        except DataFormatError as exc:
+            raise DataFormatError(path, None, f"{field_name}: {exc.reason}") from None
+        notes.append(f"{field_name}: {len(rows)} labels (tier {tier!r})")
+    return tuple(tiers)
 
 
 def _identifier(stem: str) -> str:
@@ -151,12 +243,15 @@ def _identifier(stem: str) -> str:
 
 
 def write_mview(path: str | os.PathLike, raw: RawEma, *, variable: str | None = None,
-                audio: tuple[np.ndarray, float] | None = None, overwrite: bool = False) -> Path:
+                audio: tuple[np.ndarray, float] | None = None, labels=(),
+                overwrite: bool = False) -> Path:
     """Write ``raw`` as an mview ``.mat`` file (MATLAB 5 format, through
     ``scipy.io.savemat``): one struct array named ``variable`` (default the file's stem),
     ``AUDIO`` first when ``audio = (samples, rate)`` is given, then one entry per sensor
-    (``SIGNAL`` ``[n x dims]`` mm, NaN untracked). Written atomically; never replaces an
-    input, nor an existing file unless ``overwrite``."""
+    (``SIGNAL`` ``[n x dims]`` mm, NaN untracked); ``labels`` (``Labels`` tiers named
+    ``words``, ``phones`` or ``labels``) go in the first entry's ``WORDS``/``PHONES``/
+    ``LABELS`` field (``LABEL`` and ``OFFS`` = ``[start end]`` s). Written atomically;
+    never replaces an input, nor an existing file unless ``overwrite``."""
     import io
 
     from scipy.io import savemat
@@ -167,10 +262,21 @@ def write_mview(path: str | os.PathLike, raw: RawEma, *, variable: str | None = 
         entries.append(("AUDIO", float(audio[1]), np.asarray(audio[0], np.float64)[:, None]))
     entries += [(name, float(raw.rate_hz), raw.positions[:, j, :])
                 for j, name in enumerate(raw.names)]
-    struct = np.empty((1, len(entries)), dtype=[(f, object) for f in FIELDS])
+    by_field = {f: t for t in labels for f, name in LABEL_FIELDS.items() if t.tier == name}
+    fields = FIELDS + tuple(by_field)
+    struct = np.empty((1, len(entries)), dtype=[(f, object) for f in fields])
     for j, (name, rate, signal) in enumerate(entries):
-        struct[0, j] = (name, rate, signal)
+        extra = [_label_struct(by_field[f]) if j == 0 else np.zeros((0, 0))
+                 for f in by_field]
+        struct[0, j] = (name, rate, signal, *extra)
     buffer = io.BytesIO()
     savemat(buffer, {variable or _identifier(path.stem): struct}, format="5",
             do_compression=False)
     return atomic_write(path, buffer.getvalue(), overwrite=overwrite, data_file=True)
+
+
+def _label_struct(tier) -> np.ndarray:
+    out = np.empty((1, len(tier)), dtype=[("LABEL", object), ("OFFS", object)])
+    for k, seg in enumerate(tier.segments()):
+        out[0, k] = (seg.label, np.array([[seg.start, seg.end]]))
+    return out

@@ -51,13 +51,14 @@ outside the vocabulary is a :class:`DataFormatError` naming them.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import DataFormatError, MissingDataError
+from ..errors import DataFormatError
 from ..pellets import PELLET_NAMES
 
 TONGUE = ("T1", "T2", "T3", "T4")
@@ -105,7 +106,12 @@ BUILTIN_MAPS: dict[str, dict[str, str]] = {
     "sparc": {"UL": "UL", "LL": "LL", "T1": "TT", "T2": "TB", "T3": "TD", "MNI": "LI"},
     "synthetic": {"UL": "UL", "LL": "LL", "T1": "TT", "T2": "TB", "T3": "TD", "T4": "TR",
                   "MNI": "LI", "MNM": "LMOL"},
+    # IPS Munich EMA (EMU bundles): tb is the tongue's BACK sensor, behind tm (middle)
+    "ips": {"UL": "ul", "LL": "ll", "T1": "tt", "T2": "tm", "T3": "tb", "MNI": "jw"},
 }
+#: ``[file]`` facts of built-in maps: the IPS data are head-corrected, posy toward the
+#: back of the head, posz up (cassi_fit.ema.emu's docstring says how that was read).
+BUILTIN_FILE_FACTS: dict[str, dict[str, str]] = {"ips": {"anterior": "-y", "up": "+z"}}
 _TABLES = {"channels", "roles", "references", "bite_plane", "midline", "file"}
 _SIGN_AXIS = re.compile(r"^([+-]?)([xyz])$")
 
@@ -158,8 +164,10 @@ class SensorMap:
                                       "axis such as '+x', '-x', 'y', '+z'")
         if (self.anterior is None) != (self.up is None):
             raise DataFormatError(where, None, "[file] needs both anterior and up (or neither)")
-        if self.scale_mm is not None and not self.scale_mm > 0:
-            raise DataFormatError(where, None, f"[file] scale_mm {self.scale_mm!r} must be > 0")
+        if self.scale_mm is not None and not (self.scale_mm > 0 and math.isfinite(
+                self.scale_mm)):
+            raise DataFormatError(where, None, f"[file] scale_mm {self.scale_mm!r} must be a "
+                                  "finite number > 0")
 
 
 def builtin_map(name: str) -> SensorMap:
@@ -168,7 +176,7 @@ def builtin_map(name: str) -> SensorMap:
     if key not in BUILTIN_MAPS:
         raise DataFormatError(None, None, f"unknown sensor map {name!r} (built in: "
                               f"{', '.join(BUILTIN_MAPS)}; or a .toml file)")
-    return SensorMap(roles=BUILTIN_MAPS[key], name=key)
+    return SensorMap(roles=BUILTIN_MAPS[key], name=key, **BUILTIN_FILE_FACTS.get(key, {}))
 
 
 def _strings(where, table: str, key: str, value) -> tuple[str, ...]:
@@ -191,16 +199,13 @@ def read_sensor_map(path: str | os.PathLike) -> SensorMap:
     file for a syntax error, an unknown table or key, a value of the wrong kind."""
     import tomllib
 
-    from .._io import register_input
+    from ._raw import read_bytes  # regular files only: a FIFO would block for ever
 
-    path = Path(path)
+    path, raw = read_bytes(path, "sensor map")
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise MissingDataError(f"{path}: no such sensor map") from None
+        data = tomllib.loads(raw.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise DataFormatError(path, None, f"not a TOML sensor map ({exc})") from None
-    register_input(path)
     _check_keys(path, "top level", data, sorted(_TABLES))
     for table, value in data.items():
         if not isinstance(value, dict):

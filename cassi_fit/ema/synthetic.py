@@ -21,6 +21,14 @@ folder) as an articulograph would record them, in one of :data:`FORMATS`:
    files name no units: mm), with the format's sensor names (``.pos`` and Wave files
    number their channels, so a ``sensors.toml`` beside names them).
 
+``format="emu"`` writes an emuDB instead (:mod:`cassi_fit.ema.emu`), as messy as the
+real exports: ``cassi_synth_DBconfig.json`` naming only the ``posy``/``posz`` columns,
+session folders ``<SUBJECT>_ses`` holding each task as a bundle ``<task>_bndl/`` with
+the sound inside, an annotation (``Segment``: the prompt's words spread evenly over the
+recording, NOT aligned to the sound; ``Word``: an item above them) and one SSFF track per
+sensor whose last 40 records are exact zeros (EMU's padding); the bite-plane recording is
+the session's bundle ``bite_bndl``.
+
 Every subject folder also holds a **bite-plane recording** (``bite.<ext>``: sensors
 ``OS`` at the incisor tip, ``MS`` 42 mm behind it, ``OL``/``OR`` at the molars, with the
 references, under its own head movement), the XRMB corpus's ``PAL.DAT``, ``PHA.DAT``,
@@ -53,7 +61,9 @@ from ._raw import RawEma
 
 #: Format -> (file suffix, sampling rate Hz).
 FORMATS = {"est": (".ema", 200.0), "est-ascii": (".ema", 500.0), "ag501": (".pos", 250.0),
-           "wave": (".tsv", 100.0), "mview": (".mat", 100.0)}
+           "wave": (".tsv", 100.0), "mview": (".mat", 100.0), "emu": ("_bndl", 200.0)}
+#: The emuDB's name (``<name>_DBconfig.json``) written for ``format="emu"``.
+EMU_DB_NAME = "cassi_synth"
 #: The eight pellets' sensor names (the synthetic corpus's built-in map).
 ROLE_NAMES = {"UL": "UL", "LL": "LL", "T1": "TT", "T2": "TB", "T3": "TD", "T4": "TR",
               "MNI": "LI", "MNM": "LMOL"}
@@ -197,7 +207,7 @@ def _truth_rows(times, rotation, translation, names, toolkit):
 
 
 def _convert_subject(src: Path, dst: Path, index: int, fmt: str, seed: int,
-                     sensors: str = "xrmb") -> None:
+                     sensors: str = "xrmb") -> tuple[str, ...] | None:
     """One subject of the XRMB corpus ``src`` into the EMA corpus folder ``dst``."""
     from ..txy import read_txy
 
@@ -209,6 +219,8 @@ def _convert_subject(src: Path, dst: Path, index: int, fmt: str, seed: int,
         lower = item.name.lower()
         if lower.endswith(".txy"):
             continue
+        if fmt == "emu" and lower.endswith(".wav"):
+            continue  # the sound goes inside the bundle
         if item.is_file() and not lower.endswith((".truth.csv",)):
             target = dst / (lower if lower.endswith(".wav") else item.name)
             shutil.copyfile(item, target)
@@ -229,9 +241,18 @@ def _convert_subject(src: Path, dst: Path, index: int, fmt: str, seed: int,
         wav = next((p for p in src.iterdir() if p.name.lower() == f"{task}.wav"), None)
         if fmt == "mview" and wav is not None:
             audio = _wav_samples(wav)
-        _write(fmt, dst / f"{task}{suffix}", raw, audio)
+        if fmt == "emu":
+            from .emu import PAD_RECORDS, write_bundle
+
+            write_bundle(dst, src.name, task, raw, wav=wav, tiers=_prompt_tiers(task, times),
+                         overwrite=True)
+            toolkit = toolkit.copy()
+            toolkit[-PAD_RECORDS:] = np.nan  # the export's padding: not in the file
+        else:
+            _write(fmt, dst / f"{task}{suffix}", raw, audio)
         write_table(_truth_rows(times, rotation, translation, names, toolkit),
                     dst / f"{task}.head.csv", overwrite=True)
+    _write_frame_json(dst, fmt, rate, m, origin)
     # the bite-plane recording: bite sensors and the references, its own head movement
     times = np.arange(0.0, BITE_SECONDS, 1.0 / rate)
     bite_names = tuple(BITE) + tuple(REFERENCES)
@@ -242,10 +263,33 @@ def _convert_subject(src: Path, dst: Path, index: int, fmt: str, seed: int,
     raw = RawEma(format=fmt, times=times, names=bite_names,
                  positions=_to_device(toolkit, m, origin, rotation, translation),
                  rate_hz=rate, units="mm", axes="synthetic device frame")
-    _write(fmt, dst / f"bite{suffix}", raw)
+    if fmt == "emu":  # a bundle of the session, named bite
+        from .emu import write_bundle
+
+        write_bundle(dst, src.name, "bite", raw, overwrite=True)
+    else:
+        _write(fmt, dst / f"bite{suffix}", raw)
     if fmt in ("ag501", "wave"):  # their files number the channels: name them
         atomic_write(dst / "sensors.toml", _sensor_map_text(names or ()), overwrite=True)
         atomic_write(dst / "bite.sensors.toml", _sensor_map_text(bite_names), overwrite=True)
+    return names
+
+
+def _prompt_tiers(task: str, times: np.ndarray) -> tuple:
+    """A ``Segment`` tier: the task's prompt words spread evenly over the recording (before
+    the padded end); not aligned to the sound."""
+    from ..labels import Labels
+    from ..synth import TASKS
+
+    words = [w for w in (TASKS[task].prompt.split() if task in TASKS else [task])
+             if w.strip("|")] or [task]
+    end = max(float(times[-1]) - 0.3, 0.2)
+    edges = np.linspace(0.1, end, len(words) + 1)
+    return (Labels(edges[:-1], edges[1:], words, "Segment"),)
+
+
+def _write_frame_json(dst: Path, fmt: str, rate: float, m: np.ndarray,
+                      origin: np.ndarray) -> None:
     frame = {"format": fmt, "rate_hz": rate,
              "device_from_toolkit": m.tolist(), "device_origin_mm": origin.tolist(),
              "references_mm": REFERENCES, "bite_plane_mm": BITE,
@@ -312,9 +356,15 @@ def write_ema_corpus(out_dir: str | os.PathLike, *, format: str, n_subjects: int
         ema = work / "ema"
         ema.mkdir()
         subjects = sorted(p for p in xrmb.iterdir() if p.is_dir())
+        names = None
         for index, folder in enumerate(subjects):
-            (ema / folder.name).mkdir()
-            _convert_subject(folder, ema / folder.name, index, format, seed, sensors)
+            dst = ema / (f"{folder.name}_ses" if format == "emu" else folder.name)
+            dst.mkdir()
+            names = _convert_subject(folder, dst, index, format, seed, sensors) or names
+        if format == "emu" and names:
+            from .emu import write_dbconfig
+
+            write_dbconfig(ema, EMU_DB_NAME, tuple(names) + tuple(BITE))  # bite bundles too
         shutil.copyfile(xrmb / "Headmeasures.txt", ema / "Headmeasures.txt")
         readme = (xrmb / "README.txt").read_text(encoding="utf-8").splitlines()
         lines = [f"cassi_fit synthetic EMA corpus, format {format} (NOT real data)",
@@ -375,6 +425,8 @@ def load_ema_truth(root: str | os.PathLike, subject: str, task: str) -> EmaTruth
             COMPLETE_LINE):
         raise MissingDataError(f"{root}: not a complete synthetic EMA corpus")
     folder = root / subject
+    if not folder.is_dir() and (root / f"{subject}_ses").is_dir():
+        folder = root / f"{subject}_ses"  # an emuDB's session folder
     frame_path, table = folder / "frame.json", folder / f"{task}.head.csv"
     for path in (frame_path, table):
         if not path.is_file():

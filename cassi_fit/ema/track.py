@@ -47,7 +47,7 @@ from ..errors import DataFormatError
 from ..pellets import PELLET_NAMES, plausibility_problem
 from ..txy import PelletTrack
 from . import head
-from ._raw import RawEma
+from ._raw import RawEma, untrack_impossible
 from .report import SensorReport
 from .sensor_map import Assignment, SensorMap, resolve, sensor_map
 
@@ -279,8 +279,10 @@ def ema_to_track(raw: RawEma, smap: SensorMap | str | os.PathLike | None = None,
     bite_smap = smap if bite_map is None else sensor_map(bite_map)
     where = raw.path
     scale = smap.scale_mm or 1.0
-    positions = raw.positions * scale
     assign = resolve(raw.names, smap, where)
+    # dead channels, dropouts to zero, absurd values: untracked, never data (issue 28)
+    positions, untracked_notes = untrack_impossible(raw.positions * scale, assign.names,
+                                                    assign.reference_names)
     corrected = _correct(where, positions, assign)
     frame, frame_notes = _occlusal_frame(where, raw, corrected, assign, smap, bite, scale,
                                          bite_smap)
@@ -318,7 +320,7 @@ def ema_to_track(raw: RawEma, smap: SensorMap | str | os.PathLike | None = None,
     else:
         residual = rotation = translation = np.full(n, np.nan)
         lost = 0
-    notes = list(raw.notes) + list(assign.notes) + frame_notes
+    notes = list(raw.notes) + untracked_notes + list(assign.notes) + frame_notes
     if lost:
         notes.append(f"{lost} frame(s) lack the reference sensors: their sensors are untracked")
     report = SensorReport(

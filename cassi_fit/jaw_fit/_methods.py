@@ -471,14 +471,17 @@ def method_for_sensors(method: JawMethod | str | None, sensors: tuple[str, ...]
     return method
 
 
-def tracked_jaw_sensors(valid: Bool[np.ndarray, "n 8 2"]) -> tuple[str, ...]:
+def tracked_jaw_sensors(valid: Bool[np.ndarray, "n 8 2"], source: Any = None
+                        ) -> tuple[str, ...]:
     """The jaw pellets a recording ever tracks (``valid``: a ``PelletTrack``'s), in the jaw
-    order: the default jaw sensors of a fit (``MissingDataError`` if none)."""
+    order: the default jaw sensors of a fit (``MissingDataError``, naming ``source`` (the
+    recording's file) when given, if none)."""
     from ..pellets import JAW_INDEX, JAW_PELLETS
 
     ever = np.asarray(valid)[:, list(JAW_INDEX)].all(axis=2).any(axis=0)
     if not ever.any():
-        raise MissingDataError(f"jaw pellets {', '.join(JAW_PELLETS)} never tracked")
+        where = "" if source is None else f"{source}: "
+        raise MissingDataError(f"{where}jaw pellets {', '.join(JAW_PELLETS)} never tracked")
     return tuple(p for p, e in zip(JAW_PELLETS, ever, strict=True) if e)
 
 
