@@ -42,6 +42,17 @@ _MAX_ABS_INT = 2**53
 _INT_TOKEN = re.compile(r"[+-]?[0-9]+")
 
 
+def frame_step(times: Float[np.ndarray, " n"]) -> float:
+    """Seconds between data lines of frame ``times (n,)`` s: the median time step; XRMB's
+    nominal ``FRAME_STEP_US`` for fewer than two frames. The one rule of a recording's
+    line period (``PelletTrack.frame_step_s``, the sound's length, the evaluation's
+    sustain window)."""
+    times = np.asarray(times, np.float64)
+    if times.shape[0] < 2:
+        return FRAME_STEP_US * 1e-6
+    return float(np.median(np.diff(times)))
+
+
 @dataclass(frozen=True, eq=False)
 class PelletTrack:
     """One pellet file in memory.
@@ -127,9 +138,7 @@ class PelletTrack:
         mngu0 5 ms, AG501 4 ms, SPARC 20 ms); XRMB's nominal ``FRAME_STEP_US`` for a track
         of fewer than two frames. The one home of a recording's line period: nothing else
         assumes XRMB's 6866 us."""
-        if self.n_frames < 2:
-            return FRAME_STEP_US * 1e-6
-        return float(np.median(np.diff(self.times)))
+        return frame_step(self.times)
 
     @property
     def duration(self) -> float:
@@ -238,7 +247,7 @@ def _check_frame_step(path: Path, times: np.ndarray) -> None:
     """The median frame spacing must be a plausible XRMB rate (``FRAME_STEP_RANGE_S``)."""
     if times.size < 2:
         return
-    step = float(np.median(np.diff(times)))
+    step = frame_step(times)
     lo, hi = FRAME_STEP_RANGE_S
     if not lo <= step <= hi:
         raise DataFormatError(path, None, f"median frame spacing {step * 1e6:.0f} us is outside "

@@ -297,11 +297,7 @@ def test_a_folder_with_two_calibrations_of_one_subject_is_refused(tmp_path):
         load_calibrations(tmp_path / "empty")
 
 
-def test_calibration_choice_needs_a_subject_for_a_folder(tmp_path):
-    _write(tmp_path, GOOD)
-    with pytest.raises(CassiError, match="needs the subject"):
-        calibration.calibration_choice(tmp_path)
-    assert calibration.calibration_choice(tmp_path, "s01").subject == "S01"
+def test_calibration_path_names_the_subject_in_capitals(tmp_path):
     assert calibration_path(tmp_path, "s01").name == "S01.calibration.json"
 
 
@@ -328,7 +324,7 @@ def _fake_corpus_run(monkeypatch, tmp_path, cals):
 
     module = importlib.import_module("cassi_fit.calibrate_corpus")  # the name is a function too
     run = SimpleNamespace(workers=1, resumed=0, results=[], failure_summary=lambda: "")
-    monkeypatch.setattr(module, "calibrate_corpus", lambda *a, **k: (run, cals))
+    monkeypatch.setattr(module, "calibrate_corpus", lambda *a, **k: (run, [], cals))
     (tmp_path / "data").mkdir()
     return ["calibrate", str(tmp_path / "data"), "--out", str(tmp_path / "out"),
             "--subjects", ",".join(cals), "--quiet"]

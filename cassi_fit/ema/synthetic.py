@@ -293,7 +293,7 @@ def write_ema_corpus(out_dir: str | os.PathLike, *, format: str, n_subjects: int
     if out_dir.exists() and not out_dir.is_dir():
         raise OutputExistsError(f"{out_dir}: exists and is not a folder")
     if out_dir.is_dir():  # never into a real dataset, whatever overwrite says (issue 24)
-        from .._io import refuse_foreign_data
+        from ..synth._foreign import refuse_foreign_data
 
         refuse_foreign_data(out_dir, writer="cassi synth --format")
     out_dir.parent.mkdir(parents=True, exist_ok=True)

@@ -201,7 +201,7 @@ def generate_corpus(
     if out_dir.exists() and not out_dir.is_dir():
         raise OutputExistsError(f"{out_dir}: exists and is not a folder")
     if out_dir.is_dir():  # never into a real dataset, whatever overwrite says (issue 24)
-        from .._io import refuse_foreign_data
+        from ._foreign import refuse_foreign_data
 
         refuse_foreign_data(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
