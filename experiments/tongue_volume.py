@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
             for options in RUNS.values():
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    _, _, state, animation = run_recording(recording, stride=args.stride,
+                    _, _, state, animation, _ = run_recording(recording, stride=args.stride,
                                                            **options)
                 ml = tongue_volumes(state.model, animation.vertices)
                 if rest is None:

@@ -32,7 +32,7 @@ def recording(corpus):
 @pytest.fixture(scope="module")
 def both(recording):
     """``{mode: (state, animation)}`` of S01's sentence in both modes."""
-    return {m: run_recording(recording, m, stride=STRIDE)[2:] for m in ("improved", "cassi")}
+    return {m: run_recording(recording, m, stride=STRIDE)[2:4] for m in ("improved", "cassi")}
 
 
 def test_modes_are_records_and_names():

@@ -85,7 +85,7 @@ def all_tasks():
         for task in TASKS:
             recording = _recording(task, anatomy)
             stride = -(-recording.track.times.shape[0] // FRAMES)
-            out[task] = run_recording(recording, stride=stride)[2:]
+            out[task] = run_recording(recording, stride=stride)[2:4]
     return out
 
 
