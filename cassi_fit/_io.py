@@ -356,8 +356,9 @@ def decode_text(path: str | os.PathLike, raw: bytes) -> str:
         text = body.decode(encoding)
     except UnicodeDecodeError as exc:
         line = body[: exc.start].decode(encoding, errors="replace").count("\n") + 1
-        raise DataFormatError(path, line, f"not text in UTF-8 or UTF-16 with a byte-order "
-                              f"mark (byte {body[exc.start]:#04x}); save it as UTF-8") from None
+        raise DataFormatError(path, line, f"not a text file in UTF-8, or UTF-16 with a "
+                              f"byte-order mark (byte {body[exc.start]:#04x}); save it as "
+                              "UTF-8") from None
     if "\x00" in text:
         line = text[: text.index("\x00")].count("\n") + 1
         raise DataFormatError(path, line, "a NUL character: UTF-16 without a byte-order mark? "
@@ -365,10 +366,11 @@ def decode_text(path: str | os.PathLike, raw: bytes) -> str:
     return text
 
 
-def read_text(path: str | os.PathLike, what: str) -> str:
-    """The text of ``path`` (:func:`decode_text`), registered as an input:
-    ``MissingDataError`` if there is no such file (``what`` names it),
-    ``DataFormatError`` if it is not a regular file (a FIFO would block) or not text."""
+def read_text(path: str | os.PathLike, what: str = "file") -> str:
+    """The text of ``path`` (:func:`decode_text`), registered as an input; the one reader
+    of the toolkit's text input. ``MissingDataError`` if there is no such file (``what``
+    names it), ``DataFormatError`` if it is a folder, not a regular file (a FIFO would
+    block) or not text."""
     import stat
 
     from .errors import DataFormatError, MissingDataError
@@ -377,18 +379,29 @@ def read_text(path: str | os.PathLike, what: str) -> str:
     try:
         mode = os.stat(path).st_mode
     except FileNotFoundError:
-        raise MissingDataError(f"{path}: {what} not found") from None
+        raise MissingDataError(f"{path}: no such file ({what} not found)") from None
     except OSError as exc:
         raise DataFormatError(path, None, f"cannot read: {exc.strerror or exc}") from None
+    if stat.S_ISDIR(mode):
+        raise DataFormatError(path, None, f"is a folder, not a file ({what} expected)")
     if not stat.S_ISREG(mode):
-        kind = "a folder" if stat.S_ISDIR(mode) else "a pipe, device or socket"
-        raise DataFormatError(path, None, f"{what} expected, found {kind}")
-    register_input(path)
+        raise DataFormatError(path, None, f"not a regular file (a pipe, device or socket; "
+                              f"{what} expected)")
     try:
         raw = path.read_bytes()
     except OSError as exc:
         raise DataFormatError(path, None, f"cannot read: {exc.strerror or exc}") from None
+    register_input(path)
     return decode_text(path, raw)
+
+
+def read_lines(path: str | os.PathLike, what: str = "file") -> tuple[Path, list[tuple[int, str]]]:
+    """A text data file (:func:`read_text`) as ``(lineno, line)`` pairs: CRLF, CR or LF
+    line ends, blank (white-space only) lines dropped, line numbers 1-based as stored.
+    Shared by the toolkit's line-based readers (pellet files, outlines, Headmeasures,
+    labels, articulograph text files)."""
+    text = read_text(path, what).replace("\r\n", "\n").replace("\r", "\n")
+    return Path(path), [(i + 1, s) for i, s in enumerate(text.split("\n")) if s.strip()]
 
 
 def parse_json(path: str | os.PathLike, text: str) -> Any:

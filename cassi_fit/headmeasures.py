@@ -17,9 +17,8 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
-from ._io import atomic_write
+from ._io import atomic_write, read_lines
 from .errors import DataFormatError
-from .txy import read_lines
 
 
 @dataclass(frozen=True)

@@ -223,7 +223,7 @@ _INTEGER = re.compile(r"[+-]?[0-9]+")
 
 
 def _lab_rows(path: Path) -> list[tuple[int, str, str, str]]:
-    from .txy import read_lines  # BOM, CRLF, encodings: as for pellet files
+    from ._io import read_lines  # BOM, CRLF, encodings: as for pellet files
 
     _, lines = read_lines(path)
     rows = []

@@ -16,7 +16,6 @@ from __future__ import annotations
 import functools
 import os
 import re
-import stat
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -26,7 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from jaxtyping import Bool, Float
 
-from ._io import atomic_write, register_input
+from ._io import atomic_write, read_lines
 
 if TYPE_CHECKING:
     from .mistracks import MistrackReport
@@ -253,44 +252,6 @@ def _check_frame_step(path: Path, times: np.ndarray) -> None:
         raise DataFormatError(path, None, f"median frame spacing {step * 1e6:.0f} us is outside "
                               f"{lo * 1e6:.0f}-{hi * 1e6:.0f} us (XRMB frames are {FRAME_STEP_US} "
                               "us apart; are the times in microseconds?)")
-
-
-def _decode(path: Path, raw: bytes) -> str:
-    """UTF-8 text without a BOM; a decoding failure names the line."""
-    if raw.startswith(b"\xef\xbb\xbf"):
-        raw = raw[3:]
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = raw[: exc.start].count(b"\n") + 1
-        raise DataFormatError(path, line, "not a text file (invalid UTF-8 byte)") from None
-
-
-def read_lines(path: str | os.PathLike) -> tuple[Path, list[tuple[int, str]]]:
-    """Read a text data file: register it as input, decode, return ``(lineno, line)`` pairs.
-
-    Refuses anything but a regular file (a FIFO would block). Accepts a UTF-8 BOM, CRLF or LF. Blank (white-space only) lines are dropped; line
-    numbers are 1-based in the file as stored. Shared by the toolkit's text readers.
-    """
-    path = Path(path)
-    try:
-        # a FIFO, device or socket would block or never end: refuse it before opening
-        if not stat.S_ISREG(os.stat(path).st_mode):
-            if path.is_dir():
-                raise IsADirectoryError(path)
-            raise DataFormatError(path, None, "not a regular file (a pipe, device or socket)")
-        raw = path.read_bytes()
-    except IsADirectoryError:
-        raise DataFormatError(path, None, "is a folder, not a file") from None
-    except FileNotFoundError:
-        raise MissingDataError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise DataFormatError(path, None, f"cannot read: {exc.strerror or exc}") from None
-    register_input(path)
-    text = _decode(path, raw)
-    text = text.replace("\r\n", "\n").replace("\r", "\n")
-    lines = [(i + 1, s) for i, s in enumerate(text.split("\n")) if s.strip()]
-    return path, lines
 
 
 def parse_int(path: Path, lineno: int, token: str) -> int:
