@@ -1,7 +1,8 @@
 """What a folder holds that the synthetic corpus writers did not write
 (:func:`foreign_data`), so that a generator never writes into a real dataset
 (:func:`refuse_foreign_data`, called by ``synth.generate_corpus`` and
-``ema.synthetic`` before they write anything). Reads only small sidecars, never a
+``ema.synthetic`` before they write anything), and how a finished corpus moves into its
+folder (:func:`move_into_place`, both writers). Reads only small sidecars, never a
 special file.
 """
 
@@ -168,3 +169,20 @@ def refuse_foreign_data(folder: str | os.PathLike, writer: str = "cassi synth") 
         raise OutputExistsError(
             f"{folder}: holds data {writer} did not write ({found[0]}{more}); refusing to "
             "write into it, even with --force: choose a new or empty folder")
+
+
+def move_into_place(tmp: Path, out_dir: Path) -> None:
+    """Rename the finished ``tmp`` to ``out_dir`` (one atomic rename if ``out_dir`` is
+    absent or empty); else move file by file into it, its old README.txt removed first and
+    the new one moved last, so an interruption leaves a corpus marked incomplete."""
+    if out_dir.is_dir() and not any(out_dir.iterdir()):
+        out_dir.rmdir()
+    if not out_dir.exists():
+        os.replace(tmp, out_dir)
+        return
+    (out_dir / "README.txt").unlink(missing_ok=True)
+    for path in sorted(p for p in tmp.rglob("*") if p.is_file() and p.name != "README.txt"):
+        target = out_dir / path.relative_to(tmp)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(path, target)
+    os.replace(tmp / "README.txt", out_dir / "README.txt")
