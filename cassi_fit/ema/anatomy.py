@@ -43,8 +43,8 @@ TONGUE_ORDER_MARGIN_MM = 3.0
 INCISOR_AHEAD_MM = 9.0
 #: Jaw and upper-lip origin cues farther apart than this many of their combined SDs.
 CUES_APART_SD = 3.5
-GIVE = ("give the upper incisor's tip as [file] origin = [x, y, z] (the file's units and "
-        "axes) in a sensor map, an upper-incisor reference sensor, or a bite-plane recording")
+GIVE = ("give a bite-plane recording, an upper-incisor reference sensor, or the upper "
+        "incisor's tip as [file] origin = [x, y, z] (the file's units and axes) in a sensor map")
 
 
 def _fmt(p: np.ndarray) -> str:

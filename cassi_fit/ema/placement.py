@@ -97,6 +97,8 @@ class Placement:
     midline_offset_mm: float | None = None
     midline_tilt_deg: float | None = None
     cues: Mapping[str, object] = field(default_factory=dict)
+    head_config: np.ndarray | None = None  # the session's shared reference configuration
+    head_references: tuple[str, ...] = ()  # ... the sensors it holds, in its order
 
     def to_dict(self) -> dict[str, object]:
         def num(v):
@@ -257,7 +259,7 @@ def _combine(cues: Sequence[tuple[float, float]]) -> tuple[float, float]:
 
 def _origin_draws(mni2, ul2, pitch_draws, jaw_sensor, rng) -> tuple[np.ndarray, dict]:
     """Monte Carlo origins (plane coordinates) ``(n, 2)`` combining the jaw and upper-lip
-    cues, and each cue's mean (for the report)."""
+    cues, and each cue's own draws (for the report)."""
     n = pitch_draws.shape[0]
     rot = _rot2(pitch_draws)  # occlusal frame -> plane coordinates
     cues, spreads = {}, []
@@ -288,7 +290,7 @@ def _origin_draws(mni2, ul2, pitch_draws, jaw_sensor, rng) -> tuple[np.ndarray, 
     for name, draws in cues.items():
         cov = np.cov(draws.T) + 1e-9 * np.eye(2)
         weights.append(np.linalg.inv(cov))
-        means[name] = draws.mean(0)
+        means[name] = draws
         spreads.append(draws)
     total = np.linalg.inv(sum(weights))
     combined = sum(np.einsum("ij,nj->ni", total @ w, d) for w, d in zip(weights, spreads,
@@ -425,9 +427,12 @@ def estimate_placement(sessions: Sequence[tuple[np.ndarray, Sequence[str]]],
         words = " and ".join({"jaw": "the jaw sensor at the closed jaw with dental norms",
                               "upper_lip": "the upper lip"}[k] for k in means)
         origin_words = f"estimated from {words}"
-        for k, v in means.items():
+        for k, v in means.items():  # each cue in the occlusal axes, from the estimate
             cues[f"origin_from_{k}_mm"] = [round(float(x), 2) for x in
-                                           _rot2(-pitch) @ (v - o2)]
+                                           _rot2(-pitch) @ (v.mean(0) - o2)]
+        if len(means) == 2:
+            apart = np.einsum("ij,nj->ni", _rot2(-pitch), means["jaw"] - means["upper_lip"])
+            cues["origin_cue_sd_mm"] = [round(float(x), 2) for x in apart.std(0)]
     x2 = np.array([np.cos(np.deg2rad(pitch)), np.sin(np.deg2rad(pitch))])
     y2 = np.array([-x2[1], x2[0]])
     x, y = x2[0] * e1 + x2[1] * e2, y2[0] * e1 + y2[1] * e2
