@@ -19,7 +19,7 @@ assumptions:
   (0.5-4.5 mm below it), half at the gum (7.5-12 mm), 1-3.5 mm labial, on a crown tilted
   2-30 degrees forward; moved with the mandible's exact motion;
 * a second jaw sensor on a lower molar for 40 % of speakers, 32-47 mm behind the lower
-  tip, 0-10 mm below the occlusal level;
+  tip, 0-10 mm below the occlusal level, 15-25 mm to one side (on the molar's cheek side);
 * the upper-lip sensor 8-19 mm ahead of the upper tip and 3-20 mm above it;
 * the recording frame: for a *head-normalised* file (half the speakers) the lab's axes
   (x forward, z up) tilted -20 to +20 degrees from the occlusal plane, the midline 15-45
@@ -54,8 +54,8 @@ from .synthetic import _PHYSICAL, _head_motion, _resample, _rotvec_matrix, _writ
 FORMATS = ("ag501", "wave", "mview")
 ROLES = ("UL", "LL", "T1", "T2", "T3", "T4", "MNI", "MNM")
 _TASKS = ("tp011", "tp101")
-REFERENCES = {"NAS": (9.0, 68.0, 0.0), "LMA": (-88.0, 22.0, 52.0),
-              "RMA": (-88.0, 22.0, -52.0)}
+REFERENCES = {"NAS": (9.0, 68.0, 0.0), "LMA": (-118.0, 8.0, 55.0),
+              "RMA": (-118.0, 8.0, -55.0)}  # nasion; mastoid processes, behind the condyles
 _PREFIX = {"ag501": "Ch", "wave": "S", "mview": "S"}
 
 
@@ -89,7 +89,8 @@ def _speaker_draws(rng: np.random.Generator) -> dict:
         "midline_mm": rng.choice([-1.0, 1.0]) * rng.uniform(15.0, 45.0),
         "loose": int(rng.integers(0, 3)) if rng.random() < 0.3 else None,
         "unused": int(rng.integers(1, 3)),
-        "lateral": rng.uniform(-2.0, 2.0, 8),
+        "lateral": np.concatenate([rng.uniform(-2.0, 2.0, 7),
+                                   [rng.choice([-1.0, 1.0]) * rng.uniform(15.0, 25.0)]]),
         "corner": rng.uniform(22.0, 28.0) * rng.choice([-1.0, 1.0]),
     }
 
@@ -147,12 +148,15 @@ def _layout(arts: dict, d: dict, rng) -> tuple[list[str], np.ndarray]:
             names.append(role)
             cols.append(np.concatenate([arts[role], np.full((n, 1), d["lateral"][j])], 1))
     lips = 0.5 * (arts["UL"] + arts["LL"])
-    names.append("corner")
-    cols.append(np.concatenate([lips + [-rng.uniform(8, 14), 0.0], np.full((n, 1), d["corner"])],
-                               1))
+    names.append("corner")  # spreads and rounds on its own: slow motion along x, noise
+    spread = np.sin(np.linspace(0.0, rng.uniform(3.0, 12.0), n) + rng.uniform(0, 6.3))
+    corner = lips + [-rng.uniform(8, 14), 0.0] + np.outer(spread, [rng.uniform(1.0, 3.0), 0.0])
+    cols.append(np.concatenate([corner + rng.normal(0.0, 0.2, (n, 2)),
+                                np.full((n, 1), d["corner"])], 1))
     names.append("lateral_tongue")
     side = rng.uniform(10.0, 16.0) * rng.choice([-1.0, 1.0])
-    cols.append(np.concatenate([arts["T2"] + [-2.0, -3.0], np.full((n, 1), side)], 1))
+    lateral = 0.6 * arts["T2"] + 0.4 * arts["T3"] + [-2.0, -5.0] + rng.normal(0.0, 0.3, (n, 2))
+    cols.append(np.concatenate([lateral, np.full((n, 1), side)], 1))
     if not d["normalised"]:
         for j, (name, p) in enumerate(REFERENCES.items()):
             ref = np.broadcast_to(np.asarray(p), (n, 3)).copy()

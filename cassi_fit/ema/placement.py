@@ -22,10 +22,12 @@ anterior axis); else the speaker's jaw, two cues combined by their variances:
   crown 7.5 mm long, Wheeler's Dental Anatomy; each sensor between its tooth's edge and
   its gum), over a molar-incisor distance of 35-45 mm;
 * the incisor sensor's opening path in speech (its positions' principal axis): taken as
-  perpendicular to the occlusal plane, +-12 degrees. This is a weak assumption of ours,
-  not a published norm: rotation about the condyles alone would tilt the path about 26
-  degrees backward (Bonwill's triangle at Balkwill's angle), the condyles' forward glide in
-  speech brings it toward the vertical; the real XRMB speaker JW11 shows 2 degrees.
+  pointing down and 13 degrees backward from the occlusal plane's normal, +-12 degrees.
+  This is a weak assumption of ours, not a published norm: rotation about the condyles
+  alone would tilt the path about 26 degrees backward (Bonwill's triangle at Balkwill's
+  angle), the condyles' forward glide brings it toward the vertical; we take the middle.
+  Real speakers differ: the XRMB speaker JW11's path is 2 degrees backward, the IPS
+  speaker mo1's about 23 (in his file's frame).
 
 Without a jaw sensor the line from the back of the tongue to the lips stands for it (+-15
 degrees, said in the report).
@@ -64,12 +66,15 @@ from . import head
 
 #: A midline sensor farther than this (median, mm) from the fitted plane is dropped.
 MIDLINE_OUTLIER_MM = 8.0
+#: What leaving a sensor out of the midsagittal plane costs (mm of RMS distance).
+LEFT_OUT_PENALTY_MM = 1.0
 #: Monte Carlo draws of the norms.
 N_DRAWS = 2000
 #: Share of a session's frames taken as the closed jaw (the incisor sensor's highest).
 CLOSED_SHARE = 0.02
 JAW_SENSOR_KINDS = ("edge", "gum", "unknown")
 _PATH_SD_DEG = 12.0
+_PATH_BACK_DEG = 13.0
 _COARSE_SD_DEG = 15.0
 _MAX_SAMPLES = 1500
 _BACK_FIRST = ("T4", "T3", "T2", "T1")
@@ -156,31 +161,50 @@ def _thin(points: np.ndarray, limit: int = _MAX_SAMPLES) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ the midsagittal plane
-def midsagittal_plane(samples: Mapping[str, np.ndarray]
+def midsagittal_plane(samples: Mapping[str, np.ndarray], *, max_left_out: int = 3
                       ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...], dict[str, float]]:
-    """``(unit normal, point, sensors used, dropped sensor -> median distance)``: the plane
-    through the midline sensors' positions, each sensor weighted equally, outliers
-    (:data:`MIDLINE_OUTLIER_MM`) dropped one at a time. Raises :class:`PlacementError`
-    when fewer than three sensors span a plane."""
-    use = {k: _thin(v) for k, v in samples.items() if v.shape[0] >= 3}
-    dropped: dict[str, float] = {}
-    while True:
-        if len(use) < 2 or sum(v.shape[0] for v in use.values()) < 3:
-            raise PlacementError("too few midline sensors to find the midsagittal plane")
-        weights = np.concatenate([np.full(v.shape[0], 1.0 / v.shape[0]) for v in use.values()])
-        pts = np.concatenate(list(use.values()))
-        centre = (weights[:, None] * pts).sum(0) / weights.sum()
-        cov = np.einsum("m,mi,mj->ij", weights, pts - centre, pts - centre)
-        vals, vecs = np.linalg.eigh(cov)
-        if vals[1] <= (head.COLLINEAR_RATIO ** 2) * vals[2]:
-            raise PlacementError("the midline sensors lie on a line: no midsagittal plane")
-        normal = vecs[:, 0]
-        dist = {k: float(np.median((v - centre) @ normal)) for k, v in use.items()}
-        worst = max(dist, key=lambda k: abs(dist[k]))
-        if abs(dist[worst]) <= MIDLINE_OUTLIER_MM or len(use) <= 3:
-            return normal, centre, tuple(use), dropped
-        dropped[worst] = dist[worst]
-        del use[worst]
+    """``(unit normal, point, sensors used, dropped sensor -> mean distance)``: the plane
+    through the midline sensors' positions, each sensor weighted equally. Robust: every
+    way of leaving out up to ``max_left_out`` sensors is tried (from each sensor's mean
+    and scatter, so it is cheap); among the planes with every kept sensor within
+    :data:`MIDLINE_OUTLIER_MM`, the one kept has the smallest RMS distance of the kept
+    sensors' samples plus :data:`LEFT_OUT_PENALTY_MM` per sensor left out. Raises
+    :class:`PlacementError` when fewer than three sensors span a plane."""
+    from itertools import combinations
+
+    stats = {}
+    for k, v in samples.items():
+        v = _thin(v[np.isfinite(v).all(-1)])
+        if v.shape[0] >= 3:
+            mean = v.mean(0)
+            stats[k] = (mean, np.cov((v - mean).T, bias=True))
+    names = list(stats)
+    if len(names) < 2:
+        raise PlacementError("too few midline sensors to find the midsagittal plane")
+    best = None
+    for left in range(0, min(max_left_out, len(names) - 2) + 1):
+        for out in combinations(names, left):
+            use = [k for k in names if k not in out]
+            means = np.array([stats[k][0] for k in use])
+            centre = means.mean(0)
+            cov = sum(stats[k][1] for k in use) / len(use) + np.cov((means - centre).T,
+                                                                   bias=True)
+            vals, vecs = np.linalg.eigh(cov)
+            if vals[1] <= (head.COLLINEAR_RATIO ** 2) * vals[2]:
+                continue
+            normal = vecs[:, 0]
+            dist = {k: float((stats[k][0] - centre) @ normal) for k in names}
+            if max(abs(dist[k]) for k in use) > MIDLINE_OUTLIER_MM:
+                continue
+            score = float(np.sqrt(max(vals[0], 0.0))) + LEFT_OUT_PENALTY_MM * left
+            if best is None or score < best[0]:
+                best = (score, normal, centre, tuple(use), {k: dist[k] for k in out})
+    if best is not None:
+        return best[1:]
+    if len(names) < 3:
+        raise PlacementError("too few midline sensors to find the midsagittal plane")
+    raise PlacementError("the midline sensors do not lie on one plane (no plane through all "
+                         f"but {max_left_out} of them within {MIDLINE_OUTLIER_MM:.0f} mm)")
 
 
 # ------------------------------------------------------------------ in-plane geometry
@@ -217,8 +241,9 @@ def _pitch_from_path(mni2: np.ndarray) -> tuple[float, float] | None:
     if spread < 4.0 or sv[0] < 1.8 * sv[1]:
         return None
     path = vt[0] if vt[0][1] < 0 else -vt[0]  # pointing down (opening)
-    # the path is taken as the occlusal plane's downward normal: x = path turned by +90
-    return _angle(path) + 90.0, _PATH_SD_DEG
+    # in the occlusal frame the path points down and _PATH_BACK_DEG backward:
+    # (-sin a, -cos a), at angle -90 - a; so the plane's angle is the path's + 90 + a
+    return _angle(path) + 90.0 + _PATH_BACK_DEG, _PATH_SD_DEG
 
 
 def _depth_draws(rng, jaw_sensor, n) -> np.ndarray:
