@@ -37,6 +37,7 @@ import re
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -46,8 +47,9 @@ from ._io import special_kind
 from .ema import RawEma, SensorMap, SensorReport, ema_to_track, read_ema
 from .ema.arrays import raw_from_array
 from .ema.detect import detect_format
+from .ema.sensor_map import PROPOSED
 from .ema.sensor_map import sensor_map as _sensor_map
-from .errors import DataFormatError, MissingDataError
+from .errors import CassiError, DataFormatError, MissingDataError
 from .headmeasures import DEFAULT_HEAD_MEASURES, HeadMeasures, read_headmeasures
 from .outlines import outlines_problem, read_outline
 from .txy import PelletTrack, read_txy
@@ -299,11 +301,11 @@ def _is_bite(path: Path) -> bool:
 def _sensor_map_for(path: Path, given: SensorMapLike) -> SensorMap:
     """The map given, else ``<stem>.sensors.toml``, ``sensors.toml`` beside or one folder
     up, else the built-in names."""
-    if given is not None:
+    if given is not None and str(given) != PROPOSED:
         return _sensor_map(given)
     found = (_find([path.parent], [f"{path.stem.lower()}.{SENSOR_MAP_NAME}", SENSOR_MAP_NAME])
              or _find([path.parent.parent], [SENSOR_MAP_NAME]))
-    return _sensor_map(found)
+    return _sensor_map(found if found is not None else given)  # a map beside wins over proposed
 
 
 def _bite_for(path: Path, given: str | os.PathLike | None) -> Path | None:
@@ -322,13 +324,13 @@ def _bite_for(path: Path, given: str | os.PathLike | None) -> Path | None:
 
 
 def _ema_track(path: Path, *, fmt: str | None = None, sensor_map: SensorMapLike = None,
-               layout=None, rate: float | None = None, bite_plane=None
+               layout=None, rate: float | None = None, bite_plane=None, session=None
                ) -> tuple[PelletTrack, SensorReport]:
     raw = read_ema(path, format=fmt, layout=layout, rate=rate)
     smap = _sensor_map_for(path, sensor_map)
     bite_path = _bite_for(path, bite_plane)
     if bite_path is None:
-        return ema_to_track(raw, smap)
+        return ema_to_track(raw, smap, placement=None if session is None else session(smap))
     bite = read_ema(bite_path, rate=rate)
     return ema_to_track(raw, smap, bite=bite, bite_map=_sensor_map_for(bite_path, sensor_map))
 
@@ -563,8 +565,25 @@ class Dataset:
         # a root that is itself a subject folder: look one folder up, as load_recording does
         shared = [self.root, self.root.parent] if own == self.root else [self.root]
         xrmb = path.suffix.lower() == PELLET_SUFFIX or detect_format(path) == "xrmb"
-        ema = None if xrmb else {"sensor_map": self.sensor_map}
+        ema = None if xrmb else {"sensor_map": self.sensor_map,
+                                 "session": partial(self._session_frame, subject)}
         return _assemble(path, subject, task, own=own, shared=shared, ema=ema)
+
+    def _session_frame(self, subject: str, smap: SensorMap):
+        """The frame shared by ``subject``'s articulograph files, estimated from all of
+        them together (:func:`cassi_fit.ema.track.session_placement`), once; None when it
+        cannot be (each file then finds its own, or says what it needs)."""
+        from .ema.track import session_placement
+
+        cache = self.__dict__.setdefault("_sessions", {})
+        if subject not in cache:
+            paths = [p for (s, _), (p, _) in sorted(self._index.items())
+                     if s == subject and p.suffix.lower() != PELLET_SUFFIX and not _is_bite(p)]
+            try:
+                cache[subject] = session_placement([read_ema(p) for p in paths], smap)
+            except (CassiError, ValueError):
+                cache[subject] = None
+        return cache[subject]
 
     def __len__(self) -> int:
         return len(self._index)

@@ -28,13 +28,13 @@ it, leaving the channels it is not sure of without a role.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import head, placement
 from ._raw import RawEma
+from .sensor_map import numbered  # noqa: F401  (re-exported: which files need a proposal)
 
 #: A guess at or above this confidence is "sure".
 SURE = 0.9
@@ -45,7 +45,6 @@ RIGID_SD_MM = 3.0
 SKULL_MM = 80.0
 #: A second jaw sensor's distance to the first varies less than this (mm, 95 % range).
 JAW_RIGID_MM = 1.5
-_NUMBERED = re.compile(r"^(ch(annel)?|s(ensor)?|coil|c)?[\s_#-]*\d+$", re.IGNORECASE)
 _MAX_FRAMES = 3000
 
 
@@ -113,11 +112,6 @@ def _name(g: Guess, i: int) -> str:
         return {"reference": "REF", "parasagittal": "PARA", "unused": "UNUSED",
                 "extra": "EXTRA"}[g.role] + str(i)
     return g.role
-
-
-def numbered(names) -> bool:
-    """True when every channel name is a number (``Ch3``, ``S12``, ``7``)."""
-    return bool(names) and all(_NUMBERED.match(str(n).strip()) for n in names)
 
 
 def _conf(margin: float, scale: float) -> float:
@@ -329,3 +323,17 @@ def propose_map(raw: RawEma) -> Proposal:
     for n in names:
         guesses.setdefault(n, Guess(n, "extra", 0.0, "no role found"))
     return Proposal(tuple(guesses[n] for n in names), tuple(notes))
+
+
+def write_proposed_map(recording, out) -> Proposal:
+    """Propose a map for the articulograph file ``recording`` and write it as TOML to
+    ``out`` (never over an existing file, nor over an input)."""
+    from pathlib import Path
+
+    from .._io import atomic_write
+    from .detect import read_ema
+
+    raw = read_ema(Path(recording))
+    proposal = propose_map(raw)
+    atomic_write(Path(out), proposal.to_toml(str(recording)), overwrite=False)
+    return proposal

@@ -47,8 +47,8 @@ import numpy as np
 
 from ..errors import CassiError, OutputExistsError
 from ._raw import RawEma
-from .synthetic import FORMATS as _EMA_FORMATS
 from .synthetic import _PHYSICAL, _head_motion, _resample, _rotvec_matrix, _write
+from .synthetic import FORMATS as _EMA_FORMATS
 
 #: Formats :func:`write_lab_like_corpus` writes.
 FORMATS = ("ag501", "wave", "mview")

@@ -116,8 +116,19 @@ BUILTIN_MAPS: dict[str, dict[str, str]] = {
     "synthetic": {"UL": "UL", "LL": "LL", "T1": "TT", "T2": "TB", "T3": "TD", "T4": "TR",
                   "MNI": "LI", "MNM": "LMOL"},
 }
+#: The sensor map "proposed": proposed from each file's data (:mod:`cassi_fit.ema.identify`),
+#: what ``--accept-proposed-map`` asks for.
+PROPOSED = "proposed"
 _TABLES = {"channels", "roles", "references", "bite_plane", "midline", "file"}
 _SIGN_AXIS = re.compile(r"^([+-]?)([xyz])$")
+
+
+_NUMBERED = re.compile(r"^(ch(annel)?|s(ensor)?|coil|c)?[\s_#-]*\d+$", re.IGNORECASE)
+
+
+def numbered(names) -> bool:
+    """True when every channel name is a number (``Ch3``, ``S12``, ``7``)."""
+    return bool(names) and all(_NUMBERED.match(str(n).strip()) for n in names)
 
 
 def sensor_key(name: str) -> str:
@@ -299,12 +310,15 @@ def _listed(value):
 
 
 def sensor_map(value: SensorMap | str | os.PathLike | None) -> SensorMap:
-    """A :class:`SensorMap` from a map, a built-in name, a ``.toml`` path, or None
-    (``"auto"``)."""
+    """A :class:`SensorMap` from a map, a built-in name, a ``.toml`` path, None
+    (``"auto"``) or ``"proposed"`` (:data:`PROPOSED`: proposed from each file's data when
+    it is read)."""
     if value is None:
         return builtin_map("auto")
     if isinstance(value, SensorMap):
         return value
+    if str(value) == PROPOSED:
+        return SensorMap(name=PROPOSED)
     text = os.fspath(value)
     if text.lower().endswith(".toml") or Path(text).is_file():
         return read_sensor_map(text)
@@ -430,9 +444,11 @@ def resolve(names: Sequence[str], smap: SensorMap, where: str | os.PathLike | No
             if name not in refs["upper_incisor"]:
                 refs[kind].append(name)
     if not roles and not bite_plane:
+        hint = ("; `cassi info --write-sensor-map FILE` proposes one from the data, "
+                "--accept-proposed-map uses it" if numbered(names) else "")
         raise DataFormatError(where, None, f"no sensor maps to a CASSI role (UL, LL, T1-T4, "
                               f"MNI, MNM): the file's sensors are {', '.join(names)}; give a "
-                              "sensor map (docs/EMA.md)")
+                              f"sensor map (docs/EMA.md){hint}")
     in_roles = set(roles.values())
     ordered_roles = {r: roles[r] for r in PELLET_NAMES if r in roles}
     extras = tuple(s for s in names if s not in in_roles)

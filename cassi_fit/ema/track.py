@@ -51,7 +51,7 @@ from ..txy import PelletTrack
 from . import anatomy, head, placement
 from ._raw import RawEma
 from .report import SensorReport
-from .sensor_map import Assignment, SensorMap, resolve, sensor_map
+from .sensor_map import PROPOSED, Assignment, SensorMap, resolve, sensor_map
 
 #: The span of the CASSI sensors' median positions (mm) of any head: outside it the
 #: units are wrong (a normalised array, centimetres, hundredths of a millimetre).
@@ -327,6 +327,9 @@ def ema_to_track(raw: RawEma, smap: SensorMap | str | os.PathLike | None = None,
     ``placement``: the frame of the speaker's session (:func:`session_placement`), used
     instead of one estimated from this file alone."""
     smap = sensor_map(smap)
+    proposal_notes: list[str] = []
+    if smap.name == PROPOSED:
+        smap, proposal_notes = proposed_map(raw)
     bite_smap = smap if bite_map is None else sensor_map(bite_map)
     where = raw.path
     scale = smap.scale_mm or 1.0
@@ -371,7 +374,7 @@ def ema_to_track(raw: RawEma, smap: SensorMap | str | os.PathLike | None = None,
     else:
         residual = rotation = translation = np.full(n, np.nan)
         lost = 0
-    notes = list(raw.notes) + list(assign.notes) + frame_notes
+    notes = list(raw.notes) + proposal_notes + list(assign.notes) + frame_notes
     if lost:
         notes.append(f"{lost} frame(s) lack the reference sensors: their sensors are untracked")
     report = SensorReport(
@@ -411,3 +414,16 @@ def session_placement(raws: Sequence[RawEma], smap: SensorMap | str | os.PathLik
     found = _placement(raw.path, sessions, assign, smap, corrected, raw.positions * scale)
     return dataclasses.replace(found, head_config=config,
                                head_references=tuple(corrected.references))
+
+
+def proposed_map(raw: RawEma) -> tuple[SensorMap, list[str]]:
+    """The map :mod:`cassi_fit.ema.identify` proposes for ``raw`` (the channels it is not
+    sure of get no role), and notes saying so."""
+    from .identify import propose_map
+
+    proposal = propose_map(raw)
+    unsure = [f"{g.channel} ({g.role}?)" for g in proposal.guesses if not g.sure]
+    notes = ["sensor map proposed from the data (--accept-proposed-map)"]
+    if unsure:
+        notes.append("not sure of, left without a role: " + ", ".join(unsure))
+    return proposal.sensor_map(), notes + list(proposal.notes)
