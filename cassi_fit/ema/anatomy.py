@@ -105,5 +105,6 @@ def contradicted_roles(where, medians: Mapping[str, np.ndarray], sensors: Mappin
             raise DataFormatError(where, None, f"the sensor map's roles {name('MNI')} and "
                                   f"{name('UL')} contradict the anatomy: they put the upper "
                                   f"incisor {np.linalg.norm(jaw - lip):.0f} mm apart (is the "
-                                  "jaw role on the lower lip, or the upper lip's on another "
-                                  "sensor?)")
+                                  "jaw role on the lower lip, the upper lip's on another "
+                                  "sensor, or [file] jaw_sensor wrong?); if the roles are "
+                                  "right, give the upper incisor's tip as [file] origin")
