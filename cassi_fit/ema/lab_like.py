@@ -240,18 +240,27 @@ def true_sensor_map(rec: LabLike) -> str:
 
 
 def write_lab_like_corpus(out_dir: str | os.PathLike, *, format: str = "ag501",
-                          n_subjects: int = 6, seed: int = 0, overwrite: bool = False
-                          ) -> Path:
+                          n_subjects: int = 6, seed: int = 0, overwrite: bool = False,
+                          tasks: tuple[str, ...] | None = None) -> Path:
     """Write ``n_subjects`` lab-like sessions (module docstring) in ``format`` to
     ``out_dir/<subject>/``: each task's file, ``placement.json`` (the truth of every
     file) and ``truth_sensors.toml`` (the true names, for checking a proposed map; not
-    named ``sensors.toml`` so the toolkit does not find it)."""
+    named ``sensors.toml`` so the toolkit does not find it). A folder with files is
+    refused unless ``overwrite``, and never one holding real data."""
+    from .._io import atomic_write, refuse_foreign_data
+
+    if format not in FORMATS:
+        raise CassiError(f"lab-like files: format {format!r} is not one of {', '.join(FORMATS)}")
     out = Path(out_dir)
-    if out.exists() and any(out.iterdir()) and not overwrite:
-        raise OutputExistsError(f"{out}: exists and is not empty (pass overwrite / --force)")
-    suffix = _EMA_FORMATS[format][0] if format in _EMA_FORMATS else ""
+    if out.exists() and not out.is_dir():
+        raise OutputExistsError(f"{out}: exists and is not a folder")
+    if out.is_dir() and any(out.iterdir()):
+        if not overwrite:
+            raise OutputExistsError(f"{out}: exists and is not empty (pass --force)")
+        refuse_foreign_data(out, writer="cassi synth --lab-like")
+    suffix = _EMA_FORMATS[format][0]
     for index in range(n_subjects):
-        recs = lab_like_speaker(index, seed=seed, fmt=format)
+        recs = lab_like_speaker(index, seed=seed, fmt=format, tasks=tasks or _TASKS)
         folder = out / f"L{index + 1:02d}"
         folder.mkdir(parents=True, exist_ok=True)
         truth = {}
@@ -259,9 +268,9 @@ def write_lab_like_corpus(out_dir: str | os.PathLike, *, format: str = "ag501",
             name = f"{rec.truth['task']}{suffix}"
             _write(format, folder / name, rec.raw)
             truth[name] = rec.truth
-        (folder / "placement.json").write_text(json.dumps(truth, indent=1) + "\n",
-                                               encoding="utf-8")
-        (folder / "truth_sensors.toml").write_text(true_sensor_map(recs[0]), encoding="utf-8")
+        atomic_write(folder / "placement.json", json.dumps(truth, indent=1) + "\n",
+                     overwrite=True)
+        atomic_write(folder / "truth_sensors.toml", true_sensor_map(recs[0]), overwrite=True)
     return out
 
 
