@@ -330,7 +330,10 @@ def _ema_track(path: Path, *, fmt: str | None = None, sensor_map: SensorMapLike 
     smap = _sensor_map_for(path, sensor_map)
     bite_path = _bite_for(path, bite_plane)
     if bite_path is None:
-        return ema_to_track(raw, smap, placement=None if session is None else session(smap))
+        placed = None
+        if session is not None:  # a Dataset: the subject's session (its map, its frame)
+            smap, placed = session(smap)
+        return ema_to_track(raw, smap, placement=placed)
     bite = read_ema(bite_path, rate=rate)
     return ema_to_track(raw, smap, bite=bite, bite_map=_sensor_map_for(bite_path, sensor_map))
 
@@ -570,19 +573,27 @@ class Dataset:
         return _assemble(path, subject, task, own=own, shared=shared, ema=ema)
 
     def _session_frame(self, subject: str, smap: SensorMap):
-        """The frame shared by ``subject``'s articulograph files, estimated from all of
-        them together (:func:`cassi_fit.ema.track.session_placement`), once; None when it
-        cannot be (each file then finds its own, or says what it needs)."""
-        from .ema.track import session_placement
+        """``(map, frame)`` of ``subject``'s articulograph files, found from all of them
+        together, once: the map proposed from the session when ``smap`` is
+        ``"proposed"``, and the frame (:func:`cassi_fit.ema.track.session_placement`;
+        None when it cannot be found: each file then finds its own, or says what it
+        needs)."""
+        from .ema.track import proposed_map, session_placement
 
         cache = self.__dict__.setdefault("_sessions", {})
         if subject not in cache:
             paths = [p for (s, _), (p, _) in sorted(self._index.items())
                      if s == subject and p.suffix.lower() != PELLET_SUFFIX and not _is_bite(p)]
+            raws = [read_ema(p) for p in paths]
+            if smap.name == PROPOSED:
+                try:
+                    smap = proposed_map(raws)[0]
+                except (CassiError, ValueError):
+                    pass  # files with different channels: each proposes its own
             try:
-                cache[subject] = session_placement([read_ema(p) for p in paths], smap)
+                cache[subject] = (smap, session_placement(raws, smap))
             except (CassiError, ValueError):
-                cache[subject] = None
+                cache[subject] = (smap, None)
         return cache[subject]
 
     def __len__(self) -> int:

@@ -17,7 +17,7 @@ order:
    channels lie far apart across it (the tongue's end is a chain of sensors along it);
    the **upper lip** is the one of the two that moves less (the lower lip rides on the
    jaw); the **jaw sensor** is the next channel from the front, moving with the lower
-   lip; a channel **rigid to it** 25-55 mm away, more than 20 mm behind it, is the
+   lip; a channel **rigid to it** 25-65 mm away, more than 20 mm behind it, is the
    second jaw sensor; the rest are
    the **tongue**, front to back ``T1..T4`` (more than four: the extra back ones get none).
 
@@ -173,8 +173,11 @@ def _head_group(pos: np.ndarray, idx: list[int]) -> tuple[list[int], float, str]
             groups.add(tuple(sorted(group)))
     if not groups:
         return [], 1.0, ""
+    groups = {_trimmed(sd, g) for g in groups}
     scored = sorted((_worst(sd, g), -len(g), g) for g in groups)
     worst, _, best = scored[0]
+    scored = [t for t in scored if not (set(t[2]) <= set(best) or set(t[2]) >= set(best))]
+    scored.insert(0, (worst, -len(best), best))
     others = [j for j in range(k) if j not in best]
     nearest = min((max(sd[j, g] for g in best) for j in others), default=np.inf)
     conf = min(_conf(RIGID_SD_MM - worst, 1.0), _conf(nearest - RIGID_SD_MM, 1.0))
@@ -187,6 +190,22 @@ def _head_group(pos: np.ndarray, idx: list[int]) -> tuple[list[int], float, str]
     return [idx[j] for j in best], conf, (f"rigid among themselves (their distances vary by "
                                          f"at most {worst:.1f} mm, span {span:.0f} mm); every "
                                          f"other channel's by {nearest:.1f} mm or more{words}")
+
+
+def _trimmed(sd: np.ndarray, group: tuple[int, ...]) -> tuple[int, ...]:
+    """``group`` without a member that moves against the others (an upper lip that barely
+    moves in a task): dropped when the rest keep three members and that member's
+    distances vary more than 0.5 mm and twice as much as the rest's."""
+    group = tuple(group)
+    while len(group) > 3:
+        worst_member = max(group, key=lambda m: max(sd[m, g] for g in group if g != m))
+        rest = tuple(g for g in group if g != worst_member)
+        own = max(sd[worst_member, g] for g in rest)
+        if own > 0.5 and own > 2.0 * _worst(sd, rest):
+            group = rest
+        else:
+            break
+    return tuple(sorted(group))
 
 
 def _worst(sd: np.ndarray, group) -> float:
@@ -220,22 +239,50 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.corrcoef(a[ok], b[ok])[0, 1])
 
 
+def _pair_spread(points: np.ndarray) -> float:
+    """The largest separation across the axis (y) of two of ``points`` (k, 2)."""
+    return max((abs(p[1] - q[1]) for i, p in enumerate(points) for q in points[i + 1:]),
+               default=0.0)
+
+
 def _front_and_up(med, series, mids):
-    """Forward and up signs from the lips: ``(s1, conf, words, upper, lower, conf_up)``."""
+    """Forward and up from the lips: ``(s1, conf, words, upper, lower, conf_up, words)``.
+
+    The lips are the end of the midline whose two outermost channels lie far apart across
+    it; of the two, the lower lip moves more and moves with the jaw sensor (the next
+    channel from that end): two cues, the confidence from the one that agrees best, low
+    when they disagree."""
     xs = {j: med[j][0] for j in mids}
     order = sorted(mids, key=lambda j: -xs[j])
-    front = abs(med[order[0]][1] - med[order[1]][1])
-    back = abs(med[order[-1]][1] - med[order[-2]][1])
+    front = _pair_spread(np.array([med[j] for j in order[:3]]))
+    back = _pair_spread(np.array([med[j] for j in order[-3:]]))
     s1 = 1.0 if front >= back else -1.0
     conf = _conf(abs(front - back), 10.0)
-    pair = order[:2] if s1 > 0 else order[-2:]
+    end = order[:3] if s1 > 0 else order[-3:]
+    # the lips: far apart across the axis, and in front (a jaw sensor on the gum can lie
+    # as low as the lower lip, but behind it)
+    pair = max(((p, q) for i, p in enumerate(end) for q in end[i + 1:]),
+               key=lambda pq: abs(med[pq[0]][1] - med[pq[1]][1])
+               + 0.5 * s1 * (med[pq[0]][0] + med[pq[1]][0]))
+    nxt = next(j for j in (order if s1 > 0 else order[::-1]) if j not in pair)
     ranges = {j: _range(series[j][:, 1]) for j in pair}
-    upper, lower = sorted(pair, key=lambda j: ranges[j])
-    ratio = ranges[lower] / max(ranges[upper], 1e-6)
-    conf_up = _conf(np.log(max(ratio, 1.0)), np.log(2.0))
+    by_range = sorted(pair, key=lambda j: ranges[j])  # (upper, lower)
+    ratio = ranges[by_range[1]] / max(ranges[by_range[0]], 1e-6)
+    corr = {j: _corr(series[j][:, 1], series[nxt][:, 1]) for j in pair}
+    by_corr = sorted(pair, key=lambda j: corr[j])  # (upper, lower)
+    c_range = _conf(np.log(max(ratio, 1.0)), np.log(2.0))
+    c_corr = _conf(abs(corr[pair[0]] - corr[pair[1]]), 0.5)
+    if by_range == by_corr:
+        upper, lower = by_range
+        conf_up = 1.0 - (1.0 - c_range) * (1.0 - c_corr)
+    else:
+        upper, lower = by_range if c_range >= c_corr else by_corr
+        conf_up = abs(c_range - c_corr) * 0.5
     words = (f"the two channels at one end of the midline lie {max(front, back):.0f} mm apart "
-             f"across it, at the other end {min(front, back):.0f} mm")
-    return s1, conf, words, upper, lower, conf_up, ratio
+             f"across it, at the other end {min(front, back):.0f} mm; the upper lip moves "
+             f"{ratio:.1f} times less than the lower, and the lower moves with the next "
+             f"channel (vertical correlation {corr[lower]:.2f} against {corr[upper]:.2f})")
+    return s1, conf, upper, lower, conf_up, words
 
 
 def _in_plane(pos, moving, names) -> dict[str, Guess]:
@@ -250,16 +297,16 @@ def _in_plane(pos, moving, names) -> dict[str, Guess]:
     med = {j: np.nanmedian(series[j], axis=0) for j in moving}
     if len(mids) < 4:
         raise placement.PlacementError("fewer than four channels on the midline")
-    s1, c_front, front_words, upper, lower, c_up, ratio = _front_and_up(med, series, mids)
+    s1, c_front, upper, lower, c_up, lips_words = _front_and_up(med, series, mids)
     flip = np.array([s1, 1.0 if med[upper][1] > med[lower][1] else -1.0])
     for j in moving:
         series[j] = series[j] * flip
         med[j] = med[j] * flip
     c_lips = min(c_front, c_up)
-    lips_words = f"{front_words}; the upper lip moves {ratio:.1f} times less than the lower"
     guesses[names[upper]] = Guess(names[upper], "UL", c_lips, "front, upper: " + lips_words)
     guesses[names[lower]] = Guess(names[lower], "LL", c_lips, "front, lower: " + lips_words)
     rest = sorted((j for j in mids if j not in (upper, lower)), key=lambda j: -med[j][0])
+    # (the jaw sensor: the channel nearest the lips' end, now +x after the flip)
     jaw = rest[0]
     margin = med[jaw][0] - med[rest[1]][0] if len(rest) > 1 else 10.0
     r = _corr(series[jaw][:, 1], series[lower][:, 1])
@@ -271,7 +318,7 @@ def _in_plane(pos, moving, names) -> dict[str, Guess]:
     rigid = sorted((_rigidity(pos, j, jaw) + (j,) for j in moving
                     if j not in (upper, lower, jaw) and med[j][0] < med[jaw][0] - 20.0),
                    key=lambda t: t[0])
-    if rigid and rigid[0][0] < JAW_RIGID_MM and 25.0 <= rigid[0][1] <= 55.0:
+    if rigid and rigid[0][0] < JAW_RIGID_MM and 25.0 <= rigid[0][1] <= 65.0:
         sd, dist, molar = rigid[0]
         runner = rigid[1][0] if len(rigid) > 1 else np.inf
         guesses[names[molar]] = Guess(names[molar], "MNM", min(
@@ -297,12 +344,30 @@ def _in_plane(pos, moving, names) -> dict[str, Guess]:
     return guesses
 
 
-def propose_map(raw: RawEma) -> Proposal:
-    """A proposed map for ``raw``'s channels (module docstring)."""
-    names = list(raw.names)
-    pos = raw.positions
-    if pos.shape[0] > _MAX_FRAMES:
-        pos = pos[np.linspace(0, pos.shape[0] - 1, _MAX_FRAMES).astype(int)]
+def _session_positions(raws) -> tuple[list[str], np.ndarray]:
+    """The channel names and the positions of one file, or of a session's files end to
+    end (each thinned to its share of :data:`_MAX_FRAMES`; the files must have the same
+    channels)."""
+    raws = [raws] if isinstance(raws, RawEma) else list(raws)
+    names = list(raws[0].names)
+    for raw in raws[1:]:
+        if list(raw.names) != names:
+            raise ValueError(f"{raw.path}: its channels differ from {raws[0].path}'s")
+    share = max(_MAX_FRAMES // len(raws), 100)
+    parts = []
+    for raw in raws:
+        pos = raw.positions
+        if pos.shape[0] > share:
+            pos = pos[np.linspace(0, pos.shape[0] - 1, share).astype(int)]
+        parts.append(pos)
+    return names, np.concatenate(parts)
+
+
+def propose_map(raw) -> Proposal:
+    """A proposed map for the channels of ``raw`` (a :class:`RawEma`, or a session's files:
+    a list of them, read together; module docstring). A session tells more than a file:
+    a task where the jaw hardly moves cannot tell the jaw from the skull."""
+    names, pos = _session_positions(raw)
     guesses = dict(_unused(pos, names))
     idx = [j for j, n in enumerate(names) if n not in guesses]
     notes = []

@@ -92,6 +92,8 @@ def _speaker_draws(rng: np.random.Generator) -> dict:
         "lateral": np.concatenate([rng.uniform(-2.0, 2.0, 7),
                                    [rng.choice([-1.0, 1.0]) * rng.uniform(15.0, 25.0)]]),
         "corner": rng.uniform(22.0, 28.0) * rng.choice([-1.0, 1.0]),
+        "corner_back": rng.uniform(8.0, 14.0),
+        "tongue_side": rng.uniform(10.0, 16.0) * rng.choice([-1.0, 1.0]),
     }
 
 
@@ -150,11 +152,11 @@ def _layout(arts: dict, d: dict, rng) -> tuple[list[str], np.ndarray]:
     lips = 0.5 * (arts["UL"] + arts["LL"])
     names.append("corner")  # spreads and rounds on its own: slow motion along x, noise
     spread = np.sin(np.linspace(0.0, rng.uniform(3.0, 12.0), n) + rng.uniform(0, 6.3))
-    corner = lips + [-rng.uniform(8, 14), 0.0] + np.outer(spread, [rng.uniform(1.0, 3.0), 0.0])
+    corner = lips + [-d["corner_back"], 0.0] + np.outer(spread, [rng.uniform(1.0, 3.0), 0.0])
     cols.append(np.concatenate([corner + rng.normal(0.0, 0.2, (n, 2)),
                                 np.full((n, 1), d["corner"])], 1))
     names.append("lateral_tongue")
-    side = rng.uniform(10.0, 16.0) * rng.choice([-1.0, 1.0])
+    side = d["tongue_side"]  # glued once for the session
     lateral = 0.6 * arts["T2"] + 0.4 * arts["T3"] + [-2.0, -5.0] + rng.normal(0.0, 0.3, (n, 2))
     cols.append(np.concatenate([lateral, np.full((n, 1), side)], 1))
     if not d["normalised"]:

@@ -400,6 +400,8 @@ def session_placement(raws: Sequence[RawEma], smap: SensorMap | str | os.PathLik
     :func:`ema_to_track` (``placement=``). The files are head-corrected onto the first
     one's reference configuration, so that they share one head frame."""
     smap = sensor_map(smap)
+    if smap.name == PROPOSED:
+        smap, _ = proposed_map(list(raws))
     scale = smap.scale_mm or 1.0
     sessions, config, first = [], None, None
     for raw in raws:
@@ -416,9 +418,9 @@ def session_placement(raws: Sequence[RawEma], smap: SensorMap | str | os.PathLik
                                head_references=tuple(corrected.references))
 
 
-def proposed_map(raw: RawEma) -> tuple[SensorMap, list[str]]:
-    """The map :mod:`cassi_fit.ema.identify` proposes for ``raw`` (the channels it is not
-    sure of get no role), and notes saying so."""
+def proposed_map(raw) -> tuple[SensorMap, list[str]]:
+    """The map :mod:`cassi_fit.ema.identify` proposes for ``raw`` (a file, or a session's
+    files; the channels it is not sure of get no role), and notes saying so."""
     from .identify import propose_map
 
     proposal = propose_map(raw)
