@@ -90,3 +90,14 @@ def test_cli_writes_the_proposal_and_every_command_accepts_it(files, tmp_path, c
     assert main(["info", str(pos), "--write-sensor-map", str(out)]) != 0  # never overwritten
     assert main(["info", str(pos), "--accept-proposed-map", "--json"]) == 0
     assert '"sensor_map": "proposed"' in capsys.readouterr().out
+
+
+def test_named_channels_keep_their_names_under_the_accept_option():
+    from pathlib import Path
+
+    from cassi_fit.ema import read_ema
+
+    raw = read_ema(Path(__file__).parent / "fixtures" / "ema" / "mocha_ascii.txt")
+    assert not numbered(raw.names)
+    _, report = ema_to_track(raw, "proposed")
+    assert report.sensor_map == "auto" and report.roles["T1"] == "tt"

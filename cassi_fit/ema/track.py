@@ -423,6 +423,12 @@ def proposed_map(raw) -> tuple[SensorMap, list[str]]:
     files; the channels it is not sure of get no role), and notes saying so."""
     from .identify import propose_map
 
+    from .sensor_map import builtin_map, numbered
+
+    first = raw[0] if isinstance(raw, list | tuple) else raw
+    if not numbered(first.names):
+        return builtin_map("auto"), ["--accept-proposed-map: the channels have names, so "
+                                     "the built-in names are used"]
     proposal = propose_map(raw)
     unsure = [f"{g.channel} ({g.role}?)" for g in proposal.guesses if not g.sure]
     notes = ["sensor map proposed from the data (--accept-proposed-map)"]
