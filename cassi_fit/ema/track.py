@@ -422,7 +422,6 @@ def proposed_map(raw) -> tuple[SensorMap, list[str]]:
     """The map :mod:`cassi_fit.ema.identify` proposes for ``raw`` (a file, or a session's
     files; the channels it is not sure of get no role), and notes saying so."""
     from .identify import propose_map
-
     from .sensor_map import builtin_map, numbered
 
     first = raw[0] if isinstance(raw, list | tuple) else raw
