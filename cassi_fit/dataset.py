@@ -49,7 +49,7 @@ from .ema.arrays import raw_from_array
 from .ema.detect import detect_format
 from .ema.sensor_map import PROPOSED
 from .ema.sensor_map import sensor_map as _sensor_map
-from .errors import CassiError, DataFormatError, MissingDataError
+from .errors import DataFormatError, MissingDataError
 from .headmeasures import DEFAULT_HEAD_MEASURES, HeadMeasures, read_headmeasures
 from .outlines import outlines_problem, read_outline
 from .txy import PelletTrack, read_txy
@@ -573,27 +573,15 @@ class Dataset:
         return _assemble(path, subject, task, own=own, shared=shared, ema=ema)
 
     def _session_frame(self, subject: str, smap: SensorMap):
-        """``(map, frame)`` of ``subject``'s articulograph files, found from all of them
-        together, once: the map proposed from the session when ``smap`` is
-        ``"proposed"``, and the frame (:func:`cassi_fit.ema.track.session_placement`;
-        None when it cannot be found: each file then finds its own, or says what it
-        needs)."""
-        from .ema.track import proposed_map, session_placement
+        """``(map, frame)`` shared by ``subject``'s articulograph files, found once from
+        all of them (:func:`cassi_fit.ema.track.session_of`)."""
+        from .ema.track import session_of
 
         cache = self.__dict__.setdefault("_sessions", {})
         if subject not in cache:
-            paths = [p for (s, _), (p, _) in sorted(self._index.items())
-                     if s == subject and p.suffix.lower() != PELLET_SUFFIX and not _is_bite(p)]
-            raws = [read_ema(p) for p in paths]
-            if smap.name == PROPOSED:
-                try:
-                    smap = proposed_map(raws)[0]
-                except (CassiError, ValueError):
-                    pass  # files with different channels: each proposes its own
-            try:
-                cache[subject] = (smap, session_placement(raws, smap))
-            except (CassiError, ValueError):
-                cache[subject] = (smap, None)
+            cache[subject] = session_of(
+                [p for (s, _), (p, _) in sorted(self._index.items())
+                 if s == subject and p.suffix.lower() != PELLET_SUFFIX and not _is_bite(p)], smap)
         return cache[subject]
 
     def __len__(self) -> int:

@@ -393,6 +393,23 @@ def _pitch(given, e1, e2, mni2, mnm2, rng, declared_words):
     return pitch, sd, f"estimated from {words}", cues
 
 
+def _estimated_origin(mni2, ul2, draws, pitch, given, rng, cues):
+    """``(origin (2,), SD (2,) along/across the plane, words)`` from the jaw and upper-lip
+    cues; each cue's estimate is added to ``cues`` (occlusal axes, from the estimate)."""
+    combined, means = _origin_draws(mni2, ul2, draws, given.jaw_sensor, rng)
+    o2 = combined.mean(0)
+    origin_sd = np.einsum("ij,nj->ni", _rot2(-pitch), combined - o2).std(0)
+    words = " and ".join({"jaw": "the jaw sensor at the closed jaw with dental norms",
+                          "upper_lip": "the upper lip"}[k] for k in means)
+    for k, v in means.items():
+        cues[f"origin_from_{k}_mm"] = [round(float(x), 2) for x in
+                                       _rot2(-pitch) @ (v.mean(0) - o2)]
+    if len(means) == 2:
+        apart = np.einsum("ij,nj->ni", _rot2(-pitch), means["jaw"] - means["upper_lip"])
+        cues["origin_cue_sd_mm"] = [round(float(x), 2) for x in apart.std(0)]
+    return o2, origin_sd, f"estimated from {words}"
+
+
 def estimate_placement(sessions: Sequence[tuple[np.ndarray, Sequence[str]]],
                        roles: Mapping[str, str], midline: Sequence[str],
                        given: Given = Given(), *, upper_incisor: str | None = None,
@@ -445,19 +462,8 @@ def estimate_placement(sessions: Sequence[tuple[np.ndarray, Sequence[str]]],
         o2 = plane2(np.median(ui, axis=0)[None])[0]
         origin_sd, origin_words = np.full(2, np.nan), f"the upper-incisor sensor {upper_incisor}"
     else:
-        combined, means = _origin_draws(mni2, ul2, draws, given.jaw_sensor, rng)
-        o2 = combined.mean(0)
-        local = np.einsum("ij,nj->ni", _rot2(-pitch), combined - o2)  # occlusal axes
-        origin_sd = local.std(0)
-        words = " and ".join({"jaw": "the jaw sensor at the closed jaw with dental norms",
-                              "upper_lip": "the upper lip"}[k] for k in means)
-        origin_words = f"estimated from {words}"
-        for k, v in means.items():  # each cue in the occlusal axes, from the estimate
-            cues[f"origin_from_{k}_mm"] = [round(float(x), 2) for x in
-                                           _rot2(-pitch) @ (v.mean(0) - o2)]
-        if len(means) == 2:
-            apart = np.einsum("ij,nj->ni", _rot2(-pitch), means["jaw"] - means["upper_lip"])
-            cues["origin_cue_sd_mm"] = [round(float(x), 2) for x in apart.std(0)]
+        o2, origin_sd, origin_words = _estimated_origin(mni2, ul2, draws, pitch, given, rng,
+                                                        cues)
     x2 = np.array([np.cos(np.deg2rad(pitch)), np.sin(np.deg2rad(pitch))])
     y2 = np.array([-x2[1], x2[0]])
     x, y = x2[0] * e1 + x2[1] * e2, y2[0] * e1 + y2[1] * e2

@@ -434,3 +434,24 @@ def proposed_map(raw) -> tuple[SensorMap, list[str]]:
     if unsure:
         notes.append("not sure of, left without a role: " + ", ".join(unsure))
     return proposal.sensor_map(), notes + list(proposal.notes)
+
+
+def session_of(paths, smap: SensorMap) -> tuple[SensorMap, placement.Placement | None]:
+    """``(map, frame)`` of one speaker's session of articulograph files (``paths``), found
+    from all of them together: the map proposed from the session when ``smap`` is
+    ``"proposed"`` (files with different channels: each proposes its own), and
+    :func:`session_placement` (None when it cannot be found: each file then finds its
+    own, or says what it needs)."""
+    from ..errors import CassiError
+    from .detect import read_ema
+
+    raws = [read_ema(p) for p in paths]
+    if smap.name == PROPOSED:
+        try:
+            smap = proposed_map(raws)[0]
+        except (CassiError, ValueError):
+            pass
+    try:
+        return smap, session_placement(raws, smap)
+    except (CassiError, ValueError):
+        return smap, None
