@@ -1,10 +1,10 @@
 """Channels without names: how often the proposed map is right, not sure, or wrong.
 
     python experiments/channel_identification.py [--docs docs/generated] [--speakers 24]
-        [--seed 1] [--format ag501]
+        [--seed 2] [--format ag501]
 
-Each lab-like synthetic session (``cassi_fit.ema.lab_like``; seed 1, while the identifier
-was developed on seed 0) is written in ``--format`` and read back with the toolkit's
+Each lab-like synthetic session (``cassi_fit.ema.lab_like``; seed 2: the identifier was
+developed looking at seeds 0 and 1, so seed 2 is the one it never saw) is written in ``--format`` and read back with the toolkit's
 reader: channels numbered and shuffled, one or two unused channels, extra dropouts, a lip
 corner and a lateral tongue sensor (parasagittal), head-normalised (no references) or in a
 device frame with head movement and three skull references, one of them loose for 30 %
@@ -81,7 +81,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--docs", default=None)
     parser.add_argument("--speakers", type=int, default=24)
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--seed", type=int, default=2)
     parser.add_argument("--format", default="ag501", choices=("ag501", "wave", "mview"))
     args = parser.parse_args(argv)
     by_group, by_kind, wrong = score(args.speakers, args.seed, args.format)

@@ -45,6 +45,8 @@ RIGID_SD_MM = 3.0
 SKULL_MM = 80.0
 #: A second jaw sensor's distance to the first varies less than this (mm, 95 % range).
 JAW_RIGID_MM = 1.5
+#: A channel within this distance (median, mm) of an articulator lies near the mouth.
+MOUTH_MM = 25.0
 _MAX_FRAMES = 3000
 
 
@@ -173,9 +175,11 @@ def _head_group(pos: np.ndarray, idx: list[int]) -> tuple[list[int], float, str]
             groups.add(tuple(sorted(group)))
     if not groups:
         return [], 1.0, ""
-    groups = {_trimmed(sd, g) for g in groups}
+    groups = {_trimmed(sd, dist, g) for g in groups}
     scored = sorted((_worst(sd, g), -len(g), g) for g in groups)
     worst, _, best = scored[0]
+    best = _extended(sd, dist, best)
+    worst = _worst(sd, best)
     scored = [t for t in scored if not (set(t[2]) <= set(best) or set(t[2]) >= set(best))]
     scored.insert(0, (worst, -len(best), best))
     others = [j for j in range(k) if j not in best]
@@ -192,20 +196,47 @@ def _head_group(pos: np.ndarray, idx: list[int]) -> tuple[list[int], float, str]
                                          f"other channel's by {nearest:.1f} mm or more{words}")
 
 
-def _trimmed(sd: np.ndarray, group: tuple[int, ...]) -> tuple[int, ...]:
+def _near_mouth(dist: np.ndarray, member: int, group) -> bool:
+    """True when ``member`` lies within :data:`MOUTH_MM` of a channel outside ``group``
+    (the articulators): a jaw sensor, not a skull reference (an upper-incisor reference,
+    though near, is rigid to the skull within its noise and is never trimmed)."""
+    return any(dist[member, j] < MOUTH_MM for j in range(dist.shape[0])
+               if j != member and j not in group)
+
+
+def _trimmed(sd: np.ndarray, dist: np.ndarray, group: tuple[int, ...]) -> tuple[int, ...]:
     """``group`` without a member that moves against the others (an upper lip that barely
-    moves in a task): dropped when the rest keep three members and that member's
-    distances vary more than 0.5 mm and twice as much as the rest's."""
+    moves in a task, a jaw sensor turning about an axis near two mastoid references):
+    dropped when its distances vary more than 0.5 mm and twice as much as the rest's, and
+    the rest keep three members, or two spanning a skull when it lies near the mouth."""
     group = tuple(group)
-    while len(group) > 3:
+    for m in sorted(group, key=lambda m: -max(sd[m, g] for g in group if g != m)):
+        rest = tuple(g for g in group if g != m)
+        if (len(rest) >= 2 and max(sd[m, g] for g in rest) > 0.5 and _near_mouth(dist, m, group)
+                and max(dist[a, b] for a in rest for b in rest) > SKULL_MM):
+            group = rest  # a sensor near the mouth that moves against the skull: the jaw
+    while len(group) > 2:
         worst_member = max(group, key=lambda m: max(sd[m, g] for g in group if g != m))
         rest = tuple(g for g in group if g != worst_member)
         own = max(sd[worst_member, g] for g in rest)
-        if own > 0.5 and own > 2.0 * _worst(sd, rest):
+        enough = len(rest) >= 3 or (_near_mouth(dist, worst_member, group) and max(
+            dist[a, b] for a in rest for b in rest) > SKULL_MM)
+        if own > 0.5 and own > 2.0 * _worst(sd, rest) and enough:
             group = rest
         else:
             break
     return tuple(sorted(group))
+
+
+def _extended(sd: np.ndarray, dist: np.ndarray, group: tuple[int, ...]) -> tuple[int, ...]:
+    """``group`` with every other channel rigid to it (within :data:`RIGID_SD_MM`) that
+    lies far from the mouth: a loose skull reference."""
+    out = list(group)
+    for j in range(sd.shape[0]):
+        if j not in out and max(sd[j, g] for g in out) < RIGID_SD_MM and not _near_mouth(
+                dist, j, out + [j]):
+            out.append(j)
+    return tuple(sorted(out))
 
 
 def _worst(sd: np.ndarray, group) -> float:
