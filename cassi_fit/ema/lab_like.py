@@ -27,7 +27,9 @@ assumptions:
   and three skull references (nasion, mastoids; one of them *loose* for 30 % of speakers:
   skin drift and noise).
 
-Every file: shuffled channels named by number (``Ch1``... / ``S1``...), one or two unused
+Every file: its sound (the synthetic corpus's buzz that follows the articulators: inside
+an mview file as its ``AUDIO`` entry, beside the others as ``<task>.wav``; no word or
+phone labels), shuffled channels named by number (``Ch1``... / ``S1``...), one or two unused
 channels (never tracked), a lip-corner and a lateral tongue sensor (parasagittal), per-
 sensor offsets of up to 2 mm from the midline, extra dropouts. The truth
 (``placement.json`` beside the files): the origin (the upper incisor's tip) and the
@@ -66,6 +68,7 @@ class LabLike:
 
     raw: RawEma
     truth: dict
+    audio: np.ndarray | None = None  # int16 samples at synth.AUDIO_RATE_HZ, time 0 = the file's
 
 
 def _rot2(theta: np.ndarray) -> np.ndarray:
@@ -180,9 +183,12 @@ def _dropouts(pos: np.ndarray, rng) -> np.ndarray:
 
 
 def _recording(anatomy, task, seed, d, m, origin, fmt, order, rate, rng) -> LabLike:
-    from ..synth import synth_recording
+    from ..synth import DEFAULT_NOISE_MM, synth_audio
+    from ..synth._measurement import _simulate  # synth_recording, with the controls
 
-    track, truth = synth_recording(anatomy, task, seed=seed)
+    track, truth, controls = _simulate(anatomy, task, seed, DEFAULT_NOISE_MM, None, True, True,
+                                       "realistic")
+    audio = synth_audio(controls, truth.times, anatomy.f0_hz, np.random.default_rng([*seed, 3]))
     arts = _articulators(anatomy, track, truth, d)
     roles, toolkit = _layout(arts, d, rng)
     times = np.arange(0.0, track.times[-1] + 1e-9, 1.0 / rate)
@@ -208,7 +214,7 @@ def _recording(anatomy, task, seed, d, m, origin, fmt, order, rate, rng) -> LabL
         "jaw_sensor": d["jaw_glued"], "second_jaw_sensor": bool(d["molar"]),
         "loose_reference": None if d["loose"] is None else list(REFERENCES)[d["loose"]],
     }
-    return LabLike(raw=raw, truth=truth_json)
+    return LabLike(raw=raw, truth=truth_json, audio=audio)
 
 
 def lab_like_speaker(index: int, *, seed: int = 0, fmt: str = "ag501",
@@ -250,6 +256,8 @@ def write_lab_like_corpus(out_dir: str | os.PathLike, *, format: str = "ag501",
     named ``sensors.toml`` so the toolkit does not find it). A folder with files is
     refused unless ``overwrite``, and never one holding real data."""
     from .._io import atomic_write, refuse_foreign_data
+    from ..synth import AUDIO_RATE_HZ
+    from ..synth._audio import _write_wav
 
     if format not in FORMATS:
         raise CassiError(f"lab-like files: format {format!r} is not one of {', '.join(FORMATS)}")
@@ -268,7 +276,12 @@ def write_lab_like_corpus(out_dir: str | os.PathLike, *, format: str = "ag501",
         truth = {}
         for rec in recs:
             name = f"{rec.truth['task']}{suffix}"
-            _write(format, folder / name, rec.raw)
+            if format == "mview":  # the sound inside the file, as Haskins' files carry it
+                _write(format, folder / name, rec.raw,
+                       (rec.audio.astype(np.float64) / 32768.0, float(AUDIO_RATE_HZ)))
+            else:  # the sound beside the file
+                _write(format, folder / name, rec.raw)
+                _write_wav(folder / f"{rec.truth['task']}.wav", rec.audio, overwrite=True)
             truth[name] = rec.truth
         atomic_write(folder / "placement.json", json.dumps(truth, indent=1) + "\n",
                      overwrite=True)
