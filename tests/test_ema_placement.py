@@ -154,3 +154,19 @@ def test_the_real_xrmb_speaker_is_placed_from_his_own_data():
     placed = estimate_placement([(moved[:, :7], names)], {n: n for n in names}, names)
     origin_error, plane_error = _errors(placed, shift, q[:, 0])  # XRMB: origin, x = truth
     assert origin_error < 8.0 and plane_error < 15.0
+
+
+@pytest.mark.parametrize("line, message", [
+    ('origin = "front"', r"\[file\] origin = 'front': expected \[x, y, z\]"),
+    ("origin = [1, 2, 3, 4]", r"\[file\] origin = .*expected \[x, y, z\]"),
+    ("origin = [1, nan, 3]", r"\[file\] origin = .*expected \[x, y, z\]"),
+    ("occlusal_plane = [0, 0, 0]", r"\[file\] occlusal_plane = .*expected"),
+    ('occlusal_plane = "declared"', r'\[file\] occlusal_plane = "declared" needs the axes'),
+    ('jaw_sensor = "tooth"', r"\[file\] jaw_sensor = 'tooth': expected 'edge', 'gum'"),
+    ("jaw_sensor = -3", r"\[file\] jaw_sensor = -3"),
+])
+def test_frame_keys_that_make_no_sense_are_errors_naming_the_map(tmp_path, line, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(f"[file]\n{line}\n")
+    with pytest.raises(DataFormatError, match=rf"bad\.toml: {message}"):
+        read_sensor_map(path)

@@ -56,6 +56,8 @@ from .sensor_map import PROPOSED, Assignment, SensorMap, resolve, sensor_map
 #: The span of the CASSI sensors' median positions (mm) of any head: outside it the
 #: units are wrong (a normalised array, centimetres, hundredths of a millimetre).
 SPAN_RANGE_MM = (15.0, 250.0)
+#: At most this many files of a session (spread over it) give its frame.
+SESSION_FILES = 40
 _BACK_FIRST = ("T4", "T3", "T2", "T1")
 
 
@@ -445,7 +447,14 @@ def session_of(paths, smap: SensorMap) -> tuple[SensorMap, placement.Placement |
     from ..errors import CassiError
     from .detect import read_ema
 
-    raws = [read_ema(p) for p in paths]
+    paths = list(paths)
+    if not paths:
+        return smap, None
+    first = read_ema(paths[0])
+    if first.dims == 2:  # midsagittal data: each file's own documented or anatomical axes
+        return smap, None
+    step = max(1, len(paths) // SESSION_FILES)  # a session's frame needs a sample, not all
+    raws = [first] + [read_ema(p) for p in paths[step::step][:SESSION_FILES - 1]]
     if smap.name == PROPOSED:
         try:
             smap = proposed_map(raws)[0]
