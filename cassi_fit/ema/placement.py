@@ -72,6 +72,8 @@ LEFT_OUT_PENALTY_MM = 1.0
 N_DRAWS = 2000
 #: Share of a session's frames taken as the closed jaw (the incisor sensor's highest).
 CLOSED_SHARE = 0.02
+#: ... after leaving out the highest this share (tracking spikes).
+SPIKE_SHARE = 0.005
 JAW_SENSOR_KINDS = ("edge", "gum", "unknown")
 _PATH_SD_DEG = 12.0
 _PATH_BACK_DEG = 13.0
@@ -224,7 +226,8 @@ def _closed(jaw2: np.ndarray, pitch: float) -> tuple[np.ndarray, np.ndarray]:
     up = np.array([-np.sin(np.deg2rad(pitch)), np.cos(np.deg2rad(pitch))])
     height = jaw2 @ up
     k = max(5, int(round(CLOSED_SHARE * jaw2.shape[0])))
-    top = np.argsort(height)[-k:]
+    spikes = int(SPIKE_SHARE * jaw2.shape[0])  # the very highest: a mistrack, not the jaw
+    top = np.argsort(height)[-(k + spikes):jaw2.shape[0] - spikes]
     mask = np.zeros(jaw2.shape[0], bool)
     mask[top] = True
     return np.median(jaw2[top], axis=0), mask
