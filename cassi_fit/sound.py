@@ -15,8 +15,8 @@ recording is ``"ok"``; otherwise one line says the numbers and the likely cause:
 * ``"longer"``: more sound than pellets, a warning (a video keeps the part the pellets
   cover).
 
-* ``"cut"`` (an error): the header claims more samples than the file holds (a file cut
-  after it was written: half of a video would be silence).
+* a **cut file** (an error, before the above): the header claims more samples than the
+  file holds (half of a video would be silence); accepted, the samples held are checked.
 
 ``accept_mismatch=True`` turns every error into a :class:`SoundMismatchWarning` (the
 sound is then used as it is: padded or cut, never resampled). The video writer and
