@@ -54,6 +54,8 @@ experiments: $(STAMP)
 	    --docs docs/generated --force; \
 	else echo "real_referee: skipped, no real recording (make experiments XRMB_JW11=DIR)"; fi
 	$(BIN)/python experiments/mistrack_detection.py --docs docs/generated --force
+	$(BIN)/python experiments/placement.py --docs docs/generated --xrmb $(XRMB_JW11)
+	$(BIN)/python experiments/channel_identification.py --docs docs/generated
 	$(BIN)/python experiments/quote_tables.py
 
 # ruff; the import-linter contracts (layers, no cycles; pyproject.toml); the public surface's

@@ -46,9 +46,11 @@ def _task(command: str, method: str, solver: str):
         from cassi_fit.run_spec import run_spec
 
         return evaluate_task, {"spec": run_spec("improved")}, None
-    from cassi_fit.jaw_table import jaw_task
+    from cassi_fit.jaw_fit import jaw_method
+    from cassi_fit.jaw_table import jaw_spec, jaw_task
 
-    return jaw_task, {"method": method, "solver": solver}, True  # cassi jaw: float64
+    spec = jaw_spec(jaw=jaw_method(method, solver=solver))  # cassi jaw's: float64
+    return jaw_task, {"spec": spec}, True
 
 
 def child(command: str, jobs: int, method: str, solver: str, out: str,

@@ -35,7 +35,6 @@ if TYPE_CHECKING:
     from .calibrate_corpus import calibrate_corpus as calibrate_corpus
     from .calibration import Calibration as Calibration
     from .calibration import CalibrationWarning as CalibrationWarning
-    from .calibration import calibration_choice as calibration_choice
     from .calibration import load_calibrations as load_calibrations
     from .calibration import read_calibration as read_calibration
     from .calibration import write_calibration as write_calibration
@@ -282,7 +281,6 @@ _PUBLIC = {
     "read_calibration": "calibration",
     "write_calibration": "calibration",
     "load_calibrations": "calibration",
-    "calibration_choice": "calibration",
     # calibrate (fitting)
     "calibrate_subject": "calibrate",
     "calibrate_dataset": "calibrate",
@@ -341,7 +339,7 @@ __all__ = [
     "SpecialFileWarning", "SubjectAnatomy", "SubjectState", "TASKS", "TimeGapWarning",
     "Topology", "animate",
     "animate_corpus", "build_palate", "calibrate_corpus", "calibrate_dataset",
-    "calibrate_subject", "calibration_choice", "closed_form", "closed_form_paper", "compare",
+    "calibrate_subject", "closed_form", "closed_form_paper", "compare",
     "dataset_items", "default_params", "deform", "detect_mistracks", "ensure_default_corpus",
     "evaluate_corpus", "evaluate_dataset", "evaluate_recording", "first_valid_line", "fit_jaw",
     "generate_corpus", "initialize",

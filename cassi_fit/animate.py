@@ -25,14 +25,12 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from .dataset import Recording
 from .errors import MissingDataError
 from .frames import batch_geometry, frame_bucket, frame_params, pad_frames, unpad
 from .gaps import bad_values, frame_status, repair
-from .jaw import closed_form_frames
 from .pellets import JAW_INDEX, PELLET_NAMES
 
 
@@ -69,8 +67,8 @@ class Animation(eqx.Module):
     penetration_after: dict
     stride: int = eqx.field(static=True)
     jaw_method: str = eqx.field(static=True)
+    line_step_s: float = eqx.field(static=True)
     collisions: str = eqx.field(static=True, default="off")
-    line_step_s: float = eqx.field(static=True, default=6866e-6)
 
     @property
     def n_frames(self) -> int:
@@ -97,19 +95,16 @@ def _jaw_sensors(state, spec) -> tuple[str, ...]:
 
 def _jaw_since_first(state, jaw_pellets, method, sensors, size):
     """``(theta (size,), t (size, 2), status (m,))``: the jaw from the first valid line to
-    each frame, by the jaw method object ``method`` on the jaw ``sensors``, padded to
-    ``size`` frames; ``jaw_pellets (m, 2, 2)`` scaled mm, rows [MNI, MNM]. The closed form
-    is per frame, so it runs on the padded frames (one compilation per size bucket); a fit
-    sees only the real frames."""
-    m = jaw_pellets.shape[0]
-    if method.name == "closed-form":
-        fit = closed_form_frames(state.reference_jaw, pad_frames(jaw_pellets, size))
-        return fit.theta, fit.translation, np.asarray(fit.status)[:m]
+    each frame, by the jaw method object ``method`` (``jaw_fit.fit_jaw``) on the jaw
+    ``sensors``, padded to ``size`` frames; ``jaw_pellets (m, 2, 2)`` scaled mm, rows
+    [MNI, MNM]. The fit is padded to ``size`` (one compilation per size bucket; the padding
+    weighs nothing)."""
     from .jaw_fit import fit_jaw
 
-    fit = fit_jaw(state.reference_jaw, jnp.asarray(jaw_pellets), method=method,
-                  jaw_sensors=sensors)
-    return pad_frames(fit.theta, size), pad_frames(fit.translation, size), np.asarray(fit.status)
+    m = jaw_pellets.shape[0]
+    fit = fit_jaw(state.reference_jaw, jaw_pellets, method=method, jaw_sensors=sensors,
+                  pad_to=size)
+    return pad_frames(fit.theta, size), pad_frames(fit.translation, size), fit.status[:m]
 
 
 def animate(state: eqx.Module, recording: Recording, **changes: object) -> Animation:

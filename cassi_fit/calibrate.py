@@ -40,11 +40,9 @@ Headmeasures keeps the model's jaw shape, face width, mouth and nose.
 
 The result, :class:`~cassi_fit.calibration.Calibration`, is written one JSON file per
 subject (``<SUBJECT>.calibration.json``) by ``cassi calibrate`` and read back by
-``cassi animate --calibration`` and ``initialize(..., calibration=...)``. The record,
-its file (schema, reading, writing, the folder layout) and the command line's choice
-live in :mod:`cassi_fit.calibration`; ``Calibration``, ``read_calibration``,
-``write_calibration``, ``load_calibrations``, ``calibration_path`` and
-``calibration_choice`` stay importable from here. The unknowns of the fit are the named
+``cassi animate --calibration`` and ``initialize(..., calibration=...)``. The record and
+its file (schema, reading, writing, the folder layout) live in
+:mod:`cassi_fit.calibration`. The unknowns of the fit are the named
 pytree :class:`Unknowns`.
 
 A fit that fails says so: a stage that does not converge, a jaw shape at its anatomical
@@ -70,19 +68,11 @@ from .calibration import (
     BOUND_HIT_FRACTION,
     JAW_SCALE_BOUND,
     JAW_TURN_BOUND_RAD,
+    Calibration,
     calibration_records,
     plain,
     warn_problems,
 )
-
-# The record and its file live in cassi_fit.calibration; these names stay importable here.
-from .calibration import Calibration as Calibration
-from .calibration import CalibrationWarning as CalibrationWarning
-from .calibration import calibration_choice as calibration_choice
-from .calibration import calibration_path as calibration_path
-from .calibration import load_calibrations as load_calibrations
-from .calibration import read_calibration as read_calibration
-from .calibration import write_calibration as write_calibration
 from .conformation import lips_ahead, skin_landmarks, with_values
 from .dataset import Dataset, Recording, recording_source
 from .errors import CassiError, DegenerateGeometryError, MissingDataError
@@ -126,7 +116,7 @@ class Unknowns(eqx.Module):
 
 def bounded_jaw(x: Unknowns) -> tuple[Float[Array, ""], Float[Array, " 2"]]:
     """``(theta rad, log scales (2,))`` of the jaw shape from the unknowns, each kept
-    smoothly inside its anatomical bound ``B`` (``conformation.JAW_TURN_BOUND_RAD``,
+    smoothly inside its anatomical bound ``B`` (``calibration.JAW_TURN_BOUND_RAD``,
     ``log JAW_SCALE_BOUND``) as ``B tanh(u / B)``: slope 1 at 0 and a bijection onto
     (-B, B), so a fit whose optimum lies inside the bounds reaches the same shape, and
     none goes beyond ``B``."""

@@ -11,21 +11,20 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from .calibrate import (
-    calibrate_subject,
+from .calibrate import calibrate_subject, write_summary
+from .calibration import (
+    CalibrationWarning,
     calibration_path,
     read_calibration,
     write_calibration,
-    write_summary,
 )
-from .calibration import CalibrationWarning
 from .corpus import (
     CorpusItem,
-    CorpusRun,
+    CorpusResult,
     TaskResult,
     chosen_tasks,
     dataset_items,
@@ -76,14 +75,17 @@ def calibrate_corpus(
     *,
     subjects: Iterable[str] | None = None,
     tasks: Iterable[str] | None = None,
+    run_options: Mapping[str, Any] | None = None,
     method: str = "separate",
     collisions: bool = True,
-    **run_options: Any,
-) -> tuple[CorpusRun, dict]:
+) -> CorpusResult:
     """``cassi calibrate DATASET``: :func:`calibrate_task` per subject (float64), then
     ``out_dir/calibration_summary.csv`` (the calibrated subjects, read back from their
     files in sorted order) and ``out_dir/calibration_corpus.csv`` (every subject, failed
-    ones with their error; and ``.parquet``). Returns ``(run, {subject: Calibration})``."""
+    ones with their error; and ``.parquet``). ``run_options`` go to
+    ``corpus.run_corpus``. Returns a ``corpus.CorpusResult`` whose ``value`` is
+    ``{subject: Calibration}``."""
+    run_options = dict(run_options or {})
     check_choice("calibration method", method, CALIBRATION_METHODS)
     out = Path(out_dir)
     summary, table = out / "calibration_summary.csv", out / "calibration_corpus.csv"
@@ -97,6 +99,6 @@ def calibrate_corpus(
     run = run_corpus(calibrate_task, items, out, options=options, **run_options)
     cals = {r.item.subject: read_calibration(calibration_path(out, r.item.subject))
             for r in run.results if r.status == Status.OK}
-    write_summary(summary, cals, overwrite=replaces(run_options))
-    write_table(run.rows(), table, overwrite=replaces(run_options))
-    return run, cals
+    written = [write_summary(summary, cals, overwrite=replaces(run_options))]
+    written += write_table(run.rows(), table, overwrite=replaces(run_options))
+    return CorpusResult(run, written, cals)

@@ -10,8 +10,8 @@ every calibration has, with their sizes); its file (``SUBJECT.calibration.json``
 :data:`FORMAT`), written by :func:`write_calibration` and read by
 :func:`read_calibration` against a schema (:data:`SCHEMA`, :data:`PARAMS`: types and
 plausible ranges, the calibration's own bounds among them); the folder layout
-(:func:`calibration_path`, :func:`load_calibrations`); and the command line's choice
-(:func:`calibration_choice`). Fitting lives in ``cassi_fit.calibrate``; the rest of the
+(:func:`calibration_path`, :func:`load_calibrations`). A run's choice of calibration is
+resolved by ``run_spec.RunSpec.calibration_for``. Fitting lives in ``cassi_fit.calibrate``; the rest of the
 subject's conformation in ``cassi_fit.conformation``. docs/CALIBRATION.md, "The file".
 
 A file that is not a calibration gets one line naming the file, the line where the JSON
@@ -589,44 +589,6 @@ def load_calibrations(folder: str | os.PathLike, *, warn: bool = True) -> dict[s
     if not out:
         raise MissingDataError(f"{folder}: no *.calibration.json files")
     return out
-
-
-def calibration_choice(
-    path: str | os.PathLike | None = None, subject: str = "", *, cassi: bool = False
-) -> Calibration | str | None:
-    """``initialize``'s ``calibration`` for the command line's ``--calibration PATH`` and
-    ``--cassi``: ``"cassi"`` with ``cassi``, ``None`` (the default conformation) without
-    ``path``, else the :class:`Calibration` of ``subject`` read from ``PATH``: a folder
-    written by ``cassi calibrate`` (its ``SUBJECT.calibration.json``) or one such file.
-
-    Errors, each one line: ``CassiError`` if both ``path`` and ``cassi`` are given, or if
-    the file is of another subject than ``subject`` (when ``subject`` is given);
-    ``MissingDataError`` for a missing path or a folder without the subject's file (the
-    subjects it has are named); ``DataFormatError`` for a file that is not a calibration
-    (:func:`read_calibration`, which also warns of the problems a file records).
-    """
-    if path and cassi:
-        raise CassiError("--cassi and --calibration exclude each other")
-    if cassi:
-        return "cassi"
-    if not path:
-        return None
-    path = Path(path)
-    if path.is_dir():
-        if not subject:
-            raise CassiError(f"{path}: a calibration folder needs the subject to choose from it")
-        file = calibration_path(path, subject)
-        if not file.exists():
-            have = sorted(p.name.split(".")[0] for p in path.glob("*.calibration.json"))
-            listed = f"it has {', '.join(have)}" if have else "it has no *.calibration.json"
-            raise MissingDataError(f"{path}: no calibration of subject {subject.upper()} "
-                                   f"({file.name}; {listed})")
-        path = file
-    calibration = read_calibration(path)
-    if subject and calibration.subject.upper() != subject.upper():
-        raise CassiError(f"{path}: a calibration of subject {calibration.subject}, "
-                         f"not {subject.upper()}")
-    return calibration
 
 
 def calibration_records(calibrations: Mapping[str, Calibration]) -> list[dict[str, Any]]:

@@ -9,8 +9,7 @@ Three sources (``initialize(..., calibration=...)``, docs/PIPELINE.md):
 * ``mode="cassi"``: only what the paper did (the jaw shape);
 * a :class:`~cassi_fit.calibration.Calibration`: the subject's shape fitted through the
   model by ``cassi_fit.calibrate`` (``cassi calibrate``), read back from its JSON file;
-  the record, its file and its bounds live in :mod:`cassi_fit.calibration` (re-exported
-  here: ``Calibration``, ``JAW_SCALE_BOUND``, ``JAW_TURN_BOUND_RAD``).
+  the record, its file and its bounds live in :mod:`cassi_fit.calibration`.
 
 Gonion and gnathion in Headmeasures are bone points (paper section 3); the model's are
 skin vertices: :func:`skin_landmarks` maps the one onto the other by the soft-tissue
@@ -31,9 +30,6 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from . import rigid
-from .calibration import JAW_SCALE_BOUND as JAW_SCALE_BOUND
-from .calibration import JAW_TURN_BOUND_RAD as JAW_TURN_BOUND_RAD
-from .calibration import Calibration as Calibration
 from .dataset import Recording
 from .deform import FaceParams, default_params
 from .face_model import FaceModel

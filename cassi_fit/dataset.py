@@ -42,6 +42,7 @@ import re
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -52,6 +53,7 @@ from .ema import RawEma, SensorMap, SensorReport, ema_to_track, read_ema
 from .ema import emu as _emu
 from .ema.arrays import raw_from_array
 from .ema.detect import detect_format
+from .ema.sensor_map import PROPOSED
 from .ema.sensor_map import sensor_map as _sensor_map
 from .errors import DataFormatError, MissingDataError
 from .headmeasures import DEFAULT_HEAD_MEASURES, HeadMeasures, read_headmeasures
@@ -338,11 +340,11 @@ def _is_bite(path: Path) -> bool:
 def _sensor_map_for(path: Path, given: SensorMapLike) -> SensorMap:
     """The map given, else ``<stem>.sensors.toml``, ``sensors.toml`` beside or one folder
     up, else the built-in names."""
-    if given is not None:
+    if given is not None and str(given) != PROPOSED:
         return _sensor_map(given)
     found = (_find([path.parent], [f"{path.stem.lower()}.{SENSOR_MAP_NAME}", SENSOR_MAP_NAME])
              or _find([path.parent.parent], [SENSOR_MAP_NAME]))
-    return _sensor_map(found)
+    return _sensor_map(found if found is not None else given)  # a map beside wins over proposed
 
 
 def _bite_for(path: Path, given: str | os.PathLike | None) -> Path | None:
@@ -364,7 +366,7 @@ def _bite_for(path: Path, given: str | os.PathLike | None) -> Path | None:
 
 
 def _ema_track(path: Path, *, fmt: str | None = None, sensor_map: SensorMapLike = None,
-               layout=None, rate: float | None = None, bite_plane=None
+               layout=None, rate: float | None = None, bite_plane=None, session=None
                ) -> tuple[PelletTrack, SensorReport, RawEma]:
     raw = read_ema(path, format=fmt, layout=layout, rate=rate)
     smap = _sensor_map_for(path, sensor_map)
@@ -372,7 +374,10 @@ def _ema_track(path: Path, *, fmt: str | None = None, sensor_map: SensorMapLike 
         smap = _emu.sensor_map_for(raw) or smap  # the IPS Munich set has a built-in map
     bite_path = _bite_for(path, bite_plane)
     if bite_path is None:
-        return (*ema_to_track(raw, smap), raw)
+        placed = None
+        if session is not None:  # a Dataset: the subject's session (its map, its frame)
+            smap, placed = session(smap)
+        return (*ema_to_track(raw, smap, placement=placed), raw)
     bite = read_ema(bite_path, rate=rate)
     return (*ema_to_track(raw, smap, bite=bite,
                           bite_map=_sensor_map_for(bite_path, sensor_map)), raw)
@@ -629,8 +634,21 @@ class Dataset:
         if _emu.is_bundle_folder(path):
             shared = [path.parent.parent, self.root]
         xrmb = path.suffix.lower() == PELLET_SUFFIX or detect_format(path) == "xrmb"
-        ema = None if xrmb else {"sensor_map": self.sensor_map}
+        ema = None if xrmb else {"sensor_map": self.sensor_map,
+                                 "session": partial(self._session_frame, subject)}
         return _assemble(path, subject, task, own=own, shared=shared, ema=ema)
+
+    def _session_frame(self, subject: str, smap: SensorMap):
+        """``(map, frame)`` shared by ``subject``'s articulograph files, found once from
+        all of them (:func:`cassi_fit.ema.track.session_of`)."""
+        from .ema.track import session_of
+
+        cache = self.__dict__.setdefault("_sessions", {})
+        if subject not in cache:
+            cache[subject] = session_of(
+                [p for (s, _), (p, _) in sorted(self._index.items())
+                 if s == subject and p.suffix.lower() != PELLET_SUFFIX and not _is_bite(p)], smap)
+        return cache[subject]
 
     def __len__(self) -> int:
         return len(self._index)

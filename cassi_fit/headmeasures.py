@@ -17,9 +17,8 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
-from ._io import atomic_write
+from ._io import atomic_write, read_lines
 from .errors import DataFormatError
-from .txy import read_lines
 
 
 @dataclass(frozen=True)
@@ -193,6 +192,13 @@ def read_headmeasures(
     of ``PLAUSIBLE_RANGES``, with the likely unit; a gonion in front of the gnathion).
     """
     path, lines = read_lines(path)
+    return parse_headmeasures(path, lines, check=check)
+
+
+def parse_headmeasures(path: str | os.PathLike, lines: list[tuple[int, str]], *,
+                       check: bool = True) -> dict[str, HeadMeasures]:
+    """The one parser of a ``Headmeasures.txt``'s ``(lineno, line)`` pairs (``path``
+    names the file in errors); as :func:`read_headmeasures`, which reads the file."""
     rows = [(n, _strip_comment(s).split()) for n, s in lines]
     rows = [(n, toks) for n, toks in rows if toks]
     if not rows:

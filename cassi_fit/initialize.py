@@ -23,7 +23,7 @@ Paper section 2; :func:`initialize`:
    gonion and gnathion, by the same closed form (``conformation.jaw_shape``);
 6. beyond the paper (its future work): face and mouth width from Headmeasures, lip
    thickness per speaker, nose tip (``conformation.default_conformation``), or a fitted
-   ``conformation.Calibration``; tongue (#55-#62) and lips (#63-#66) from the first frame.
+   ``calibration.Calibration``; tongue (#55-#62) and lips (#63-#66) from the first frame.
 
 Every choice of the run comes from one :class:`~cassi_fit.run_spec.RunSpec` (the
 ``"improved"`` or ``"cassi"`` preset, docs/CASSI_MODE.md, with any changes), checked once
@@ -40,7 +40,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Float
 
-from .conformation import Calibration, default_conformation
+from .calibration import Calibration
+from .conformation import default_conformation
 from .dataset import Recording, recording_source
 from .errors import DegenerateGeometryError
 from .face_model import FaceModel
@@ -194,7 +195,7 @@ def initialize(
     (``RunSpec.calibration_for``): None (the subject's shape from its Headmeasures and
     first valid line, step 6 of the module docstring), ``"cassi"`` (only what the paper
     did: the jaw shape from gonion and gnathion), or a fitted
-    :class:`~cassi_fit.conformation.Calibration` of this subject (its scale and shape;
+    :class:`~cassi_fit.calibration.Calibration` of this subject (its scale and shape;
     ``cassi calibrate``). Returns a :class:`SubjectState`. Raises ``MissingDataError`` (jaw
     pellets never tracked), ``DegenerateGeometryError`` (coincident jaw pellets on the
     first valid line), ``InvalidChoiceError`` (an unknown option) or ``CassiError`` (a

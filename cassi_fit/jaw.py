@@ -33,15 +33,6 @@ from jaxtyping import Float
 
 from .status import Status
 
-# Status codes of a jaw motion (``JawMotion.status``; also used per frame by ``JawFit``): the
-# first values of the toolkit's one status vocabulary, :class:`cassi_fit.status.Status`.
-STATUS_OK = int(Status.OK)
-STATUS_PIVOT_UNDEFINED = int(Status.PIVOT_UNDEFINED)  # theta == 0: the pivot is at infinity
-STATUS_DEGENERATE = int(Status.DEGENERATE)  # the two jaw pellets coincide
-STATUS_NON_FINITE = int(Status.NON_FINITE)  # a NaN or infinite coordinate (untracked pellet)
-STATUS_INVALID_FRAME = int(Status.INVALID_FRAME)  # (fits) excluded by ``valid``: interpolated
-STATUS_NOT_CONVERGED = int(Status.NOT_CONVERGED)  # (fits) the solver did not report success
-
 
 class JawMotion(NamedTuple):
     """The jaw's motion in one frame (or, vmapped, in each of ``n`` frames).
@@ -193,8 +184,9 @@ def _finish(theta, c, s, t, ok, finite):
     defined = defined & good
     status = jnp.where(
         ~finite,
-        STATUS_NON_FINITE,
-        jnp.where(~ok, STATUS_DEGENERATE, jnp.where(defined, STATUS_OK, STATUS_PIVOT_UNDEFINED)),
+        int(Status.NON_FINITE),
+        jnp.where(~ok, int(Status.DEGENERATE),
+                  jnp.where(defined, int(Status.OK), int(Status.PIVOT_UNDEFINED))),
     )
     status = jnp.asarray(status, jnp.int32)
     return JawMotion(theta, t, jnp.where(defined, pivot, 0.0), defined, status)

@@ -8,22 +8,23 @@ Every table goes through :mod:`cassi_fit.tables` (one writer, one way to print a
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from ._io import atomic_write
 from .corpus import (
     CorpusItem,
-    CorpusRun,
+    CorpusResult,
     TaskResult,
     dataset_items,
+    refuse_existing,
+    replaces,
     require_items,
     run_corpus,
     write_table,
 )
-from .errors import OutputExistsError
-from .status import Status
+from .status import Status, fitted
 from .tables import csv_text
 
 if TYPE_CHECKING:
@@ -33,7 +34,8 @@ if TYPE_CHECKING:
     from .dataset import Dataset
     from .jaw_fit import JawFit
     from .labels import Labels
-    from .txy import PelletTrack
+    from .pipeline import RecordingRun
+    from .run_spec import RunSpec
 
 JAW_FRAME_COLUMNS = ("time_s", "theta_deg", "pivot_a_mm", "pivot_b_mm", "tx_mm", "ty_mm",
                      "residual_mm", "status")
@@ -48,7 +50,8 @@ def jaw_frame_rows(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels |
     :data:`JAW_FRAME_COLUMNS` (times s, theta deg, pivot and translation mm, rms residual
     mm, the status word); with one jaw sensor and the other's reference known, the hidden
     sensor's predicted position (``MNM_pred_x_mm``, ``MNM_pred_y_mm`` or ``MNI_...``, mm,
-    in the pellet frame); a ``mistrack`` column when ``mistracks`` are given (one string
+    in the pellet frame; blank in frames whose own data were not used: invalid-frame,
+    mistracked, ...); a ``mistrack`` column when ``mistracks`` are given (one string
     per frame, ``MistrackReport.frame_labels``: which pellet the detector flagged and
     why, e.g. ``"MNI:dropout"``); a ``label`` column when ``labels`` are given
     (``labels.Labels``; ``""`` between labelled intervals)."""
@@ -60,6 +63,7 @@ def jaw_frame_rows(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels |
     columns = (list(JAW_FRAME_COLUMNS) + (["mistrack"] if mistracks is not None else [])
                + pred_columns + (["label"] if labels is not None else []))
     theta_deg = np.rad2deg(fit.theta)
+    predicted_here = fitted(fit.status) | (fit.status == int(Status.NOT_CONVERGED))
     current = labels.at(times) if labels is not None else None
     rows = []
     for k in range(len(times)):
@@ -67,8 +71,9 @@ def jaw_frame_rows(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels |
                "pivot_a_mm": float(fit.pivot[k, 0]), "pivot_b_mm": float(fit.pivot[k, 1]),
                "tx_mm": float(fit.translation[k, 0]), "ty_mm": float(fit.translation[k, 1]),
                "residual_mm": float(fit.residual[k]), "status": Status(int(fit.status[k])).label}
-        if predicted is not None:
-            row[pred_columns[0]], row[pred_columns[1]] = (float(v) for v in predicted[k])
+        if predicted is not None:  # blank where the frame's own data were not used
+            row[pred_columns[0]], row[pred_columns[1]] = (
+                (float(v) for v in predicted[k]) if predicted_here[k] else (None, None))
         if mistracks is not None:
             row["mistrack"] = mistracks[k]
         if current is not None:
@@ -135,57 +140,6 @@ def jaw_summary_row(fit: JawFit, *, label_file: str = "",
     return row
 
 
-#: frames per padding bucket of the jaw fits: one compilation covers every recording up to
-#: 7 s; the padding's cost is nothing for the closed form, and up to 3x a short recording's
-#: fitting time for "frame-fit" (still far below one compilation)
-JAW_FRAME_BUCKET = 1024
-
-
-def fit_jaw_bucketed(track: PelletTrack, *, method: str | None = None,
-                     solver: str | None = None, smoothness: float = 1.0,
-                     jaw_sensors: str | None = None) -> JawFit:
-    """``jaw_fit.jaw_from_track`` with the frames padded to a multiple of
-    :data:`JAW_FRAME_BUCKET` (1024 frames, 7 s), so that a worker compiles the fit once per
-    bucket instead of once per recording length (the XRMB lengths all differ; compiling
-    costs about 2-3 s a length, fitting a recording tens of ms). The padding is untracked
-    frames after the last: the per-frame methods give the real frames the values of an
-    unpadded fit (they are fitted frame by frame and the noise is pooled over usable frames
-    only), and "fixed-pivot" gets zero weight for them. "smooth-pivot" is not padded: its
-    pivot-path knots depend on the length. ``jaw_sensors``: both, or one (``"MNI"``,
-    ``"MNM"``; ``jaw_fit.fit_jaw``), or None for the jaw pellets the track has; ``method``
-    None: the closed form with two, coupled-rotation with one
-    (``jaw_fit.method_for_sensors``)."""
-    import dataclasses
-
-    import numpy as np
-
-    from .jaw_fit import jaw_from_track, jaw_sensor_set, method_for_sensors, tracked_jaw_sensors
-    from .txy import PelletTrack
-
-    sensors = (tracked_jaw_sensors(track.valid, track.path) if jaw_sensors is None
-               else jaw_sensor_set(jaw_sensors))
-    method = method_for_sensors(method, sensors).name
-    jaw_sensors = ",".join(sensors)
-
-    if method == "smooth-pivot":
-        return jaw_from_track(track, method=method, solver=solver, smoothness=float(smoothness),
-                              jaw_sensors=jaw_sensors)
-    n = track.n_frames
-    extra = -n % JAW_FRAME_BUCKET
-    step = track.frame_step_s
-    padded = PelletTrack(
-        times=np.concatenate([track.times, track.times[-1] + step * np.arange(1, extra + 1)]),
-        positions=np.concatenate([track.positions, np.full((extra, 8, 2), np.nan)]),
-        valid=np.concatenate([track.valid, np.zeros((extra, 8, 2), bool)]),
-        path=track.path,
-    )
-    fit = jaw_from_track(padded, method=method, solver=solver, jaw_sensors=jaw_sensors)
-    per_frame = {f.name: getattr(fit, f.name)[:n] for f in dataclasses.fields(fit)
-                 if isinstance(getattr(fit, f.name), np.ndarray)
-                 and getattr(fit, f.name).shape[:1] == (n + extra,)}
-    return dataclasses.replace(fit, **per_frame)
-
-
 def jaw_output_path(out_dir: str | os.PathLike, item: CorpusItem) -> Path:
     """``out_dir/SUBJECT/TASK.jaw.csv``."""
     return Path(out_dir) / item.subject / f"{item.task}.jaw.csv"
@@ -196,44 +150,73 @@ def segments_output_path(out_dir: str | os.PathLike, item: CorpusItem) -> Path:
     return Path(out_dir) / item.subject / f"{item.task}.segments.csv"
 
 
-def jaw_task(item: CorpusItem, out_dir: str, *, method: str | None = None,
-             solver: str | None = None, smoothness: float = 1.0,
-             jaw_sensors: str | None = None, labels: bool = True,
-             overwrite: bool = False) -> TaskResult:
-    """``cassi jaw DATASET``'s task: fit the jaw of one pellet file
-    (:func:`fit_jaw_bucketed`), write ``out_dir/SUBJECT/TASK.jaw.csv`` (one row per frame)
-    and return the summary row (:func:`jaw_summary_row`). When ``labels`` and a label
-    file lies beside the pellet file or labels are inside it (``labels.recording_labels``),
-    the frame table gets a
-    ``label`` column and ``TASK.segments.csv`` holds one row per labelled segment
-    (``labels.segment_summary``: peak jaw opening, lip aperture range, ...). With one jaw
-    sensor (``jaw_sensors``), the other's prediction is in the frame table and its error,
-    where the file has it, in the row. Any recording the toolkit reads (XRMB or an
-    articulograph's, ``corpus.load_item``); ``method``/``jaw_sensors`` None: as
-    :func:`fit_jaw_bucketed`, per recording."""
-    from .corpus import load_item
-    from .labels import SEGMENT_COLUMNS, recording_labels, segment_summary
-    from .pellets import JAW_PELLETS, pellet_index
+class JawTables(NamedTuple):
+    """What :func:`write_jaw_tables` wrote: the ``outputs`` (the frame table, and the
+    segments table when there are labels), the ``labels`` used (None: none found or
+    asked for) and the ``segments`` rows."""
 
-    recording = load_item(item, quiet=True)
+    outputs: tuple[Path, ...]
+    labels: Labels | None
+    segments: list[dict]
+
+
+def write_jaw_tables(run: RecordingRun, out: str | os.PathLike,
+                     segments_out: str | os.PathLike, *, labels: bool = True,
+                     overwrite: bool = False) -> JawTables:
+    """One recording's jaw tables (``cassi jaw``, one recording or a corpus's): the frame
+    table (:func:`jaw_frame_csv`, with the mistrack column) to ``out`` and, when
+    ``labels`` and labels beside the recording or inside it (``labels.recording_labels``), a
+    ``label`` column and one row per labelled segment (``labels.segment_summary``: peak
+    jaw opening, lip aperture range, ...) to ``segments_out``. ``run``: a
+    ``pipeline.RecordingRun`` with the jaw stage run."""
+    from .labels import SEGMENT_COLUMNS, recording_labels, segment_summary
+
+    recording, fit = run.recording, run.jaw
     track = recording.track
-    fit = fit_jaw_bucketed(track, method=method, solver=solver, smoothness=smoothness,
-                           jaw_sensors=jaw_sensors)
     found = recording_labels(recording) if labels else None  # beside the file or inside it
-    out = jaw_output_path(out_dir, item)
     outputs = [atomic_write(out, jaw_frame_csv(track.times, fit, found,
                                                track.mistracks.frame_labels()),
                             overwrite=overwrite)]
-    label_file = ""
+    segments: list[dict] = []
     if found is not None:
-        label_file = found.path.name if found.path is not None else ""
-        rows = segment_summary(track.times, fit.theta, track.positions, found,
-                               usable=fit.status == int(Status.OK))
-        outputs.append(atomic_write(segments_output_path(out_dir, item),
-                                    csv_text(rows, SEGMENT_COLUMNS), overwrite=overwrite))
-    current = track.positions[:, [pellet_index(p) for p in JAW_PELLETS]]
-    return TaskResult(jaw_summary_row(fit, label_file=label_file, current=current),
-                      tuple(str(p) for p in outputs))
+        segments = segment_summary(track.times, fit.theta, track.positions, found,
+                                   usable=fit.status == int(Status.OK))
+        outputs.append(atomic_write(segments_out, csv_text(segments, SEGMENT_COLUMNS),
+                                    overwrite=overwrite))
+    return JawTables(tuple(outputs), found, segments)
+
+
+def jaw_task(item: CorpusItem, out_dir: str, *, spec: RunSpec, labels: bool = True,
+             overwrite: bool = False) -> TaskResult:
+    """``cassi jaw DATASET``'s task: the jaw stage of one recording
+    (``pipeline.run_recording(..., stages=pipeline.JAW)``, as ``spec`` says), its tables
+    (:func:`write_jaw_tables`: ``out_dir/SUBJECT/TASK.jaw.csv``, and
+    ``TASK.segments.csv`` with labels) and the summary row (:func:`jaw_summary_row`; with
+    one jaw sensor, the other's prediction error where the file has it). Any recording
+    the toolkit reads (``corpus.load_item``)."""
+    from .corpus import load_item
+    from .pellets import JAW_PELLETS, pellet_index
+    from .pipeline import JAW, run_recording
+
+    recording = load_item(item, quiet=True)
+    run = run_recording(recording, spec, stages=JAW)
+    written = write_jaw_tables(run, jaw_output_path(out_dir, item),
+                               segments_output_path(out_dir, item), labels=labels,
+                               overwrite=overwrite)
+    found = written.labels
+    label_file = found.path.name if found is not None and found.path is not None else ""
+    current = recording.track.positions[:, [pellet_index(p) for p in JAW_PELLETS]]
+    return TaskResult(jaw_summary_row(run.jaw, label_file=label_file, current=current),
+                      tuple(str(p) for p in written.outputs))
+
+
+def jaw_spec(spec: RunSpec | str | None = None, **changes: Any) -> RunSpec:
+    """The run spec of ``cassi jaw``: ``spec`` with ``changes`` (``jaw=``, a method object
+    or name, ``jaw_sensors=``), computed in float64 (``x64``: the pivots to a micrometre
+    are quotients by ``sin(theta / 2)``)."""
+    from .run_spec import run_spec
+
+    return run_spec(spec, **changes).replace(x64=True)
 
 
 def jaw_corpus_path(out_dir: str | os.PathLike) -> Path:
@@ -245,44 +228,28 @@ def jaw_corpus(
     dataset: Dataset | str | os.PathLike,
     out_dir: str | os.PathLike,
     *,
-    method: str | None = None,
-    solver: str | None = None,
-    smoothness: float = 1.0,
-    jaw_sensors: str | None = None,
-    labels: bool = True,
     subjects: Iterable[str] | None = None,
     tasks: Iterable[str] | None = None,
-    **run_options: Any,
-) -> tuple[CorpusRun, list[Path]]:
-    """``cassi jaw DATASET --out DIR``: :func:`jaw_task` on every recording (float64, as
-    the single-recording command), then the corpus table ``DIR/jaw_corpus.csv`` (and
-    ``.parquet``). ``run_options`` go to :func:`cassi_fit.corpus.run_corpus` (``jobs``,
-    ``scheduler``, ``executor``, ``resume``, ``overwrite``, ``progress``,
-    ``compilation_cache``). ``solver``: None for the method's own; ``jaw_sensors``: both,
-    or one (``"MNI"``, ``"MNM"``), or None (the default) for the jaw pellets each recording
-    has; ``method`` None: the closed form with two jaw sensors, coupled-rotation with one.
-    Returns the run (``run.failed``: exit non-zero) and the table files written. A method
-    that cannot run with the sensors given is refused before the run."""
-    replace = bool(run_options.get("overwrite") or run_options.get("resume"))
+    run_options: Mapping[str, Any] | None = None,
+    spec: RunSpec | str | None = None,
+    labels: bool = True,
+    **changes: Any,
+) -> CorpusResult:
+    """``cassi jaw DATASET --out DIR``: :func:`jaw_task` on every recording (the jaw
+    method and sensors of ``spec`` with ``changes``, :func:`jaw_spec`: float64, checked
+    before the run), then the corpus table ``DIR/jaw_corpus.csv`` (and ``.parquet``).
+    ``spec.jaw`` None: the closed form with two jaw sensors, coupled-rotation with one;
+    ``spec.jaw_sensors`` None: the jaw pellets each recording has. ``run_options`` go to
+    :func:`cassi_fit.corpus.run_corpus` (``jobs``, ``scheduler``, ``executor``,
+    ``resume``, ``overwrite``, ``progress``, ``compilation_cache``). Returns a
+    ``corpus.CorpusResult`` (``value`` None)."""
+    spec = jaw_spec(spec, **changes)
+    run_options = dict(run_options or {})
     table = jaw_corpus_path(out_dir)
-    if table.exists() and not replace:  # refuse before the run, not after it
-        raise OutputExistsError(f"{table}: file exists (pass overwrite=True / --force, or "
-                                "resume=True / --resume)")
-    from .jaw_fit import check_sensors, jaw_method, jaw_sensor_set
-
-    sensors = None if jaw_sensors is None else ",".join(jaw_sensor_set(jaw_sensors))
-    if method is not None:  # checked here (the name, its options) rather than per recording
-        chosen = jaw_method(method, solver=solver, smoothness=smoothness)
-        if sensors is not None:
-            check_sensors(chosen, jaw_sensor_set(sensors))
-    run_options.setdefault("x64", True)  # pivots to a micrometre need float64 (cassi jaw)
+    refuse_existing([table], run_options)  # before the run, not after it
     run_options.setdefault("desc", "jaw")
-    options = {"method": method, "solver": solver, "labels": bool(labels),
-               "jaw_sensors": sensors}
-    if method == "smooth-pivot":
-        options["smoothness"] = float(smoothness)
     items = require_items(dataset_items(dataset, subjects=subjects, tasks=tasks), dataset,
                           subjects, tasks)
-    run = run_corpus(jaw_task, items, out_dir, options=options, **run_options)
-    written = write_table(run.rows(), table, overwrite=replace)
-    return run, written
+    run = run_corpus(jaw_task, items, out_dir, options={"spec": spec, "labels": bool(labels)},
+                     **run_options)
+    return CorpusResult(run, write_table(run.rows(), table, overwrite=replaces(run_options)))

@@ -52,6 +52,7 @@ from jaxtyping import Bool, Float, Shaped
 
 from ._io import atomic_output_path, atomic_write, commit_output, register_input
 from .errors import DataFormatError, MissingDataError
+from .status import LengthFit, SegmentStatus
 
 LAB_SUFFIX = ".lab"
 TEXTGRID_SUFFIX = ".textgrid"
@@ -172,26 +173,26 @@ def check_labels(labels: Labels, recording_s: float, *,
     n = len(labels)
     if not n or recording_s <= 0:
         return LabelCheck(None if labels.path is None else str(labels.path), n, 0.0,
-                          recording_s, "ok", 0, None)
+                          recording_s, LengthFit.OK.label, 0, None)
     last = float(labels.ends.max())
     tolerance = max(LABEL_TOLERANCE_S, LABEL_TOLERANCE_FRACTION * recording_s)
     past = int((labels.starts >= recording_s).sum())
     numbers = (f"{n} labels span 0-{last:.4g} s, the recording {recording_s:.4g} s "
                f"({past} start after its end)")
     cause = _unit_cause(last / recording_s) if last > 0 else None
-    status = "ok"
+    status = LengthFit.OK.label
     if cause is not None and abs(last - recording_s) > tolerance:
-        status, message, error = "units", f"{numbers}: likely {cause}", True
+        status, message, error = LengthFit.UNITS.label, f"{numbers}: likely {cause}", True
     elif past == n:
-        status, error = "past-end", True
+        status, error = LengthFit.PAST_END.label, True
         message = (f"{numbers}: every label starts after the recording ends, none would be "
                    "shown (times in other units, labels of another recording, or a "
                    "different time origin?)")
     elif last > recording_s + tolerance:
-        status, error = "past-end", False
+        status, error = LengthFit.PAST_END.label, False
         message = (f"{numbers}: labels past the end are never shown (labels of another "
                    "recording, or a different time origin?)")
-    if status == "ok":
+    if status == LengthFit.OK.label:
         return LabelCheck(None if labels.path is None else str(labels.path), n, last,
                           recording_s, status, past, None)
     if error and not accept_mismatch:
@@ -228,7 +229,7 @@ _INTEGER = re.compile(r"[+-]?[0-9]+")
 
 
 def _lab_rows(path: Path) -> list[tuple[int, str, str, str]]:
-    from .txy import read_lines  # BOM, CRLF, encodings: as for pellet files
+    from ._io import read_lines  # BOM, CRLF, encodings: as for pellet files
 
     _, lines = read_lines(path)
     rows = []
@@ -588,7 +589,7 @@ def segment_summary(
         inside = (times >= seg.start) & (times < seg.end)
         row = dict.fromkeys(SEGMENT_COLUMNS)
         row.update(label=seg.label, start_s=seg.start, end_s=seg.end,
-                   frames=int(inside.sum()), status="ok")
+                   frames=int(inside.sum()), status=SegmentStatus.OK.label)
         jaw_k = np.flatnonzero(inside & usable & np.isfinite(theta_deg))
         lip_k = np.flatnonzero(inside & np.isfinite(aperture))
         if jaw_k.size:
@@ -602,10 +603,10 @@ def segment_summary(
                        lip_aperture_min_mm=float(aperture[low]),
                        lip_aperture_min_time_s=float(times[low]))
         if not inside.any():
-            row["status"] = "no-frames"
+            row["status"] = SegmentStatus.NO_FRAMES.label
         elif not jaw_k.size:
-            row["status"] = "jaw-untracked"
+            row["status"] = SegmentStatus.JAW_UNTRACKED.label
         elif not lip_k.size:
-            row["status"] = "lips-untracked"
+            row["status"] = SegmentStatus.LIPS_UNTRACKED.label
         rows.append(row)
     return rows

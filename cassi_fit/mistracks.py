@@ -128,7 +128,6 @@ LOWER_LIP_MIN_MM = 12.0
 DRIFT_MIN_FRAMES = 6
 ORDER_MARGIN_MM = 5.0
 _MAD_TO_SD = 1.4826
-_NOMINAL_STEP_S = 6866e-6
 
 
 class Reason(enum.IntFlag):
@@ -218,11 +217,6 @@ def detect_mistracks(track: PelletTrackLike) -> Bool[np.ndarray, "n 8"]:
 
 
 # ------------------------------------------------------------------ helpers
-def _frame_step(times: np.ndarray) -> float:
-    """Median time between frames (s); the nominal step for fewer than two frames."""
-    return float(np.median(np.diff(times))) if times.shape[0] >= 2 else _NOMINAL_STEP_S
-
-
 def _norm(v: np.ndarray) -> np.ndarray:
     return np.sqrt(np.sum(v * v, axis=-1))
 
@@ -602,7 +596,8 @@ def _blame_pair(reasons, reason, a, b, v, tongue_count) -> None:
 # ------------------------------------------------------------------ the detector
 def detect(track: PelletTrackLike) -> MistrackReport:
     """The mistrack detector (module docstring): a :class:`MistrackReport` of ``track``
-    (times s ``(n,)``, positions mm ``(n, 8, 2)``, valid ``(n, 8, 2)``).
+    (times s ``(n,)``, positions mm ``(n, 8, 2)``, valid ``(n, 8, 2)``, its line period
+    ``frame_step_s``).
 
     Prefer :func:`mistrack_report` (or ``PelletTrack.mistracks``), which computes it once
     per track. Values marked untracked (1000000) are never flagged.
@@ -616,7 +611,7 @@ def detect(track: PelletTrackLike) -> MistrackReport:
     positions = np.where(tracked[..., None], raw, np.nan)
     if n == 0:
         return MistrackReport(reasons)
-    step_s = _frame_step(times)
+    step_s = track.frame_step_s  # the one rule of the line period (txy.frame_step)
     # 1-3
     reasons[_out_of_range(np.where(valid, raw, np.nan)) & valid.any(axis=-1)] |= np.uint16(Reason.RANGE)
     reasons[_dropouts(positions, tracked)] |= np.uint16(Reason.DROPOUT)

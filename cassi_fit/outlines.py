@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 from jaxtyping import Float
 
-from ._io import atomic_write
+from ._io import atomic_write, read_lines
 from .errors import DataFormatError
-from .txy import UNTRACKED, parse_int, read_lines
+from .txy import UNTRACKED, parse_int
 
 #: kind -> (minimum number of points, description used in messages)
 OUTLINE_KINDS = {"palate": (2, "palate outline"), "pharynx": (2, "pharyngeal wall")}

@@ -61,6 +61,9 @@ class PelletTrackLike(Protocol):
     valid: np.ndarray  # (n, 8, 2) bool
 
     @property
+    def frame_step_s(self) -> float: ...  # s between lines (txy.frame_step)
+
+    @property
     def mistracks(self): ...
 
 

@@ -2,8 +2,7 @@
 
 Real XRMB files mark lost pellets with 1000000 (the validity mask); tracking errors that
 are not marked are found by the mistrack detector (:mod:`cassi_fit.mistracks`, where its
-tests, thresholds and reasons are documented; :func:`detect_mistracks` and the constants
-are re-exported here). A track's detection is computed once (``PelletTrack.mistracks``)
+tests, thresholds and reasons are documented). A track's detection is computed once (``PelletTrack.mistracks``)
 and this report reads it, as do the first valid line, ``gaps`` and the jaw fit.
 """
 
@@ -16,19 +15,7 @@ import numpy as np
 
 from .errors import MissingDataError
 from .mistracks import (
-    JAW_MIN_DEVIATION_MM,
-    JAW_ROBUST_SDS,
-    MAX_ACCELERATION_MM_S2,
-    MAX_SPEED_MM_S,
-    MEDIAN_WINDOW,
-    PLATEAU_FRAMES,
-    PLAUSIBLE_X_MM,
-    PLAUSIBLE_Y_MM,
-    MistrackReport,
-    Reason,
-    detect_mistracks,
     mistrack_report,
-    running_median,
 )
 from .pellets import (
     JAW_PELLETS,
@@ -42,12 +29,7 @@ from .pellets import (
 )
 from .txy import PelletTrack
 
-__all__ = [
-    "JAW_MIN_DEVIATION_MM", "JAW_ROBUST_SDS", "MAX_ACCELERATION_MM_S2", "MAX_SPEED_MM_S",
-    "MEDIAN_WINDOW", "PLATEAU_FRAMES", "PLAUSIBLE_X_MM", "PLAUSIBLE_Y_MM", "MistrackReport",
-    "QualityReport", "Reason", "detect_mistracks", "mistrack_report", "quality_report",
-    "running_median",
-]
+__all__ = ["QualityReport", "quality_report"]
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import os
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -308,17 +308,18 @@ def animate_task(item: Any, out_dir: str, *, spec: Any, suffix: str = ".mp4",
     return TaskResult(row, (str(path),))
 
 
-def animate_corpus(dataset: Any, out_dir: str | os.PathLike, *, spec: Any = None,
+def animate_corpus(dataset: Any, out_dir: str | os.PathLike, *,
                    subjects: Iterable[str] | None = None, tasks: Iterable[str] | None = None,
-                   video_options: dict[str, Any] | None = None,
-                   run_options: dict[str, Any] | None = None, **changes: Any) -> tuple:
+                   run_options: Mapping[str, Any] | None = None, spec: Any = None,
+                   video_options: Mapping[str, Any] | None = None, **changes: Any) -> Any:
     """``cassi animate DATASET --out DIR``: :func:`animate_task` on every recording (the
     run ``spec``, a ``run_spec.RunSpec`` or a preset's name, with ``changes``;
     ``video_options``: ``suffix``, ``size``, ``views``, ``audio``, ``markers``, ``labels``),
     then ``DIR/animate_corpus.csv`` (and ``.parquet``): one row per recording, failed ones
     with their error. ``run_options`` go to ``corpus.run_corpus``. Returns ``(run, the
-    table files written)``."""
+    table files written, None)`` as a ``corpus.CorpusResult``."""
     from .corpus import (
+        CorpusResult,
         dataset_items,
         refuse_existing,
         replaces,
@@ -337,4 +338,4 @@ def animate_corpus(dataset: Any, out_dir: str | os.PathLike, *, spec: Any = None
     items = require_items(dataset_items(dataset, subjects=subjects, tasks=tasks), dataset,
                           subjects, tasks)
     run = run_corpus(animate_task, items, out_dir, options=options, **run_options)
-    return run, write_table(run.rows(), table, overwrite=replaces(run_options))
+    return CorpusResult(run, write_table(run.rows(), table, overwrite=replaces(run_options)))

@@ -50,17 +50,19 @@ def write_penetration_csv(path: str | Path, animation: Animation, *, overwrite: 
     """A CSV, one row per frame: ``time_s``, ``line`` (1-based data line), then each depth
     (mm) before and after projection. Written atomically; an existing file only with
     ``overwrite``."""
-    from ._io import atomic_write
+    from .tables import write_table
 
     keys = list(animation.penetration)
-    header = ["time_s", "line"] + [f"{k}_mm" for k in keys] + [f"{k}_after_mm" for k in keys]
-    rows = [",".join(header)]
+    columns = ["time_s", "line"] + [f"{k}_mm" for k in keys] + [f"{k}_after_mm" for k in keys]
+    rows = []
     for i in range(animation.n_frames):
-        values = [f"{animation.times[i]:.6f}", str(int(animation.frame_index[i]) + 1)]
-        values += [f"{animation.penetration[k][i]:.4f}" for k in keys]
-        values += [f"{animation.penetration_after[k][i]:.4f}" for k in keys]
-        rows.append(",".join(values))
-    return atomic_write(Path(path), "\n".join(rows) + "\n", overwrite=overwrite)
+        row = {"time_s": float(animation.times[i]), "line": int(animation.frame_index[i]) + 1}
+        row.update((f"{k}_mm", float(animation.penetration[k][i])) for k in keys)
+        row.update((f"{k}_after_mm", float(animation.penetration_after[k][i])) for k in keys)
+        rows.append(row)
+    digits = {c: 4 for c in columns if c.endswith("_mm")}
+    return write_table(rows, Path(path), columns=columns, digits=digits,
+                       overwrite=overwrite)[0]
 
 
 def jaw_comparison_plot(

@@ -28,13 +28,12 @@ from __future__ import annotations
 import dataclasses
 import numbers
 import os
-import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Union
 
-from .errors import CassiError, InvalidChoiceError
+from .errors import CassiError, InvalidChoiceError, MissingDataError
 from .options import (
     COLLISION_MODES,
     CONFORMATIONS,
@@ -64,7 +63,7 @@ class CalibrationFiles:
 
 #: What initialization builds the subject's shape from: ``None`` or ``"measures"`` (the
 #: subject's Headmeasures and first valid line), ``"cassi"`` (only what the paper did: the
-#: jaw shape), a fitted ``conformation.Calibration``, a mapping subject ->
+#: jaw shape), a fitted ``calibration.Calibration``, a mapping subject ->
 #: ``Calibration`` (``calibrate_dataset``'s result), or :class:`CalibrationFiles`.
 CalibrationChoice = Union[None, str, "Calibration", CalibrationFiles]  # noqa: F821
 
@@ -80,7 +79,7 @@ def _jaw_method(jaw: Any) -> Any:
 
 
 def _calibration(value: Any) -> Any:
-    from .conformation import Calibration
+    from .calibration import Calibration
 
     if value is None or isinstance(value, (Calibration, CalibrationFiles)):
         return value
@@ -110,7 +109,9 @@ class RunSpec:
     (:meth:`jaw_method_for`); stride: every Nth data line from the first valid one
     (>= 1); gap_policy: ``options.GAP_POLICIES``; jaw_sensors: None (every jaw pellet the
     recording tracks) or the jaw sensors to use (``("MNI",)``: the other is left out, as
-    if absent).
+    if absent); x64: compute in float64 for this run only (``jax.enable_x64`` around the
+    runner's stages, never process-wide; ``cassi jaw``: its pivots to a micrometre are
+    quotients by ``sin(theta / 2)``).
     """
 
     mode: str = "improved"
@@ -124,6 +125,7 @@ class RunSpec:
     stride: int = 1
     gap_policy: str = "hold"
     jaw_sensors: Any = None
+    x64: bool = False
 
     def __post_init__(self):
         check_choice("mode", self.mode, MODES)
@@ -138,11 +140,14 @@ class RunSpec:
                                      f"{stride!r}")
         object.__setattr__(self, "stride", int(stride))
         object.__setattr__(self, "lip_rounding", bool(self.lip_rounding))
+        object.__setattr__(self, "x64", bool(self.x64))
         object.__setattr__(self, "jaw", _jaw_method(self.jaw))
         if self.jaw_sensors is not None:
-            from .jaw_fit import jaw_sensor_set
+            from .jaw_fit import check_sensors, jaw_sensor_set
 
             object.__setattr__(self, "jaw_sensors", jaw_sensor_set(self.jaw_sensors))
+            if self.jaw is not None:  # refused here, before any recording is read
+                check_sensors(self.jaw, self.jaw_sensors)
         object.__setattr__(self, "calibration", _calibration(self.calibration))
         if isinstance(self.calibration, CalibrationFiles) and not self.calibration.path.exists():
             raise CassiError(f"{self.calibration.path}: no such calibration file or folder")
@@ -186,37 +191,37 @@ class RunSpec:
     def calibration_for(self, subject: str) -> Any:
         """The calibration for ``subject``'s recordings, as ``initialize`` takes it: None
         (the subject's conformation from Headmeasures), ``"cassi"``, or a fitted
-        ``Calibration``. :class:`CalibrationFiles`: a file is read (it must be the
-        subject's); from a folder the subject's ``SUBJECT.calibration.json``, and when the
-        folder has none, the default conformation with a warning (likewise a mapping
-        without the subject). Errors name the file."""
-        from .conformation import Calibration
+        ``Calibration``; the one resolver of a calibration choice. :class:`CalibrationFiles`:
+        a file is read (it must be the subject's); from a folder the subject's
+        ``SUBJECT.calibration.json``. A folder or a mapping without the subject is one
+        ``MissingDataError`` naming the subject and the folder (and the subjects it has):
+        a single recording stops, a corpus run records a failed row. Errors name the
+        file."""
+        from .calibration import Calibration, calibration_path, read_calibration
 
-        cal = self.calibration
+        cal, subject = self.calibration, str(subject).upper()
         if isinstance(cal, Mapping):
-            if str(subject).upper() not in cal:
-                warnings.warn(f"{subject}: no calibration given; using the default "
-                              "conformation", stacklevel=2)
-                return None
-            return cal[str(subject).upper()]
+            if subject not in cal:
+                raise MissingDataError(f"no calibration of subject {subject} among those "
+                                       f"given ({', '.join(sorted(cal)) or 'none'})")
+            return cal[subject]
         if not isinstance(cal, CalibrationFiles):
-            if isinstance(cal, Calibration) and cal.subject.upper() != str(subject).upper():
+            if isinstance(cal, Calibration) and cal.subject.upper() != subject:
                 raise CassiError(f"the calibration is of subject {cal.subject}, not {subject}")
             return cal
-        from .calibrate import calibration_path, read_calibration
-
         path = cal.path
         if path.is_dir():
             own = calibration_path(path, subject)
             if not own.is_file():
-                warnings.warn(f"{path}: no calibration of subject {subject}; using the "
-                              "default conformation", stacklevel=2)
-                return None
+                have = sorted(p.name.split(".")[0] for p in path.glob("*.calibration.json"))
+                raise MissingDataError(
+                    f"{path}: no calibration of subject {subject} ({own.name}; "
+                    f"{'it has ' + ', '.join(have) if have else 'it has no *.calibration.json'})")
             path = own
         elif not path.is_file():
             raise CassiError(f"{path}: no such calibration file or folder")
         found = read_calibration(path)
-        if found.subject.upper() != str(subject).upper():
+        if found.subject.upper() != subject:
             raise CassiError(f"{path}: the calibration is of subject {found.subject}, not "
                              f"{subject}")
         return found

@@ -45,6 +45,7 @@ import numpy as np
 from jaxtyping import Float
 
 from .errors import DataFormatError
+from .status import LengthFit
 
 #: Below this difference (s), or 5 % of the recording, sound and pellets agree.
 SOUND_TOLERANCE_S = 0.25
@@ -53,7 +54,6 @@ SOUND_TOLERANCE_FRACTION = 0.05
 STANDARD_RATES_HZ = (8000, 11025, 16000, 22050, 24000, 32000, 44100, 48000, 96000)
 #: How close (relative) the implied rate must be to a standard one to be named.
 RATE_MATCH = 0.02
-_FRAME_STEP_S = 6866e-6
 
 
 class SoundMismatchWarning(UserWarning):
@@ -88,8 +88,9 @@ def recording_seconds(times: Float[np.ndarray, " n"]) -> float:
     times = np.asarray(times, np.float64)
     if times.size == 0:
         return 0.0
-    step = float(np.median(np.diff(times))) if times.size > 1 else _FRAME_STEP_S
-    return float(times[-1] + step)
+    from .txy import frame_step
+
+    return float(times[-1] + frame_step(times))
 
 
 def open_pcm(path: str | os.PathLike, *, samples: bool = True
@@ -176,18 +177,19 @@ def _check(where: str, params: wave._wave_params, held: int, recording_s: float,
     numbers = (f"{sound_s:.3g} s of sound ({n} samples at {rate} Hz) for {recording_s:.3g} s "
                "of pellets")
     if abs(sound_s - recording_s) <= tolerance:
-        return SoundCheck(where, rate, n, sound_s, recording_s, "ok", None, None)
+        return SoundCheck(where, rate, n, sound_s, recording_s, LengthFit.OK.label, None,
+                          None)
     if likely is not None:
-        status, error = "rate", True
+        status, error = LengthFit.RATE.label, True
         cause = (f"the header's rate is likely wrong: the samples fill the recording at "
                  f"{likely} Hz")
         if sound_s < recording_s:
             cause += ", or the file is cut"
     elif sound_s < recording_s:
-        status, error = "shorter", sound_s < 0.5 * recording_s
+        status, error = LengthFit.SHORTER.label, sound_s < 0.5 * recording_s
         cause = (f"the file looks cut: a video would be silent after {sound_s:.3g} s")
     else:
-        status, error = "longer", False
+        status, error = LengthFit.LONGER.label, False
         cause = f"a video keeps the first {recording_s:.3g} s"
     message = f"{numbers}: {cause}"
     if error and not accept_mismatch:

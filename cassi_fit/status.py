@@ -1,4 +1,6 @@
-"""One status vocabulary for per-frame and per-recording results, and one for solvers.
+"""The status vocabulary: per-frame and per-recording results, solvers, the files beside a
+recording, labelled segments. Every status word a table or a report prints is a member's
+``.label`` here.
 
 Jaw fits, animation frames and evaluation rows report what happened as a :class:`Status`
 (an ``IntEnum``: arrays carry the integer, tables print :attr:`Status.label`, the one home
@@ -39,10 +41,51 @@ class Status(_Labelled):
     HELD = 6
     #: animation: an untracked value was interpolated between good neighbours.
     INTERPOLATED = 7
-    #: a value flagged by the mistrack detector (``quality.detect_mistracks``), not used.
+    #: a value flagged by the mistrack detector (``mistracks.detect_mistracks``), not used.
     MISTRACKED = 8
     #: a whole recording that could not be processed (its one-line error is kept beside).
     FAILED = 9
+
+
+class LengthFit(_Labelled):
+    """How a file beside a recording (its sound, its labels) fits the recording's length
+    (``sound.check_sound``, ``labels.check_labels``; their ``status`` is the label)."""
+
+    OK = 0
+    #: labels: a unit mix-up explains their span (ms for s, samples for s, ...).
+    UNITS = 1
+    #: labels: intervals start after the recording ends.
+    PAST_END = 2
+    #: sound: the header's sample rate is likely wrong.
+    RATE = 3
+    #: sound: shorter than the pellets (cut).
+    SHORTER = 4
+    #: sound: longer than the pellets.
+    LONGER = 5
+
+
+class SegmentStatus(_Labelled):
+    """What a labelled segment's row measured (``labels.segment_summary``)."""
+
+    OK = 0
+    #: no frame of the recording lies inside the segment.
+    NO_FRAMES = 1
+    #: no frame inside has a fitted jaw.
+    JAW_UNTRACKED = 2
+    #: no frame inside has both lips tracked.
+    LIPS_UNTRACKED = 3
+
+
+#: The statuses of a frame whose motion was fitted from its own data (the jaw fits'
+#: usable frames): every other frame's values are interpolated or held.
+FITTED = (Status.OK, Status.PIVOT_UNDEFINED)
+
+
+def fitted(status):
+    """Where ``status`` (an array of :class:`Status` values) is one of :data:`FITTED`."""
+    import numpy as np
+
+    return np.isin(np.asarray(status), [int(s) for s in FITTED])
 
 
 class SolverResult(_Labelled):

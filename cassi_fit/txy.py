@@ -16,7 +16,6 @@ from __future__ import annotations
 import functools
 import os
 import re
-import stat
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -26,7 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from jaxtyping import Bool, Float
 
-from ._io import atomic_write, register_input
+from ._io import atomic_write, read_lines
 
 if TYPE_CHECKING:
     from .mistracks import MistrackReport
@@ -40,6 +39,17 @@ N_FIELDS = 1 + 2 * len(PELLET_NAMES)  # 17
 # Integers beyond this magnitude cannot be held exactly in float64 (and are no data).
 _MAX_ABS_INT = 2**53
 _INT_TOKEN = re.compile(r"[+-]?[0-9]+")
+
+
+def frame_step(times: Float[np.ndarray, " n"]) -> float:
+    """Seconds between data lines of frame ``times (n,)`` s: the median time step; XRMB's
+    nominal ``FRAME_STEP_US`` for fewer than two frames. The one rule of a recording's
+    line period (``PelletTrack.frame_step_s``, the sound's length, the evaluation's
+    sustain window)."""
+    times = np.asarray(times, np.float64)
+    if times.shape[0] < 2:
+        return FRAME_STEP_US * 1e-6
+    return float(np.median(np.diff(times)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,9 +137,7 @@ class PelletTrack:
         mngu0 5 ms, AG501 4 ms, SPARC 20 ms); XRMB's nominal ``FRAME_STEP_US`` for a track
         of fewer than two frames. The one home of a recording's line period: nothing else
         assumes XRMB's 6866 us."""
-        if self.n_frames < 2:
-            return FRAME_STEP_US * 1e-6
-        return float(np.median(np.diff(self.times)))
+        return frame_step(self.times)
 
     @property
     def duration(self) -> float:
@@ -238,50 +246,12 @@ def _check_frame_step(path: Path, times: np.ndarray) -> None:
     """The median frame spacing must be a plausible XRMB rate (``FRAME_STEP_RANGE_S``)."""
     if times.size < 2:
         return
-    step = float(np.median(np.diff(times)))
+    step = frame_step(times)
     lo, hi = FRAME_STEP_RANGE_S
     if not lo <= step <= hi:
         raise DataFormatError(path, None, f"median frame spacing {step * 1e6:.0f} us is outside "
                               f"{lo * 1e6:.0f}-{hi * 1e6:.0f} us (XRMB frames are {FRAME_STEP_US} "
                               "us apart; are the times in microseconds?)")
-
-
-def _decode(path: Path, raw: bytes) -> str:
-    """UTF-8 text without a BOM; a decoding failure names the line."""
-    if raw.startswith(b"\xef\xbb\xbf"):
-        raw = raw[3:]
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = raw[: exc.start].count(b"\n") + 1
-        raise DataFormatError(path, line, "not a text file (invalid UTF-8 byte)") from None
-
-
-def read_lines(path: str | os.PathLike) -> tuple[Path, list[tuple[int, str]]]:
-    """Read a text data file: register it as input, decode, return ``(lineno, line)`` pairs.
-
-    Refuses anything but a regular file (a FIFO would block). Accepts a UTF-8 BOM, CRLF or LF. Blank (white-space only) lines are dropped; line
-    numbers are 1-based in the file as stored. Shared by the toolkit's text readers.
-    """
-    path = Path(path)
-    try:
-        # a FIFO, device or socket would block or never end: refuse it before opening
-        if not stat.S_ISREG(os.stat(path).st_mode):
-            if path.is_dir():
-                raise IsADirectoryError(path)
-            raise DataFormatError(path, None, "not a regular file (a pipe, device or socket)")
-        raw = path.read_bytes()
-    except IsADirectoryError:
-        raise DataFormatError(path, None, "is a folder, not a file") from None
-    except FileNotFoundError:
-        raise MissingDataError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise DataFormatError(path, None, f"cannot read: {exc.strerror or exc}") from None
-    register_input(path)
-    text = _decode(path, raw)
-    text = text.replace("\r\n", "\n").replace("\r", "\n")
-    lines = [(i + 1, s) for i, s in enumerate(text.split("\n")) if s.strip()]
-    return path, lines
 
 
 def parse_int(path: Path, lineno: int, token: str) -> int:

@@ -30,7 +30,7 @@ def table(results: dict, v_limit: float, palate_limit: float) -> str:
     count = {"iv": 0, "cv": 0, "ip": 0, "cp": 0}
     for a, b in zip(improved, cassi, strict=True):
         if not (a.rated and b.rated):
-            lines.append(f"| {a.subject} {a.task} | {a.status_text} | {b.status_text} | | |")
+            lines.append(f"| {a.subject} {a.task} | {a.error or a.status.label} | {b.error or b.status.label} | | |")
             continue
         va, vb = a.measures["tongue_back_v_deg"], b.measures["tongue_back_v_deg"]
         pa, pb = a.measures["tongue_palate_mm"], b.measures["tongue_palate_mm"]

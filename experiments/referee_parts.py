@@ -277,7 +277,7 @@ def tongue_part(recording, hidden: str, model=None,
     errors = {m: {} for m in TONGUE_METRICS}
     fraction, scored = None, np.zeros(n, bool)
     for label, mode in models.items():
-        _, _, state, anim = run_recording(_hide(recording, hidden), mode, model=model,
+        _, _, state, anim, _ = run_recording(_hide(recording, hidden), mode, model=model,
                                           stride=TONGUE_STRIDE)
         rows = np.asarray(anim.frame_index)
         keep = rows < n

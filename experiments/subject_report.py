@@ -301,7 +301,7 @@ def write_evaluation(results: dict, penetration: list[dict], out: Path, overwrit
         plot_summary(result, out / folder / "evaluation_summary.png", overwrite=overwrite)
     a, b = results["cassi_like"], results["calibrated"]
     text = compare(a, b, labels=(SETTINGS["cassi_like"][2], SETTINGS["calibrated"][2]))
-    failed = [f"{r.subject} {r.task} ({r.status_text})" for k in SETTINGS
+    failed = [f"{r.subject} {r.task} ({r.error})" for k in SETTINGS
               for r in results[k].failed]
     atomic_write(out / "evaluation_comparison.md",
                  "# CASSI-like vs calibrated + collisions\n\n" + text

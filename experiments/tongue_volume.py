@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     from cassi_fit import synth
     from cassi_fit.dataset import Recording
     from cassi_fit.pipeline import run_recording
-    from cassi_fit.synth_tasks import TASKS
+    from cassi_fit.synth import TASKS
     from cassi_fit.tongue import tongue_volumes
 
     rest = None
@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
             for options in RUNS.values():
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    _, _, state, animation = run_recording(recording, stride=args.stride,
+                    _, _, state, animation, _ = run_recording(recording, stride=args.stride,
                                                            **options)
                 ml = tongue_volumes(state.model, animation.vertices)
                 if rest is None:

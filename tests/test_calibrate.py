@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 import zoo
 
-from cassi_fit import calibrate
+from cassi_fit import calibrate, calibration
 from cassi_fit.animate import animate
 from cassi_fit.calibration import CalibrationWarning
 from cassi_fit.cli import main as cli
@@ -265,29 +265,29 @@ def test_a_jaw_beyond_its_bound_is_held_there_and_the_fit_converges(corpus, monk
 
 def test_calibration_files_round_trip_and_bad_files_are_named(tmp_path, separate):
     cal = separate["S01"]
-    path = calibrate.write_calibration(tmp_path / "S01.calibration.json", cal)
-    back = calibrate.read_calibration(path)
+    path = calibration.write_calibration(tmp_path / "S01.calibration.json", cal)
+    back = calibration.read_calibration(path)
     assert back == cal
     with pytest.raises(Exception, match="exists|input file"):
-        calibrate.write_calibration(path, cal)
-    assert calibrate.load_calibrations(tmp_path) == {"S01": cal}
+        calibration.write_calibration(path, cal)
+    assert calibration.load_calibrations(tmp_path) == {"S01": cal}
     broken = tmp_path / "broken" / "S09.calibration.json"
     broken.parent.mkdir()
     broken.write_text('{"format": "cassi_fit calibration 1",\n "scale": }\n')
     with pytest.raises(DataFormatError, match=r"S09.calibration.json:2: invalid JSON"):
-        calibrate.read_calibration(broken)
+        calibration.read_calibration(broken)
     data = json.loads(cal.to_json())
     data["params"]["jaw_shape_scale"] = [1.0]
     broken.write_text(json.dumps(data))
     with pytest.raises(DataFormatError, match="jaw_shape_scale"):
-        calibrate.read_calibration(broken)
+        calibration.read_calibration(broken)
     data = json.loads(cal.to_json())
     data["scale"] = -1
     broken.write_text(json.dumps(data))
     with pytest.raises(DataFormatError, match="scale"):
-        calibrate.read_calibration(broken)
+        calibration.read_calibration(broken)
     with pytest.raises(MissingDataError):
-        calibrate.load_calibrations(tmp_path / "nowhere")
+        calibration.load_calibrations(tmp_path / "nowhere")
 
 
 def test_animation_uses_the_calibration(corpus, separate):
@@ -348,21 +348,27 @@ def test_cli_calibrate_writes_one_file_per_subject_and_animate_reads_them(
     assert "exclude" in capsys.readouterr().err
 
 
-def test_calibration_choice_reads_a_folder_or_a_file_and_excludes_cassi(tmp_path, separate):
+def test_the_run_spec_resolves_a_folder_or_a_file_and_excludes_cassi(tmp_path, separate):
+    from cassi_fit.run_spec import run_spec
+
     cal = separate["S01"]
-    path = calibrate.write_calibration(calibrate.calibration_path(tmp_path, "S01"), cal)
-    assert calibrate.calibration_choice(tmp_path, "s01") == cal
-    assert calibrate.calibration_choice(path, "S01") == cal
-    assert calibrate.calibration_choice(path) == cal  # no subject named: the file as it is
+    path = calibration.write_calibration(calibration.calibration_path(tmp_path, "S01"), cal)
+    assert run_spec(calibration=tmp_path).calibration_for("s01") == cal
+    assert run_spec(calibration=path).calibration_for("S01") == cal
+    assert run_spec(calibration={"s01": cal}).calibration_for("S01") == cal
     # one line naming the file (or the folder and what it holds)
-    with pytest.raises(CassiError, match=r"S01.calibration.json: a calibration of subject S01, not S02"):
-        calibrate.calibration_choice(path, "S02")
+    with pytest.raises(CassiError, match=r"S01.calibration.json: the calibration is of "
+                       r"subject S01, not S02"):
+        run_spec(calibration=path).calibration_for("S02")
     with pytest.raises(MissingDataError, match=r"no calibration of subject S02 .*it has S01"):
-        calibrate.calibration_choice(tmp_path, "S02")
-    assert calibrate.calibration_choice(None, "S01") is None
-    assert calibrate.calibration_choice(None, "S01", cassi=True) == "cassi"
+        run_spec(calibration=tmp_path).calibration_for("s02")
+    with pytest.raises(MissingDataError, match=r"no calibration of subject S02 among those "
+                       r"given \(S01\)"):
+        run_spec(calibration={"S01": cal}).calibration_for("S02")
+    assert run_spec().calibration_for("S01") is None
+    assert run_spec("cassi").calibration_for("S01") == "cassi"
     with pytest.raises(CassiError, match="exclude each other"):
-        calibrate.calibration_choice(tmp_path, "S01", cassi=True)
+        run_spec("cassi", calibration=tmp_path)
 
 
 def test_the_unknowns_are_named_and_flatten_in_their_documented_order():

@@ -32,7 +32,7 @@ def recording(corpus):
 @pytest.fixture(scope="module")
 def both(recording):
     """``{mode: (state, animation)}`` of S01's sentence in both modes."""
-    return {m: run_recording(recording, m, stride=STRIDE)[2:] for m in ("improved", "cassi")}
+    return {m: run_recording(recording, m, stride=STRIDE)[2:4] for m in ("improved", "cassi")}
 
 
 def test_modes_are_records_and_names():
@@ -58,7 +58,7 @@ def test_cassi_state_carries_the_papers_choices(both, recording):
 
 
 def test_cassi_mode_refuses_a_fitted_calibration(recording):
-    from cassi_fit.conformation import Calibration
+    from cassi_fit.calibration import Calibration
 
     fields = {f.name: None for f in dataclasses.fields(Calibration)}
     fields.update(subject=recording.subject, params={}, lip_rest_offset=(0.0, 0.0))
@@ -197,7 +197,7 @@ def test_jaw_shape_unknowns_are_bounded_and_flagged():
     import jax.numpy as jnp
 
     from cassi_fit.calibrate import Unknowns, bounded_jaw, bounds_hit
-    from cassi_fit.conformation import JAW_SCALE_BOUND, JAW_TURN_BOUND_RAD
+    from cassi_fit.calibration import JAW_SCALE_BOUND, JAW_TURN_BOUND_RAD
 
     x = Unknowns.zeros()
     assert bounds_hit(x) == ()

@@ -190,7 +190,12 @@ def test_one_sensor_adds_the_hidden_sensors_prediction(pellet_file, tmp_path, ca
     positions, _ = _opening_jaw(60)
     k = ("MNI", "MNM").index(hidden) + 6
     ref = read_txy(path).positions[2, k]  # as stored: whole micrometres
-    for r in rows[2:]:
+    fitted = [i for i, r in enumerate(rows) if r["status"] != "invalid-frame"]
+    assert all(r[f"{hidden}_pred_x_mm"] == r[f"{hidden}_pred_y_mm"] == ""
+               for i, r in enumerate(rows) if i not in fitted)  # nothing predicted: blanks
+    assert fitted[0] == 2 and (30 in fitted) == (sensor == "MNM")  # MNI's dropout: frame 30
+    rows, positions = [rows[i] for i in fitted], positions[fitted]
+    for r in rows:
         theta = np.deg2rad(float(r["theta_deg"]))
         moved = np.asarray(rigid.apply(theta, np.array([float(r["tx_mm"]), float(r["ty_mm"])]),
                                        ref))
@@ -199,7 +204,7 @@ def test_one_sensor_adds_the_hidden_sensors_prediction(pellet_file, tmp_path, ca
     # ... and near the truth: a noise-free rotation about PIVOT by up to 11.5 degrees, whose
     # short arc places the pivot only roughly; the prior (mean 35 mm off) pulls it by 2-4 mm,
     # which moves the hidden pellet by up to 0.45 mm (a pivot 20 mm off: 1-2 mm)
-    for r, p in zip(rows[2:], positions[2:, k], strict=True):
+    for r, p in zip(rows, positions[:, k], strict=True):
         assert float(r[f"{hidden}_pred_x_mm"]) == pytest.approx(p[0], abs=0.6)
         assert float(r[f"{hidden}_pred_y_mm"]) == pytest.approx(p[1], abs=0.6)
     diag = list(csv.DictReader((tmp_path / "one.diagnostics.csv").read_text().splitlines()))

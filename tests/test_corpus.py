@@ -45,7 +45,7 @@ def corpus(tmp_path_factory):
 def serial(corpus, tmp_path_factory):
     """The reference run: in this process (jobs=1)."""
     out = tmp_path_factory.mktemp("serial")
-    run, written = jaw_corpus(corpus, out, jobs=1, progress=False)
+    run, written, _ = jaw_corpus(corpus, out, run_options={"jobs": 1, "progress": False})
     parquet = [jaw_corpus_path(out).with_suffix(".parquet")] if parquet_available() else []
     assert written == [jaw_corpus_path(out), *parquet]
     return out, run
@@ -101,23 +101,24 @@ def test_jaw_csv_per_recording_with_labels(serial, corpus):
 
 
 def test_padding_to_a_frame_bucket_leaves_the_fit_unchanged(corpus):
-    from cassi_fit.jaw_fit import jaw_from_track
-    from cassi_fit.jaw_table import JAW_FRAME_BUCKET, fit_jaw_bucketed
+    from cassi_fit.jaw_fit import jaw_bucket, jaw_from_track
     from cassi_fit.txy import read_txy
 
     track = read_txy(dataset_items(corpus)[0].path)
-    assert track.n_frames % JAW_FRAME_BUCKET  # so there is padding
-    plain, padded = jaw_from_track(track), fit_jaw_bucketed(track)
-    for name in ("theta", "translation", "pivot", "pivot_defined", "residual", "status",
-                 "covariance", "pivot_covariance"):
-        np.testing.assert_array_equal(getattr(padded, name), getattr(plain, name))
-    assert (padded.noise_mm, padded.converged) == (plain.noise_mm, plain.converged)
+    assert jaw_bucket(track.n_frames) > track.n_frames  # so there is padding
+    for method in ("closed-form", "frame-fit"):
+        plain = jaw_from_track(track, method=method)
+        padded = jaw_from_track(track, method=method, pad_to=jaw_bucket(track.n_frames))
+        for name in ("theta", "translation", "pivot", "pivot_defined", "residual", "status",
+                     "covariance", "pivot_covariance"):
+            np.testing.assert_array_equal(getattr(padded, name), getattr(plain, name))
+        assert (padded.noise_mm, padded.converged) == (plain.noise_mm, plain.converged)
 
 
 def test_jaw_corpus_refuses_to_replace_a_table_before_running(serial, corpus):
     out, _ = serial
     with pytest.raises(OutputExistsError, match="jaw_corpus.csv"):
-        jaw_corpus(corpus, out, jobs=1, progress=False)
+        jaw_corpus(corpus, out, run_options={"jobs": 1, "progress": False})
 
 
 def test_tables_are_written_as_csv_and_parquet(serial):
@@ -135,8 +136,8 @@ def test_tables_are_written_as_csv_and_parquet(serial):
 def test_process_pool_gives_identical_tables(serial, corpus, tmp_path):
     out, reference = serial
     cache = tmp_path / "jax-cache"
-    run, _ = jaw_corpus(corpus, tmp_path / "out", jobs=2, progress=False,
-                        compilation_cache=cache)
+    run = jaw_corpus(corpus, tmp_path / "out", run_options={
+        "jobs": 2, "progress": False, "compilation_cache": cache}).run
     assert run.workers == 2
     assert any(cache.iterdir())  # the workers stored what they compiled
     assert _outputs(tmp_path / "out") == _outputs(out)
@@ -155,12 +156,13 @@ def test_dask_cluster_gives_identical_tables(serial, corpus, dask_cluster, tmp_p
     out, reference = serial
     from distributed import Client
 
-    run, _ = jaw_corpus(corpus, tmp_path / "address", progress=False,
-                        scheduler=dask_cluster.scheduler_address)
+    run = jaw_corpus(corpus, tmp_path / "address", run_options={
+        "progress": False, "scheduler": dask_cluster.scheduler_address}).run
     assert run.workers == 2
     assert _outputs(tmp_path / "address") == _outputs(out)
     with Client(dask_cluster) as client:  # a Client passed as the executor
-        again, _ = jaw_corpus(corpus, tmp_path / "client", progress=False, executor=client)
+        again = jaw_corpus(corpus, tmp_path / "client",
+                           run_options={"progress": False, "executor": client}).run
     assert again.workers == 2
     assert _outputs(tmp_path / "client") == _outputs(out)
 

@@ -67,7 +67,8 @@ def test_unknown_2d_axes_get_their_signs_from_the_anatomy(flip_x, flip_y):
 
 def test_declared_axes_are_used_and_a_wrong_declaration_is_caught():
     raw = raw_from_array(_array(flip_x=True), layout="mngu0", rate=200.0)
-    track, _ = ema_to_track(raw, SensorMap(anterior="-x", up="+y"))
+    given = SensorMap(anterior="-x", up="+y", origin=(0.0, 0.0), occlusal_plane="declared")
+    track, _ = ema_to_track(raw, given)  # the frame given whole: used as it is
     np.testing.assert_allclose(_role(track, "UL")[0], SPEAKER["UL"])
     with pytest.raises(DataFormatError, match="tongue tip T1 in front of the upper lip"):
         ema_to_track(raw, SensorMap(anterior="+x", up="+y"))

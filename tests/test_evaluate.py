@@ -373,16 +373,16 @@ def hand_result(with_unrated=False):
 def test_rows_are_typed_records_with_a_status():
     result = hand_result(with_unrated=True)
     s01, s02_ok, s02_bad, s03 = result.recordings
-    assert s01.status is Status.OK and s01.rated and s01.status_text == "ok"
+    assert s01.status is Status.OK and s01.rated and s01.error == ""
     assert s01.ratings == {"teeth": "EXCELLENT", "lips": "EXCELLENT", "tongue": "EXCELLENT"}
     assert s02_bad.status is Status.FAILED and not s02_bad.rated
-    assert s02_bad.status_text == "error: S02/tp106: jaw pellet(s) MNI never tracked"
+    assert s02_bad.error == "S02/tp106: jaw pellet(s) MNI never tracked"
     assert (s02_bad.frames, s02_bad.measures, s02_bad.ratings) == (0, {}, {})
     assert result.failed == [s02_bad, s03]
     s1, s2, s3 = result.subjects
     assert (s2.tasks, s2.recordings, s2.failed, s2.calibration) == ("tp040", 1, 1, "cassi")
     assert s2.measures == s02_ok.measures and s2.ratings["lips"] == "GOOD"
-    assert s3.status is Status.FAILED and s3.status_text == ev.NO_RECORDING
+    assert s3.status is Status.FAILED and s3.error == ev.NO_RECORDING
     assert (s3.tasks, s3.recordings, s3.failed, s3.calibration, s3.ratings) == ("", 0, 1, "",
                                                                                 {})
     with pytest.raises(dataclasses.FrozenInstanceError):
@@ -410,7 +410,7 @@ def test_markdown_table_layout():
     assert lines[header + 4] == ("| **Total** (EXCELLENT/VERY GOOD/GOOD/FAIR) | | 2/0/0/0 | "
                                  "1/0/1/0 | 2/0/0/0 |")
     assert "S02: tongue through the palate" in text
-    assert "S02 tp106 (error: S02/tp106: jaw pellet(s) MNI never tracked)" in text
+    assert "S02 tp106 (S02/tp106: jaw pellet(s) MNI never tracked)" in text
     unrated = ev.markdown_table(hand_result(with_unrated=True)).splitlines()
     assert "| S03 |  | not rated | not rated | not rated |" in unrated
 
@@ -426,7 +426,8 @@ def test_write_table_csv_and_refusal(tmp_path):
     assert [r["task"] for r in rows] == ["tp040", "tp040", "tp106"]
     assert rows[1]["lips_rating"] == "GOOD" and rows[1]["lips_problems_n"] == "2"
     assert float(rows[1]["lip_gap_min_mm"]) == pytest.approx(ev.LIP_APART_LARGE_MM + 1)
-    assert rows[2]["status"] == "error: S02/tp106: jaw pellet(s) MNI never tracked"
+    assert (rows[2]["status"], rows[2]["error"]) == (
+        "failed", "S02/tp106: jaw pellet(s) MNI never tracked")
     assert rows[2]["frames"] == "0" and rows[2]["lips_rating"] == ""
     with open(tmp_path / "evaluation_subjects.csv", newline="") as fh:
         subjects = list(csv.DictReader(fh))
@@ -441,8 +442,8 @@ def test_write_table_csv_and_refusal(tmp_path):
     ev.write_table(hand_result(with_unrated=True), tmp_path, overwrite=True)
     with open(tmp_path / "evaluation_subjects.csv", newline="") as fh:
         s03 = list(csv.DictReader(fh))[2]
-    assert (s03["subject"], s03["status"], s03["tasks"], s03["calibration"]) == (
-        "S03", "no recording evaluated", "", "")
+    assert (s03["subject"], s03["status"], s03["error"], s03["tasks"], s03["calibration"]) == (
+        "S03", "failed", "no recording evaluated", "", "")
     assert s03["teeth_rating"] == "" and s03["lip_gap_min_mm"] == ""
 
 
@@ -520,26 +521,24 @@ def test_evaluate_dataset_rows(corpus):
 
 
 def test_cli_calibration_folder_is_loaded_per_subject(corpus, tmp_path, capsys, monkeypatch):
-    from cassi_fit import calibrate
+    from cassi_fit import calibration
 
     seen = []
 
-    def fake_load(folder):  # a folder without S01's file: S01 falls back to the default
+    def fake_load(folder):  # read once before the run; the folder lacks S01's file
         seen.append(folder)
         return {}
 
-    monkeypatch.setattr(calibrate, "load_calibrations", fake_load)
+    monkeypatch.setattr(calibration, "load_calibrations", fake_load)
     folder = tmp_path / "calibrations"
     folder.mkdir()
     out = tmp_path / "eval"
-    with pytest.warns(UserWarning, match="S01: no calibration given"):
-        code, text, err = _run(capsys, "evaluate", corpus, "--calibration", folder, "--out",
-                               out, "--tasks", "tp040", "--stride", "4", "--quiet")
-    assert code == 0, err
-    assert seen == [folder]
-    assert "Calibration: calibrated" in text
+    code, text, err = _run(capsys, "evaluate", corpus, "--calibration", folder, "--out",
+                           out, "--tasks", "tp040", "--stride", "4", "--quiet")
+    assert code == 1 and seen == [folder]  # S01's recording: a failed row, not a default
+    assert f"{folder}: no calibration of subject S01 (S01.calibration.json; it has no" in err
     with open(out / "evaluation_recordings.csv") as fh:
-        assert ",default,off," in fh.read().splitlines()[1]
+        assert "no calibration of subject S01" in fh.read()
     code, _, err = _run(capsys, "evaluate", corpus, "--calibration", tmp_path / "nowhere",
                         "--out", tmp_path / "other", "--quiet")
     assert code == 2 and "no such calibration file or folder" in err

@@ -106,11 +106,12 @@ def test_the_video_gets_the_sound_and_labels_inside_the_file(mview_folder, tmp_p
 
 
 def test_the_jaw_table_has_the_labels_inside_the_file(mview_folder, tmp_path):
-    from cassi_fit.jaw_table import jaw_task
+    from cassi_fit.jaw_table import jaw_spec, jaw_task
 
     folder, _ = mview_folder
     item = CorpusItem("S01", "tp040", str(folder / "tp040.mat"))
-    result = jaw_task(item, str(tmp_path), jaw_sensors="MNI", method="coupled-rotation")
+    spec = jaw_spec(jaw="coupled-rotation", jaw_sensors="MNI")
+    result = jaw_task(item, str(tmp_path), spec=spec)
     frames = (tmp_path / "S01" / "tp040.jaw.csv").read_text().splitlines()
     column = frames[0].split(",").index("label")
     assert {line.split(",")[column] for line in frames[1:]} >= {"sh", "iy", "hh"}

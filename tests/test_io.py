@@ -236,63 +236,6 @@ def test_special_kind_of_ordinary_paths(tmp_path):
     _io.atomic_write(tmp_path / "link.csv", "y", overwrite=True)  # a link to a file is fine
 
 
-def test_foreign_data_of_a_synthetic_corpus(tmp_path_factory, tmp_path):
-    """A corpus the synthetic writer wrote holds no foreign data; anything a user adds
-    to it (a real recording, labels, another subject's head measures, a README of their
-    own, a FIFO) is listed, and refuse_foreign_data names the folder and the first."""
-    import os
-    import shutil
-
-    import zoo
-
-    corpus = zoo.small_corpus(tmp_path_factory)
-    assert _io.foreign_data(corpus) == []
-    assert _io.foreign_data(tmp_path / "absent") == [] and _io.foreign_data(tmp_path) == []
-    _io.refuse_foreign_data(corpus)  # nothing to say
-    copy = tmp_path / "corpus"
-    shutil.copytree(corpus, copy)
-    headmeasures = (copy / "Headmeasures.txt").read_text()
-    added = {
-        "S01/TP999.TXY": (copy / "S01" / "TP106.TXY").read_text(),  # no truth sidecar
-        "S01/TP106.lab": "0 0.5 a\n",
-        "JW11/tp005.txy": "0" + "\t1000000" * 16 + "\n",
-        "JW11/PAL.DAT": " -4000 4433\n",
-        "jw11_pha.dat": " -90663 16444\n -90629 -24627\n",
-        "S02/tp040.truth.csv": "time_s\n0\n",  # a sidecar that is not the generator's
-    }
-    for rel, text in added.items():
-        (copy / rel).parent.mkdir(exist_ok=True)
-        (copy / rel).write_text(text)
-    os.mkfifo(copy / "S02" / "tp777.txy")
-    expected = {copy / rel for rel in added} | {copy / "S02" / "tp777.txy"}
-    # S02's tp040.txy and .wav lose their synthetic sidecar with it
-    expected |= {p for p in (copy / "S02").iterdir() if p.name.lower() in ("tp040.txy",
-                                                                             "tp040.wav")}
-    assert set(_io.foreign_data(copy)) == expected
-    (copy / "Headmeasures.txt").write_text(headmeasures + "JW11 " + " 1" * 10 + "\n")
-    (copy / "README.txt").write_text("JW11 from the XRMB database\n")
-    found = _io.foreign_data(copy)
-    assert {copy / "Headmeasures.txt", copy / "README.txt"} <= set(found)
-    with pytest.raises(OutputExistsError, match="did not write") as info:
-        _io.refuse_foreign_data(copy)
-    message = str(info.value)
-    assert message.startswith(f"{copy}: holds data cassi synth did not write ({found[0]} and")
-    assert "\n" not in message
-
-
-def test_the_real_recording_is_foreign_data():
-    from pathlib import Path
-
-    here = Path(__file__).resolve()
-    jw11 = next((p for p in (here.parents[2] / "shared/data/xrmb_jw11",
-                             here.parents[3] / "shared/data/xrmb_jw11") if p.is_dir()), None)
-    if jw11 is None:
-        pytest.skip("the real XRMB recording JW11 task 5 is not here (/work/shared/data/xrmb_jw11)")
-    names = {p.name for p in _io.foreign_data(jw11)}
-    assert {"jw11_tp005.txy", "jw11_pal.dat", "jw11_pha.dat", "jw11_tp005.wav",
-            "jw11_tp005.lab"} <= names
-
-
 def test_an_output_folder_that_is_not_a_folder(tmp_path):
     (tmp_path / "file").write_text("x")
     assert _io.check_output_folder(tmp_path) == tmp_path

@@ -6,8 +6,8 @@ import warnings
 import numpy as np
 import pytest
 
-from cassi_fit.mistracks import Reason, mistrack_report
-from cassi_fit.quality import detect_mistracks, quality_report
+from cassi_fit.mistracks import Reason, detect_mistracks, mistrack_report
+from cassi_fit.quality import quality_report
 from cassi_fit.txy import FRAME_STEP_US, PELLET_NAMES, PelletTrack
 
 MEDIANS = np.array(
@@ -127,7 +127,7 @@ def test_single_frame():
 def test_running_median_matches_nanmedian():
     from numpy.lib.stride_tricks import sliding_window_view
 
-    from cassi_fit.quality import MEDIAN_WINDOW, running_median
+    from cassi_fit.mistracks import MEDIAN_WINDOW, running_median
 
     rng = np.random.default_rng(4)
     x = rng.normal(size=(60, 8, 2))

@@ -19,7 +19,7 @@ from cassi_fit.dataset import Recording
 from cassi_fit.deform import default_params, deform, tongue_midline
 from cassi_fit.face_model import load_model
 from cassi_fit.pipeline import run_recording
-from cassi_fit.synth_tasks import TASKS
+from cassi_fit.synth import TASKS
 from cassi_fit.tongue import closed_mesh_volume, tongue_faces, tongue_volume, tongue_volumes
 
 MODEL = load_model()
@@ -85,7 +85,7 @@ def all_tasks():
         for task in TASKS:
             recording = _recording(task, anatomy)
             stride = -(-recording.track.times.shape[0] // FRAMES)
-            out[task] = run_recording(recording, stride=stride)[2:]
+            out[task] = run_recording(recording, stride=stride)[2:4]
     return out
 
 

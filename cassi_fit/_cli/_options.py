@@ -54,11 +54,18 @@ def add_source_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bite-plane", metavar="FILE", default=None,
                         help="articulograph files: the bite-plane recording (default: a *bite* "
                         "file beside)")
+    parser.add_argument("--accept-proposed-map", action="store_true",
+                        help="articulograph files with numbered channels and no sensor map: "
+                        "use the map proposed from the data (`cassi info --write-sensor-map "
+                        "FILE` shows it); the channels it is not sure of get no role")
 
 
 def source_options(args: argparse.Namespace) -> dict:
     """``dataset.load_recording``'s keywords from :func:`add_source_arguments`' options."""
-    return {"sensor_map": args.sensor_map, "layout": args.layout, "rate": args.rate,
+    smap = args.sensor_map
+    if smap is None and getattr(args, "accept_proposed_map", False):
+        smap = "proposed"  # cassi_fit.ema.sensor_map.PROPOSED; a map beside the files wins
+    return {"sensor_map": smap, "layout": args.layout, "rate": args.rate,
             "bite_plane": args.bite_plane}
 
 

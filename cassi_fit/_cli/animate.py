@@ -168,8 +168,9 @@ def run_dataset(args) -> int:
     video_options = {"suffix": f".{args.format}", "size": parse_size(args.size),
                      "views": parse_views(args.views), "audio": not args.no_audio,
                      "markers": args.markers}
-    run, written = animate_corpus(args.recording[0], args.out, spec=spec_from_args(args),
-                                  video_options=video_options, run_options=run_options(args))
+    run, written, _ = animate_corpus(args.recording[0], args.out, spec=spec_from_args(args),
+                                     video_options=video_options,
+                                     run_options=run_options(args))
     print(f"{len(run.results) - len(run.failed)} of {len(run.results)} videos written to "
           f"{args.out} on {run.workers} worker(s); table {written[0]}")
     return finish(run)

@@ -74,9 +74,9 @@ def run(args) -> int:
                                     "or --resume to continue)")
     with warnings.catch_warnings():  # the problems are printed below, one line each
         warnings.simplefilter("ignore", CalibrationWarning)
-        run, cals = calibrate_corpus(root, out, subjects=subjects, tasks=_words(args.tasks),
-                                     method=args.method, collisions=not args.no_collisions,
-                                     **run_options(args))
+        run, _, cals = calibrate_corpus(root, out, subjects=subjects,
+                                        tasks=_words(args.tasks), run_options=run_options(args),
+                                        method=args.method, collisions=not args.no_collisions)
     print(f"{'subject':8} {'scale':>7} {'UL mm':>7} {'LL mm':>7} {'LL bias mm':>12} "
           f"{'face mm':>8}  residuals (mm)")
     for subject, c in cals.items():

@@ -165,8 +165,8 @@ def run(args) -> int:
     if not cassi:
         import warnings
 
-        from cassi_fit.calibrate import calibrate_subject, calibration_path, write_calibration
-        from cassi_fit.calibration import CalibrationWarning
+        from cassi_fit.calibrate import calibrate_subject
+        from cassi_fit.calibration import CalibrationWarning, calibration_path, write_calibration
 
         print(f"calibrating {recordings[0].subject} ...", file=sys.stderr)
         with warnings.catch_warnings():  # said once below, beside the outputs

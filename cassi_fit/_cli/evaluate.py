@@ -64,8 +64,9 @@ def run(args: argparse.Namespace) -> int:
         raise OutputExistsError(f"{', '.join(existing)}: file exists (pass --force to replace)")
     from cassi_fit.evaluate import evaluate_corpus, markdown_table, write_report
 
-    run, result = evaluate_corpus(dataset, out, spec=spec, tasks=_words(args.tasks),
-                                  subjects=_words(args.subjects), run_options=run_options(args))
+    run, _, result = evaluate_corpus(dataset, out, spec=spec, tasks=_words(args.tasks),
+                                     subjects=_words(args.subjects),
+                                     run_options=run_options(args))
     print(markdown_table(result), end="")
     flagged = {r.item.subject: r.row["calibration_problems"] for r in run.results
                if r.row.get("calibration_problems")}

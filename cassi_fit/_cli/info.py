@@ -28,6 +28,10 @@ def register(subparsers) -> None:
         "--list", action="store_true", help="only list subjects and tasks (read no file)"
     )
     add_source_arguments(parser)
+    parser.add_argument("--write-sensor-map", metavar="FILE", default=None,
+                        help="articulograph files with numbered channels: propose a sensor map "
+                        "from the data (roles with their evidence and confidence) and write it "
+                        "to FILE as TOML to edit (PATH: a file, or a folder's first file)")
     parser.set_defaults(func=run)
 
 
@@ -302,7 +306,31 @@ def _print_dataset(report: dict, out) -> None:
         print("  " + "  ".join(r).rstrip(), file=out)
 
 
+def _write_map(path: Path, out_path: str, out) -> int:
+    """``--write-sensor-map``: the proposal for PATH (or its folder's first file)."""
+    from cassi_fit.ema.identify import write_proposed_map
+
+    if path.is_dir():
+        from cassi_fit.dataset import Dataset
+
+        ds = Dataset(path)
+        ds.check_selection()
+        subject = ds.subjects()[0]
+        path = ds.pellet_path(subject, ds.tasks(subject)[0])
+    proposal = write_proposed_map(path, out_path)
+    print(f"{out_path}: sensor map proposed from {path} (check it; NOT SURE lines are "
+          "commented out):", file=out)
+    for g in proposal.guesses:
+        mark = "" if g.sure else "  NOT SURE"
+        print(f"  {g.channel:<8} {g.role:<12} {g.confidence:.2f}{mark}  {g.evidence}", file=out)
+    for note in proposal.notes:
+        print(f"  note: {note}", file=out)
+    return 0
+
+
 def run(args) -> int:
+    if getattr(args, "write_sensor_map", None):
+        return _write_map(Path(args.path), args.write_sensor_map, sys.stdout)
     report = collect(Path(args.path), list_only=args.list, **source_options(args))
     out = sys.stdout
     if args.json:

@@ -6,7 +6,6 @@ beside the pellet file, a label column and ``OUT.segments.csv``. ``--jaw-sensors
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 from cassi_fit.options import ALL_JAW_METHODS, JAW_SENSOR_SETS, SOLVERS
@@ -23,10 +22,6 @@ DIAGNOSTIC_COLUMNS = ("method", "jaw_sensors", "frames_used", "jaw_distance_sd_m
                       "jaw_distance_range_mm", "residual_median_mm", "pivot_iqr_x_mm",
                       "pivot_iqr_y_mm", "pivot_plausible_fraction", "hidden_error_median_mm",
                       "hidden_error_p95_mm", "prior")
-# Names of files that hold a recording's data (lower case): never replaced by an output,
-# whether or not this command reads them (issue 12).
-_DATA_NAMES = ("pal.dat", "pha.dat", "headmeasures.txt")
-_DATA_SUFFIXES = ("_pal.dat", "_pha.dat", ".txy", ".wav")
 
 
 def register(subparsers) -> None:
@@ -93,27 +88,6 @@ def _load_recording(args):
         return load_recording_args(args.recording, args)
 
 
-def _check_output(out: Path, inputs: list[Path], force: bool) -> None:
-    """Refuse, before any work, an output that would replace an input or any recording
-    data file (pellet file, PAL.DAT, PHA.DAT, Headmeasures, .wav), be a folder, sit under
-    a file, or replace an existing file without ``--force``."""
-    from cassi_fit.errors import OutputExistsError
-
-    real = os.path.realpath(out)
-    if any(os.path.realpath(p) == real for p in inputs):
-        raise OutputExistsError(f"{out}: refusing to overwrite an input file")
-    name = out.name.lower()
-    if out.exists() and (name in _DATA_NAMES or name.endswith(_DATA_SUFFIXES)):
-        raise OutputExistsError(f"{out}: refusing to replace a recording's data file")
-    if out.is_dir():
-        raise OutputExistsError(f"{out}: is a folder; give a file name for the table")
-    parent = next((p for p in out.parents if p.exists()), None)
-    if parent is not None and not parent.is_dir():
-        raise OutputExistsError(f"{out}: {parent} is a file, not a folder")
-    if out.exists() and not force:
-        raise OutputExistsError(f"{out}: file exists (pass --force to replace it)")
-
-
 def diagnostics_path(out: Path) -> Path:
     """``OUT.csv`` -> ``OUT.diagnostics.csv`` (beside the table)."""
     stem = out.name[:-4] if out.name.lower().endswith(".csv") else out.name
@@ -167,96 +141,93 @@ def run(args) -> int:
                          "folder alone)")
     if args.jobs is not None or args.scheduler or args.resume:
         raise CassiError("--jobs, --scheduler and --resume are for a DATASET folder")
-    return run_recording(args)
+    return run_one(args)
+
+
+def jaw_spec_from_args(args):
+    """The run spec of ``--method`` (with ``--solver``, ``--smoothness``) and
+    ``--jaw-sensors`` (``jaw_table.jaw_spec``: float64), checked before any work."""
+    from cassi_fit.jaw_fit import jaw_method
+    from cassi_fit.jaw_table import jaw_spec
+
+    jaw = None if args.method is None else jaw_method(args.method, solver=args.solver,
+                                                      smoothness=args.smoothness)
+    return jaw_spec(jaw=jaw, jaw_sensors=args.jaw_sensors)
 
 
 def run_dataset(args) -> int:
     """``cassi jaw DATASET --out DIR``."""
     from cassi_fit.jaw_table import jaw_corpus
 
-    # jaw_corpus checks the method, its options and the sensors before anything starts
-    run, written = jaw_corpus(args.recording[0], args.out, method=args.method,
-                              solver=args.solver, smoothness=args.smoothness,
-                              jaw_sensors=args.jaw_sensors, labels=not args.no_labels,
-                              **run_options(args))
+    result = jaw_corpus(args.recording[0], args.out, spec=jaw_spec_from_args(args),
+                        labels=not args.no_labels, run_options=run_options(args))
+    run = result.run
     ok = len(run.results) - len(run.failed)
     what = args.method or "closed-form, or coupled-rotation with one jaw sensor"
     print(f"{ok} of {len(run.results)} recordings fitted ({what}) on {run.workers} "
-          f"worker(s); tables: {', '.join(str(p) for p in written)}")
+          f"worker(s); tables: {', '.join(str(p) for p in result.tables)}")
     return finish(run)
 
 
-def run_recording(args) -> int:
-    """``cassi jaw RECORDING --csv OUT.csv``."""
-    import jax
-
-    # The CSV reports pivots to a micrometre; at small angles they need float64 (the pivot
-    # is a quotient by sin(theta/2)), so the command computes in float64.
-    jax.config.update("jax_enable_x64", True)
-    from cassi_fit._io import atomic_write
-    from cassi_fit.dataset import recording_source
-    from cassi_fit.jaw_fit import (
-        check_sensors,
-        jaw_diagnostics,
-        jaw_from_track,
-        jaw_method,
-        jaw_sensor_set,
-        method_for_sensors,
-        tracked_jaw_sensors,
-    )
-    from cassi_fit.jaw_table import jaw_frame_csv
-    from cassi_fit.labels import SEGMENT_COLUMNS, recording_labels, segment_summary
-    from cassi_fit.status import Status
-    from cassi_fit.tables import csv_text
+def run_one(args) -> int:
+    """``cassi jaw RECORDING --csv OUT.csv``: the runner's jaw stage (no model), its tables
+    (``jaw_table.write_jaw_tables``) and the diagnostics."""
+    from cassi_fit._io import atomic_write, check_outputs, register_input
+    from cassi_fit.jaw_fit import jaw_diagnostics
+    from cassi_fit.jaw_table import write_jaw_tables
+    from cassi_fit.pipeline import JAW, run_recording
     from cassi_fit.txy import JAW_PELLETS, pellet_index
 
-    chosen = None if args.method is None else jaw_method(args.method, solver=args.solver,
-                                                         smoothness=args.smoothness)
-    if chosen is not None and args.jaw_sensors is not None:  # refuse before any work
-        check_sensors(chosen, jaw_sensor_set(args.jaw_sensors))
+    spec = jaw_spec_from_args(args)  # a bad method or sensor set: refused before any work
     out = Path(args.csv)
     diag_out, seg_out = diagnostics_path(out), segments_path(out)
-    inputs = [Path(args.recording[0])] if len(args.recording) == 1 else []
-    for path in (out, diag_out, seg_out):  # refuse before the (slower) fit
-        _check_output(path, inputs, args.force)
+    outputs = [out, diag_out, seg_out]
+    if len(args.recording) == 1:
+        register_input(args.recording[0])  # about to be read: never an output
+    check_outputs(outputs, overwrite=args.force)  # before reading (a data file is no output)
     recording = _load_recording(args)
-    track = recording.track
-    if track.path is not None:
-        for path in (out, diag_out, seg_out):
-            _check_output(path, [track.path], args.force)
-    where = recording_source(recording)
-    sensors = (tracked_jaw_sensors(track.valid, where) if args.jaw_sensors is None
-               else jaw_sensor_set(args.jaw_sensors))
-    method = method_for_sensors(chosen, sensors)  # by default, by the recording's sensors
-    args.method = method.name
-    labels = None if args.no_labels else recording_labels(recording)  # beside or inside
-    fit = jaw_from_track(track, method=method, jaw_sensors=sensors)
+    check_outputs(outputs, overwrite=args.force)  # and every file it read, before the fit
+    run = run_recording(recording, spec, stages=JAW)
+    fit, track = run.jaw, recording.track
     jaw_points = track.positions[:, [pellet_index(p) for p in JAW_PELLETS], :]
     rows = [jaw_diagnostics(fit, jaw_points)]
     if args.compare_methods:
-        others = [jaw_method(m, solver=args.solver, smoothness=args.smoothness)
-                  for m in ALL_JAW_METHODS if m != args.method]
-        others = [m for m in others if len(sensors) in m.jaw_sensors_needed]
-        rows += [jaw_diagnostics(jaw_from_track(track, method=m, jaw_sensors=sensors),
-                                 jaw_points) for m in others]
-    atomic_write(out, jaw_frame_csv(track.times, fit, labels, track.mistracks.frame_labels()),
-                 overwrite=args.force)
+        rows += [jaw_diagnostics(run_recording(recording, spec.replace(jaw=m), stages=JAW).jaw,
+                                 jaw_points) for m in _other_methods(args, fit)]
+    written = write_jaw_tables(run, out, seg_out, labels=not args.no_labels,
+                               overwrite=args.force)
     atomic_write(diag_out, format_diagnostics(rows), overwrite=args.force)
-    if labels is not None:
-        segments = segment_summary(track.times, fit.theta, track.positions, labels,
-                                   usable=fit.status == Status.OK)
-        atomic_write(seg_out, csv_text(segments, SEGMENT_COLUMNS), overwrite=args.force)
-        source = labels.path.name if labels.path else labels.tier
-        print(f"{seg_out}: {len(segments)} labelled segments ({source})")
-    ok = int((fit.status <= 1).sum())
+    if written.labels is not None:
+        found = written.labels
+        print(f"{seg_out}: {len(written.segments)} labelled segments "
+              f"({found.path.name if found.path else found.tier})")
+    _print_fit(out, track, fit)
+    print_diagnostics(rows)
+    print(f"{diag_out}: diagnostics written")
+    return 0
+
+
+def _other_methods(args, fit) -> list:
+    """The methods ``--compare-methods`` adds: every other one that runs with the fit's
+    jaw sensors."""
+    from cassi_fit.jaw_fit import jaw_method
+
+    others = [jaw_method(m, solver=args.solver, smoothness=args.smoothness)
+              for m in ALL_JAW_METHODS if m != fit.method]
+    return [m for m in others if len(fit.jaw_sensors) in m.jaw_sensors_needed]
+
+
+def _print_fit(out: Path, track, fit) -> None:
+    """One line: frames, fitted, method (solver, sensors), mistracked, noise; the prior."""
+    from cassi_fit.status import Status, fitted
+
+    ok = int(fitted(fit.status).sum())
     mistracked = int((fit.status == Status.MISTRACKED).sum())
-    print(f"{out}: {track.n_frames} frames, {ok} fitted ({args.method}"
-          f"{'' if args.method == 'closed-form' else ', ' + fit.solver}"
+    sensors = fit.jaw_sensors
+    print(f"{out}: {track.n_frames} frames, {ok} fitted ({fit.method}"
+          f"{'' if fit.solver == fit.method else ', ' + fit.solver}"
           f"{'' if len(sensors) == 2 else ', ' + sensors[0] + ' alone'}), "
           f"{mistracked} mistracked, noise estimate {fit.noise_mm:.3f} mm"
           f"{'' if fit.converged else ', NOT converged (' + fit.failure.label + ')'}")
     if fit.prior:
         print(f"prior: {fit.prior}")
-    print_diagnostics(rows)
-    print(f"{diag_out}: diagnostics written")
-    return 0

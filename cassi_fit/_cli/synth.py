@@ -68,6 +68,15 @@ def register(subparsers) -> None:
         "XRMB pellet, two on the jaw, four on the tongue) or mocha (MOCHA-TIMIT's set: one "
         "jaw sensor on the lower incisor; tongue tip, blade and dorsum)",
     )
+    parser.add_argument(
+        "--lab-like",
+        action="store_true",
+        help="with --format ag501, wave or mview: recordings as labs' files look (no "
+        "upper-incisor sensor, numbered and shuffled channels, unused channels, a device or "
+        "lab frame whose midline is not at zero, parasagittal sensors, a loose reference, "
+        "dropouts), the truth of each placement in placement.json beside them "
+        "(cassi_fit.ema.lab_like)",
+    )
     parser.add_argument("--no-audio", action="store_true", help="do not write .wav files")
     parser.add_argument("--force", action="store_true", help="overwrite existing files")
     parser.set_defaults(func=run)
@@ -84,6 +93,16 @@ def run(args: argparse.Namespace) -> int:
         from ..errors import CassiError
 
         raise CassiError("--sensors chooses an articulograph's sensors: give --format too")
+    if getattr(args, "lab_like", False):
+        from ..ema.lab_like import write_lab_like_corpus
+
+        tasks = None if args.tasks is None else tuple(
+            t.strip() for t in args.tasks.split(",") if t.strip())
+        out = write_lab_like_corpus(args.out_dir, format=args.format, n_subjects=args.subjects,
+                                    seed=args.seed, overwrite=args.force, tasks=tasks)
+        print(f"wrote {args.subjects} lab-like {args.format} sessions to {out} (seed "
+              f"{args.seed}; the truth in each placement.json)")
+        return 0
     if args.format != "xrmb":
         from ..ema.synthetic import write_ema_corpus
 

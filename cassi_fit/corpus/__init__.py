@@ -52,6 +52,7 @@ from ._cluster import connect_scheduler as connect_scheduler
 from ._cluster import parse_scheduler_address as parse_scheduler_address
 from ._cluster import scheduler_timeout as scheduler_timeout
 from ._executor import WORKER_DIED as WORKER_DIED
+from ._executor import CorpusResult as CorpusResult
 from ._executor import CorpusRun as CorpusRun
 from ._executor import ItemResult as ItemResult
 from ._executor import JaxSettings as JaxSettings

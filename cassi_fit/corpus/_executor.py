@@ -10,7 +10,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from .._io import check_output_folder, check_outputs
 from .._signals import defer_interrupts, end_worker, in_task, is_worker, signals_blocked
@@ -245,6 +245,17 @@ class CorpusRun:
         lines = [f"{len(self.failed)} of {len(self.results)} failed:"]
         lines += [f"  {r.item.subject} {r.item.task}: {r.error}".rstrip() for r in self.failed]
         return "\n".join(lines)
+
+
+class CorpusResult(NamedTuple):
+    """What every corpus entry point returns (``animate_corpus``, ``evaluate_corpus``,
+    ``jaw_corpus``, ``calibrate_corpus``): the ``run`` (``run.failed``: exit non-zero),
+    the ``tables`` written (paths; none when the caller writes them), and the command's
+    ``value`` (the evaluation, the calibrations; None when the tables are all)."""
+
+    run: CorpusRun
+    tables: list[Path]
+    value: Any = None
 
 
 def run_corpus(

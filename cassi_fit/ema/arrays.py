@@ -152,7 +152,7 @@ def raw_from_array(
 
 
 def _csv(path: Path) -> tuple[list[str] | None, np.ndarray, list[int]]:
-    from ..txy import read_lines
+    from .._io import read_lines
 
     _, lines = read_lines(path)
     if not lines:

@@ -52,6 +52,8 @@ class SensorReport:
             plane (mm, + toward the subject's left); empty for 2D data.
         bite_plane: the bite-plane recording used, or None.
         notes: what the readers and the conversion decided that a user should know.
+        placement: how the occlusal frame was estimated from the data, with its
+            uncertainty (:meth:`cassi_fit.ema.placement.Placement.to_dict`), or None.
         head_fits: the per-frame rigid motions of the head correction
             (:class:`cassi_fit.ema.head.RigidFits`: ``R p + t`` takes the file's
             coordinates into the head frame), or None without references.
@@ -78,6 +80,7 @@ class SensorReport:
     bite_plane: str | None = None
     notes: tuple[str, ...] = ()
     head_fits: object = None  # cassi_fit.ema.head.RigidFits: per frame R, t (device -> head)
+    placement: dict | None = None  # how the frame was estimated, with its uncertainty
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready summary: arrays as median / 95th percentile / max."""
@@ -103,4 +106,5 @@ class SensorReport:
                                         for k, v in self.midsagittal_distance_mm.items()},
             "bite_plane": self.bite_plane,
             "notes": list(self.notes),
+            "placement": self.placement,
         }

@@ -44,6 +44,15 @@ error, so a typo is not silently ignored)::
     scale_mm = 0.01     # the files' numbers times this are millimetres
     anterior = "-x"     # data already in a head frame: the axis toward the face's front
     up = "+y"           # ... and the axis pointing up
+    origin = [0.0, -12.5, 3.0]   # the upper incisor's tip, in the file's units and axes
+                                 # (before any correction): the toolkit's origin
+    occlusal_plane = "declared"  # or [x, y, z]: the occlusal plane's forward direction in
+                                 # the file's axes (default: estimated from the jaw)
+    jaw_sensor = "gum"  # where the jaw sensor is glued on the lower incisor: "edge",
+                        # "gum", "unknown" (default) or its depth below the edge in mm
+
+Without a bite plane or an upper-incisor sensor, the origin and the occlusal plane are
+estimated from the speaker's own data (:mod:`cassi_fit.ema.placement`).
 
 A map that names a sensor the file does not have, two sensors for one role, or a role
 outside the vocabulary is a :class:`DataFormatError` naming them.
@@ -112,8 +121,19 @@ BUILTIN_MAPS: dict[str, dict[str, str]] = {
 #: ``[file]`` facts of built-in maps: the IPS data are head-corrected, posy toward the
 #: back of the head, posz up (cassi_fit.ema.emu's docstring says how that was read).
 BUILTIN_FILE_FACTS: dict[str, dict[str, str]] = {"ips": {"anterior": "-y", "up": "+z"}}
+#: The sensor map "proposed": proposed from each file's data (:mod:`cassi_fit.ema.identify`),
+#: what ``--accept-proposed-map`` asks for.
+PROPOSED = "proposed"
 _TABLES = {"channels", "roles", "references", "bite_plane", "midline", "file"}
 _SIGN_AXIS = re.compile(r"^([+-]?)([xyz])$")
+
+
+_NUMBERED = re.compile(r"^(ch(annel)?|s(ensor)?|coil|c)?[\s_#-]*\d+$", re.IGNORECASE)
+
+
+def numbered(names) -> bool:
+    """True when every channel name is a number (``Ch3``, ``S12``, ``7``)."""
+    return bool(names) and all(_NUMBERED.match(str(n).strip()) for n in names)
 
 
 def sensor_key(name: str) -> str:
@@ -142,6 +162,9 @@ class SensorMap:
     anterior: str | None = None
     up: str | None = None
     name: str = "auto"
+    origin: tuple[float, ...] | None = None
+    occlusal_plane: str | tuple[float, ...] | None = None
+    jaw_sensor: str | float = "unknown"
 
     def __post_init__(self):
         where = self.name if self.name.endswith(".toml") else None
@@ -168,6 +191,36 @@ class SensorMap:
                 self.scale_mm)):
             raise DataFormatError(where, None, f"[file] scale_mm {self.scale_mm!r} must be a "
                                   "finite number > 0")
+        _check_frame_keys(where, self)
+
+
+def _numbers(value, n=(2, 3)) -> bool:
+    return (isinstance(value, list | tuple) and len(value) in n and all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+        for v in value))
+
+
+def _check_frame_keys(where, smap) -> None:
+    """``[file] origin``, ``occlusal_plane`` and ``jaw_sensor`` (module docstring)."""
+    from .placement import JAW_SENSOR_KINDS
+
+    if smap.origin is not None and not _numbers(smap.origin):
+        raise DataFormatError(where, None, f"[file] origin = {smap.origin!r}: expected [x, y, z]"
+                              " (or [x, y]) numbers in the file's units and axes")
+    plane = smap.occlusal_plane
+    if plane is not None and plane != "declared" and not (
+            _numbers(plane) and any(v != 0 for v in plane)):
+        raise DataFormatError(where, None, f"[file] occlusal_plane = {plane!r}: expected "
+                              "\"declared\" or a direction [x, y, z] in the file's axes")
+    if plane == "declared" and smap.anterior is None:
+        raise DataFormatError(where, None, '[file] occlusal_plane = "declared" needs the axes '
+                              "(anterior, up)")
+    jaw = smap.jaw_sensor
+    ok = jaw in JAW_SENSOR_KINDS if isinstance(jaw, str) else (
+        isinstance(jaw, int | float) and not isinstance(jaw, bool) and 0 <= jaw <= 25)
+    if not ok:
+        raise DataFormatError(where, None, f"[file] jaw_sensor = {jaw!r}: expected "
+                              f"{', '.join(map(repr, JAW_SENSOR_KINDS))} or a depth in mm (0-25)")
 
 
 def builtin_map(name: str) -> SensorMap:
@@ -228,7 +281,8 @@ def read_sensor_map(path: str | os.PathLike) -> SensorMap:
     midline = data.get("midline", {})
     _check_keys(path, "midline", midline, ("sensors",))
     facts = data.get("file", {})
-    _check_keys(path, "file", facts, ("scale_mm", "anterior", "up"))
+    _check_keys(path, "file", facts, ("scale_mm", "anterior", "up", "origin",
+                                       "occlusal_plane", "jaw_sensor"))
     scale = facts.get("scale_mm")
     if scale is not None and (isinstance(scale, bool) or not isinstance(scale, int | float)):
         raise DataFormatError(path, None, "[file] scale_mm must be a number")
@@ -249,16 +303,26 @@ def read_sensor_map(path: str | os.PathLike) -> SensorMap:
         anterior=facts.get("anterior"),
         up=facts.get("up"),
         name=str(path),
+        origin=_listed(facts.get("origin")),
+        occlusal_plane=_listed(facts.get("occlusal_plane")),
+        jaw_sensor=facts.get("jaw_sensor", "unknown"),
     )
 
 
+def _listed(value):
+    return tuple(value) if isinstance(value, list) else value
+
+
 def sensor_map(value: SensorMap | str | os.PathLike | None) -> SensorMap:
-    """A :class:`SensorMap` from a map, a built-in name, a ``.toml`` path, or None
-    (``"auto"``)."""
+    """A :class:`SensorMap` from a map, a built-in name, a ``.toml`` path, None
+    (``"auto"``) or ``"proposed"`` (:data:`PROPOSED`: proposed from each file's data when
+    it is read)."""
     if value is None:
         return builtin_map("auto")
     if isinstance(value, SensorMap):
         return value
+    if str(value) == PROPOSED:
+        return SensorMap(name=PROPOSED)
     text = os.fspath(value)
     if text.lower().endswith(".toml") or Path(text).is_file():
         return read_sensor_map(text)
@@ -384,9 +448,11 @@ def resolve(names: Sequence[str], smap: SensorMap, where: str | os.PathLike | No
             if name not in refs["upper_incisor"]:
                 refs[kind].append(name)
     if not roles and not bite_plane:
+        hint = ("; `cassi info --write-sensor-map FILE` proposes one from the data, "
+                "--accept-proposed-map uses it" if numbered(names) else "")
         raise DataFormatError(where, None, f"no sensor maps to a CASSI role (UL, LL, T1-T4, "
                               f"MNI, MNM): the file's sensors are {', '.join(names)}; give a "
-                              "sensor map (docs/EMA.md)")
+                              f"sensor map (docs/EMA.md){hint}")
     in_roles = set(roles.values())
     ordered_roles = {r: roles[r] for r in PELLET_NAMES if r in roles}
     extras = tuple(s for s in names if s not in in_roles)

@@ -337,7 +337,7 @@ def write_ema_corpus(out_dir: str | os.PathLike, *, format: str, n_subjects: int
     if out_dir.exists() and not out_dir.is_dir():
         raise OutputExistsError(f"{out_dir}: exists and is not a folder")
     if out_dir.is_dir():  # never into a real dataset, whatever overwrite says (issue 24)
-        from .._io import refuse_foreign_data
+        from ..synth._foreign import refuse_foreign_data
 
         refuse_foreign_data(out_dir, writer="cassi synth --format")
     out_dir.parent.mkdir(parents=True, exist_ok=True)
@@ -376,26 +376,12 @@ def write_ema_corpus(out_dir: str | os.PathLike, *, format: str, n_subjects: int
         lines += [f"  {line}" for line in readme if line and line != COMPLETE_LINE]
         lines.append(COMPLETE_LINE)
         (ema / "README.txt").write_text("\n".join(lines) + "\n", encoding="utf-8")
-        _move(ema, out_dir)
+        from ..synth._foreign import move_into_place
+
+        move_into_place(ema, out_dir)
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return out_dir
-
-
-def _move(tmp: Path, out_dir: Path) -> None:
-    """``tmp`` renamed to ``out_dir`` (absent or empty), else moved file by file with the
-    old README.txt removed first and the new one last."""
-    if out_dir.is_dir() and not any(out_dir.iterdir()):
-        out_dir.rmdir()
-    if not out_dir.exists():
-        os.replace(tmp, out_dir)
-        return
-    (out_dir / "README.txt").unlink(missing_ok=True)
-    for path in sorted(p for p in tmp.rglob("*") if p.is_file() and p.name != "README.txt"):
-        target = out_dir / path.relative_to(tmp)
-        target.parent.mkdir(parents=True, exist_ok=True)
-        os.replace(path, target)
-    os.replace(tmp / "README.txt", out_dir / "README.txt")
 
 
 @dataclass(frozen=True, eq=False)

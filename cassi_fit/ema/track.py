@@ -38,7 +38,9 @@ untracked; every other sensor in ``extra_*``) with a
 
 from __future__ import annotations
 
+import dataclasses
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,14 +48,16 @@ import numpy as np
 from ..errors import DataFormatError
 from ..pellets import PELLET_NAMES, plausibility_problem
 from ..txy import PelletTrack
-from . import head
+from . import anatomy, head, placement
 from ._raw import RawEma, untrack_impossible
 from .report import SensorReport
-from .sensor_map import Assignment, SensorMap, resolve, sensor_map
+from .sensor_map import PROPOSED, Assignment, SensorMap, resolve, sensor_map
 
 #: The span of the CASSI sensors' median positions (mm) of any head: outside it the
 #: units are wrong (a normalised array, centimetres, hundredths of a millimetre).
 SPAN_RANGE_MM = (15.0, 250.0)
+#: At most this many files of a session (spread over it) give its frame.
+SESSION_FILES = 40
 _BACK_FIRST = ("T4", "T3", "T2", "T1")
 
 
@@ -77,7 +81,8 @@ def _median(positions: np.ndarray) -> np.ndarray:
     return out
 
 
-def _correct(where, positions: np.ndarray, assign: Assignment) -> _Corrected:
+def _correct(where, positions: np.ndarray, assign: Assignment,
+             config: np.ndarray | None = None) -> _Corrected:
     refs = assign.reference_names
     dims = positions.shape[2]
     level = head.reference_level(dims, len(refs))
@@ -86,7 +91,8 @@ def _correct(where, positions: np.ndarray, assign: Assignment) -> _Corrected:
                           "head movement stays in the data)")
     index = [assign.names.index(r) for r in refs]
     ref_pos = positions[:, index]
-    config = head.reference_configuration(ref_pos, level)
+    if config is None or config.shape != ref_pos.shape[1:]:
+        config = head.reference_configuration(ref_pos, level)
     if config is None:
         raise DataFormatError(where, None, f"no frame has every reference sensor "
                               f"({', '.join(refs)}) tracked: the head frame cannot be set "
@@ -177,7 +183,11 @@ def _anatomy_2d(med, assign, origin) -> head.Frame:
 
 def _occlusal_frame(where, raw: RawEma, corrected: _Corrected, assign: Assignment,
                     smap: SensorMap, bite: RawEma | None, scale: float,
-                    bite_smap: SensorMap) -> tuple[head.Frame, list[str]]:
+                    bite_smap: SensorMap, placed: placement.Placement | None = None,
+                    uncorrected: np.ndarray | None = None
+                    ) -> tuple[head.Frame, list[str], placement.Placement | None]:
+    """``uncorrected``: the positions in mm before head correction (default the file's)."""
+    uncorrected = raw.positions * scale if uncorrected is None else uncorrected
     dims = raw.dims
     med = _median(corrected.positions)
     notes: list[str] = []
@@ -205,45 +215,88 @@ def _occlusal_frame(where, raw: RawEma, corrected: _Corrected, assign: Assignmen
         if frame is None:
             raise DataFormatError(where, None, "bite-plane sensors are degenerate (front and "
                                   "back at one point, or left and right on the x axis)")
-        return frame, notes
+        return frame, notes, None
+    if raw.frame == "mocha" and dims == 2:
+        return head.Frame(np.array([[-1.0, 0.0], [0.0, 1.0]]), origin,
+                          "MOCHA-TIMIT's documented axes (x toward the back: mirrored); "
+                          f"{origin_words}; occlusal plane not given (the file's x axis "
+                          "stands for it)"), notes, None
+    if dims == 2 and smap.anterior is None and smap.origin is None:
+        frame = _anatomy_2d(med, assign, origin)
+        return head.Frame(frame.rotation, origin, f"{frame.source}; {origin_words}"), notes, None
+    if placed is None:
+        placed = _placement(where, [(corrected.positions, assign.names)], assign, smap,
+                            corrected, uncorrected)
+    return placed.frame, notes, placed
+
+
+def _given(smap: SensorMap, dims: int, corrected: _Corrected | None, names,
+           file_positions: np.ndarray | None) -> placement.Given:
+    """The sensor map's frame facts in the head frame (mm)."""
+    forward = up = origin = occlusal = None
     if smap.anterior is not None:
         forward = head.signed_axis(smap.anterior, dims)
         up = head.signed_axis(smap.up, dims)
         if abs(np.dot(forward, up)) > 0:
             raise DataFormatError(smap.name, None, "[file] anterior and up are the same axis")
-        frame = head.frame_from_axes(forward, up, origin, f"axes declared by {smap.name} "
-                                     f"(anterior {smap.anterior}, up {smap.up}); {origin_words}")
-        return frame, notes
-    if raw.frame == "mocha" and dims == 2:
-        return head.Frame(np.array([[-1.0, 0.0], [0.0, 1.0]]), origin,
-                          "MOCHA-TIMIT's documented axes (x toward the back: mirrored); "
-                          f"{origin_words}; occlusal plane not given (the file's x axis "
-                          "stands for it)"), notes
-    if dims == 2:
-        frame = _anatomy_2d(med, assign, origin)
-        return head.Frame(frame.rotation, origin, f"{frame.source}; {origin_words}"), notes
-    if ui_pos is None:
-        raise DataFormatError(where, None, "3D positions in the device's frame cannot be "
-                              "placed in the occlusal frame: give a bite-plane recording, an "
-                              "upper-incisor reference sensor, or the axes in a sensor map's "
-                              "[file] table (docs/EMA.md)")
-    normal = _midline_plane(med, assign)
-    ul = _role_median(med, assign, "UL")
-    back = next((p for r in _BACK_FIRST if (p := _role_median(med, assign, r)) is not None),
-                None)
-    if normal is None or ul is None or back is None:
-        raise DataFormatError(where, None, "no bite plane, and too few midline sensors (upper "
-                              "lip, tongue, incisors) to estimate the occlusal frame")
-    forward = (ul - back) - np.dot(ul - back, normal) * normal
-    up = np.cross(normal, forward)
-    hint = _up_hint(med, assign, ui_pos)
-    if hint is not None and np.dot(up, hint) < 0:
-        up = -up
-    frame = head.frame_from_axes(forward, up, ui_pos, "estimated without a bite plane: "
-                                 "midsagittal plane through the midline sensors, x from the "
-                                 "back of the tongue toward the upper lip (within about 10 "
-                                 f"degrees of the occlusal plane); {origin_words}")
-    return frame, notes
+    if smap.origin is not None:
+        origin = np.asarray(smap.origin, float) * (smap.scale_mm or 1.0)
+        if origin.shape[0] != dims:
+            raise DataFormatError(smap.name, None, f"[file] origin has {origin.shape[0]} "
+                                  f"numbers for {dims}D data")
+        if corrected is not None and corrected.fits is not None and file_positions is not None:
+            origin = _file_to_head(origin, corrected, names, file_positions)
+    if isinstance(smap.occlusal_plane, tuple):
+        occlusal = np.asarray(smap.occlusal_plane, float)[:dims]
+    elif smap.occlusal_plane == "declared":
+        occlusal = "declared"
+    return placement.Given(origin=origin, occlusal=occlusal, forward=forward, up=up,
+                           jaw_sensor=smap.jaw_sensor)
+
+
+def _file_to_head(point: np.ndarray, corrected: _Corrected, names, file_positions: np.ndarray
+                  ) -> np.ndarray:
+    """A point given in the file's coordinates, in the head frame: moved as the median
+    pose of the references (the head frame is their median configuration)."""
+    index = [list(names).index(r) for r in corrected.references]
+    refs = np.nanmedian(file_positions[:, index], axis=0)[None]
+    fits = head.fit_references(refs, corrected.config, corrected.level)
+    return fits.rotation[0] @ point + fits.translation[0]
+
+
+def _placement(where, sessions, assign: Assignment, smap: SensorMap,
+               corrected: _Corrected | None, file_positions) -> placement.Placement:
+    dims = sessions[0][0].shape[2]
+    given = _given(smap, dims, corrected, assign.names, file_positions)
+    try:
+        return placement.estimate_placement(sessions, assign.roles, sorted(assign.midline),
+                                            given, upper_incisor=assign.upper_incisor)
+    except placement.PlacementError as exc:
+        raise DataFormatError(where, None, f"{exc}; {anatomy.GIVE}") from None
+
+
+def _role_medians(track: PelletTrack) -> dict[str, np.ndarray]:
+    out = {}
+    for j, role in enumerate(PELLET_NAMES):
+        ok = track.valid[:, j].all(-1)
+        if ok.any():
+            out[role] = np.median(track.positions[ok, j], axis=0)
+    return out
+
+
+def _check_roles(where, track: PelletTrack, assign: Assignment, frame: head.Frame,
+                 placed: placement.Placement | None) -> None:
+    """Maps that contradict the anatomy, sensors outside it (:mod:`~cassi_fit.ema.anatomy`)."""
+    med = _role_medians(track)
+    ui = assign.upper_incisor if (placed is None or "upper-incisor" in placed.source) else None
+    tongue = [med[r][0] for r in ("T1", "T2", "T3", "T4") if r in med]
+    if ("UL" in med and "LL" in med and med["UL"][1] < med["LL"][1]) or (
+            "UL" in med and tongue and med["UL"][0] < np.mean(tongue)):
+        return  # the axes are wrong, not the roles: the plausibility check says so
+    anatomy.contradicted_roles(where, med, assign.roles, ui,
+                               None if placed is None else placed.cues)
+    if placed is not None or ui is not None:
+        anatomy.outside_anatomy(where, med, assign.roles, frame.source)
 
 
 def _check_anatomy(where, track: PelletTrack, frame: head.Frame) -> None:
@@ -269,13 +322,19 @@ def _check_anatomy(where, track: PelletTrack, frame: head.Frame) -> None:
 
 def ema_to_track(raw: RawEma, smap: SensorMap | str | os.PathLike | None = None, *,
                  bite: RawEma | None = None,
-                 bite_map: SensorMap | str | os.PathLike | None = None, check: bool = True
+                 bite_map: SensorMap | str | os.PathLike | None = None, check: bool = True,
+                 placement: placement.Placement | None = None
                  ) -> tuple[PelletTrack, SensorReport]:
     """The toolkit's pellet track of an articulograph recording, and how it was made
     (module docstring). ``smap``: a :class:`SensorMap`, a built-in map name, a ``.toml``
     path, or None (the built-in names); ``bite``: a bite-plane recording, read with
-    ``bite_map`` (default ``smap``); ``check``: refuse implausible anatomy or units."""
+    ``bite_map`` (default ``smap``); ``check``: refuse implausible anatomy or units;
+    ``placement``: the frame of the speaker's session (:func:`session_placement`), used
+    instead of one estimated from this file alone."""
     smap = sensor_map(smap)
+    proposal_notes: list[str] = []
+    if smap.name == PROPOSED:
+        smap, proposal_notes = proposed_map(raw)
     bite_smap = smap if bite_map is None else sensor_map(bite_map)
     where = raw.path
     scale = smap.scale_mm or 1.0
@@ -283,9 +342,10 @@ def ema_to_track(raw: RawEma, smap: SensorMap | str | os.PathLike | None = None,
     # dead channels, dropouts to zero, absurd values: untracked, never data (issue 28)
     positions, untracked_notes = untrack_impossible(raw.positions * scale, assign.names,
                                                     assign.reference_names)
-    corrected = _correct(where, positions, assign)
-    frame, frame_notes = _occlusal_frame(where, raw, corrected, assign, smap, bite, scale,
-                                         bite_smap)
+    corrected = _correct(where, positions, assign,
+                         None if placement is None else placement.head_config)
+    frame, frame_notes, placed = _occlusal_frame(where, raw, corrected, assign, smap, bite,
+                                                 scale, bite_smap, placement, positions)
     toolkit = frame.apply(corrected.positions)
     n = raw.n_frames
     index = {s: j for j, s in enumerate(assign.names)}
@@ -301,6 +361,7 @@ def ema_to_track(raw: RawEma, smap: SensorMap | str | os.PathLike | None = None,
                         extra_names=assign.extras, extra_positions=extras,
                         extra_valid=extra_valid)
     if check:
+        _check_roles(where, track, assign, frame, placed)
         _check_anatomy(where, track, frame)
     distances = {}
     if raw.dims == 3:
@@ -320,7 +381,8 @@ def ema_to_track(raw: RawEma, smap: SensorMap | str | os.PathLike | None = None,
     else:
         residual = rotation = translation = np.full(n, np.nan)
         lost = 0
-    notes = list(raw.notes) + untracked_notes + list(assign.notes) + frame_notes
+    notes = (list(raw.notes) + untracked_notes + proposal_notes + list(assign.notes)
+             + frame_notes)
     if lost:
         notes.append(f"{lost} frame(s) lack the reference sensors: their sensors are untracked")
     report = SensorReport(
@@ -334,5 +396,79 @@ def ema_to_track(raw: RawEma, smap: SensorMap | str | os.PathLike | None = None,
         frame_source=frame.source, frame_rotation=frame.rotation, frame_origin=frame.origin,
         midsagittal_distance_mm=distances,
         bite_plane=None if bite is None or bite.path is None else str(bite.path),
-        notes=tuple(notes), head_fits=fits)
+        notes=tuple(notes), head_fits=fits,
+        placement=None if placed is None else placed.to_dict())
     return track, report
+
+
+def session_placement(raws: Sequence[RawEma], smap: SensorMap | str | os.PathLike | None = None
+                      ) -> placement.Placement:
+    """One occlusal frame for the files of one speaker's session, estimated from all of
+    them together (:mod:`cassi_fit.ema.placement`), to give each file's
+    :func:`ema_to_track` (``placement=``). The files are head-corrected onto the first
+    one's reference configuration, so that they share one head frame."""
+    smap = sensor_map(smap)
+    if smap.name == PROPOSED:
+        smap, _ = proposed_map(list(raws))
+    scale = smap.scale_mm or 1.0
+    sessions, config, first = [], None, None
+    for raw in raws:
+        assign = resolve(raw.names, smap, raw.path)
+        positions, _ = untrack_impossible(raw.positions * scale, assign.names,
+                                          assign.reference_names)
+        corrected = _correct(raw.path, positions, assign, config)
+        config = corrected.config if config is None else config
+        sessions.append((corrected.positions, assign.names))
+        first = first or (raw, assign, corrected, positions)
+    if first is None:
+        raise ValueError("session_placement: no recordings")
+    raw, assign, corrected, positions = first
+    found = _placement(raw.path, sessions, assign, smap, corrected, positions)
+    return dataclasses.replace(found, head_config=config,
+                               head_references=tuple(corrected.references))
+
+
+def proposed_map(raw) -> tuple[SensorMap, list[str]]:
+    """The map :mod:`cassi_fit.ema.identify` proposes for ``raw`` (a file, or a session's
+    files; the channels it is not sure of get no role), and notes saying so."""
+    from .identify import propose_map
+    from .sensor_map import builtin_map, numbered
+
+    first = raw[0] if isinstance(raw, list | tuple) else raw
+    if not numbered(first.names):
+        return builtin_map("auto"), ["--accept-proposed-map: the channels have names, so "
+                                     "the built-in names are used"]
+    proposal = propose_map(raw)
+    unsure = [f"{g.channel} ({g.role}?)" for g in proposal.guesses if not g.sure]
+    notes = ["sensor map proposed from the data (--accept-proposed-map)"]
+    if unsure:
+        notes.append("not sure of, left without a role: " + ", ".join(unsure))
+    return proposal.sensor_map(), notes + list(proposal.notes)
+
+
+def session_of(paths, smap: SensorMap) -> tuple[SensorMap, placement.Placement | None]:
+    """``(map, frame)`` of one speaker's session of articulograph files (``paths``), found
+    from all of them together: the map proposed from the session when ``smap`` is
+    ``"proposed"`` (files with different channels: each proposes its own), and
+    :func:`session_placement` (None when it cannot be found: each file then finds its
+    own, or says what it needs)."""
+    from ..errors import CassiError
+    from .detect import read_ema
+
+    paths = list(paths)
+    if not paths:
+        return smap, None
+    first = read_ema(paths[0])
+    if first.dims == 2:  # midsagittal data: each file's own documented or anatomical axes
+        return smap, None
+    step = max(1, len(paths) // SESSION_FILES)  # a session's frame needs a sample, not all
+    raws = [first] + [read_ema(p) for p in paths[step::step][:SESSION_FILES - 1]]
+    if smap.name == PROPOSED:
+        try:
+            smap = proposed_map(raws)[0]
+        except (CassiError, ValueError):
+            pass
+    try:
+        return smap, session_placement(raws, smap)
+    except (CassiError, ValueError):
+        return smap, None

@@ -26,9 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._io import atomic_write
+from .._io import atomic_write, read_lines
 from ..errors import DataFormatError
-from ..txy import read_lines
 from ._raw import RawEma, check_times, rate_of
 
 GROUP = ("sensor id", "frame", "state", "q0", "qx", "qy", "qz", "tx", "ty", "tz")

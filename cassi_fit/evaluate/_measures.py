@@ -338,7 +338,9 @@ def sustain_frames(times: Float[ArrayLike, " m"]) -> int:
     times = np.asarray(times, np.float64)
     if times.size < 2:
         return 1
-    period = float(np.median(np.diff(times)))
+    from ..txy import frame_step
+
+    period = frame_step(times)
     if not period > 0:
         raise DegenerateGeometryError("frame times do not increase")
     return max(1, int(round(SUSTAIN_S / period)))

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import csv
-import io
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -12,6 +10,7 @@ import numpy as np
 
 from .._io import OutputGroup, atomic_outputs
 from ..errors import OutputExistsError
+from ..tables import csv_text
 from ._measures import MEASURES
 from ._ratings import (
     CASSI_TOTALS,
@@ -30,8 +29,9 @@ from ._ratings import (
 from ._rows import EvaluationResult, RecordingRow, SubjectRow
 
 # ----------------------------------------------------------------------------- writing
-_META = ("subject", "task", "status", "frames", "stride", "jaw", "calibration", "collisions")
-_SUBJECT_META = ("subject", "tasks", "recordings", "failed", "status", "stride", "jaw",
+_META = ("subject", "task", "status", "error", "frames", "stride", "jaw", "calibration",
+         "collisions")
+_SUBJECT_META = ("subject", "tasks", "recordings", "failed", "status", "error", "stride", "jaw",
                  "calibration", "collisions")
 
 
@@ -40,27 +40,27 @@ def _subjects(n: int) -> str:
     return f"{n} subject" if n == 1 else f"{n} subjects"
 
 def _meta_value(row: RecordingRow | SubjectRow, name: str) -> object:
-    return row.status_text if name == "status" else getattr(row, name)
+    return row.status.label if name == "status" else getattr(row, name)
 
 
 def _csv_text(rows: Sequence[RecordingRow | SubjectRow], meta: tuple[str, ...]) -> str:
+    """The rows as CSV (``tables.csv_text``; measures to 4 decimals)."""
     columns = [*meta, *MEASURES]
     for c in COMPONENTS:
         columns += [f"{c}_rating", f"{c}_problems_n", f"{c}_problems"]
     columns.append("not_counted")
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(columns)
+    table = []
     for r in rows:
-        line = [_meta_value(r, k) for k in meta]
-        line += [f"{r.measures[k]:.4f}" if k in r.measures else "" for k in MEASURES]
+        line = {k: _meta_value(r, k) for k in meta}
+        line.update((k, float(r.measures[k])) for k in MEASURES if k in r.measures)
         for c in COMPONENTS:
             found = r.problems.get(c)
-            line += ([r.ratings[c], len(found), describe(found)] if found is not None
-                     else ["", "", ""])
-        line.append(describe(r.problems.get("not_counted", [])))
-        writer.writerow(line)
-    return buffer.getvalue()
+            if found is not None:
+                line.update({f"{c}_rating": r.ratings[c], f"{c}_problems_n": len(found),
+                             f"{c}_problems": describe(found)})
+        line["not_counted"] = describe(r.problems.get("not_counted", []))
+        table.append(line)
+    return csv_text(table, columns, digits=4)
 
 
 def _cell(row: SubjectRow, component: str) -> str:
@@ -101,7 +101,7 @@ def markdown_table(result: EvaluationResult) -> str:
         out += ["", "Seen but not counted (as in CASSI): " + "; ".join(noted) + "."]
     if result.failed:
         out += ["", "Not evaluated: " + "; ".join(
-            f"{r.subject} {r.task} ({r.status_text})" for r in result.failed) + "."]
+            f"{r.subject} {r.task} ({r.error})" for r in result.failed) + "."]
     return "\n".join(out) + "\n"
 
 

@@ -1,10 +1,9 @@
 """Evaluation rows as typed records: one per recording, one per subject, and the result.
 
 A row's ``status`` is a :class:`cassi_fit.status.Status`: ``OK`` (measured and rated) or
-``FAILED`` (not rated; the one-line reason in ``error``). Tables print
-:attr:`RecordingRow.status_text` / :attr:`SubjectRow.status_text`: ``"ok"``, or for a
-recording ``"error: <message>"`` and for a subject its reason (``"no recording
-evaluated"``).
+``FAILED`` (not rated; the one-line reason in ``error``: for a recording its error, for a
+subject :data:`NO_RECORDING`). Tables print the status word (``Status.label``) and the
+error in a column of its own.
 """
 
 from __future__ import annotations
@@ -79,11 +78,6 @@ class RecordingRow:
     def rated(self) -> bool:
         return self.status is Status.OK
 
-    @property
-    def status_text(self) -> str:
-        """The status as tables print it: ``"ok"`` or ``"error: <message>"``."""
-        return self.status.label if self.rated else f"error: {self.error}"
-
 
 @dataclass(frozen=True)
 class SubjectRow:
@@ -131,11 +125,6 @@ class SubjectRow:
     @property
     def rated(self) -> bool:
         return self.status is Status.OK
-
-    @property
-    def status_text(self) -> str:
-        """The status as tables print it: ``"ok"`` or the reason it is not rated."""
-        return self.status.label if self.rated else self.error
 
 
 @dataclass

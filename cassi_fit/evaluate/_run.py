@@ -10,12 +10,12 @@ output folder: the two differ only in where they run, never in what they choose.
 from __future__ import annotations
 
 import os
-import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from ..corpus import (
     CorpusItem,
+    CorpusResult,
     CorpusRun,
     TaskResult,
     dataset_items,
@@ -127,24 +127,15 @@ def _jaw_used(rows: Sequence[RecordingRow], subject: str | None, spec: RunSpec) 
     return ", ".join(used) or spec.jaw_name
 
 
-def _check_calibrations(spec: RunSpec, items: Sequence[CorpusItem]) -> None:
+def _check_calibrations(spec: RunSpec) -> None:
     """Read a folder's calibration files once here, so that a broken one stops the run
-    before it starts (instead of failing every recording of its subject), and warn once
-    for each subject that has none (its recordings get the default conformation)."""
+    before it starts (instead of failing every recording of its subject); a subject
+    without one fails its rows (``RunSpec.calibration_for``)."""
     cal = spec.calibration
-    subjects = list(dict.fromkeys(item.subject for item in items))
     if isinstance(cal, CalibrationFiles) and cal.path.is_dir():
-        from ..calibrate import load_calibrations
+        from ..calibration import load_calibrations
 
-        have = load_calibrations(cal.path)
-    elif isinstance(cal, Mapping):
-        have = {str(k).upper(): v for k, v in cal.items()}
-    else:
-        return
-    for subject in subjects:
-        if subject not in have:
-            warnings.warn(f"{subject}: no calibration given; using the default conformation",
-                          stacklevel=3)
+        load_calibrations(cal.path)
 
 
 def evaluate_corpus(
@@ -156,26 +147,25 @@ def evaluate_corpus(
     tasks: Iterable[str] | None = None,
     run_options: Mapping[str, Any] | None = None,
     **changes: Any,
-) -> tuple[CorpusRun, EvaluationResult]:
+) -> CorpusResult:
     """``cassi evaluate DATASET``: :func:`evaluate_task` on every recording (the chosen
     ``subjects``/``tasks``, names in any case), combined per subject
     (:func:`evaluation_result`). ``spec``/``changes``: the run (as
     :func:`evaluate_recording`; ``calibration`` may be a folder of ``cassi calibrate``'s
-    files or a dict subject -> ``Calibration``: a subject without one gets the default
-    conformation, with a warning). ``run_options`` go to ``corpus.run_corpus`` (``jobs``,
+    files or a dict subject -> ``Calibration``: the recordings of a subject without one
+    fail, each a row with its one-line error). ``run_options`` go to ``corpus.run_corpus`` (``jobs``,
     ``scheduler``, ``executor``, ``resume``, ``overwrite``, ``progress``, ...).
     Completion markers go to ``out_dir`` (None: none, nothing written); the tables are the
-    caller's (``evaluate.write_table``). Returns ``(run, EvaluationResult)``."""
+    caller's (``evaluate.write_report``). Returns a ``corpus.CorpusResult`` whose
+    ``value`` is the :class:`EvaluationResult` (``tables`` empty)."""
     spec = _spec(spec, dict(changes))
     items = require_items(dataset_items(dataset, subjects=subjects, tasks=tasks), dataset,
                           subjects, tasks)
-    _check_calibrations(spec, items)
+    _check_calibrations(spec)
     options = dict(run_options or {})
     options.setdefault("desc", "evaluate")
-    with warnings.catch_warnings():  # said once above, not once per recording
-        warnings.filterwarnings("ignore", message=".*no calibration")
-        run = run_corpus(evaluate_task, items, out_dir, options={"spec": spec}, **options)
-    return run, evaluation_result(run, spec)
+    run = run_corpus(evaluate_task, items, out_dir, options={"spec": spec}, **options)
+    return CorpusResult(run, [], evaluation_result(run, spec))
 
 
 def evaluate_dataset(
@@ -200,4 +190,4 @@ def evaluate_dataset(
             return evaluate_dataset(dataset, spec=spec, subjects=subjects, tasks=tasks,
                                     progress=progress, **changes)
     return evaluate_corpus(dataset, None, spec=spec, subjects=subjects, tasks=tasks,
-                           run_options={"jobs": 1, "progress": progress}, **changes)[1]
+                           run_options={"jobs": 1, "progress": progress}, **changes).value

@@ -63,7 +63,7 @@ from ._diagnostics import (
     JawDiagnostics,
     jaw_diagnostics,
 )
-from ._fit import JAW_SENSORS, JawFit, fit_jaw, jaw_sensor_set
+from ._fit import JAW_FRAME_BUCKET, JAW_SENSORS, JawFit, fit_jaw, jaw_bucket, jaw_sensor_set
 from ._jaxopt_adapter import JaxoptGaussNewton, JaxoptLevenbergMarquardt
 from ._linalg import block_tridiagonal_inverse_blocks, block_tridiagonal_solve
 from ._methods import (
@@ -99,12 +99,12 @@ from ._solvers import DEFAULT_MAX_STEPS, Dogleg, GaussNewton, LevenbergMarquardt
 from ._track import jaw_from_track, learn_jaw_coupling
 
 __all__ = [
-    "DEFAULT_COUPLINGS", "DEFAULT_KNOT_SPACING", "DEFAULT_MAX_STEPS", "JAW_SENSORS",
+    "DEFAULT_COUPLINGS", "DEFAULT_KNOT_SPACING", "DEFAULT_MAX_STEPS", "JAW_FRAME_BUCKET", "JAW_SENSORS",
     "PIVOT_FROM_DATA", "PLAUSIBLE_PIVOT_X_MM", "PLAUSIBLE_PIVOT_Y_MM", "POPULATION_CONDYLE",
     "PRIOR_NOISE_MM", "ClosedForm", "CoupledRotation", "Dogleg", "JawCoupling", "PivotPrior", "FixedPivot", "FrameFit", "GaussNewton", "JawDiagnostics",
     "JawFit", "JawMethod", "JaxoptGaussNewton", "JaxoptLevenbergMarquardt",
     "LevenbergMarquardt", "SmoothPivot", "Solver", "best_angle_about",
-    "block_tridiagonal_inverse_blocks", "block_tridiagonal_solve", "check_sensors", "method_for_sensors", "tracked_jaw_sensors", "fit_jaw",
+    "block_tridiagonal_inverse_blocks", "block_tridiagonal_solve", "check_sensors", "method_for_sensors", "tracked_jaw_sensors", "fit_jaw", "jaw_bucket",
     "fixed_pivot_residuals", "jaw_diagnostics", "jaw_from_track", "jaw_method", "jaw_sensor_set", "jaw_solver",
     "learn_jaw_coupling", "least_squares", "rigid_residuals", "scaled_rigid_residuals", "smooth_pivot_residuals",
     "solve",

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..status import Status
+from ..status import fitted
 from ._fit import JawFit
 
 ArrayLike = Array | np.ndarray
@@ -66,7 +66,7 @@ def jaw_diagnostics(fit: JawFit, current: Float[ArrayLike, "n 2 2"]) -> JawDiagn
     """:class:`JawDiagnostics` of ``fit`` on its data ``current`` (n, 2, 2) mm [MNI, MNM]
     (with one sensor, the other's columns may be NaN)."""
     current = np.asarray(current, float)
-    used = np.asarray(fit.status) <= Status.PIVOT_UNDEFINED
+    used = fitted(fit.status)
     if current.shape != (len(used), 2, 2):
         raise ValueError(f"jaw diagnostics: current must be ({len(used)}, 2, 2), "
                          f"got {current.shape}")

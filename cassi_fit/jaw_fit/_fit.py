@@ -3,7 +3,8 @@ both jaw sensors or from one (the other then predicted)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from jaxtyping import Array, Bool, Float
@@ -11,7 +12,7 @@ from jaxtyping import Array, Bool, Float
 from .. import jaw
 from ..errors import DegenerateGeometryError, InvalidChoiceError, MissingDataError
 from ..options import JAW_SENSOR_SETS
-from ..status import SolverResult, Status
+from ..status import SolverResult, Status, fitted
 from ._kernels import pivot_with_covariance, translation_about
 from ._methods import JawMethod, as_method, check_sensors
 from ._solvers import Solver
@@ -19,6 +20,17 @@ from ._solvers import Solver
 ArrayLike = Array | np.ndarray
 #: The jaw sensors, in the jaw code's order (index 0 = MNI, 1 = MNM).
 JAW_SENSORS = ("MNI", "MNM")
+#: Frames per padding bucket of a recording's jaw fit (:func:`jaw_bucket`): one
+#: compilation covers every recording up to 7 s; the padding costs nothing for the closed
+#: form, and up to 3x a short recording's fitting time for "frame-fit" (still far below
+#: one compilation, 2-3 s a length).
+JAW_FRAME_BUCKET = 1024
+
+
+def jaw_bucket(n: int) -> int:
+    """The frames ``n`` frames are padded to for a jaw fit (``fit_jaw(pad_to=...)``): the
+    next multiple of :data:`JAW_FRAME_BUCKET`."""
+    return JAW_FRAME_BUCKET * max(math.ceil(n / JAW_FRAME_BUCKET), 1)
 
 
 def jaw_sensor_set(sensors: str | tuple[str, ...] | list[str]) -> tuple[str, ...]:
@@ -131,7 +143,7 @@ def _prepare(reference, current, valid, sensors):
         finite = np.isfinite(current).all(axis=(1, 2))
         status = np.where(finite, Status.OK, Status.NON_FINITE).astype(np.int32)
     status = np.where(valid, status, Status.INVALID_FRAME)
-    usable = status <= Status.PIVOT_UNDEFINED
+    usable = fitted(status)
     if not usable.any():
         raise MissingDataError(f"jaw data: no frame where {' and '.join(sensors)} "
                                f"{'are' if len(used) == 2 else 'is'} tracked")
@@ -167,6 +179,7 @@ def fit_jaw(
     solver: Solver | str | None = None,
     smoothness: float | None = None,
     knot_spacing: int | None = None,
+    pad_to: int | None = None,
 ) -> JawFit:
     """Jaw motion from ``reference`` (2, 2) mm [MNI, MNM] to each frame of ``current``
     (n, 2, 2) mm, by ``method``: an object (:class:`ClosedForm`, :class:`FrameFit`,
@@ -186,8 +199,23 @@ def fit_jaw(
     can be computed at all (untracked or coincident reference, no usable frame, no rotation
     for a pivot model), :class:`InvalidChoiceError` for a bad method or option, or a
     method that cannot run with the sensors given (with its reason).
+
+    ``pad_to``: fit ``pad_to`` frames, the given ones followed by untracked ones, and
+    return the given ones (unchanged: the padding is not usable, so it weighs nothing), so
+    that one compilation serves every length up to ``pad_to`` (:func:`jaw_bucket`). A
+    method whose model depends on the length (``JawMethod.paddable`` False: the smooth
+    pivot's knots) is not padded.
     """
     method = as_method(method, solver, smoothness, knot_spacing)
+    n = np.shape(current)[0]
+    if pad_to is not None and pad_to > n and method.paddable:
+        padded = np.concatenate([np.asarray(current, float), np.full((pad_to - n, 2, 2), np.nan)])
+        use = np.ones(n, bool) if valid is None else np.asarray(valid, bool)
+        fit = fit_jaw(reference, padded, method=method, jaw_sensors=jaw_sensors,
+                      valid=np.concatenate([use, np.zeros(pad_to - n, bool)]))
+        return replace(fit, **{f.name: getattr(fit, f.name)[:n] for f in fields(fit)
+                               if np.ndim(getattr(fit, f.name)) and
+                               np.shape(getattr(fit, f.name))[0] == pad_to})
     sensors = jaw_sensor_set(jaw_sensors)
     check_sensors(method, sensors)
     full_reference = np.asarray(reference, dtype=float)

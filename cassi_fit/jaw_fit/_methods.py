@@ -178,6 +178,9 @@ class JawMethod(eqx.Module):
     name: ClassVar[str]
     jaw_sensors_needed: ClassVar[tuple[int, ...]] = (2,)
     needs_both: ClassVar[str] = _TWO_REASON
+    #: whether untracked frames appended after the last leave the fit of the others
+    #: unchanged (``fit_jaw(pad_to=...)``)
+    paddable: ClassVar[bool] = True
 
     @abc.abstractmethod
     def _estimate(self, reference, current, usable, sensors) -> Estimate:
@@ -327,6 +330,7 @@ class SmoothPivot(JawMethod):
 
     name: ClassVar[str] = "smooth-pivot"
     jaw_sensors_needed: ClassVar[tuple[int, ...]] = (1, 2)
+    paddable: ClassVar[bool] = False  # the knots depend on the length
 
     def __check_init__(self):
         try:

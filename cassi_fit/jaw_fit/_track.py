@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import DegenerateGeometryError, InvalidChoiceError, MissingDataError
-from ..status import Status
+from ..status import Status, fitted
 from ._fit import JAW_SENSORS, JawFit, fit_jaw, jaw_sensor_set
 from ._methods import JawMethod
 from ._priors import JawCoupling
@@ -88,7 +88,7 @@ def learn_jaw_coupling(tracks: Sequence[PelletTrack], sensor: str = "MNI", *,
     rows, targets = [], []
     for track in tracks:
         fit = jaw_from_track(track, method="frame-fit")
-        used = fit.status <= Status.PIVOT_UNDEFINED
+        used = fitted(fit.status)
         p = track.positions[:, pellet_index(sensor)]
         rows.append((p - p[fit.reference_frame])[used])
         targets.append(fit.theta[used])

@@ -52,6 +52,7 @@ from ._corpus import (
     subject_names,
 )
 from ._corpus import _recording_seed as _recording_seed
+from ._foreign import foreign_data, refuse_foreign_data
 from ._kinematics import (
     FRAME_STEP_S,
     JawTruth,
@@ -95,6 +96,8 @@ __all__ = [
     "synth_recording",
     "synth_audio",
     "generate_corpus",
+    "foreign_data",
+    "refuse_foreign_data",
     "load_truth",
     "load_anatomy",
     "JAW_KINEMATICS",

@@ -201,7 +201,7 @@ def generate_corpus(
     if out_dir.exists() and not out_dir.is_dir():
         raise OutputExistsError(f"{out_dir}: exists and is not a folder")
     if out_dir.is_dir():  # never into a real dataset, whatever overwrite says (issue 24)
-        from .._io import refuse_foreign_data
+        from ._foreign import refuse_foreign_data
 
         refuse_foreign_data(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
@@ -210,7 +210,9 @@ def generate_corpus(
         _chmod_as_umask(tmp)
         options = (seed, tasks, noise_scale, audio, families, noise_family)
         _write_corpus(tmp, names, _corpus_plan(tmp, names, tasks, audio), options)
-        _move_into_place(tmp, out_dir)
+        from ._foreign import move_into_place
+
+        move_into_place(tmp, out_dir)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return out_dir
@@ -259,23 +261,6 @@ def _write_corpus(root: Path, names, plan, options) -> None:
     write_headmeasures(root / "Headmeasures.txt", heads, overwrite=True)
     readme = _readme(len(names), seed, tasks, noise_scale, audio, families, noise_family)
     atomic_write(root / "README.txt", readme, overwrite=True)
-
-
-def _move_into_place(tmp: Path, out_dir: Path) -> None:
-    """Rename the finished ``tmp`` to ``out_dir`` (one atomic rename if ``out_dir`` is
-    absent or empty); else move file by file into it, its old README.txt removed first and
-    the new one moved last, so an interruption leaves a corpus marked incomplete."""
-    if out_dir.is_dir() and not any(out_dir.iterdir()):
-        out_dir.rmdir()
-    if not out_dir.exists():
-        os.replace(tmp, out_dir)
-        return
-    (out_dir / "README.txt").unlink(missing_ok=True)
-    for path in sorted(p for p in tmp.rglob("*") if p.is_file() and p.name != "README.txt"):
-        target = out_dir / path.relative_to(tmp)
-        target.parent.mkdir(parents=True, exist_ok=True)
-        os.replace(path, target)
-    os.replace(tmp / "README.txt", out_dir / "README.txt")
 
 
 def _check_arguments(n_subjects, seed, tasks, noise_scale, audio) -> tuple[str, ...]:

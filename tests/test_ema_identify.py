@@ -1,0 +1,103 @@
+"""Channels without names identified from the data (issue 28 part 2): lab-like synthetic
+files with shuffled, numbered channels, unused channels, dropouts, parasagittal sensors,
+head-normalised or with head movement and skull references."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cassi_fit.cli import main
+from cassi_fit.ema import ema_to_track
+from cassi_fit.ema.carstens import write_pos
+from cassi_fit.ema.identify import propose_map
+from cassi_fit.ema.lab_like import lab_like_speaker
+from cassi_fit.ema.sensor_map import numbered, read_sensor_map, resolve
+from cassi_fit.errors import DataFormatError
+
+KINDS = {"NAS": "reference", "LMA": "reference", "RMA": "reference",
+         "corner": "parasagittal", "lateral_tongue": "parasagittal"}
+
+
+@pytest.fixture(scope="module")
+def files():
+    return [lab_like_speaker(i, tasks=("tp011",))[0] for i in range(6)]
+
+
+def _truth(rec, channel):
+    role = rec.truth["channels"][channel]
+    return KINDS.get(role, role)
+
+
+def test_numbered_channels_are_identified_or_not_sure(files):
+    sure = right = 0
+    for rec in files:
+        assert numbered(rec.raw.names)
+        proposal = propose_map(rec.raw)
+        for g in proposal.guesses:
+            if g.sure:
+                sure += 1
+                assert g.role == _truth(rec, g.channel), (rec.truth["task"], g)
+                right += 1
+            assert g.evidence or g.role == "extra"
+    total = sum(len(r.raw.names) for r in files)
+    assert sure >= 0.8 * total  # most channels named; none named wrong (above)
+
+
+def test_unused_channels_and_references_are_found(files):
+    for rec in files:
+        proposal = propose_map(rec.raw)
+        for g in proposal.guesses:
+            truth = _truth(rec, g.channel)
+            if truth == "unused":
+                assert g.role == "unused" and g.confidence == 1.0
+        refs = {g.channel for g in proposal.guesses if g.role == "reference"}
+        assert refs == {c for c in rec.raw.names if _truth(rec, c) == "reference"} or not all(
+            g.sure for g in proposal.guesses if g.role == "reference")
+
+
+def test_the_proposal_as_toml_names_the_roles(files, tmp_path):
+    rec = files[0]
+    proposal = propose_map(rec.raw)
+    path = tmp_path / "proposed.toml"
+    path.write_text(proposal.to_toml("x.pos"))
+    assign = resolve(rec.raw.names, read_sensor_map(path))
+    for role, sensor in assign.roles.items():
+        channel = rec.raw.names[assign.names.index(sensor)]
+        assert _truth(rec, channel) == role
+
+
+def test_nothing_is_used_without_a_map_or_the_accept_option(files):
+    rec = files[1]
+    with pytest.raises(DataFormatError, match="--write-sensor-map FILE.*--accept-proposed-map"):
+        ema_to_track(rec.raw)
+    track, report = ema_to_track(rec.raw, "proposed")
+    assert report.sensor_map == "proposed" and any("proposed" in n for n in report.notes)
+    ul = rec.raw.names.index(report.roles["UL"]) if report.roles["UL"] in rec.raw.names else None
+    assert ul is None or _truth(rec, rec.raw.names[ul]) == "UL"
+    assert np.isfinite(track.positions[:, 0]).any()
+
+
+def test_cli_writes_the_proposal_and_every_command_accepts_it(files, tmp_path, capsys):
+    rec = files[2]
+    pos = tmp_path / "s1.pos"
+    write_pos(pos, rec.raw)
+    out = tmp_path / "s1.toml"
+    assert main(["info", str(pos), "--write-sensor-map", str(out)]) == 0
+    text = out.read_text()
+    assert "[channels]" in text and "confidence" in text
+    assert "sensor map proposed" in capsys.readouterr().out
+    assert main(["info", str(pos), "--write-sensor-map", str(out)]) != 0  # never overwritten
+    assert main(["info", str(pos), "--accept-proposed-map", "--json"]) == 0
+    assert '"sensor_map": "proposed"' in capsys.readouterr().out
+
+
+def test_named_channels_keep_their_names_under_the_accept_option():
+    from pathlib import Path
+
+    from cassi_fit.ema import read_ema
+
+    raw = read_ema(Path(__file__).parent / "fixtures" / "ema" / "mocha_ascii.txt")
+    assert not numbered(raw.names)
+    _, report = ema_to_track(raw, "proposed")
+    assert report.sensor_map == "auto" and report.roles["T1"] == "tt"
