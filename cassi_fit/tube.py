@@ -221,6 +221,12 @@ def formants(
     return Formants(jnp.where(found, freq, nan), jnp.where(found, bw, nan))
 
 
+@jax.jit
+def formants_batch(areas_mm2: Float[ArrayLike, "m n"], lengths_mm: Float[ArrayLike, "m n"]) -> Formants:
+    """:func:`formants` of ``m`` tracts at once (all losses on), compiled once per shape."""
+    return jax.vmap(formants)(areas_mm2, lengths_mm)
+
+
 def uniform_tube(length_mm: float, area_mm2: float = 300.0, n: int = 40) -> tuple[Array, Array]:
     """A uniform tube of ``length_mm`` as ``(areas, lengths)`` of ``n`` sections."""
     return jnp.full(n, float(area_mm2)), jnp.full(n, float(length_mm) / n)
