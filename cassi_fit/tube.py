@@ -159,8 +159,8 @@ def spectrum(
     return 10.0 * g / jnp.log(10.0)
 
 
-def _grid(dtype):
-    return jnp.arange(F_MIN_HZ, F_MAX_HZ + GRID_STEP_HZ / 2, GRID_STEP_HZ, dtype=dtype)
+def _grid(dtype, step=GRID_STEP_HZ):
+    return jnp.arange(F_MIN_HZ, F_MAX_HZ + step / 2, step, dtype=dtype)
 
 
 def _inverse_gain(frequency_hz, areas_mm2, lengths_mm, losses):
@@ -174,14 +174,16 @@ def _inverse_gain(frequency_hz, areas_mm2, lengths_mm, losses):
 
 def formants(
     areas_mm2: Float[ArrayLike, " n"], lengths_mm: Float[ArrayLike, " n"],
-    losses: Losses = Losses(),
+    losses: Losses = Losses(), grid_step_hz: float = GRID_STEP_HZ,
 ) -> Formants:
     """F1-F4 and their bandwidths (Hz) of one tract (module docstring); differentiable in
-    the areas and lengths. vmap over frames."""
+    the areas and lengths. vmap over frames. ``grid_step_hz`` (static): the search grid's
+    step; Newton's steps refine from it (a coarser grid is cheaper, and misses only
+    resonances closer together than about two steps)."""
     areas = jnp.asarray(areas_mm2)
     lengths = jnp.asarray(lengths_mm)
     dtype = jnp.result_type(areas.dtype, lengths.dtype, float)
-    grid = _grid(dtype)
+    grid = _grid(dtype, grid_step_hz)
     consts = jax.lax.stop_gradient((areas, lengths))
     q = jax.vmap(lambda f: _inverse_gain(f, *consts, losses))(grid)
     dip = (q[1:-1] < q[:-2]) & (q[1:-1] <= q[2:])
@@ -201,7 +203,7 @@ def formants(
             d1, d2, _ = slopes(f, *consts)
             # a Newton step that would leave the grid cell's neighbourhood is clipped
             s = jnp.where(d2 > 0, d1 / jnp.where(d2 > 0, d2, 1.0), 0.0)
-            return f - jnp.clip(s, -GRID_STEP_HZ, GRID_STEP_HZ), None
+            return f - jnp.clip(s, -grid_step_hz, grid_step_hz), None
 
         f, _ = jax.lax.scan(step, f0, None, length=NEWTON_STEPS)
         f = jax.lax.stop_gradient(f)

@@ -46,7 +46,7 @@ def load_bundle(path: str | Path) -> dict:
     ann = bundle["annotation"]
     sr = float(ann["sampleRate"])
     level = next(lv for lv in ann["levels"] if lv["name"] == "Segment")
-    segments = [(it["sampleStart"] / sr, (it["sampleStart"] + it["sampleDur"] + 1) / sr,
+    segments = [(it["sampleStart"] / sr, (it["sampleStart"] + it["sampleDur"]) / sr,
                  it["labels"][0]["value"]) for it in level["items"]]
     tracks = {}
     for f in bundle["ssffFiles"]:
