@@ -20,6 +20,11 @@ figure (say so).
 
 from __future__ import annotations
 
+import json
+import os
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
 from typing import NamedTuple
 
 import jax
@@ -54,6 +59,20 @@ def _unpack(x, base: af.TractParams):
                           base.pharynx_scale * jnp.exp(x[2]), base.lip_scale * jnp.exp(x[3]))
 
 
+def _residuals(x, args):
+    """The fit's residuals (a module-level function: optimistix compiles it once per
+    subject topology and frame count, not once per call)."""
+    geometry, v, target, base, sd, scale = args
+    n = v.shape[0]
+    areas, lengths, _ = af.area_functions(geometry, v, _unpack(x, base), scale)
+    f = jax.vmap(lambda a, ln: tube.formants(a, ln, grid_step_hz=FIT_GRID_STEP_HZ))(
+        areas, lengths).frequency[:, :3]
+    misfit = (jnp.log(f) - target).reshape(-1)
+    # a missing model formant (NaN) is a large misfit, not a NaN step
+    misfit = jnp.where(jnp.isfinite(misfit), misfit, 1.0)
+    return jnp.concatenate([misfit / jnp.sqrt(n), x / sd / jnp.sqrt(3.0 * n) * 0.1])
+
+
 def _subsample(index: np.ndarray, n: int) -> np.ndarray:
     if len(index) <= n:
         return index
@@ -72,21 +91,11 @@ def fit_tract(geometry: af.TractGeometry, vertices, measured: np.ndarray, scale:
     v = vertices[pick]
     target = jnp.log(jnp.asarray(measured[pick], dtype))
     sd = jnp.asarray([PRIOR_SD["larynx_drop_mm"]] + [PRIOR_SD["log_scale"]] * 3, dtype)
-    n = len(pick)
-
-    def residuals(x, args):
-        tract = _unpack(x, base)
-        areas, lengths, _ = af.area_functions(geometry, v, tract, scale)
-        f = jax.vmap(lambda a, ln: tube.formants(a, ln, grid_step_hz=FIT_GRID_STEP_HZ))(
-            areas, lengths).frequency[:, :3]
-        misfit = (jnp.log(f) - target).reshape(-1)
-        # a missing model formant (NaN) is a large misfit, not a NaN step
-        misfit = jnp.where(jnp.isfinite(misfit), misfit, 1.0)
-        return jnp.concatenate([misfit / jnp.sqrt(n), x / sd / jnp.sqrt(3.0 * n) * 0.1])
 
     solver = optx.LevenbergMarquardt(rtol=1e-4, atol=1e-6)
     x0 = jnp.zeros(4, dtype)
-    sol = optx.least_squares(residuals, solver, x0, max_steps=MAX_STEPS, throw=False)
+    args = (geometry, v, target, base, sd, jnp.asarray(scale, dtype))
+    sol = optx.least_squares(_residuals, solver, x0, args=args, max_steps=MAX_STEPS, throw=False)
     tract = _unpack(sol.value, base)
     before = _median_error(geometry, v, base, scale, measured[pick])
     after = _median_error(geometry, v, tract, scale, measured[pick])
@@ -94,9 +103,15 @@ def fit_tract(geometry: af.TractGeometry, vertices, measured: np.ndarray, scale:
                        int(sol.stats["num_steps"]), before, after)
 
 
-def _median_error(geometry, vertices, tract, scale, measured) -> np.ndarray:
+@jax.jit
+def tract_formants(geometry: af.TractGeometry, vertices, tract: af.TractParams, scale):
+    """F1-F4 ``(m, 4)`` Hz of the frames ``vertices (m, V, 3)`` with ``tract`` (compiled)."""
     areas, lengths, _ = af.area_functions(geometry, vertices, tract, scale)
-    f = np.asarray(tube.formants_batch(areas, lengths).frequency[:, :3])
+    return jax.vmap(tube.formants)(areas, lengths).frequency
+
+
+def _median_error(geometry, vertices, tract, scale, measured) -> np.ndarray:
+    f = np.asarray(tract_formants(geometry, vertices, tract, scale))[:, :3]
     return np.nanmedian(np.abs(f / measured - 1.0), axis=0)
 
 
@@ -125,8 +140,8 @@ def leave_one_quality_out(result, *, max_frames: int = MAX_FRAMES):
         fit = fit_tract(geometry, vertices[train], result.measured.frequency[train], scale,
                         max_frames=max_frames)
         fits[q] = fit
-        areas, lengths, _ = af.area_functions(geometry, jnp.asarray(vertices)[test], fit.tract, scale)
-        held[test] = np.asarray(tube.formants_batch(areas, lengths).frequency)[:, :3]
+        held[test] = np.asarray(tract_formants(geometry, jnp.asarray(vertices)[test], fit.tract,
+                                               scale))[:, :3]
     return held, fits
 
 
@@ -141,3 +156,50 @@ def tract_from_record(record: dict) -> af.TractParams:
     return af.TractParams(*(jnp.asarray(float(record[k])) for k in (
         "larynx_drop_mm", "area_scale", "pharynx_scale", "lip_scale")))
 
+
+
+# ------------------------------------------------------------------ the calibration's file
+ACOUSTIC_SUFFIX = ".acoustic.json"
+
+
+def acoustic_calibration_path(folder: str | os.PathLike, subject: str) -> Path:
+    """``FOLDER/SUBJECT.acoustic.json``: beside the subject's ``cassi calibrate`` file (a
+    sidecar: the face's calibration file and its schema are left as they are)."""
+    return Path(folder) / f"{subject}{ACOUSTIC_SUFFIX}"
+
+
+def write_acoustic_calibration(path: str | os.PathLike, subject: str, fit: AcousticFit, *,
+                               recordings: Sequence[str], frames: int, qualities: Sequence[str],
+                               overwrite: bool = False) -> Path:
+    """Write a fitted vocal tract (atomically; ``OutputExistsError`` for an existing file
+    without ``overwrite``)."""
+    from ._io import atomic_write
+
+    record = {"subject": subject, "tract": tract_record(fit.tract), "converged": fit.converged,
+              "steps": fit.steps, "recordings": list(recordings), "frames": int(frames),
+              "vowel_qualities": list(qualities),
+              "median_error_before": [float(x) for x in fit.before],
+              "median_error_after": [float(x) for x in fit.after]}
+    path = Path(path)
+    atomic_write(path, json.dumps(record, indent=2) + "\n", overwrite=overwrite)
+    return path
+
+
+def read_acoustic_calibration(path: str | os.PathLike) -> tuple[af.TractParams, dict]:
+    """``(tract, record)`` of a file :func:`write_acoustic_calibration` wrote;
+    ``DataFormatError`` naming the file for anything else."""
+    from .errors import DataFormatError
+
+    path = Path(path)
+    try:
+        record = json.loads(path.read_text())
+        tract = tract_from_record(record["tract"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise DataFormatError(path, None, f"not an acoustic calibration ({exc})") from None
+    values = np.array([float(v) for v in record["tract"].values()])
+    if not np.all(np.isfinite(values)) or np.any(values[1:] <= 0):
+        raise DataFormatError(path, None, "an acoustic calibration with a non-finite or "
+                              "non-positive parameter")
+    if not record.get("converged", False):
+        warnings.warn(f"{path}: this acoustic calibration did not converge", stacklevel=2)
+    return tract, record

@@ -36,6 +36,8 @@ closure is not modelled: the tube needs a finite area).
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -94,6 +96,7 @@ class TractGeometry(eqx.Module):
     palate_region: tuple[int, ...] = eqx.field(static=True)
     hyoid_y: float = eqx.field(static=True)
     velum_tip_y: float = eqx.field(static=True)
+    back_region: tuple[int, ...] = eqx.field(static=True, default=())
 
 
 def _lip_points(model: FaceModel, region: str, upper: bool) -> np.ndarray:
@@ -131,9 +134,10 @@ def tract_geometry(model: FaceModel) -> TractGeometry:
     lower = np.concatenate([[lm["lower_incisor_tip"]], _lip_points(model, "lower_lip", False)])
     upper = np.concatenate([[lm["upper_incisor_tip"]], _lip_points(model, "upper_lip", True)])
     as_ints = lambda x: tuple(int(i) for i in np.asarray(x).reshape(-1))  # noqa: E731
-    return TractGeometry(as_ints(tops), as_ints(lower), as_ints(upper), jnp.asarray(wall),
-                         jnp.asarray(palate), as_ints(region), float(vertices[tops[-1], 1]),
-                         float(palate[-1, 1]))
+    geometry = TractGeometry(as_ints(tops), as_ints(lower), as_ints(upper), jnp.asarray(wall),
+                             jnp.asarray(palate), as_ints(region), float(vertices[tops[-1], 1]),
+                             float(palate[-1, 1]))
+    return dataclasses.replace(geometry, back_region=as_ints(_wall_regions(geometry)))
 
 
 def _nearest(p, a, b):
@@ -197,7 +201,7 @@ def area_function(
     the vertices and ``params``; vmap over frames (:func:`area_functions`)."""
     params = eqx.tree_at(lambda p: p.larynx_drop_mm, params, params.larynx_drop_mm * scale)
     front, a, b = _walls(geometry, vertices, params)
-    region_of = jnp.asarray(_wall_regions(geometry))
+    region_of = jnp.asarray(np.asarray(geometry.back_region, np.int32))
     points = _resample(front, N_SECTIONS)
 
     def one(p):

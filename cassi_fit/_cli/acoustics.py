@@ -44,7 +44,7 @@ def run(args) -> int:
             raise OutputExistsError(f"{out}: exists (use --force to replace it)")
     recording = load_recording_args(args.recording, args)
     run_ = run_args(recording, args)
-    tract = _calibrated_tract(run_)
+    tract = _calibrated_tract(recording, getattr(args, "calibration", None))
     result = recording_acoustics(run_, ceiling_hz=args.ceiling, tract=tract)
     segments = result.segment_rows()
     print(markdown_text(segments, digits=3) if segments else "no vowel segments labelled")
@@ -62,12 +62,83 @@ def run(args) -> int:
     return 0
 
 
-def _calibrated_tract(run_):
-    """The vocal tract of the subject's acoustic calibration, or None (the norms)."""
-    calibration = getattr(run_.state, "calibration", None)
-    record = getattr(calibration, "acoustic", None)
-    if not record:
+def _calibrated_tract(recording, calibration):
+    """The vocal tract of the subject's acoustic calibration (``SUBJECT.acoustic.json`` in
+    the ``--calibration`` folder, or beside the given file), or None (the adult norms)."""
+    if not calibration:
         return None
-    from cassi_fit.acoustic_fit import tract_from_record
+    from cassi_fit.acoustic_fit import acoustic_calibration_path, read_acoustic_calibration
 
-    return tract_from_record(record)
+    folder = Path(calibration)
+    folder = folder if folder.is_dir() else folder.parent
+    path = acoustic_calibration_path(folder, recording.subject)
+    if not path.exists():
+        print(f"no acoustic calibration for {recording.subject} in {folder}: the adult norms")
+        return None
+    return read_acoustic_calibration(path)[0]
+
+
+def calibrate_acoustic(args) -> int:
+    """``cassi calibrate DATASET --acoustic``: each subject's vocal tract fitted to the
+    vowels of its recordings that have sound and labels, written to
+    ``OUT/SUBJECT.acoustic.json``; a fit that does not converge is reported (status 3 unless
+    ``--accept-unconverged``)."""
+    import sys
+
+    import numpy as np
+
+    from cassi_fit.acoustic_fit import (
+        acoustic_calibration_path,
+        fit_tract,
+        vowel_quality,
+        write_acoustic_calibration,
+    )
+    from cassi_fit.acoustics import recording_acoustics
+    from cassi_fit.dataset import Dataset
+    from cassi_fit.errors import CassiError, OutputExistsError
+    from cassi_fit.pipeline import run_recording
+
+    root, out = Path(args.dataset), Path(args.out)
+    if not root.is_dir():
+        raise CassiError(f"{root}: no such dataset folder")
+    dataset = Dataset(root)
+    subjects = [w.strip() for w in (args.subjects or "").split(",") if w.strip()] or dataset.subjects()
+    status = 0
+    for subject in subjects:
+        target = acoustic_calibration_path(out, subject)
+        if target.exists() and not args.force:
+            raise OutputExistsError(f"{target}: file exists (pass --force to replace it)")
+        results, names = [], []
+        for task in dataset.tasks(subject):
+            recording = dataset.load(subject, task)
+            if recording.audio is None:
+                continue
+            result = recording_acoustics(run_recording(recording))
+            if result.scored.any():
+                results.append(result)
+                names.append(task)
+        if not results:
+            print(f"{subject}: no recording with sound and scored vowel frames: no acoustic "
+                  "calibration")
+            continue
+        # one subject, one model: the frames of every recording pooled
+        import jax.numpy as jnp
+
+        vertices = jnp.concatenate([r.vertices[r.scored] for r in results])
+        measured = np.concatenate([r.measured.frequency[r.scored] for r in results])
+        fit = fit_tract(results[0].geometry, vertices, measured, results[0].scale)
+        qualities = sorted({vowel_quality(str(s)) for r in results for s in r.labels[r.scored]})
+        write_acoustic_calibration(target, subject, fit, recordings=names, frames=len(measured),
+                                   qualities=qualities, overwrite=args.force)
+        flag = "" if fit.converged else "  NOT CONVERGED"
+        print(f"{subject}: {len(measured)} vowel frames ({', '.join(qualities)}); median F1-F3 "
+              f"error {', '.join(f'{100 * e:.0f}' for e in fit.before)} % -> "
+              f"{', '.join(f'{100 * e:.0f}' for e in fit.after)} % (on the fitted frames){flag}; "
+              f"wrote {target}")
+        if len(qualities) < 2:
+            print(f"{subject}: one vowel quality: the fit cannot be checked on held-out vowels")
+        if not fit.converged and not args.accept_unconverged:
+            print(f"cassi: {subject}: the acoustic calibration did not converge (recorded in "
+                  "its file); pass --accept-unconverged to accept it", file=sys.stderr)
+            status = 3
+    return status
