@@ -103,6 +103,16 @@ if TYPE_CHECKING:
     from .jaw_fit import jaw_solver as jaw_solver
     from .jaw_fit import learn_jaw_coupling as learn_jaw_coupling
     from .jaw_table import jaw_corpus as jaw_corpus
+    from .acoustic_fit import fit_tract as fit_tract
+    from .acoustics import Acoustics as Acoustics
+    from .acoustics import plot_acoustics as plot_acoustics
+    from .acoustics import recording_acoustics as recording_acoustics
+    from .area_function import TractParams as TractParams
+    from .area_function import area_function as area_function
+    from .area_function import tract_geometry as tract_geometry
+    from .formant_track import FormantTrack as FormantTrack
+    from .formant_track import measure_formants as measure_formants
+    from .tube import formants as formants
     from .labels import Labels as Labels
     from .labels import labels_for as labels_for
     from .labels import read_lab as read_lab
@@ -276,6 +286,17 @@ _PUBLIC = {
     "PivotPrior": "jaw_fit",
     "JawCoupling": "jaw_fit",
     "learn_jaw_coupling": "jaw_fit",
+    # the vocal tract heard (issue 29): area function, tube, measured formants, calibration
+    "TractParams": "area_function",
+    "area_function": "area_function",
+    "tract_geometry": "area_function",
+    "formants": "tube",
+    "FormantTrack": "formant_track",
+    "measure_formants": "formant_track",
+    "fit_tract": "acoustic_fit",
+    "Acoustics": "acoustics",
+    "recording_acoustics": "acoustics",
+    "plot_acoustics": "acoustics",
     # calibration (fitting): the record and its file
     "Calibration": "calibration",
     "CalibrationWarning": "calibration",

@@ -31,6 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+from jaxtyping import ArrayLike, Float
 
 from . import area_function as af
 from . import tube
@@ -79,7 +80,8 @@ def _subsample(index: np.ndarray, n: int) -> np.ndarray:
     return index[np.round(np.linspace(0, len(index) - 1, n)).astype(int)]
 
 
-def fit_tract(geometry: af.TractGeometry, vertices, measured: np.ndarray, scale: float, *,
+def fit_tract(geometry: af.TractGeometry, vertices: Float[ArrayLike, "m V 3"],
+              measured: Float[np.ndarray, "m 3"], scale: float, *,
               base: af.TractParams | None = None, max_frames: int = MAX_FRAMES) -> AcousticFit:
     """Fit :class:`TractParams` to ``measured (m, 3)`` Hz formants of the frames
     ``vertices (m, V, 3)`` (module docstring). ``base``: the prior's centre (default the

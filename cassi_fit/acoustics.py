@@ -16,6 +16,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -25,6 +26,10 @@ from jaxtyping import Bool, Float
 from . import area_function as af
 from . import tube
 from .formant_track import CEILING_HZ, FormantTrack, measure_formants, read_wav
+
+if TYPE_CHECKING:
+    from .labels import Labels
+    from .pipeline import RecordingRun
 
 #: Vowel labels (SAMPA, ARPAbet without stress digits, plain letters): a label whose
 #: stress digits and length marks removed is here is a vowel.
@@ -135,8 +140,8 @@ class Acoustics:
 
 
 def recording_acoustics(
-    run, *, samples: np.ndarray | None = None, rate_hz: float | None = None,
-    labels=None, ceiling_hz: float = CEILING_HZ["male"], tract: af.TractParams | None = None,
+    run: RecordingRun, *, samples: Float[np.ndarray, " n"] | None = None,
+    rate_hz: float | None = None, labels: Labels | None = None, ceiling_hz: float = CEILING_HZ["male"], tract: af.TractParams | None = None,
 ) -> Acoustics:
     """The :class:`Acoustics` of a :class:`~cassi_fit.pipeline.RecordingRun`. The sound is
     the recording's ``.wav`` unless ``samples`` and ``rate_hz`` are given; the labels are
@@ -163,7 +168,7 @@ def recording_acoustics(
                      anim.vertices, float(run.state.scale))
 
 
-def plot_acoustics(result: Acoustics, samples: np.ndarray, rate_hz: float,
+def plot_acoustics(result: Acoustics, samples: Float[np.ndarray, " n"], rate_hz: float,
                    path: str | os.PathLike, *, title: str = "") -> Path:
     """The spectrogram with the measured (dots) and model (lines) F1-F3 and the vowel
     labels, written to ``path`` (PNG); returns the path."""
