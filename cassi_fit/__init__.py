@@ -108,7 +108,6 @@ if TYPE_CHECKING:
     from .acoustics import plot_acoustics as plot_acoustics
     from .acoustics import recording_acoustics as recording_acoustics
     from .area_function import TractParams as TractParams
-    from .area_function import area_function as area_function
     from .area_function import tract_geometry as tract_geometry
     from .formant_track import FormantTrack as FormantTrack
     from .formant_track import measure_formants as measure_formants
@@ -288,7 +287,6 @@ _PUBLIC = {
     "learn_jaw_coupling": "jaw_fit",
     # the vocal tract heard (issue 29): area function, tube, measured formants, calibration
     "TractParams": "area_function",
-    "area_function": "area_function",
     "tract_geometry": "area_function",
     "formants": "tube",
     "FormantTrack": "formant_track",

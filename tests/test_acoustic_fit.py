@@ -5,11 +5,14 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from cassi_fit import acoustic_fit, tube
 from cassi_fit import area_function as af
 from cassi_fit.deform import default_params, deform
 from cassi_fit.face_model import load_model
+
+pytestmark = pytest.mark.slow
 
 
 def test_fit_recovers_a_longer_larynx_and_narrower_pharynx():

@@ -75,3 +75,20 @@ def test_cli_tables_figure_and_refusals(recording, tmp_path, capsys):
         assert "no sound" in capsys.readouterr().err
     finally:
         (tmp_path / "moved.wav").rename(recording.with_suffix(".wav"))
+
+
+def test_calibrate_acoustic_writes_the_tract_and_acoustics_reads_it(recording, tmp_path, capsys):
+    dataset = recording.parent.parent  # DATASET/SUBJECT/TASK.TXY
+    out = tmp_path / "cal"
+    code = cli.main(["calibrate", str(dataset), "--acoustic", "--out", str(out),
+                     "--accept-unconverged"])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    written = sorted(out.glob("*.acoustic.json"))
+    assert len(written) == 1 and "one vowel quality" in text
+    code = cli.main(["acoustics", str(recording), "--stride", "8", "--calibration", str(out)])
+    assert code == 0
+    assert "no acoustic calibration" not in capsys.readouterr().out
+    written[0].write_text("{}")
+    assert cli.main(["acoustics", str(recording), "--stride", "8", "--calibration", str(out)]) != 0
+    assert "not an acoustic calibration" in capsys.readouterr().err
