@@ -221,7 +221,9 @@ def main(argv=None) -> int:
     args.docs.mkdir(parents=True, exist_ok=True)
     write_table(seg_rows, args.docs / "acoustic_referee_segments.csv", overwrite=args.force,
                 digits=3)
-    text = ["# The vocal tract's referee: model formants against the real recordings' sound", "",
+    text = ["<!-- written by `python experiments/acoustic_referee.py --docs docs/generated "
+            "--force`; do not edit: `make experiments` rewrites it -->",
+            "# The vocal tract's referee: model formants against the real recordings' sound", "",
             "Written by `experiments/acoustic_referee.py` (docstring: the method). Each line is "
             "one recording of one speaker (JW11: XRMB, Westbury et al. 1994; EMU mo1: IPS Munich "
             "EMA demo): no figure here generalises to other speakers. Relative error = model / "
