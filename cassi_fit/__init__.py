@@ -29,7 +29,13 @@ if TYPE_CHECKING:
     from . import deform as deform
     from . import rigid as rigid
     from . import synth as synth
+    from .acoustic_fit import fit_tract as fit_tract
+    from .acoustics import Acoustics as Acoustics
+    from .acoustics import plot_acoustics as plot_acoustics
+    from .acoustics import recording_acoustics as recording_acoustics
     from .animate import Animation as Animation
+    from .area_function import TractParams as TractParams
+    from .area_function import tract_geometry as tract_geometry
     from .calibrate import calibrate_dataset as calibrate_dataset
     from .calibrate import calibrate_subject as calibrate_subject
     from .calibrate_corpus import calibrate_corpus as calibrate_corpus
@@ -73,6 +79,8 @@ if TYPE_CHECKING:
     from .face_model import FaceModel as FaceModel
     from .face_model import Topology as Topology
     from .face_model import load_model as load_model
+    from .formant_track import FormantTrack as FormantTrack
+    from .formant_track import measure_formants as measure_formants
     from .gaps import repair as repair
     from .headmeasures import DEFAULT_HEAD_MEASURES as DEFAULT_HEAD_MEASURES
     from .headmeasures import HeadMeasures as HeadMeasures
@@ -103,15 +111,6 @@ if TYPE_CHECKING:
     from .jaw_fit import jaw_solver as jaw_solver
     from .jaw_fit import learn_jaw_coupling as learn_jaw_coupling
     from .jaw_table import jaw_corpus as jaw_corpus
-    from .acoustic_fit import fit_tract as fit_tract
-    from .acoustics import Acoustics as Acoustics
-    from .acoustics import plot_acoustics as plot_acoustics
-    from .acoustics import recording_acoustics as recording_acoustics
-    from .area_function import TractParams as TractParams
-    from .area_function import tract_geometry as tract_geometry
-    from .formant_track import FormantTrack as FormantTrack
-    from .formant_track import measure_formants as measure_formants
-    from .tube import formants as formants
     from .labels import Labels as Labels
     from .labels import labels_for as labels_for
     from .labels import read_lab as read_lab
@@ -164,6 +163,7 @@ if TYPE_CHECKING:
     from .synth import synth_recording as synth_recording
     from .tongue import tongue_volume as tongue_volume
     from .tongue import tongue_volumes as tongue_volumes
+    from .tube import formants as formants
     from .txy import PelletTrack as PelletTrack
     from .txy import TimeGapWarning as TimeGapWarning
     from .txy import read_txy as read_txy

@@ -60,7 +60,7 @@ def model_formants(geometry: af.TractGeometry, vertices: Float[jax.Array, "m V 3
         a, ln = run(v, tract, jnp.asarray(scale, v.dtype))
         f = tube.formants_batch(a, ln)
         out.append([np.asarray(x)[:n] for x in (f.frequency, f.bandwidth, a, ln)])
-    return tuple(np.concatenate(parts) for parts in zip(*out))
+    return tuple(np.concatenate(parts) for parts in zip(*out, strict=True))
 
 
 @dataclass(frozen=True, eq=False)

@@ -76,6 +76,7 @@ class Losses(NamedTuple):
 
 
 LOSSLESS = Losses(False, False, False, False)
+ALL_LOSSES = Losses()
 
 
 class Formants(NamedTuple):
@@ -129,7 +130,7 @@ def _chain_product(m):
 
 def transfer(
     frequency_hz: Float[ArrayLike, ""], areas_mm2: Float[ArrayLike, " n"],
-    lengths_mm: Float[ArrayLike, " n"], losses: Losses = Losses(),
+    lengths_mm: Float[ArrayLike, " n"], losses: Losses = ALL_LOSSES,
 ) -> Array:
     """The complex volume-velocity transfer function lips/glottis at one frequency (Hz) of
     the tract ``areas_mm2 (n,)``, ``lengths_mm (n,)`` (glottis first). vmap for many."""
@@ -144,7 +145,7 @@ def transfer(
 
 
 
-def log_gain(frequency_hz, areas_mm2, lengths_mm, losses: Losses = Losses()):
+def log_gain(frequency_hz, areas_mm2, lengths_mm, losses: Losses = ALL_LOSSES):
     """``log |H|^2`` at one frequency (real; the function whose peaks are the formants)."""
     h = transfer(frequency_hz, areas_mm2, lengths_mm, losses)
     return jnp.log(jnp.real(h) ** 2 + jnp.imag(h) ** 2)
@@ -152,7 +153,7 @@ def log_gain(frequency_hz, areas_mm2, lengths_mm, losses: Losses = Losses()):
 
 def spectrum(
     frequencies_hz: Float[ArrayLike, " k"], areas_mm2: Float[ArrayLike, " n"],
-    lengths_mm: Float[ArrayLike, " n"], losses: Losses = Losses(),
+    lengths_mm: Float[ArrayLike, " n"], losses: Losses = ALL_LOSSES,
 ) -> Float[Array, " k"]:
     """``20 log10 |H|`` (dB) at ``frequencies_hz (k,)``."""
     g = jax.vmap(lambda f: log_gain(f, areas_mm2, lengths_mm, losses))(jnp.asarray(frequencies_hz))
@@ -174,7 +175,7 @@ def _inverse_gain(frequency_hz, areas_mm2, lengths_mm, losses):
 
 def formants(
     areas_mm2: Float[ArrayLike, " n"], lengths_mm: Float[ArrayLike, " n"],
-    losses: Losses = Losses(), grid_step_hz: float = GRID_STEP_HZ,
+    losses: Losses = ALL_LOSSES, grid_step_hz: float = GRID_STEP_HZ,
 ) -> Formants:
     """F1-F4 and their bandwidths (Hz) of one tract (module docstring); differentiable in
     the areas and lengths. vmap over frames. ``grid_step_hz`` (static): the search grid's

@@ -65,5 +65,5 @@ def test_vmapped_equals_one_frame(setup):
     _, geometry, frames, run = setup
     many = run(frames, af.default_tract())
     one = jax.jit(lambda v, t: af.area_function(geometry, v, t))(frames[1], af.default_tract())
-    for x, y in zip(many, one):
+    for x, y in zip(many, one, strict=True):
         np.testing.assert_allclose(np.asarray(x)[1], np.asarray(y), rtol=1e-12)

@@ -25,7 +25,7 @@ def synthetic_vowel():
     x = np.zeros(n)
     x[:: int(RATE / 110)] = 1.0
     x = lfilter([1.0], [1.0, -0.97], lfilter([1.0], [1.0, -0.97], x))  # a glottal pulse's tilt
-    for f, b in zip(TRUE_F + (3500.0, 4500.0), (80.0, 100.0, 120.0, 150.0, 200.0)):
+    for f, b in zip(TRUE_F + (3500.0, 4500.0), (80.0, 100.0, 120.0, 150.0, 200.0), strict=True):
         r = np.exp(-np.pi * b / RATE)
         x = lfilter([1.0 - r], [1.0, -2 * r * np.cos(2 * np.pi * f / RATE), r * r], x)
     x = x / np.max(np.abs(x)) * 0.5

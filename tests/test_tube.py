@@ -38,7 +38,7 @@ PETERSON_BARNEY = {"i": (270, 2290, 3010), "a": (730, 1090, 2440), "u": (300, 87
 def formants_jit():
     jitted = jax.jit(tube.formants)  # one compilation: every tract here has N sections
 
-    def call(areas, lengths, losses=tube.Losses()):
+    def call(areas, lengths, losses=tube.ALL_LOSSES):
         as_bools = tube.Losses(*(bool(x) for x in losses))
         return jitted(np.asarray(areas, np.float64), np.asarray(lengths, np.float64), as_bools)
 
