@@ -29,7 +29,13 @@ if TYPE_CHECKING:
     from . import deform as deform
     from . import rigid as rigid
     from . import synth as synth
+    from .acoustic_fit import fit_tract as fit_tract
+    from .acoustics import Acoustics as Acoustics
+    from .acoustics import plot_acoustics as plot_acoustics
+    from .acoustics import recording_acoustics as recording_acoustics
     from .animate import Animation as Animation
+    from .area_function import TractParams as TractParams
+    from .area_function import tract_geometry as tract_geometry
     from .calibrate import calibrate_dataset as calibrate_dataset
     from .calibrate import calibrate_subject as calibrate_subject
     from .calibrate_corpus import calibrate_corpus as calibrate_corpus
@@ -72,6 +78,8 @@ if TYPE_CHECKING:
     from .face_model import FaceModel as FaceModel
     from .face_model import Topology as Topology
     from .face_model import load_model as load_model
+    from .formant_track import FormantTrack as FormantTrack
+    from .formant_track import measure_formants as measure_formants
     from .gaps import repair as repair
     from .headmeasures import DEFAULT_HEAD_MEASURES as DEFAULT_HEAD_MEASURES
     from .headmeasures import HeadMeasures as HeadMeasures
@@ -154,6 +162,7 @@ if TYPE_CHECKING:
     from .synth import synth_recording as synth_recording
     from .tongue import tongue_volume as tongue_volume
     from .tongue import tongue_volumes as tongue_volumes
+    from .tube import formants as formants
     from .txy import PelletTrack as PelletTrack
     from .txy import TimeGapWarning as TimeGapWarning
     from .txy import read_txy as read_txy
@@ -275,6 +284,16 @@ _PUBLIC = {
     "PivotPrior": "jaw_fit",
     "JawCoupling": "jaw_fit",
     "learn_jaw_coupling": "jaw_fit",
+    # the vocal tract heard (issue 29): area function, tube, measured formants, calibration
+    "TractParams": "area_function",
+    "tract_geometry": "area_function",
+    "formants": "tube",
+    "FormantTrack": "formant_track",
+    "measure_formants": "formant_track",
+    "fit_tract": "acoustic_fit",
+    "Acoustics": "acoustics",
+    "recording_acoustics": "acoustics",
+    "plot_acoustics": "acoustics",
     # calibration (fitting): the record and its file
     "Calibration": "calibration",
     "CalibrationWarning": "calibration",

@@ -39,6 +39,7 @@ SUBCOMMANDS = (
     "export",
     "calibrate",
     "evaluate",
+    "acoustics",
 )
 
 

@@ -46,6 +46,10 @@ def register(subparsers) -> None:
                         "file)")
     add_run_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--acoustic", action="store_true",
+                        help="fit each subject's vocal tract (larynx drop, area-rule scales) to "
+                        "the formants of the labelled vowels of its recordings with sound, to "
+                        "OUT/SUBJECT.acoustic.json (cassi_fit.acoustic_fit)")
     parser.set_defaults(func=run)
 
 
@@ -61,6 +65,10 @@ def run(args) -> int:
     from cassi_fit.dataset import Dataset
     from cassi_fit.errors import CassiError, OutputExistsError
 
+    if args.acoustic:
+        from .acoustics import calibrate_acoustic
+
+        return calibrate_acoustic(args)
     root = Path(args.dataset)
     if not root.is_dir():
         raise CassiError(f"{root}: no such dataset folder")

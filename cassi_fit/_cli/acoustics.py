@@ -1,0 +1,144 @@
+"""``cassi acoustics RECORDING [--csv OUT.csv] [--plot OUT.png]``: the model's formants of
+every frame against the recording's sound (``cassi_fit.acoustics``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ._options import add_model_arguments, add_recording_argument, load_recording_args, run_args
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "acoustics",
+        help="the model's formants F1-F3 per frame against the sound's (Praat), per vowel segment",
+        description="The area function of every animated frame (the midsagittal airway from a "
+        "glottis placed below the hyoid to the lips, areas by Soquet et al.'s rules), its "
+        "formants through a lossy tube (Sondhi & Schroeter), and the sound's formants measured "
+        "by Praat's Burg method at the same times. Prints one line per vowel segment (labels "
+        "beside the pellet file: X.lab or X.TextGrid) with the median model and measured F1-F3 "
+        "and the share of the vowels' frames scored (silent, unvoiced and wide-bandwidth frames "
+        "are never scored). --csv writes the per-frame table (and OUT.segments.csv), --plot "
+        "the formant tracks over the spectrogram. --calibration FILE with an acoustic "
+        "calibration (cassi calibrate --acoustic) uses its vocal tract.",
+    )
+    add_recording_argument(parser)
+    add_model_arguments(parser)
+    parser.add_argument("--ceiling", type=float, default=5000.0, metavar="HZ",
+                        help="Praat's formant ceiling: 5000 for an adult male (default), 5500 "
+                        "for an adult female")
+    parser.add_argument("--csv", metavar="OUT.csv", help="per-frame table to write")
+    parser.add_argument("--plot", metavar="OUT.png", help="figure to write")
+    parser.add_argument("--force", action="store_true", help="replace existing outputs")
+    parser.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from cassi_fit.acoustics import plot_acoustics, recording_acoustics
+    from cassi_fit.errors import OutputExistsError
+    from cassi_fit.formant_track import read_wav
+    from cassi_fit.tables import markdown_text, write_table
+
+    for out in (args.csv, args.plot):
+        if out and Path(out).exists() and not args.force:
+            raise OutputExistsError(f"{out}: exists (use --force to replace it)")
+    recording = load_recording_args(args.recording, args)
+    run_ = run_args(recording, args)
+    tract = _calibrated_tract(recording, getattr(args, "calibration", None))
+    result = recording_acoustics(run_, ceiling_hz=args.ceiling, tract=tract)
+    segments = result.segment_rows()
+    print(markdown_text(segments, digits=3) if segments else "no vowel segments labelled")
+    print(f"{100 * result.share_scored:.0f} % of the vowels' frames scored")
+    if args.csv:
+        write_table(result.frame_rows(), args.csv, overwrite=args.force, digits=3)
+        seg_path = Path(args.csv).with_suffix(".segments.csv")
+        if segments:
+            write_table(segments, seg_path, overwrite=args.force, digits=3)
+        print(f"wrote {args.csv}")
+    if args.plot:
+        samples, rate = read_wav(recording.audio)
+        plot_acoustics(result, samples, rate, args.plot)
+        print(f"wrote {args.plot}")
+    return 0
+
+
+def _calibrated_tract(recording, calibration):
+    """The vocal tract of the subject's acoustic calibration (``SUBJECT.acoustic.json`` in
+    the ``--calibration`` folder, or beside the given file), or None (the adult norms)."""
+    if not calibration:
+        return None
+    from cassi_fit.acoustic_fit import acoustic_calibration_path, read_acoustic_calibration
+
+    folder = Path(calibration)
+    folder = folder if folder.is_dir() else folder.parent
+    path = acoustic_calibration_path(folder, recording.subject)
+    if not path.exists():
+        print(f"no acoustic calibration for {recording.subject} in {folder}: the adult norms")
+        return None
+    return read_acoustic_calibration(path)[0]
+
+
+def calibrate_acoustic(args) -> int:
+    """``cassi calibrate DATASET --acoustic``: each subject's vocal tract fitted to the
+    vowels of its recordings that have sound and labels, written to
+    ``OUT/SUBJECT.acoustic.json``; a fit that does not converge is reported (status 3 unless
+    ``--accept-unconverged``)."""
+    import sys
+
+    import numpy as np
+
+    from cassi_fit.acoustic_fit import (
+        acoustic_calibration_path,
+        fit_tract,
+        vowel_quality,
+        write_acoustic_calibration,
+    )
+    from cassi_fit.acoustics import recording_acoustics
+    from cassi_fit.dataset import Dataset
+    from cassi_fit.errors import CassiError, OutputExistsError
+    from cassi_fit.pipeline import run_recording
+
+    root, out = Path(args.dataset), Path(args.out)
+    if not root.is_dir():
+        raise CassiError(f"{root}: no such dataset folder")
+    dataset = Dataset(root)
+    subjects = [w.strip() for w in (args.subjects or "").split(",") if w.strip()] or dataset.subjects()
+    status = 0
+    for subject in subjects:
+        target = acoustic_calibration_path(out, subject)
+        if target.exists() and not args.force:
+            raise OutputExistsError(f"{target}: file exists (pass --force to replace it)")
+        results, names = [], []
+        for task in dataset.tasks(subject):
+            recording = dataset.load(subject, task)
+            if recording.audio is None:
+                continue
+            result = recording_acoustics(run_recording(recording))
+            if result.scored.any():
+                results.append(result)
+                names.append(task)
+        if not results:
+            print(f"{subject}: no recording with sound and scored vowel frames: no acoustic "
+                  "calibration")
+            continue
+        # one subject, one model: the frames of every recording pooled
+        import jax.numpy as jnp
+
+        vertices = jnp.concatenate([r.vertices[r.scored] for r in results])
+        measured = np.concatenate([r.measured.frequency[r.scored] for r in results])
+        fit = fit_tract(results[0].geometry, vertices, measured, results[0].scale)
+        qualities = sorted({vowel_quality(str(s)) for r in results for s in r.labels[r.scored]})
+        write_acoustic_calibration(target, subject, fit, recordings=names, frames=len(measured),
+                                   qualities=qualities, overwrite=args.force)
+        flag = "" if fit.converged else "  NOT CONVERGED"
+        print(f"{subject}: {len(measured)} vowel frames ({', '.join(qualities)}); median F1-F3 "
+              f"error {', '.join(f'{100 * e:.0f}' for e in fit.before)} % -> "
+              f"{', '.join(f'{100 * e:.0f}' for e in fit.after)} % (on the fitted frames){flag}; "
+              f"wrote {target}")
+        if len(qualities) < 2:
+            print(f"{subject}: one vowel quality: the fit cannot be checked on held-out vowels")
+        if not fit.converged and not args.accept_unconverged:
+            print(f"cassi: {subject}: the acoustic calibration did not converge (recorded in "
+                  "its file); pass --accept-unconverged to accept it", file=sys.stderr)
+            status = 3
+    return status

@@ -1,0 +1,209 @@
+"""Acoustic calibration: a speaker's vocal-tract parameters fitted to the measured formants.
+
+The unknowns are :class:`~cassi_fit.area_function.TractParams`: the larynx's drop below the
+hyoid (the vocal tract's length, which sets every formant's scale and which no pellet
+sees), the area rule's overall scale, the pharynx's scale (the pharynx's width across and
+its depth behind the tongue root, which no pellet reaches: the model's tongue root is not
+the speaker's) and the lips' scale (the lip opening's width across, which midsagittal
+pellets do not measure). The tongue, jaw and lips stay where the pellets put them: the
+frames' vertices are fixed, so the pellets' fit is kept exactly. The area rule's published
+coefficients are never refitted: only these four scales move.
+
+The fit (optimistix Levenberg-Marquardt) minimises, over the scored frames of the training
+vowels, ``log(F_model / F_measured)`` of F1-F3 through the differentiable chain (area
+function, tube, formants by implicit differentiation), with a weak prior keeping the
+parameters near the adult norms (``PRIOR_SD``): the drop within about 10 mm of 30 mm, the
+scales within about a factor e^0.5. Scored by leaving one vowel quality out
+(:func:`leave_one_quality_out`); a recording with one vowel quality has no held-out
+figure (say so).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import ArrayLike, Float
+
+from . import area_function as af
+from . import tube
+
+PRIOR_SD = {"larynx_drop_mm": 10.0, "log_scale": 0.5}
+MAX_FRAMES = 48  # frames per fit (an even subsample): the fit's cost grows with them
+MAX_STEPS = 40
+#: The fit's formant search grid (Hz): Newton refines from it to the same formants as the
+#: finer default grid wherever the formants are over 2 steps apart, at a fifth of the cost.
+FIT_GRID_STEP_HZ = 40.0
+
+
+class AcousticFit(NamedTuple):
+    """The fitted ``tract``, whether the solver ``converged``, its ``steps`` and the
+    training frames' median relative F1-F3 error before and after."""
+
+    tract: af.TractParams
+    converged: bool
+    steps: int
+    before: np.ndarray
+    after: np.ndarray
+
+
+def _unpack(x, base: af.TractParams):
+    return af.TractParams(base.larynx_drop_mm + x[0], base.area_scale * jnp.exp(x[1]),
+                          base.pharynx_scale * jnp.exp(x[2]), base.lip_scale * jnp.exp(x[3]))
+
+
+def _residuals(x, args):
+    """The fit's residuals (a module-level function: optimistix compiles it once per
+    subject topology and frame count, not once per call)."""
+    geometry, v, target, base, sd, scale = args
+    n = v.shape[0]
+    areas, lengths, _ = af.area_functions(geometry, v, _unpack(x, base), scale)
+    f = jax.vmap(lambda a, ln: tube.formants(a, ln, grid_step_hz=FIT_GRID_STEP_HZ))(
+        areas, lengths).frequency[:, :3]
+    misfit = (jnp.log(f) - target).reshape(-1)
+    # a missing model formant (NaN) is a large misfit, not a NaN step
+    misfit = jnp.where(jnp.isfinite(misfit), misfit, 1.0)
+    return jnp.concatenate([misfit / jnp.sqrt(n), x / sd / jnp.sqrt(3.0 * n) * 0.1])
+
+
+def _subsample(index: np.ndarray, n: int) -> np.ndarray:
+    if len(index) <= n:
+        return index
+    return index[np.round(np.linspace(0, len(index) - 1, n)).astype(int)]
+
+
+def fit_tract(geometry: af.TractGeometry, vertices: Float[ArrayLike, "m V 3"],
+              measured: Float[np.ndarray, "m 3"], scale: float, *,
+              base: af.TractParams | None = None, max_frames: int = MAX_FRAMES) -> AcousticFit:
+    """Fit :class:`TractParams` to ``measured (m, 3)`` Hz formants of the frames
+    ``vertices (m, V, 3)`` (module docstring). ``base``: the prior's centre (default the
+    adult norms)."""
+    vertices = jnp.asarray(vertices)
+    dtype = vertices.dtype
+    base = af.default_tract(dtype) if base is None else base
+    pick = _subsample(np.arange(len(measured)), max_frames)
+    v = vertices[pick]
+    target = jnp.log(jnp.asarray(measured[pick], dtype))
+    sd = jnp.asarray([PRIOR_SD["larynx_drop_mm"]] + [PRIOR_SD["log_scale"]] * 3, dtype)
+
+    # parameters in mm and log-scales: a thousandth is far below what the formants resolve
+    # (and above float32's noise in them, so a float32 fit can meet it)
+    solver = optx.LevenbergMarquardt(rtol=1e-3, atol=1e-3)
+    x0 = jnp.zeros(4, dtype)
+    args = (geometry, v, target, base, sd, jnp.asarray(scale, dtype))
+    sol = optx.least_squares(_residuals, solver, x0, args=args, max_steps=MAX_STEPS, throw=False)
+    tract = _unpack(sol.value, base)
+    before = _median_error(geometry, v, base, scale, measured[pick])
+    after = _median_error(geometry, v, tract, scale, measured[pick])
+    return AcousticFit(tract, bool(sol.result == optx.RESULTS.successful),
+                       int(sol.stats["num_steps"]), before, after)
+
+
+@jax.jit
+def tract_formants(geometry: af.TractGeometry, vertices, tract: af.TractParams, scale):
+    """F1-F4 ``(m, 4)`` Hz of the frames ``vertices (m, V, 3)`` with ``tract`` (compiled)."""
+    areas, lengths, _ = af.area_functions(geometry, vertices, tract, scale)
+    return jax.vmap(tube.formants)(areas, lengths).frequency
+
+
+def _median_error(geometry, vertices, tract, scale, measured) -> np.ndarray:
+    f = np.asarray(tract_formants(geometry, vertices, tract, scale))[:, :3]
+    return np.nanmedian(np.abs(f / measured - 1.0), axis=0)
+
+
+def vowel_quality(label: str) -> str:
+    """A vowel label's quality: the label without length marks and stress digits."""
+    return label.strip().replace(":", "").rstrip("012")
+
+
+def leave_one_quality_out(result, *, max_frames: int = MAX_FRAMES):
+    """For each vowel quality of ``result`` (an :class:`~cassi_fit.acoustics.Acoustics`)
+    with scored frames: the tract fitted to the other qualities' scored frames and the
+    model's F1-F3 on this quality's frames with it. Returns ``(held_out (m, 3) Hz, NaN for
+    frames not scored or of a quality that could not be held out; fits {quality:
+    AcousticFit})``, or ``(None, {})`` with fewer than two qualities (no held-out figure)."""
+    scored = result.scored
+    quality = np.array([vowel_quality(str(s)) for s in result.labels])
+    qualities = sorted(set(quality[scored]))
+    held = np.full((len(result.times), 3), np.nan)
+    if len(qualities) < 2:
+        return None, {}
+    fits = {}
+    geometry, vertices, scale = result.geometry, result.vertices, result.scale
+    for q in qualities:
+        train = np.nonzero(scored & (quality != q))[0]
+        test = np.nonzero(scored & (quality == q))[0]
+        fit = fit_tract(geometry, vertices[train], result.measured.frequency[train], scale,
+                        max_frames=max_frames)
+        fits[q] = fit
+        held[test] = np.asarray(tract_formants(geometry, jnp.asarray(vertices)[test], fit.tract,
+                                               scale))[:, :3]
+    return held, fits
+
+
+def tract_record(tract: af.TractParams) -> dict[str, float]:
+    """The fitted parameters as plain numbers (for a calibration file or a table)."""
+    return {k: float(getattr(tract, k)) for k in ("larynx_drop_mm", "area_scale",
+                                                  "pharynx_scale", "lip_scale")}
+
+
+def tract_from_record(record: dict) -> af.TractParams:
+    """:class:`TractParams` from :func:`tract_record`'s numbers."""
+    return af.TractParams(*(jnp.asarray(float(record[k])) for k in (
+        "larynx_drop_mm", "area_scale", "pharynx_scale", "lip_scale")))
+
+
+
+# ------------------------------------------------------------------ the calibration's file
+ACOUSTIC_SUFFIX = ".acoustic.json"
+
+
+def acoustic_calibration_path(folder: str | os.PathLike, subject: str) -> Path:
+    """``FOLDER/SUBJECT.acoustic.json``: beside the subject's ``cassi calibrate`` file (a
+    sidecar: the face's calibration file and its schema are left as they are)."""
+    return Path(folder) / f"{subject}{ACOUSTIC_SUFFIX}"
+
+
+def write_acoustic_calibration(path: str | os.PathLike, subject: str, fit: AcousticFit, *,
+                               recordings: Sequence[str], frames: int, qualities: Sequence[str],
+                               overwrite: bool = False) -> Path:
+    """Write a fitted vocal tract (atomically; ``OutputExistsError`` for an existing file
+    without ``overwrite``)."""
+    from ._io import atomic_write
+
+    record = {"subject": subject, "tract": tract_record(fit.tract), "converged": fit.converged,
+              "steps": fit.steps, "recordings": list(recordings), "frames": int(frames),
+              "vowel_qualities": list(qualities),
+              "median_error_before": [float(x) for x in fit.before],
+              "median_error_after": [float(x) for x in fit.after]}
+    path = Path(path)
+    atomic_write(path, json.dumps(record, indent=2) + "\n", overwrite=overwrite)
+    return path
+
+
+def read_acoustic_calibration(path: str | os.PathLike) -> tuple[af.TractParams, dict]:
+    """``(tract, record)`` of a file :func:`write_acoustic_calibration` wrote;
+    ``DataFormatError`` naming the file for anything else."""
+    from .errors import DataFormatError
+
+    path = Path(path)
+    try:
+        record = json.loads(path.read_text())
+        tract = tract_from_record(record["tract"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise DataFormatError(path, None, f"not an acoustic calibration ({exc})") from None
+    values = np.array([float(v) for v in record["tract"].values()])
+    if not np.all(np.isfinite(values)) or np.any(values[1:] <= 0):
+        raise DataFormatError(path, None, "an acoustic calibration with a non-finite or "
+                              "non-positive parameter")
+    if not record.get("converged", False):
+        warnings.warn(f"{path}: this acoustic calibration did not converge", stacklevel=2)
+    return tract, record

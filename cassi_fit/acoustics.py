@@ -1,0 +1,202 @@
+"""The vocal tract heard: the model's formants of every frame against the recording's.
+
+:func:`recording_acoustics` takes a recording's run (``pipeline.run_recording``), makes the
+area function of every animated frame (:mod:`cassi_fit.area_function`), its formants
+through the lossy tube (:mod:`cassi_fit.tube`) and measures the sound's formants at the
+same times (:mod:`cassi_fit.formant_track`). Frames are *scored* where the label is a
+vowel (:data:`VOWELS`), the measurement is reliable and the model found F1-F3; the share
+of the vowels' frames scored is reported beside every figure (``share_scored``).
+:meth:`Acoustics.frame_rows` and :meth:`Acoustics.segment_rows` are the per-frame and
+per-vowel-segment tables (``cassi acoustics --csv``), :func:`plot_acoustics` the figure of
+the model's formant tracks over the spectrogram (``--plot``).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Bool, Float
+
+from . import area_function as af
+from . import tube
+from .formant_track import CEILING_HZ, FormantTrack, measure_formants, read_wav
+
+if TYPE_CHECKING:
+    from .labels import Labels
+    from .pipeline import RecordingRun
+
+#: Vowel labels (SAMPA, ARPAbet without stress digits, plain letters): a label whose
+#: stress digits and length marks removed is here is a vowel.
+VOWELS = frozenset(
+    "a e i o u y @ 6 E I O U Y V Q A { } 2 9 3 & aI aU OY eI oU @U OI ai au oi ei ou "
+    "aa ae ah ao aw ax ay eh er ey ih iy ow oy uh uw".split())
+
+
+def is_vowel(label: str) -> bool:
+    """True for a vowel label (:data:`VOWELS`; ``:`` length marks and stress digits
+    ignored, case kept for SAMPA but ARPAbet matched in lower case)."""
+    core = label.strip().replace(":", "").rstrip("012")
+    return bool(core) and (core in VOWELS or core.lower() in VOWELS)
+
+
+def model_formants(geometry: af.TractGeometry, vertices: Float[jax.Array, "m V 3"],
+                   tract: af.TractParams, scale: float, chunk: int = 256):
+    """``(frequency (m, 4), bandwidth (m, 4), areas (m, n), lengths (m, n))`` of every
+    frame, in chunks of ``chunk`` frames (one compilation per chunk size)."""
+    run = jax.jit(lambda v, t, s: af.area_functions(geometry, v, t, s)[:2])
+    out = []
+    m = vertices.shape[0]
+    for start in range(0, m, chunk):
+        v = vertices[start:start + chunk]
+        n = v.shape[0]
+        if n < chunk and m > chunk:  # pad the last chunk: no second compilation
+            v = jnp.concatenate([v, jnp.broadcast_to(v[-1:], (chunk - n,) + v.shape[1:])])
+        a, ln = run(v, tract, jnp.asarray(scale, v.dtype))
+        f = tube.formants_batch(a, ln)
+        out.append([np.asarray(x)[:n] for x in (f.frequency, f.bandwidth, a, ln)])
+    return tuple(np.concatenate(parts) for parts in zip(*out, strict=True))
+
+
+@dataclass(frozen=True, eq=False)
+class Acoustics:
+    """One recording's model and measured formants at the animation's frame ``times``:
+    ``model`` and ``model_bandwidth`` ``(m, 4)`` Hz, ``measured`` the
+    :class:`FormantTrack`, ``labels (m,)``, ``areas`` and ``lengths`` ``(m, n)`` mm^2, mm;
+    ``scored (m,)``; ``tract`` the :class:`~cassi_fit.area_function.TractParams` used; the
+    subject's ``geometry``, the frames' ``vertices`` and ``scale`` (for a calibration)."""
+
+    times: Float[np.ndarray, " m"]
+    model: Float[np.ndarray, "m 4"]
+    model_bandwidth: Float[np.ndarray, "m 4"]
+    measured: FormantTrack
+    labels: np.ndarray
+    areas: Float[np.ndarray, "m n"]
+    lengths: Float[np.ndarray, "m n"]
+    tract: af.TractParams
+    geometry: af.TractGeometry
+    vertices: jax.Array
+    scale: float
+
+    @property
+    def vowel(self) -> Bool[np.ndarray, " m"]:
+        return np.array([is_vowel(s) for s in self.labels], bool)
+
+    @property
+    def scored(self) -> Bool[np.ndarray, " m"]:
+        return self.vowel & self.measured.reliable & np.all(np.isfinite(self.model[:, :3]), 1)
+
+    @property
+    def share_scored(self) -> float:
+        """The share of the vowels' frames that are scored (0 without vowels)."""
+        v = self.vowel
+        return float(self.scored[v].mean()) if v.any() else 0.0
+
+    @property
+    def relative_error(self) -> Float[np.ndarray, "m 3"]:
+        """``model / measured - 1`` for F1-F3 (NaN where not scored)."""
+        err = self.model[:, :3] / self.measured.frequency - 1.0
+        return np.where(self.scored[:, None], err, np.nan)
+
+    def frame_rows(self) -> list[dict]:
+        rows = []
+        for k, t in enumerate(self.times):
+            row = {"time_s": float(t), "label": str(self.labels[k]), "scored": bool(self.scored[k]),
+                   "reason": str(self.measured.reason[k]),
+                   "vocal_tract_mm": float(self.lengths[k].sum())}
+            for j in range(3):
+                row[f"F{j + 1}_model_hz"] = float(self.model[k, j])
+                row[f"F{j + 1}_measured_hz"] = float(self.measured.frequency[k, j])
+            rows.append(row)
+        return rows
+
+    def segment_rows(self) -> list[dict]:
+        """One row per vowel segment (a run of frames with one vowel label): its frames,
+        the frames scored, the median model and measured F1-F3 and the median relative
+        errors over the scored frames."""
+        rows, k, m = [], 0, len(self.times)
+        while k < m:
+            j = k
+            while j < m and self.labels[j] == self.labels[k]:
+                j += 1
+            if is_vowel(str(self.labels[k])):
+                s = np.arange(k, j)[self.scored[k:j]]
+                row = {"start_s": float(self.times[k]), "end_s": float(self.times[j - 1]),
+                       "vowel": str(self.labels[k]), "frames": j - k, "scored": len(s)}
+                for q in range(3):
+                    row[f"F{q + 1}_model_hz"] = float(np.median(self.model[s, q])) if len(s) else np.nan
+                    row[f"F{q + 1}_measured_hz"] = (float(np.median(self.measured.frequency[s, q]))
+                                                    if len(s) else np.nan)
+                    row[f"F{q + 1}_error"] = (float(np.median(self.relative_error[s, q]))
+                                              if len(s) else np.nan)
+                rows.append(row)
+            k = j
+        return rows
+
+
+def recording_acoustics(
+    run: RecordingRun, *, samples: Float[np.ndarray, " n"] | None = None,
+    rate_hz: float | None = None, labels: Labels | None = None, ceiling_hz: float = CEILING_HZ["male"], tract: af.TractParams | None = None,
+) -> Acoustics:
+    """The :class:`Acoustics` of a :class:`~cassi_fit.pipeline.RecordingRun`. The sound is
+    the recording's ``.wav`` unless ``samples`` and ``rate_hz`` are given; the labels are
+    those beside the pellet file unless ``labels`` (a :class:`~cassi_fit.labels.Labels`) is
+    given. ``MissingDataError`` if there is no sound."""
+    from .errors import MissingDataError
+    from .labels import labels_for
+
+    rec, anim = run.recording, run.animation
+    if samples is None:
+        if rec.audio is None:
+            raise MissingDataError(f"{rec.subject}/{rec.task}: no sound (.wav) beside the "
+                                   "pellet file: the formants cannot be measured")
+        samples, rate_hz = read_wav(rec.audio)
+    if labels is None and rec.path is not None:
+        labels = labels_for(rec.path)
+    times = np.asarray(anim.times, np.float64)
+    names = labels.at(times) if labels is not None else np.full(times.shape, "")
+    tract = af.default_tract(jnp.asarray(anim.vertices).dtype) if tract is None else tract
+    geometry = af.tract_geometry(run.state.model)
+    freq, bw, areas, lengths = model_formants(geometry, anim.vertices, tract, run.state.scale)
+    measured = measure_formants(samples, rate_hz, times, ceiling_hz=ceiling_hz)
+    return Acoustics(times, freq, bw, measured, names, areas, lengths, tract, geometry,
+                     anim.vertices, float(run.state.scale))
+
+
+def plot_acoustics(result: Acoustics, samples: Float[np.ndarray, " n"], rate_hz: float,
+                   path: str | os.PathLike, *, title: str = "") -> Path:
+    """The spectrogram with the measured (dots) and model (lines) F1-F3 and the vowel
+    labels, written to ``path`` (PNG); returns the path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(11, 4.5))
+    ax.specgram(samples, NFFT=int(0.008 * rate_hz), Fs=rate_hz, noverlap=int(0.006 * rate_hz),
+                cmap="Greys", scale="dB")
+    colours = ("tab:red", "tab:green", "tab:blue")
+    for q in range(3):
+        meas = np.where(result.measured.reliable, result.measured.frequency[:, q], np.nan)
+        ax.plot(result.times, meas, ".", ms=2.5, color=colours[q], alpha=0.6)
+        ax.plot(result.times, result.model[:, q], "-", lw=1.2, color=colours[q],
+                label=f"F{q + 1} model (line), measured (dots)")
+    for row in result.segment_rows():
+        ax.axvspan(row["start_s"], row["end_s"], color="gold", alpha=0.15)
+        ax.text(0.5 * (row["start_s"] + row["end_s"]), 4700, row["vowel"], ha="center", fontsize=9)
+    ax.set_ylim(0, 5000)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("frequency (Hz)")
+    ax.set_title(title or f"model vs measured formants; {100 * result.share_scored:.0f} % of "
+                          "the vowels' frames scored")
+    ax.legend(loc="upper right", fontsize=7)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

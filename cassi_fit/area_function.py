@@ -1,0 +1,238 @@
+"""The area function of a frame: the model's midsagittal airway, glottis to lips (JAX).
+
+The airway's two walls in the midsagittal plane (model frame, mm), glottis first:
+
+* the *front/lower wall*: the glottis, straight up the front of the larynx to the tongue's
+  hyoid end, the tongue's upper midline back to its tip, the lower incisor's tip, the lower
+  lip's inner and upper midline points (every one a vertex of the posed frame, so it moves
+  with the jaw, the tongue and the lips);
+* the *back/upper wall*: the posterior pharyngeal wall (the model's wall from ``PHA.DAT``,
+  ``cassi_fit.pharynx``) extended further down in a straight line along its lowest segment
+  (the wall follows the cervical spine, nearly straight from C2 to C6) to below the
+  glottis; the oral surface of the velum and the hard palate (``cassi_fit.palate``, the
+  subject's ``PAL.DAT``), the upper incisor's tip and the upper lip's lower midline points.
+
+**The larynx** (the model has none): the glottis lies ``larynx_drop_mm`` below the tongue's
+hyoid end (the hyoid body at about C3, the vocal folds at about C5-C6 in adult men: about
+two vertebrae, ``GLOTTIS_BELOW_HYOID_MM`` = 30 mm by default; a per-subject parameter, and
+the handle acoustic calibration moves for the vocal tract's length), and
+``GLOTTIS_DEPTH_MM`` in front of the wall (the male glottis is about 16 mm long front to
+back, Hirano et al. 1988's adult men: 14-17 mm).
+
+**Cross-distances to areas**: the front wall is resampled at ``N_SECTIONS`` points equally
+spaced in arc length; each point's cross-distance ``d`` is its distance to the nearest
+segment of the back wall (unsigned; a tongue through the palate gives a small area, not a
+negative one); the section's centre is the middle of that chord, and the sections' lengths
+follow the centres' path (so the tract's length moves with the larynx, the tongue and the
+lips). ``d`` becomes an area by ``A = alpha d^beta`` (d in cm, A in cm^2) with the region's
+coefficients of Soquet, Lecuit, Metens & Demolin (2002, Speech Commun. 36:169-180; male
+speakers, MRI): larynx, lower, middle and upper (oro-) pharynx, velum, hard palate,
+alveolar region, lips. The region is the back wall's where the nearest point lies. The
+coefficients stay as published: calibration scales them through :class:`TractParams`
+(``area_scale`` for all, ``pharynx_scale`` for the pharynx, ``lip_scale`` for the lips), never
+by refitting them on the scored data. An area below ``MIN_AREA_MM2`` is held there (a
+closure is not modelled: the tube needs a finite area).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, Int
+
+from .deform import tongue_midline
+from .errors import MissingDataError
+from .face_model import FaceModel
+
+N_SECTIONS = 40
+GLOTTIS_BELOW_HYOID_MM = 30.0
+GLOTTIS_DEPTH_MM = 16.0
+WALL_EXTENSION_MM = 60.0  # how far below the model's wall the straight extension reaches
+MIN_AREA_MM2 = 5.0
+ALVEOLAR_X_MM = -15.0  # palate in front of this (about the alveolar ridge's back) is alveolar
+
+REGIONS = ("larynx", "low pharynx", "mid pharynx", "oropharynx", "velum", "hard palate",
+           "alveolar", "labial")
+# Soquet et al. (2002), male speakers: alpha (cm^(2-beta)), beta, per region above
+ALPHA = np.array([0.78, 1.86, 1.74, 1.99, 1.84, 1.82, 2.67, 2.42])
+BETA = np.array([0.7, 1.22, 1.23, 0.81, 0.93, 1.43, 1.48, 1.67])
+PHARYNX_REGIONS = np.array([0, 1, 1, 1, 0, 0, 0, 0], bool)
+LIP_REGIONS = np.array([0, 0, 0, 0, 0, 0, 0, 1], bool)
+
+
+class TractParams(eqx.Module):
+    """A speaker's vocal-tract parameters (acoustic calibration's unknowns), scalars:
+    ``larynx_drop_mm`` the glottis below the tongue's hyoid end; ``area_scale``,
+    ``pharynx_scale``, ``lip_scale`` multiply the published alpha of every region, of the
+    three pharyngeal regions and of the lips (the airway's width across, which the
+    midsagittal section does not see)."""
+
+    larynx_drop_mm: Float[Array, ""]
+    area_scale: Float[Array, ""]
+    pharynx_scale: Float[Array, ""]
+    lip_scale: Float[Array, ""]
+
+
+def default_tract(dtype=float) -> TractParams:
+    """The published rules unscaled and the adult-norm larynx."""
+    one = jnp.asarray(1.0, dtype)
+    return TractParams(jnp.asarray(GLOTTIS_BELOW_HYOID_MM, dtype), one, one, one)
+
+
+class TractGeometry(eqx.Module):
+    """What the area function needs of one subject's model: the vertex indices of the
+    front wall and of the upper lip (static), and the back wall's fixed parts (the wall,
+    palate and velum do not move with the frames) as segments with their regions."""
+
+    tongue_tops: tuple[int, ...] = eqx.field(static=True)
+    lower: tuple[int, ...] = eqx.field(static=True)
+    upper: tuple[int, ...] = eqx.field(static=True)
+    wall: Float[Array, "h 2"]
+    palate: Float[Array, "p 2"]
+    palate_region: tuple[int, ...] = eqx.field(static=True)
+    hyoid_y: float = eqx.field(static=True)
+    velum_tip_y: float = eqx.field(static=True)
+    back_region: tuple[int, ...] = eqx.field(static=True, default=())
+
+
+def _lip_points(model: FaceModel, region: str, upper: bool) -> np.ndarray:
+    """The lip's two midsagittal vertices facing the mouth opening, inner first."""
+    idx = np.asarray(model.regions[region])
+    v = np.asarray(model.vertices)[idx]
+    mid = idx[np.abs(v[:, 2]) < 0.3]
+    if len(mid) < 2:
+        raise MissingDataError(f"the face model's {region} has fewer than two midsagittal vertices")
+    y = np.asarray(model.vertices)[mid, 1]
+    pick = mid[np.argsort(y)[:2]] if upper else mid[np.argsort(-y)[:2]]
+    return pick[np.argsort(np.asarray(model.vertices)[pick, 0])]
+
+
+def tract_geometry(model: FaceModel) -> TractGeometry:
+    """The :class:`TractGeometry` of a subject's model (with its palate and pharynx):
+    ``MissingDataError`` if the model lacks a palate, a pharynx or the tube tongue."""
+    from .palate import N_ACROSS as P_ACROSS
+    from .palate import N_ALONG, N_HARD
+    from .pharynx import N_ACROSS as W_ACROSS
+    from .pharynx import front_sheet, has_pharynx
+
+    if not has_pharynx(model) or "palate" not in model.regions:
+        raise MissingDataError("the area function needs the model's palate and pharyngeal wall")
+    vertices = np.asarray(model.vertices)
+    _, top = tongue_midline(model)
+    tops = np.array(sorted(set(top.tolist())))  # station order: tip -> hyoid end
+    wall = np.asarray(front_sheet(model, jnp.asarray(vertices)))[:, W_ACROSS // 2, :2]
+    palate_idx = np.asarray(model.regions["palate"])[: N_ALONG * P_ACROSS]
+    palate = vertices[palate_idx.reshape(N_ALONG, P_ACROSS)[:, P_ACROSS // 2], :2]  # front -> back
+    rows = np.arange(N_ALONG - 1)
+    mid_x = 0.5 * (palate[:-1, 0] + palate[1:, 0])
+    region = np.where(rows >= N_HARD - 1, 4, np.where(mid_x < ALVEOLAR_X_MM, 5, 6))
+    lm = model.landmarks
+    lower = np.concatenate([[lm["lower_incisor_tip"]], _lip_points(model, "lower_lip", False)])
+    upper = np.concatenate([[lm["upper_incisor_tip"]], _lip_points(model, "upper_lip", True)])
+    as_ints = lambda x: tuple(int(i) for i in np.asarray(x).reshape(-1))  # noqa: E731
+    geometry = TractGeometry(as_ints(tops), as_ints(lower), as_ints(upper), jnp.asarray(wall),
+                             jnp.asarray(palate), as_ints(region), float(vertices[tops[-1], 1]),
+                             float(palate[-1, 1]))
+    return dataclasses.replace(geometry, back_region=as_ints(_wall_regions(geometry)))
+
+
+def _nearest(p, a, b):
+    """Distance from ``p (2,)`` to the segments ``a -> b (s, 2)`` and the nearest points."""
+    ab = b - a
+    t = jnp.clip(jnp.sum((p[None] - a) * ab, -1) / jnp.sum(ab * ab, -1), 0.0, 1.0)
+    q = a + t[:, None] * ab
+    d2 = jnp.sum((p[None] - q) ** 2, -1)
+    return d2, q
+
+
+def _resample(line, n):
+    """``n`` points equally spaced in arc length along ``line (k, 2)``, centred in their
+    stretches (differentiable in the points)."""
+    seg = jnp.sqrt(jnp.sum(jnp.diff(line, axis=0) ** 2, -1))
+    s = jnp.concatenate([jnp.zeros(1, line.dtype), jnp.cumsum(seg)])
+    q = (jnp.arange(n, dtype=line.dtype) + 0.5) / n * s[-1]
+    return jnp.stack([jnp.interp(q, s, line[:, 0]), jnp.interp(q, s, line[:, 1])], -1)
+
+
+def _walls(geometry: TractGeometry, vertices, params: TractParams):
+    """The front wall ``(k, 2)`` and the back wall's segments ``a -> b`` (their regions:
+    :func:`_wall_regions`, in the same order)."""
+    g = geometry
+    tongue = vertices[np.asarray(g.tongue_tops[::-1]), :2]  # hyoid end -> tip
+    hyoid = tongue[0]
+    w = g.wall
+    down = (w[-1] - w[-2]) / jnp.linalg.norm(w[-1] - w[-2])
+    wall = jnp.concatenate([w, (w[-1] + WALL_EXTENSION_MM * down)[None]])  # top -> bottom
+    y_g = hyoid[1] - params.larynx_drop_mm
+    # the extended wall's x at the glottis's height (its last stretch is straight)
+    x_wall = w[-1, 0] + down[0] * (y_g - w[-1, 1]) / down[1]
+    glottis = jnp.stack([x_wall + GLOTTIS_DEPTH_MM, y_g])
+    front = jnp.concatenate([glottis[None], tongue, vertices[np.asarray(g.lower), :2]])
+    lips = vertices[np.asarray(g.upper), :2]
+    a = jnp.concatenate([wall[:-1], g.palate[:-1], g.palate[:1], lips[:-1]])
+    b = jnp.concatenate([wall[1:], g.palate[1:], lips[:1], lips[1:]])
+    return front, a, b
+
+
+def _wall_regions(geometry: TractGeometry) -> np.ndarray:
+    """Each back-wall segment's region, from the rest geometry (static)."""
+    w = np.asarray(geometry.wall)
+    down = (w[-1] - w[-2]) / np.linalg.norm(w[-1] - w[-2])
+    wall = np.concatenate([w, (w[-1] + WALL_EXTENSION_MM * down)[None]])
+    mid_y = 0.5 * (wall[:-1, 1] + wall[1:, 1])
+    third = (geometry.velum_tip_y - geometry.hyoid_y) / 3.0
+    wall_region = np.where(mid_y < geometry.hyoid_y, 0,
+                           np.clip(1 + (mid_y - geometry.hyoid_y) // third, 1, 3)).astype(int)
+    return np.concatenate([wall_region, np.asarray(geometry.palate_region), [6],
+                           [7] * (len(geometry.upper) - 1)])
+
+
+def area_function(
+    geometry: TractGeometry, vertices: Float[Array, "V 3"], params: TractParams,
+    scale: float | Float[Array, ""] = 1.0,
+) -> tuple[Float[Array, " n"], Float[Array, " n"], Int[Array, " n"]]:
+    """``(areas mm^2, lengths mm, regions)`` ``(N_SECTIONS,)`` of one posed frame, glottis
+    first (module docstring), in the subject's millimetres: ``scale`` is the model's mm per
+    subject mm (``SubjectState.scale``); ``regions`` index :data:`REGIONS`. Differentiable in
+    the vertices and ``params``; vmap over frames (:func:`area_functions`)."""
+    params = eqx.tree_at(lambda p: p.larynx_drop_mm, params, params.larynx_drop_mm * scale)
+    front, a, b = _walls(geometry, vertices, params)
+    region_of = jnp.asarray(np.asarray(geometry.back_region, np.int32))
+    points = _resample(front, N_SECTIONS)
+
+    def one(p):
+        d2, q = _nearest(p, a, b)
+        k = jnp.argmin(d2)
+        return d2[k], q[k], region_of[k]
+
+    d2, q, region = jax.vmap(one)(points)
+    ok = d2 > 0
+    d_cm = jnp.where(ok, jnp.sqrt(jnp.where(ok, d2, 1.0)), 0.0) / (10.0 * scale)
+    alpha = jnp.asarray(ALPHA, d_cm.dtype)[region] * params.area_scale
+    alpha = alpha * jnp.where(jnp.asarray(PHARYNX_REGIONS)[region], params.pharynx_scale, 1.0)
+    alpha = alpha * jnp.where(jnp.asarray(LIP_REGIONS)[region], params.lip_scale, 1.0)
+    beta = jnp.asarray(BETA, d_cm.dtype)[region]
+    pos = d_cm > 0
+    area = jnp.where(pos, alpha * jnp.exp(beta * jnp.log(jnp.where(pos, d_cm, 1.0))), 0.0) * 100.0
+    area = jnp.maximum(area, MIN_AREA_MM2)
+    centre = 0.5 * (points + q)
+    step = jnp.sqrt(jnp.sum(jnp.diff(centre, axis=0) ** 2, -1))
+    lengths = 0.5 * (jnp.concatenate([step[:1], step]) + jnp.concatenate([step, step[-1:]]))
+    return area, lengths / scale, region
+
+
+def area_functions(
+    geometry: TractGeometry, vertices: Float[Array, "m V 3"], params: TractParams,
+    scale: float | Float[Array, ""] = 1.0,
+) -> tuple[Float[Array, "m n"], Float[Array, "m n"], Int[Array, "m n"]]:
+    """:func:`area_function` of every frame of ``vertices (m, V, 3)``."""
+    return jax.vmap(lambda v: area_function(geometry, v, params, scale))(vertices)
+
+
+def tract_length(lengths: Float[Array, "... n"]) -> Float[Array, "..."]:
+    """The vocal tract's length (mm): the sum of its sections."""
+    return jnp.sum(lengths, axis=-1)

@@ -1,0 +1,112 @@
+"""The formants measured from a recording's sound: Praat's Burg tracker (praat-parselmouth).
+
+:func:`measure_formants` runs Praat's ``To Formant (burg)`` (Boersma & Weenink, Praat; the
+field's reference implementation, through praat-parselmouth, Jadoul, Thompson & de Boer
+2018) on the sound and reads F1-F3 and their bandwidths at the given frame times. The
+formant ceiling is the speaker's option: Praat's own advice is 5000 Hz for an adult male,
+5500 Hz for an adult female (``CEILING_HZ``); a wrong ceiling splits or merges formants, so
+a study sets it per speaker.
+
+A frame's measurement is *reliable* only where all three hold, and an unreliable frame is
+never scored (``FormantTrack.reason`` says why, ``share_reliable`` how many are left):
+
+* ``silence``: the frame's intensity is more than ``SILENCE_DB`` below the recording's
+  loudest frame;
+* ``unvoiced``: Praat's pitch tracker (``To Pitch``, 75-500 Hz) finds no voicing there;
+* ``wide bandwidth``: a bandwidth of F1-F3 is over ``MAX_BANDWIDTH_HZ`` (or a formant is
+  missing): no clear resonance to measure.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from jaxtyping import Bool, Float, Shaped
+
+from .errors import DataFormatError
+
+CEILING_HZ = {"male": 5000.0, "female": 5500.0}
+WINDOW_S = 0.025
+N_FORMANTS_BURG = 5
+SILENCE_DB = 30.0
+MAX_BANDWIDTH_HZ = 1000.0
+PITCH_FLOOR_HZ = 75.0
+PITCH_CEILING_HZ = 500.0
+
+
+@dataclass(frozen=True, eq=False)
+class FormantTrack:
+    """F1-F3 measured at ``times (m,)`` s: ``frequency``, ``bandwidth`` ``(m, 3)`` Hz (NaN
+    where Praat found none), ``reliable (m,)`` and ``reason (m,)`` (``""`` where reliable,
+    else ``silence`` / ``unvoiced`` / ``wide bandwidth``), the ``ceiling_hz`` used."""
+
+    times: Float[np.ndarray, " m"]
+    frequency: Float[np.ndarray, "m 3"]
+    bandwidth: Float[np.ndarray, "m 3"]
+    reliable: Bool[np.ndarray, " m"]
+    reason: Shaped[np.ndarray, " m"]
+    ceiling_hz: float
+
+    @property
+    def share_reliable(self) -> float:
+        """The share of frames measured reliably (0 for no frames)."""
+        return float(np.mean(self.reliable)) if len(self.times) else 0.0
+
+
+def read_wav(path: str | os.PathLike) -> tuple[Float[np.ndarray, " n"], float]:
+    """``(samples in [-1, 1], rate Hz)`` of a PCM ``.wav`` (first channel);
+    ``DataFormatError`` naming the file for what :mod:`cassi_fit.sound` cannot read."""
+    from .sound import open_pcm
+
+    params, data = open_pcm(path)
+    width = params.sampwidth
+    if width not in (1, 2, 4) or params.framerate <= 0:
+        raise DataFormatError(Path(path), None, f"unsupported .wav: {8 * width}-bit samples at "
+                              f"{params.framerate} Hz")
+    dtype = {1: np.uint8, 2: "<i2", 4: "<i4"}[width]
+    x = np.frombuffer(data, dtype=dtype).astype(np.float64)
+    x = x.reshape(-1, params.nchannels)[:, 0]
+    if width == 1:
+        x = x - 128.0
+    return x / float(2 ** (8 * width - 1)), float(params.framerate)
+
+
+def measure_formants(
+    samples: Float[np.ndarray, " n"], rate_hz: float, times: Float[np.ndarray, " m"], *,
+    ceiling_hz: float = CEILING_HZ["male"], max_bandwidth_hz: float = MAX_BANDWIDTH_HZ,
+    silence_db: float = SILENCE_DB,
+) -> FormantTrack:
+    """Praat's Burg formants F1-F3 of ``samples`` at ``times`` (s), reliability marked
+    (module docstring). ``ValueError`` for an empty sound or a non-positive rate."""
+    import parselmouth
+
+    samples = np.asarray(samples, dtype=np.float64).reshape(-1)
+    times = np.asarray(times, dtype=np.float64).reshape(-1)
+    if samples.size == 0 or not rate_hz > 0:
+        raise ValueError(f"measure_formants: {samples.size} samples at {rate_hz} Hz")
+    sound = parselmouth.Sound(samples, sampling_frequency=float(rate_hz))
+    formant = sound.to_formant_burg(time_step=0.005, max_number_of_formants=N_FORMANTS_BURG,
+                                    maximum_formant=float(ceiling_hz), window_length=WINDOW_S)
+    pitch = sound.to_pitch(pitch_floor=PITCH_FLOOR_HZ, pitch_ceiling=PITCH_CEILING_HZ)
+    intensity = sound.to_intensity(minimum_pitch=PITCH_FLOOR_HZ)
+    freq = np.array([[formant.get_value_at_time(k, t) for k in (1, 2, 3)] for t in times]).reshape(-1, 3)
+    bw = np.array([[formant.get_bandwidth_at_time(k, t) for k in (1, 2, 3)] for t in times]).reshape(-1, 3)
+    f0 = np.array([pitch.get_value_at_time(t) for t in times])
+    level = np.array([intensity.get_value(t) for t in times], dtype=np.float64)
+    loudest = np.nanmax(intensity.values) if intensity.values.size else np.nan
+    reason = np.full(times.shape, "", dtype=object)
+    wide = ~np.all(np.isfinite(freq) & np.isfinite(bw) & (bw <= max_bandwidth_hz), axis=1)
+    reason[wide] = "wide bandwidth"
+    reason[~np.isfinite(f0)] = "unvoiced"
+    reason[~(level >= loudest - silence_db)] = "silence"
+    reason = reason.astype(str)
+    return FormantTrack(times, freq, bw, reason == "", reason, float(ceiling_hz))
+
+
+def measure_wav(path: str | os.PathLike, times: Float[np.ndarray, " m"], **options) -> FormantTrack:
+    """:func:`measure_formants` of the ``.wav`` at ``path``."""
+    samples, rate = read_wav(path)
+    return measure_formants(samples, rate, times, **options)

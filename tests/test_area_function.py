@@ -1,0 +1,69 @@
+"""The area function (cassi_fit.area_function) of the model's posed frames."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from cassi_fit import area_function as af
+from cassi_fit.deform import default_params, deform
+from cassi_fit.face_model import load_model
+
+
+@pytest.fixture(scope="module")
+def setup():
+    model = load_model()
+    geometry = af.tract_geometry(model)
+    p0 = default_params(model)
+    # the jaw lowered 12 mm, and the tongue's back pellets down and back: an /a/-like frame
+    opened = eqx.tree_at(lambda p: (p.jaw_translation, p.tongue), p0,
+                         (jnp.array([0.0, -12.0]),
+                          p0.tongue + jnp.array([[0, -12], [0, -12], [-4, -14], [-6, -12]], float)))
+    posed = jax.jit(jax.vmap(lambda p: deform(model, p)))
+    frames = posed(jax.tree.map(lambda a, b: jnp.stack([a, b]), p0, opened))
+    run = jax.jit(lambda v, t: af.area_functions(geometry, v, t))
+    return model, geometry, frames, run
+
+
+def test_areas_and_lengths_of_rest_and_open_frames(setup):
+    _, _, frames, run = setup
+    areas, lengths, regions = (np.asarray(x) for x in run(frames, af.default_tract()))
+    assert areas.shape == lengths.shape == regions.shape == (2, af.N_SECTIONS)
+    assert np.all(areas >= af.MIN_AREA_MM2) and np.all(lengths > 0)
+    # an adult male tract from the glottis to the lips: 14-20 cm (Fitch & Giedd 1999)
+    assert np.all((lengths.sum(1) > 140) & (lengths.sum(1) < 200))
+    # glottis first (larynx), lips last
+    assert regions[0, 0] == 0 and regions[0, -1] == 7
+    # opening the jaw opens the lips and the front of the mouth
+    assert areas[1, -1] > 2 * areas[0, -1]
+
+
+def test_larynx_drop_lengthens_the_tract_and_is_differentiable(setup):
+    _, geometry, frames, run = setup
+    base = af.default_tract()
+    longer = eqx.tree_at(lambda p: p.larynx_drop_mm, base, base.larynx_drop_mm + 10.0)
+    l0 = np.asarray(run(frames, base)[1]).sum(1)
+    l1 = np.asarray(run(frames, longer)[1]).sum(1)
+    np.testing.assert_allclose(l1 - l0, 10.0, atol=3.0)
+
+    def total(drop, lip):
+        p = af.TractParams(drop, jnp.asarray(1.0), jnp.asarray(1.0), lip)
+        a, ln, _ = af.area_function(geometry, frames[1], p)
+        return jnp.sum(jnp.log(a)) + jnp.sum(ln)
+
+    g = jax.jit(jax.grad(total, argnums=(0, 1)))(jnp.asarray(30.0), jnp.asarray(1.0))
+    total = jax.jit(total)
+    h = 1e-4
+    fd0 = (total(30.0 + h, 1.0) - total(30.0 - h, 1.0)) / (2 * h)
+    fd1 = (total(30.0, 1.0 + h) - total(30.0, 1.0 - h)) / (2 * h)
+    np.testing.assert_allclose([g[0], g[1]], [fd0, fd1], rtol=1e-5)
+    assert float(g[1]) > 0  # the lips' scale widens the lips' sections
+
+
+def test_vmapped_equals_one_frame(setup):
+    _, geometry, frames, run = setup
+    many = run(frames, af.default_tract())
+    one = jax.jit(lambda v, t: af.area_function(geometry, v, t))(frames[1], af.default_tract())
+    for x, y in zip(many, one, strict=True):
+        np.testing.assert_allclose(np.asarray(x)[1], np.asarray(y), rtol=1e-12)

@@ -1,0 +1,73 @@
+"""The formant tracker (cassi_fit.formant_track) on a synthetic vowel with known
+resonances, and against the EMU bundle's own formant track (an independent tracker)."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+from cassi_fit import formant_track as ft
+
+ROOT = Path(__file__).resolve().parents[1]
+EMU = next((p for p in (ROOT.parent / "shared/data/emu_ips_mo1", ROOT.parents[1] / "shared/data/emu_ips_mo1",
+                        Path("/work/shared/data/emu_ips_mo1")) if p.is_dir()), None)
+RATE = 16000.0
+TRUE_F = (550.0, 1450.0, 2550.0)
+
+
+def synthetic_vowel():
+    """0.3 s of silence, 0.6 s of a 110 Hz pulse train (tilted -12 dB/octave) through five
+    resonators (TRUE_F, then 3500 and 4500 Hz; bandwidths 80-200 Hz), 0.3 s of white noise at a tenth of the vowel's level."""
+    rng = np.random.default_rng(0)
+    n = int(0.6 * RATE)
+    x = np.zeros(n)
+    x[:: int(RATE / 110)] = 1.0
+    x = lfilter([1.0], [1.0, -0.97], lfilter([1.0], [1.0, -0.97], x))  # a glottal pulse's tilt
+    for f, b in zip(TRUE_F + (3500.0, 4500.0), (80.0, 100.0, 120.0, 150.0, 200.0), strict=True):
+        r = np.exp(-np.pi * b / RATE)
+        x = lfilter([1.0 - r], [1.0, -2 * r * np.cos(2 * np.pi * f / RATE), r * r], x)
+    x = x / np.max(np.abs(x)) * 0.5
+    noise = rng.normal(0, 0.05, int(0.3 * RATE))
+    return np.concatenate([np.zeros(int(0.3 * RATE)), x, noise])
+
+
+def test_synthetic_vowel_formants_and_reliability():
+    times = np.array([0.15, 0.45, 0.6, 0.75, 1.05])
+    track = ft.measure_formants(synthetic_vowel(), RATE, times)
+    assert list(track.reason) == ["silence", "", "", "", "unvoiced"]
+    assert track.share_reliable == pytest.approx(0.6)
+    np.testing.assert_allclose(track.frequency[1:4], np.tile(TRUE_F, (3, 1)), rtol=0.04)
+
+
+def test_bad_input_is_one_clear_error(tmp_path):
+    with pytest.raises(ValueError, match="samples"):
+        ft.measure_formants(np.zeros(0), RATE, np.array([0.1]))
+    bad = tmp_path / "x.wav"
+    bad.write_bytes(b"not a wave")
+    from cassi_fit.errors import DataFormatError
+
+    with pytest.raises(DataFormatError, match="x.wav"):
+        ft.measure_wav(bad, np.array([0.1]))
+
+
+@pytest.mark.skipif(EMU is None, reason="the EMU bundle (../shared/data/emu_ips_mo1) is absent")
+def test_praat_agrees_with_the_emu_bundles_own_formant_track():
+    """Praat's Burg against the bundle's ``fms`` track (EMU's own tracker, computed by its
+    makers): on the vowels' reliable frames, the median relative difference is under 3 % for
+    F2 and F3; Praat's F1 runs higher (median about 10 %), under 15 % asserted."""
+    sys.path.insert(0, str(ROOT / "experiments"))
+    import _emu_bundle
+
+    b = _emu_bundle.load_bundle(next(EMU.glob("*_bndl.json")))
+    t, fm, _ = b["fms"]
+    track = ft.measure_formants(b["samples"], b["rate"], t)
+    vowels = {"O", "U", "i:", "e:", "6", "aU", "u:", "E", "a:", "@"}
+    label = np.full(t.shape, "", dtype=object)
+    for start, end, lab in b["segments"]:
+        label[(t >= start) & (t < end)] = lab
+    scored = np.isin(label, list(vowels)) & track.reliable & np.all(fm[:, :3] > 0, axis=1)
+    assert scored.sum() > 50
+    diff = np.median(np.abs(track.frequency[scored] / fm[scored, :3] - 1), axis=0)
+    assert diff[0] < 0.15 and diff[1] < 0.03 and diff[2] < 0.03
