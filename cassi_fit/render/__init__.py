@@ -54,9 +54,11 @@ from ._pieces import MATERIAL_COLOURS as MATERIAL_COLOURS
 from ._pieces import SKINS as SKINS
 from ._pieces import PieceInfo as PieceInfo
 from ._pieces import triangle_winding as triangle_winding
+from ._pieces import vertex_colours_srgb as vertex_colours_srgb
 from ._scene import Markers as Markers
 from ._scene import MeshModel as MeshModel
 from ._scene import Renderer as Renderer
+from ._scene import view_cameras as view_cameras
 from ._section import SECTION_VIEW as SECTION_VIEW
 from ._section import Section as Section
 from ._section import midsagittal_figure as midsagittal_figure
@@ -85,4 +87,6 @@ __all__ = [
     "section_polylines",
     "section_segments",
     "triangle_winding",
+    "vertex_colours_srgb",
+    "view_cameras",
 ]

@@ -339,3 +339,24 @@ def _model_arrays(model):
     if face_material.shape != (len(faces),) or face_material.max() >= len(materials):
         raise CassiError("render: model face_material must be (F,) indices into MATERIALS")
     return rest, faces, face_material, tuple(materials)
+
+
+def vertex_colours_srgb(model) -> np.ndarray:
+    """(V, 3) sRGB in [0, 1] per vertex, as the renderer colours the model: each material's
+    colour (:data:`MATERIAL_COLOURS`), the eyes' iris and pupil and the skin's hair (blended
+    per vertex); for drawing the model elsewhere (the one-file viewer). numpy only."""
+    rest, faces, face_material, materials = _model_arrays(model)
+    linear = np.tile(np.asarray(_linear(MATERIAL_COLOURS["skin"])), (len(rest), 1))
+    for m, name in enumerate(materials):
+        used = faces[face_material == m].ravel()
+        linear[used] = _linear(MATERIAL_COLOURS.get(name, (0.7,) * 3))
+    if "eye" in materials:
+        iris = _iris_factors(rest, faces, face_material, materials.index("eye"))
+        if iris is not None:
+            linear *= iris[:, :3]
+    hair = _hair_factors(len(rest), getattr(model, "fields", None))
+    if hair is not None:
+        skin = np.unique(faces[face_material == materials.index("skin")])
+        share = np.clip(hair[skin, 3], 0.0, 1.0)[:, None]  # 0.5 + distance / edge
+        linear[skin] *= 1.0 - share + share * hair[skin, :3]
+    return np.clip(linear, 0.0, 1.0) ** (1 / 2.2)
