@@ -135,6 +135,9 @@ if TYPE_CHECKING:
     from .recording_video import subject_traces as subject_traces
     from .recording_video import write_animation as write_animation
     from .recording_video import write_recording_video as write_recording_video
+    from .viewer import ViewerPage as ViewerPage
+    from .viewer import view as view
+    from .viewer import write_view as write_view
     from .render import Renderer as Renderer
     from .render import midsagittal_figure as midsagittal_figure
     from .reports import jaw_comparison_plot as jaw_comparison_plot
@@ -303,6 +306,9 @@ _PUBLIC = {
     # video (outputs)
     "write_animation": "recording_video",
     "write_recording_video": "recording_video",
+    "view": "viewer",
+    "write_view": "viewer",
+    "ViewerPage": "viewer",
     "subject_traces": "recording_video",
     # reports (outputs)
     "write_penetration_csv": "reports",
@@ -357,6 +363,7 @@ __all__ = [
     "with_pharynx",
     "RunSpec", "run_spec", "CalibrationFiles", "run_recording", "RecordingRun",
     "write_recording_video",
+    "view", "write_view", "ViewerPage",
     "write_animation", "write_calibration", "write_headmeasures", "write_lab", "write_outline",
     "write_penetration_csv", "write_report", "write_table", "write_textgrid", "write_txy",
 ]

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from cassi_fit import synth
+from cassi_fit import cli, synth
 from cassi_fit.dataset import Dataset
-from cassi_fit.labels import Labels
-from cassi_fit.viewer import decode_motion, encode_motion, view
+from cassi_fit.labels import Labels, write_lab
+from cassi_fit.viewer import ViewerPage, decode_motion, encode_motion
 from cassi_fit.viewer._browser import browser_missing, chromium, open_page
 from cassi_fit.viewer._encode import TOLERANCE_MM
 
@@ -85,31 +85,36 @@ def test_a_still_face_and_bad_frames():
 # ------------------------------------------------------------------ the page
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
+    """The synthetic sentence with its sound, and phone labels written beside it."""
     root = synth.generate_corpus(tmp_path_factory.mktemp("corpus"), n_subjects=1,
                                  tasks=[synth.SENTENCE_TASK], audio=True)  # fmt: skip
     dataset = Dataset(root)
-    return dataset.load(dataset.subjects()[0], synth.SENTENCE_TASK)
+    recording = dataset.load(dataset.subjects()[0], synth.SENTENCE_TASK)
+    write_lab(recording.path.with_suffix(".lab"), _labels(recording))
+    return recording
+
+
+def _labels(recording):
+    """Four labels over the recording (made here: the synthetic corpus writes none)."""
+    t = np.asarray(recording.track.times)
+    edges = np.round(np.linspace(t[0], t[-1], 5), 4)
+    return Labels(edges[:-1].copy(), edges[1:].copy(), ("aa", "bb", "cc", "dd"), "labels")
 
 
 @pytest.fixture(scope="module")
 def run(recording):
+    """The run the page shows, in this process (its vertices for the toolkit's render)."""
     from cassi_fit.pipeline import run_recording
 
     return run_recording(recording, stride=1)
 
 
-def _labels(run):
-    """Four labels over the recording (made here: the synthetic corpus writes none)."""
-    t = np.asarray(run.animation.times)
-    edges = np.linspace(t[0], t[-1], 5)
-    return Labels(edges[:-1].copy(), edges[1:].copy(), ("aa", "bb", "cc", "dd"), "phones")
-
-
 @pytest.fixture(scope="module")
-def page(run, tmp_path_factory):
-    page = view(run, labels=_labels(run))
-    path = page.save(tmp_path_factory.mktemp("page") / "talk.html")
-    return page, path
+def page(recording, run, tmp_path_factory):
+    """``cassi view RECORDING --out talk.html``, after the run above (compiled once)."""
+    path = tmp_path_factory.mktemp("page") / "talk.html"
+    assert cli.main(["view", str(recording.path), "--out", str(path)]) == 0
+    return path
 
 
 def _data(html):
@@ -117,8 +122,8 @@ def _data(html):
     return json.loads(blob.group(1))
 
 
-def test_page_holds_every_data_line_the_sound_and_says_what_it_is(page, run, recording):
-    page, path = page
+def test_page_holds_every_data_line_the_sound_and_says_what_it_is(page, run, recording, capsys):
+    path = page
     html = path.read_text()
     data = _data(html)
     assert data["meta"]["frames"] == run.animation.n_frames
@@ -136,8 +141,19 @@ def test_page_holds_every_data_line_the_sound_and_says_what_it_is(page, run, rec
     assert str(path.parent) not in html  # no machine's path in the page
     # small enough to e-mail: at most 15 MB for 5 s (this recording is about 4 s)
     seconds = float(run.animation.times[-1] - run.animation.times[0])
-    assert page.size_bytes <= 15e6 * seconds / 5
-    assert "<iframe srcdoc=" in page._repr_html_()
+    assert path.stat().st_size <= 15e6 * seconds / 5
+    assert [t["name"] for t in data["labels"]] == ["labels"]  # the .lab beside it
+    inline = ViewerPage(html, data["meta"])._repr_html_()  # what Jupyter shows
+    assert inline.startswith("<iframe srcdoc=") and "&lt;script" in inline
+
+
+def test_cli_refuses_a_wrong_suffix_and_an_existing_page(page, recording, capsys):
+    assert cli.main(["view", str(recording.path), "--out", str(page.with_suffix(".png"))]) != 0
+    assert ".html" in capsys.readouterr().err
+    before = page.read_bytes()
+    assert cli.main(["view", str(recording.path), "--out", str(page)]) != 0
+    assert "exists" in capsys.readouterr().err
+    assert page.read_bytes() == before
 
 
 # ------------------------------------------------------------------ in the browser
@@ -151,15 +167,21 @@ def browser():
 
 @pytest.fixture(scope="module")
 def tab(browser, page):
-    tab, errors = open_page(browser, page[1])
+    tab, errors = open_page(browser, page)
     yield tab, errors
     assert errors == []  # nothing blocked, no console or page error, over every test
 
 
-def _canvas(tab, selector="#cassi-3d"):
+def _canvas(tab):
+    """The 3D view's pixels as drawn (its drawing buffer, kept), (H, W, 3) int."""
+    import base64
+    import io
+
     import imageio.v3 as iio
 
-    return iio.imread(tab.locator(selector).screenshot())[..., :3].astype(int)
+    url = tab.evaluate("cassiViewer.scene.renderer.domElement.toDataURL('image/png')")
+    png = base64.b64decode(url.split(",", 1)[1])
+    return iio.imread(io.BytesIO(png), extension=".png")[..., :3].astype(int)
 
 
 def _show(tab, frame, preset):
@@ -280,7 +302,7 @@ def test_each_toggle_changes_what_is_drawn(tab, run):
 def test_clicking_a_label_moves_the_scrubber_to_its_start(tab, run):
     tab, _ = tab
     times = np.asarray(run.animation.times)
-    labels = _labels(run)
+    labels = _labels(run.recording)
     tab.locator(".cassi-label", has_text="cc").click()
     tab.wait_for_function("cassiViewer.time >= %r" % (float(labels.starts[2]) - 1e-9))
     frame = tab.evaluate("Number(document.getElementById('cassi-scrub').value)")
@@ -295,7 +317,7 @@ def test_without_webgl_the_page_says_so(browser, page):
     other = browser.browser_type.launch(executable_path=chromium_path(), headless=True,
                                         args=[*CHROMIUM_ARGS, "--disable-3d-apis"])
     try:
-        tab, errors = open_page(other, page[1])
+        tab, errors = open_page(other, page)
         note = tab.locator("#cassi-nogl")
         assert note.is_visible() and "cannot be drawn" in note.inner_text()
         assert tab.evaluate("cassiViewer.n") > 0  # the rest of the page works
