@@ -135,9 +135,6 @@ if TYPE_CHECKING:
     from .recording_video import subject_traces as subject_traces
     from .recording_video import write_animation as write_animation
     from .recording_video import write_recording_video as write_recording_video
-    from .viewer import ViewerPage as ViewerPage
-    from .viewer import view as view
-    from .viewer import write_view as write_view
     from .render import Renderer as Renderer
     from .render import midsagittal_figure as midsagittal_figure
     from .reports import jaw_comparison_plot as jaw_comparison_plot
@@ -163,6 +160,9 @@ if TYPE_CHECKING:
     from .txy import read_txy as read_txy
     from .txy import require_tracked as require_tracked
     from .txy import write_txy as write_txy
+    from .viewer import ViewerPage as ViewerPage
+    from .viewer import view as view
+    from .viewer import write_view as write_view
 
 _PUBLIC = {
     # errors (base)

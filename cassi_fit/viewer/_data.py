@@ -20,7 +20,14 @@ from typing import Any
 import numpy as np
 
 from ..pellets import PELLET_NAMES
-from ..render import MATERIAL_COLOURS, PAPER_VIEWS, vertex_colours_srgb, view_cameras
+from ..render import (
+    HAIR_COLOUR,
+    MATERIAL_COLOURS,
+    PAPER_VIEWS,
+    hair_share,
+    vertex_colours_srgb,
+    view_cameras,
+)
 from ._encode import TOLERANCE_MM, encode_motion
 
 #: The page's parts: each a toggle in the page, made of the model's materials.
@@ -60,9 +67,14 @@ def mesh_data(model: Any) -> dict[str, Any]:
         chosen = np.isin(material, [MATERIALS.index(n) for n in names if n in MATERIALS])
         if chosen.any():
             parts[part] = array(faces[chosen].reshape(-1), "u4")
-    colours = np.round(255 * vertex_colours_srgb(model)).astype(np.uint8)
-    return {"rest": array(np.asarray(model.vertices, np.float32).reshape(-1), "f4"),
-            "colors": array(colours.reshape(-1), "u1"), "parts": parts}  # fmt: skip
+    colours = np.round(255 * vertex_colours_srgb(model, hair=False)).astype(np.uint8)
+    out = {"rest": array(np.asarray(model.vertices, np.float32).reshape(-1), "f4"),
+           "colors": array(colours.reshape(-1), "u1"), "parts": parts}  # fmt: skip
+    share = hair_share(model)
+    if share is not None:  # clipped per pixel by the page's shader: the renderer's sharp edge
+        out["hair"] = array(share, "f4")
+        out["hair_colour"] = list(HAIR_COLOUR)
+    return out
 
 
 def _section_box(model: Any, pellets: np.ndarray, traces: dict) -> list[float]:

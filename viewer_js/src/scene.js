@@ -34,6 +34,26 @@ function toWorld(p) {
   return new Vector3(p[0], p[1], -p[2]);
 }
 
+// The skin's hair as the toolkit's renderer draws it: the hair's share of the colour
+// interpolated across each triangle and clipped per pixel (a sharp edge along a line,
+// not along the triangles).
+function withHair(geometry, material, mesh) {
+  geometry.setAttribute("hair", new BufferAttribute(mesh.hair, 1));
+  const colour = new Color().setRGB(...mesh.hair_colour, "srgb");
+  material.onBeforeCompile = (shader) => {
+    shader.uniforms.hairColour = { value: colour };
+    shader.vertexShader = shader.vertexShader
+      .replace("#include <common>", "#include <common>\nattribute float hair;\nvarying float vHair;")
+      .replace("#include <begin_vertex>", "#include <begin_vertex>\nvHair = hair;");
+    shader.fragmentShader = shader.fragmentShader
+      .replace("#include <common>", "#include <common>\nvarying float vHair;\nuniform vec3 hairColour;")
+      .replace(
+        "#include <color_fragment>",
+        "#include <color_fragment>\ndiffuseColor.rgb = mix(diffuseColor.rgb, hairColour, clamp(vHair, 0.0, 1.0));",
+      );
+  };
+}
+
 export class FaceScene {
   constructor(canvas, data, background) {
     this.data = data;
@@ -79,6 +99,7 @@ export class FaceScene {
       geometry.setIndex(new BufferAttribute(faces, 1));
       geometry.computeVertexNormals();
       const material = new MeshLambertMaterial({ vertexColors: true, side: DoubleSide });
+      if (name === "skin" && mesh.hair) withHair(geometry, material, mesh);
       const part = new Mesh(geometry, material);
       part.name = name;
       this.root.add(part);
@@ -90,6 +111,7 @@ export class FaceScene {
     const p = this.data.pellets;
     const radius = this.data.views.marker_radius_mm;
     const sphere = new SphereGeometry(radius, 12, 8);
+    const small = new SphereGeometry(0.7 * radius, 12, 8); // the measured one shows around it
     const make = (color) => new MeshBasicMaterial({ color: new Color(color) });
     this.measured = new Group();
     this.model = new Group();
@@ -108,7 +130,7 @@ export class FaceScene {
       line.frustumCulled = false;
       this.measured.add(line);
       this.trails.push([j, line]);
-      const site = new Mesh(sphere, make("#1ab838"));
+      const site = new Mesh(small, make("#1ab838"));
       site.renderOrder = 2;
       this.model.add(site);
       this.modelDots.push([j, site]);
@@ -168,6 +190,12 @@ export class FaceScene {
         m.transparent = mode === "see-through";
         m.opacity = mode === "see-through" ? 0.3 : 1.0;
         m.depthWrite = mode !== "see-through";
+      }
+      if (name === "palate") {
+        // hidden skin (the top view): the palate see-through over the tongue, as the toolkit draws it
+        m.transparent = mode === "hidden";
+        m.opacity = mode === "hidden" ? 0.35 : 1.0;
+        m.depthWrite = mode !== "hidden";
       }
       m.clippingPlanes = mode === "cut" && CUT_PARTS.has(name) ? [this.cut] : [];
       m.needsUpdate = true;
