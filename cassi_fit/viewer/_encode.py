@@ -6,9 +6,10 @@ so its vertex motion is close to a low-dimensional linear space. Per animation:
 * the **moving vertices**: those that move by more than ``still_mm`` from the rest mesh in
   any frame (the forehead, eyes, upper teeth and palate never move and are not stored);
 * their displacements from rest, one row per frame, ``(m, 3n)``, **PCA-compressed**: the
-  mean row plus ``k`` principal components (the eigenvectors of a Gram matrix), ``k`` the fewest whose reconstruction
-  error stays within ``tolerance_mm`` at every vertex of every frame (checked on the
-  quantised numbers, not estimated), at most ``max_components``;
+  mean row plus ``k`` principal components (eigenvectors of a Gram matrix), ``k`` the
+  fewest of the ranks tried (1, 2, 3, 4, 6, 9, 13, ..., by bisection) whose
+  reconstruction error stays within ``tolerance_mm`` at every vertex of every frame
+  (checked on the quantised numbers, not estimated), at most ``max_components``;
 * basis rows and coefficients **quantised to int16**, one scale per component.
 
 Every frame is kept (no keyframes, no decimation). The page's script rebuilds a frame as
@@ -71,24 +72,40 @@ def encode_motion(
     rows = displacement[:, moving].reshape(len(frames), -1)
     mean = rows.mean(axis=0).astype(np.float32)
     centred = rows - mean
-    k, basis_q, basis_scale, coeff_q, coeff_scale = 0, *_quantise(centred[:0]), \
-        np.zeros((len(rows), 0), np.int16), np.zeros(0, np.float32)
-    max_error = float(np.abs(centred).max()) if centred.size else 0.0
-    if max_error > tolerance_mm:
+    best = (0, *_quantise(centred[:0]), np.zeros((len(rows), 0), np.int16),
+            np.zeros(0, np.float32), float(np.abs(centred).max()) if centred.size else 0.0)
+    if best[-1] > tolerance_mm:
         vt = _principal_axes(centred, max_components)
-        for k in _candidate_ranks(len(vt)):
-            basis_q, basis_scale = _quantise(vt[:k])
-            basis = basis_q.astype(np.float64) * basis_scale[:, None].astype(np.float64)
-            coeff = np.linalg.solve(basis @ basis.T, basis @ centred.T)  # (k, m), least squares
-            quantised, coeff_scale = _quantise(coeff)
-            coeff_q = np.ascontiguousarray(quantised.T)
-            error = rows - _rebuild(mean, coeff_q, coeff_scale, basis_q, basis_scale)
-            max_error = float(np.abs(error).max())
-            if max_error <= tolerance_mm:
-                break
+        ranks = _candidate_ranks(len(vt))
+        lo, hi = 0, len(ranks) - 1  # the first rank that meets the tolerance: bisection
+        best = None
+        while lo <= hi:
+            mid = (lo + hi) // 2
+            trial = _with_rank(ranks[mid], vt, rows, centred, mean)
+            if trial[-1] <= tolerance_mm:
+                best, hi = trial, mid - 1
+            else:
+                lo = mid + 1
+        if best is None:  # not met even by the most components: say how far
+            best = _with_rank(ranks[-1], vt, rows, centred, mean)
+    k, basis_q, basis_scale, coeff_q, coeff_scale, max_error = best
     return {"moving": moving.astype(np.uint32), "mean": mean, "basis": basis_q,
             "basis_scale": basis_scale, "coeff": coeff_q, "coeff_scale": coeff_scale,
             "n_components": int(k), "max_error_mm": max_error}  # fmt: skip
+
+
+def _with_rank(k: int, vt: np.ndarray, rows: np.ndarray, centred: np.ndarray,
+               mean: np.ndarray) -> tuple:  # fmt: skip
+    """``(k, basis_q, basis_scale, coeff_q, coeff_scale, max error mm)`` with ``k`` axes:
+    the coefficients are the least-squares fit to the quantised basis, and the error is that
+    of the quantised numbers, as the page rebuilds them."""
+    basis_q, basis_scale = _quantise(vt[:k])
+    basis = basis_q.astype(np.float64) * basis_scale[:, None].astype(np.float64)
+    coeff = np.linalg.solve(basis @ basis.T, basis @ centred.T)  # (k, m)
+    quantised, coeff_scale = _quantise(coeff)
+    coeff_q = np.ascontiguousarray(quantised.T)
+    error = rows - _rebuild(mean, coeff_q, coeff_scale, basis_q, basis_scale)
+    return k, basis_q, basis_scale, coeff_q, coeff_scale, float(np.abs(error).max())
 
 
 def _principal_axes(centred: np.ndarray, limit: int) -> np.ndarray:
