@@ -4,6 +4,7 @@
 #                  workers, one test file each at a time, each on its share of the cores)
 #   make lint   -- ruff, the import-linter contracts and the public annotations check
 #   make browser -- Debian's chromium for the viewer's browser tests (make test runs it first)
+#   make notebooks -- run the notebooks and store them with their outputs
 #   make docs   -- the API reference from the docstrings, into build/docs_site/ (index.html)
 PYTHON ?= python3
 VENV   ?= .venv
@@ -66,6 +67,11 @@ experiments: $(STAMP)
 	else echo "real_referee: skipped, no real recording (make experiments XRMB_JW11=DIR)"; fi
 	$(BIN)/python experiments/mistrack_detection.py --docs docs/generated --force
 	$(BIN)/python experiments/quote_tables.py
+
+# The notebooks stored with their outputs (figures, tables, the inline viewer), so that a code
+# host's web page shows them; tests/test_notebooks_stored.py checks they are current.
+notebooks: $(STAMP)
+	$(BIN)/python notebooks/store_outputs.py
 
 # ruff; the import-linter contracts (layers, no cycles; pyproject.toml); the public surface's
 # type annotations (tests/test_architecture.py, which also runs the contracts).
