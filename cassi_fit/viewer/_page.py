@@ -100,6 +100,10 @@ def _header(meta: dict[str, Any], sound_note: str) -> str:
     )
 
 
+def _error_words(error_mm: float) -> str:
+    return "under 0.001 mm" if error_mm < 0.0005 else f"at most {error_mm:.3f} mm"
+
+
 def page_html(data: dict[str, Any], *, sound: bytes | None = None,
               sound_note: str = "no sound") -> str:  # fmt: skip
     """The page's HTML of ``data`` (:func:`cassi_fit.viewer._data.page_data`) with the
@@ -113,7 +117,7 @@ def page_html(data: dict[str, Any], *, sound: bytes | None = None,
     footer = (
         f"Every data line is a frame; the face's motion is stored PCA-compressed "
         f"({meta['components']} components over {meta['moving_vertices']} moving vertices, "
-        f"at most {meta['max_error_mm']:.3f} mm from the toolkit's vertices). Written by "
+        f"{_error_words(meta['max_error_mm'])} from the toolkit's vertices). Written by "
         "cassi_fit (cassi view); drawn with three.js (MIT licence)."
     )
     title = html.escape(f"cassi_fit: {meta['subject']} {meta['task']}")
@@ -191,31 +195,56 @@ def view(recording: Any, spec: Any = None, *, labels: Any = True, sound: bool = 
     """The viewer page of a recording: ``recording`` is a ``pipeline.RecordingRun``, a
     ``dataset.Recording`` or a recording file's path (run with ``spec``, a
     ``run_spec.RunSpec`` or a preset's name, and ``changes``; every data line a frame
-    unless ``stride=`` says otherwise). ``labels``: True for the labels beside the
-    recording (``labels.labels_for``, checked against its length), a ``labels.Labels`` or
-    a list of them, or None/False. ``sound``: embed the recording's ``.wav`` (checked
-    against its length, ``sound.check_sound``); ``accept_mismatch`` keeps sound or labels
+    unless ``stride=`` says otherwise). ``labels``: True for the recording's labels (a
+    file beside it, or the tiers inside the file where this version reads them; checked
+    against its length), a ``labels.Labels`` or a list of them, or None/False. ``sound``:
+    embed the recording's sound (the ``.wav`` beside it, or the sound inside the file where
+    this version reads it; checked against its length); ``accept_mismatch`` keeps sound or labels
     whose length does not fit (with a warning). In Jupyter the page shows inline; save it
     with ``.save(path)``."""
-    from ..sound import check_sound, recording_seconds
+    from ..sound import recording_seconds
 
     run = _run_of(recording, spec, changes)
     rec = run.recording
     length_s = recording_seconds(rec.track.times)
     if labels is True:
-        from ..labels import labels_for
-
-        labels = (labels_for(rec.path, recording_s=length_s, accept_mismatch=accept_mismatch)
-                  if rec.path is not None else None)  # fmt: skip
-    wav, note = None, "no sound beside this recording"
-    if sound and rec.audio is not None:
-        checked = check_sound(rec.audio, length_s, accept_mismatch=accept_mismatch)
-        wav = Path(rec.audio).read_bytes()
-        note = f"sound {Path(rec.audio).name} ({checked.sound_s:.2f} s, {checked.rate_hz} Hz)"
-    elif not sound:
-        note = "sound left out"
+        labels = _recording_labels(rec, length_s, accept_mismatch)
+    wav, note = _sound(rec, length_s, accept_mismatch) if sound else (None, "sound left out")
     data = page_data(run, labels=_tiers(labels or None))
     return ViewerPage(page_html(data, sound=wav, sound_note=note), data["meta"])
+
+
+def _recording_labels(rec: Any, length_s: float, accept_mismatch: bool) -> Any:
+    """The labels every output uses: ``labels.recording_labels`` where this version has it
+    (a file beside, else the tiers inside the recording file), else the file beside."""
+    from .. import labels as labels_module
+
+    inside_too = getattr(labels_module, "recording_labels", None)
+    if inside_too is not None:
+        return inside_too(rec, recording_s=length_s, accept_mismatch=accept_mismatch)
+    if rec.path is None:
+        return None
+    return labels_module.labels_for(rec.path, recording_s=length_s,
+                                    accept_mismatch=accept_mismatch)  # fmt: skip
+
+
+def _sound(rec: Any, length_s: float, accept_mismatch: bool) -> tuple[bytes | None, str]:
+    """``(.wav bytes or None, the header's words)``: the recording's sound (``Recording.sound``
+    where this version has it: the ``.wav`` beside, else the sound inside the file; else
+    the ``.wav`` beside), checked against its length."""
+    from ..sound import check_sound
+
+    held = getattr(rec, "sound", None)
+    if held is not None and hasattr(held, "check"):
+        checked = held.check(length_s, accept_mismatch=accept_mismatch)
+        data = held.data if held.data is not None else Path(held.path).read_bytes()
+        name = Path(held.path).name if held.path is not None else held.source
+        return data, f"sound {name} ({checked.sound_s:.2f} s, {checked.rate_hz} Hz)"
+    if rec.audio is None:
+        return None, "no sound with this recording"
+    checked = check_sound(rec.audio, length_s, accept_mismatch=accept_mismatch)
+    return (Path(rec.audio).read_bytes(),
+            f"sound {Path(rec.audio).name} ({checked.sound_s:.2f} s, {checked.rate_hz} Hz)")
 
 
 def write_view(path: str | os.PathLike, recording: Any, spec: Any = None, *,
