@@ -326,3 +326,19 @@ def test_without_webgl_the_page_says_so(browser, page):
         assert errors == []
     finally:
         other.close()
+
+
+def test_stepping_and_slowing_down(tab, run):
+    tab, _ = tab
+    tab.evaluate("cassiViewer.seekFrame(10)")
+    tab.locator("#cassi-fwd").click()
+    assert tab.evaluate("cassiViewer.frame") == 11  # one data line on (stride 1)
+    tab.locator("#cassi-back").click()
+    tab.locator("#cassi-back").click()
+    assert tab.evaluate("cassiViewer.frame") == 9
+    for speed in ("0.5", "0.25", "1"):
+        tab.locator("#cassi-speed").select_option(speed)
+        assert tab.evaluate("document.getElementById('cassi-audio').playbackRate") == float(speed)
+    tab.locator("[data-preset=top]").click()
+    assert tab.evaluate("cassiViewer.preset") == "top"
+    assert tab.locator("#cassi-skin").input_value() == "hidden"
