@@ -342,3 +342,14 @@ def test_stepping_and_slowing_down(tab, run):
     tab.locator("[data-preset=top]").click()
     assert tab.evaluate("cassiViewer.preset") == "top"
     assert tab.locator("#cassi-skin").input_value() == "hidden"
+
+
+def test_play_and_pause(tab):
+    tab, _ = tab
+    tab.evaluate("cassiViewer.seekFrame(0)")
+    tab.locator("#cassi-play").click()
+    assert tab.evaluate("cassiViewer.playing") is True
+    assert tab.locator("#cassi-play").inner_text() == "pause"
+    tab.locator("#cassi-play").click()
+    assert tab.evaluate("cassiViewer.playing") is False
+    assert tab.evaluate("document.getElementById('cassi-audio').paused") is True
