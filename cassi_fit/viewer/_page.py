@@ -89,13 +89,16 @@ def _header(meta: dict[str, Any], sound_note: str) -> str:
     e = html.escape
     what = (f"{e(meta['format'])} recording {e(meta['file'])}" if meta["file"]
             else f"{e(meta['format'])} recording")  # fmt: skip
+    lines = ("every data line" if meta["stride"] == 1
+             else f"one in {meta['stride']} data lines")  # fmt: skip
+    mode = "" if meta["calibration"] == "cassi mode" else f" ({e(meta['mode'])} mode)"
     return (
         f"<header><h1>{e(meta['subject'])} {e(meta['task'])}</h1><p>"
         f"subject <b>{e(meta['subject'])}</b> &middot; task <b>{e(meta['task'])}</b> &middot; "
         f"{what} &middot; {meta['rate_hz']:.1f} Hz, {meta['frames']} frames "
-        f"(every {'data line' if meta['stride'] == 1 else str(meta['stride']) + 'th line'}) "
+        f"({lines}) "
         f"&middot; jaw method <b>{e(meta['jaw_method'])}</b> &middot; calibration "
-        f"<b>{e(meta['calibration'])}</b> ({e(meta['mode'])} mode) &middot; {e(sound_note)}"
+        f"<b>{e(meta['calibration'])}</b>{mode} &middot; {e(sound_note)}"
         "</p></header>"
     )
 
