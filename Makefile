@@ -3,6 +3,8 @@
 #   make test   -- build the venv if needed, then run the whole test suite (two pytest-xdist
 #                  workers, one test file each at a time, each on its share of the cores)
 #   make lint   -- ruff, the import-linter contracts and the public annotations check
+#   make browser -- Debian's chromium for the viewer's browser tests (make test runs it first)
+#   make notebooks -- run the notebooks and store them with their outputs
 #   make docs   -- the API reference from the docstrings, into build/docs_site/ (index.html)
 PYTHON ?= python3
 VENV   ?= .venv
@@ -12,7 +14,7 @@ STAMP  := $(VENV)/.installed
 # beside the checkout (../shared); `make experiments XRMB_JW11=DIR` names another.
 XRMB_JW11 ?= $(wildcard ../shared/data/xrmb_jw11)
 
-.PHONY: demo test venv pictures bench experiments lint docs clean
+.PHONY: demo test venv pictures bench experiments lint docs clean browser notebooks
 
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -26,12 +28,22 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/cassi demo --out demo_output
 
-test: $(STAMP)
+# The viewer's browser tests (tests/test_viewer.py) drive Debian's chromium through Playwright
+# for Python (a test extra; no browser is downloaded). Installed here when missing (apt-get,
+# as root); where it cannot be, those tests skip with one line saying why.
+browser:
+	@command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1 || \
+	  { (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) \
+	      >/dev/null 2>&1 && echo "browser: installed Debian's chromium" || \
+	    echo "browser: chromium could not be installed here; the viewer's browser tests will skip"; }
+
+test: $(STAMP) browser
 	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadfile
 
-pictures: $(STAMP)
+pictures: $(STAMP) browser
 	$(BIN)/python model/render_pictures.py --out model/pictures
 	$(BIN)/python model/render_face.py --out model/pictures
+	$(BIN)/python experiments/viewer_screenshot.py --out docs/images/viewer.png
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_jaw.py
@@ -58,6 +70,11 @@ experiments: $(STAMP)
 	$(BIN)/python experiments/placement.py --docs docs/generated --xrmb $(XRMB_JW11)
 	$(BIN)/python experiments/channel_identification.py --docs docs/generated
 	$(BIN)/python experiments/quote_tables.py
+
+# The notebooks stored with their outputs (figures, tables, the inline viewer), so that a code
+# host's web page shows them; tests/test_notebooks_stored.py checks they are current.
+notebooks: $(STAMP)
+	$(BIN)/python notebooks/store_outputs.py
 
 # ruff; the import-linter contracts (layers, no cycles; pyproject.toml); the public surface's
 # type annotations (tests/test_architecture.py, which also runs the contracts).

@@ -168,6 +168,9 @@ if TYPE_CHECKING:
     from .txy import read_txy as read_txy
     from .txy import require_tracked as require_tracked
     from .txy import write_txy as write_txy
+    from .viewer import ViewerPage as ViewerPage
+    from .viewer import view as view
+    from .viewer import write_view as write_view
 
 _PUBLIC = {
     # errors (base)
@@ -320,6 +323,9 @@ _PUBLIC = {
     # video (outputs)
     "write_animation": "recording_video",
     "write_recording_video": "recording_video",
+    "view": "viewer",
+    "write_view": "viewer",
+    "ViewerPage": "viewer",
     "subject_traces": "recording_video",
     # reports (outputs)
     "write_penetration_csv": "reports",
@@ -374,6 +380,7 @@ __all__ = [
     "with_pharynx",
     "RunSpec", "run_spec", "CalibrationFiles", "run_recording", "RecordingRun",
     "write_recording_video",
+    "view", "write_view", "ViewerPage",
     "write_animation", "write_calibration", "write_headmeasures", "write_lab", "write_outline",
     "write_penetration_csv", "write_report", "write_table", "write_textgrid", "write_txy",
 ]

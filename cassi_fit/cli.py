@@ -37,6 +37,7 @@ SUBCOMMANDS = (
     "jaw",
     "animate",
     "export",
+    "view",
     "calibrate",
     "evaluate",
     "acoustics",

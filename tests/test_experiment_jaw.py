@@ -215,9 +215,12 @@ def test_notebook_runs_and_shows_figures(tmp_path):
     NotebookClient(nb, timeout=None, kernel_name="python3",
                    resources={"metadata": {"path": str(ROOT / "notebooks")}}).execute()
     outputs = [o for cell in nb.cells if cell.cell_type == "code" for o in cell.outputs]
-    assert sum("image/png" in o.get("data", {}) for o in outputs) == 2
+    # the experiment's two figures and one recording's jaw plot
+    assert sum("image/png" in o.get("data", {}) for o in outputs) == 3
     text = "".join(o.get("text", "") for o in outputs)
     assert "closed-form pivot" in text and "smooth-pivot" in text
+    assert "angle error (deg): median" in text  # the methods against the generator's truth
+    assert any("| fixed-pivot |" in o.get("data", {}).get("text/markdown", "") for o in outputs)
 
 
 def test_existing_outputs_are_kept_unless_forced(tmp_path, capsys):

@@ -107,6 +107,9 @@ def _run_installed(target: Path, cwd: Path, *args: str) -> subprocess.CompletedP
 def test_wheel_contains_the_model(installed):
     for name in ("vertices.csv", "faces.csv", "model.json", "parameters.csv"):
         assert (installed / "cassi_fit" / "model" / name).is_file(), name
+    # the viewer's inline script and three.js's licence (cassi view needs no network)
+    for name in ("viewer.js", "THREE_LICENSE"):
+        assert (installed / "cassi_fit" / "viewer" / "assets" / name).is_file(), name
 
 
 LOAD = """

@@ -49,14 +49,18 @@ from ._gl import ensure_headless_gl as ensure_headless_gl
 from ._gl import probe_gl_platform as probe_gl_platform
 from ._images import add_caption as add_caption
 from ._images import save_png as save_png
+from ._pieces import HAIR_COLOUR as HAIR_COLOUR
 from ._pieces import MARKER_COLOURS as MARKER_COLOURS
 from ._pieces import MATERIAL_COLOURS as MATERIAL_COLOURS
 from ._pieces import SKINS as SKINS
 from ._pieces import PieceInfo as PieceInfo
+from ._pieces import hair_share as hair_share
 from ._pieces import triangle_winding as triangle_winding
+from ._pieces import vertex_colours_srgb as vertex_colours_srgb
 from ._scene import Markers as Markers
 from ._scene import MeshModel as MeshModel
 from ._scene import Renderer as Renderer
+from ._scene import view_cameras as view_cameras
 from ._section import SECTION_VIEW as SECTION_VIEW
 from ._section import Section as Section
 from ._section import midsagittal_figure as midsagittal_figure
@@ -64,6 +68,7 @@ from ._section import section_polylines as section_polylines
 from ._section import section_segments as section_segments
 
 __all__ = [
+    "HAIR_COLOUR",
     "HEADLESS_PLATFORMS",
     "MARKER_COLOURS",
     "MATERIAL_COLOURS",
@@ -80,9 +85,12 @@ __all__ = [
     "choose_gl_platform",
     "midsagittal_figure",
     "ensure_headless_gl",
+    "hair_share",
     "probe_gl_platform",
     "save_png",
     "section_polylines",
     "section_segments",
     "triangle_winding",
+    "vertex_colours_srgb",
+    "view_cameras",
 ]

@@ -339,3 +339,44 @@ def _model_arrays(model):
     if face_material.shape != (len(faces),) or face_material.max() >= len(materials):
         raise CassiError("render: model face_material must be (F,) indices into MATERIALS")
     return rest, faces, face_material, tuple(materials)
+
+
+def vertex_colours_srgb(model, *, hair: bool = True) -> np.ndarray:
+    """(V, 3) sRGB in [0, 1] per vertex, as the renderer colours the model: each material's
+    colour (:data:`MATERIAL_COLOURS`), the eyes' iris and pupil and, with ``hair``, the
+    skin's hair blended per vertex (the renderer's edge is per pixel: draw
+    :func:`hair_share` to have it); for drawing the model elsewhere (the one-file viewer).
+    numpy only."""
+    rest, faces, face_material, materials = _model_arrays(model)
+    linear = np.tile(np.asarray(_linear(MATERIAL_COLOURS["skin"])), (len(rest), 1))
+    for m, name in enumerate(materials):
+        used = faces[face_material == m].ravel()
+        linear[used] = _linear(MATERIAL_COLOURS.get(name, (0.7,) * 3))
+    if "eye" in materials:
+        iris = _iris_factors(rest, faces, face_material, materials.index("eye"))
+        if iris is not None:
+            linear *= iris[:, :3]
+    share = hair_share(model) if hair else None
+    if share is not None:
+        share = np.clip(share, 0.0, 1.0)[:, None]
+        linear = linear * (1.0 - share) + share * np.asarray(_linear(HAIR_COLOUR))
+    return np.clip(linear, 0.0, 1.0) ** (1 / 2.2)
+
+
+#: The hair's colour (sRGB) where :func:`hair_share` reaches 1.
+HAIR_COLOUR = _HAIR_COLOUR
+
+
+def hair_share(model) -> np.ndarray | None:
+    """(V,) the hair's share of each skin vertex's colour before clipping to [0, 1]:
+    ``0.5 + distance / edge`` (the model's ``hair`` field, signed mm to the hair's edge);
+    interpolated across a triangle and clipped per pixel it draws the renderer's sharp
+    edge. 0 off the skin; None if the model has no hair."""
+    rest, faces, face_material, materials = _model_arrays(model)
+    factors = _hair_factors(len(rest), getattr(model, "fields", None))
+    if factors is None:
+        return None
+    out = np.zeros(len(rest))
+    skin = np.unique(faces[face_material == materials.index("skin")])
+    out[skin] = factors[skin, 3]
+    return out

@@ -190,13 +190,7 @@ class Renderer:
 
     def _fit(self, view, rest):
         """(R (3,3), mid (3,), lo (3,), extent (3,)) of the view's visible rest geometry."""
-        idx = np.unique(np.concatenate(
-            [p.vertex_index for p in self._pieces if view in p.views] or [np.arange(len(rest))]
-        ))  # fmt: skip
-        rotation = np.asarray(_VIEW_AXES[view], float)
-        q = rest[idx] @ rotation.T
-        lo, hi = q.min(axis=0), q.max(axis=0)
-        return rotation, (lo + hi) / 2, lo, np.maximum(hi - lo, 1e-9 * (1 + np.abs(hi)))
+        return _fit_view(self._pieces, view, rest)
 
     def _build_scene(self, background, samples):
         import pyrender
@@ -498,6 +492,42 @@ class Renderer:
     def __exit__(self, *exc: object) -> bool:
         self.close()
         return False
+
+
+def _fit_view(pieces, view, rest):
+    """(R (3,3), mid (3,), lo (3,), extent (3,)) of ``view``'s visible rest geometry."""
+    idx = np.unique(np.concatenate(
+        [p.vertex_index for p in pieces if view in p.views] or [np.arange(len(rest))]
+    ))  # fmt: skip
+    rotation = np.asarray(_VIEW_AXES[view], float)
+    q = rest[idx] @ rotation.T
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    return rotation, (lo + hi) / 2, lo, np.maximum(hi - lo, 1e-9 * (1 + np.abs(hi)))
+
+
+def view_cameras(model: MeshModel, views: Sequence[str] = PAPER_VIEWS,
+                 skin: str = "cut") -> dict[str, dict[str, Any]]:
+    """How a :class:`Renderer` frames each of ``views`` (numpy only, no OpenGL), for
+    drawing the same views elsewhere (the one-file viewer): per view, ``right``, ``up``
+    and ``toward`` (the camera) as model-frame unit vectors, ``centre`` (3,) mm of the
+    visible rest geometry and its ``extent`` (width, height) mm on screen; with
+    ``margin_mm`` (kept free around the bounds) and ``margin`` (the default fraction of
+    the image kept free on each side): the scale is
+    ``min(W / (width + 2 margin_mm), H / (height + 2 margin_mm)) * (1 - 2 margin)``."""
+    rest, faces, face_material, materials = _model_arrays(model)
+    views = tuple(v for v in views if v != SECTION_VIEW)
+    drawn, drawn_materials = _with_mouth_wall(
+        faces, face_material, materials, getattr(model, "regions", None)
+    )
+    pieces = _split_pieces(rest, faces, drawn, drawn_materials, views, skin, True,
+                           fields=getattr(model, "fields", None))  # fmt: skip
+    out: dict[str, dict[str, Any]] = {"margin_mm": _MARGIN_MM, "margin": 0.06}
+    for view in views:
+        rotation, mid, _, extent = _fit_view(pieces, view, rest)
+        out[view] = {"right": rotation[0].tolist(), "up": rotation[1].tolist(),
+                     "toward": rotation[2].tolist(), "centre": (rotation.T @ mid).tolist(),
+                     "extent": extent[:2].tolist()}  # fmt: skip
+    return out
 
 
 def _check_options(size, views, skin, background) -> tuple[tuple[int, int], tuple, str]:
