@@ -35,7 +35,8 @@ imported; ``_pieces`` cuts the mesh into drawable pieces (numpy); ``_section`` c
 at z = 0 and draws the midsagittal view (numpy and Pillow); ``_scene`` holds the
 :class:`Renderer` (cameras, layout, markers); ``_draw`` the shaders and the OpenGL calls
 (the only module that imports pyrender and OpenGL, when a Renderer is made); ``_images``
-captions and PNG files. Importing :mod:`cassi_fit.render` imports neither OpenGL nor
+captions and PNG files; ``_pool`` draws frames in worker processes, each with its own
+context (:class:`FramePool`). Importing :mod:`cassi_fit.render` imports neither OpenGL nor
 pyrender, JAX or Pillow.
 """
 
@@ -50,6 +51,7 @@ from ._gl import probe_gl_platform as probe_gl_platform
 from ._images import add_caption as add_caption
 from ._images import save_png as save_png
 from ._pieces import MARKER_COLOURS as MARKER_COLOURS
+from ._pool import FramePool as FramePool
 from ._pieces import MATERIAL_COLOURS as MATERIAL_COLOURS
 from ._pieces import SKINS as SKINS
 from ._pieces import PieceInfo as PieceInfo
@@ -68,6 +70,7 @@ __all__ = [
     "MARKER_COLOURS",
     "MATERIAL_COLOURS",
     "SKINS",
+    "FramePool",
     "VIEWS",
     "Markers",
     "MeshModel",

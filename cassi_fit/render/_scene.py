@@ -223,6 +223,8 @@ class Renderer:
         self._gl._renderer.samples = samples
 
     def _add_piece(self, pyrender, piece):
+        from . import _draw
+
         alpha = 0.35 if piece.glass else 1.0
         if piece.glass and piece.views == ("top",):  # the palate over the tongue's relief
             alpha = _TOP_GLASS_ALPHA
@@ -244,7 +246,7 @@ class Renderer:
         )
         piece.primitive.cassi_cull = piece.cull
         piece.mesh = pyrender.Mesh([piece.primitive])
-        self._scene.add(piece.mesh)
+        _draw.add_mesh(self._scene, piece.mesh)
 
     # -- per frame ---------------------------------------------------------------------
 
@@ -355,6 +357,8 @@ class Renderer:
         return np.concatenate(out) if out else np.zeros((0, 4, 4))
 
     def _marker_mesh(self, pyrender, label, poses):
+        from . import _draw
+
         colours = _EXTRA_MARKER_COLOURS
         colour = MARKER_COLOURS.get(label, colours[len(self._markers) % len(colours)])
         material = pyrender.MetallicRoughnessMaterial(
@@ -368,7 +372,7 @@ class Renderer:
             positions=positions, normals=normals, indices=faces, material=material, poses=poses
         )
         mesh = pyrender.Mesh([primitive])
-        self._scene.add(mesh)
+        _draw.add_mesh(self._scene, mesh)
         return mesh
 
     def _draw(self) -> np.ndarray:
