@@ -128,11 +128,10 @@ def frame_work(
     from .mistracks import mistrack_labels
     from .status import Status
 
-    if frames is None:
+    if frames is None:  # the animation frames themselves (the rate is not needed here)
         chosen = np.arange(animation.n_frames) if indices is None else np.fromiter(
             indices, np.int64)
-        frames = VideoFrames(frame_rate(animation.frame_step_s), chosen,
-                             np.asarray(animation.times, np.float64)[chosen])
+        frames = VideoFrames(Fraction(0), chosen, np.asarray(animation.times, np.float64)[chosen])
     vertices = np.asarray(animation.vertices)
     measured = np.asarray(animation.pellets_measured)
     model_sites = np.asarray(animation.pellets_model)

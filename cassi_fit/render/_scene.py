@@ -323,7 +323,9 @@ class Renderer:
         from . import _draw
 
         markers = {} if markers is None else dict(markers)
-        for label in set(self._markers) | set(markers):
+        # in a fixed order (not a set's, which varies with each process's string hashes):
+        # the markers are drawn at one depth, so the first drawn shows where they overlap
+        for label in [*self._markers, *(k for k in markers if k not in self._markers)]:
             pts = _marker_points(markers.get(label, np.zeros((0, 3))))
             poses = self._marker_poses(pts)
             if label not in self._markers:
