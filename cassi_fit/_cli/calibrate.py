@@ -8,7 +8,7 @@ from pathlib import Path
 
 from cassi_fit.options import CALIBRATION_METHODS
 
-from ._corpus import add_run_arguments, finish, run_options
+from ._options import add_run_arguments, finish, run_options
 
 
 def register(subparsers) -> None:

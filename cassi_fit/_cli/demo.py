@@ -151,7 +151,7 @@ def run(args) -> int:
     from cassi_fit.render import Renderer
     from cassi_fit.run_spec import run_spec
 
-    from .animate import parse_size
+    from ._options import parse_size
 
     size = parse_size(args.size)
     cassi = args.mode == "cassi"

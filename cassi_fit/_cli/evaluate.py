@@ -6,8 +6,13 @@ import argparse
 import sys
 from pathlib import Path
 
-from ._corpus import add_run_arguments, finish, run_options
-from .animate import add_model_arguments, spec_from_args
+from ._options import (
+    add_model_arguments,
+    add_run_arguments,
+    finish,
+    run_options,
+    spec_from_args,
+)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .animate import add_model_arguments, add_recording_argument, load_recording_args, run_args
+from ._options import add_model_arguments, add_recording_argument, load_recording_args, run_args
 
 SUFFIXES = (".glb", ".obj", ".ply")
 

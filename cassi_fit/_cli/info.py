@@ -6,6 +6,8 @@ import json
 import sys
 from pathlib import Path
 
+from ._options import add_source_arguments, source_options
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
@@ -25,18 +27,7 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--list", action="store_true", help="only list subjects and tasks (read no file)"
     )
-    parser.add_argument("--sensor-map", metavar="MAP", default=None,
-                        help="articulograph sensor map: a built-in name (auto, mocha, mngu0, "
-                        "sparc, synthetic) or a .toml file (default: sensors.toml beside the "
-                        "files, else the built-in names)")
-    parser.add_argument("--layout", default=None,
-                        help="array files: a built-in layout (sparc, mngu0) or comma-separated "
-                        "column names")
-    parser.add_argument("--rate", type=float, default=None,
-                        help="array files (and headerless .pos files): the sampling rate, Hz")
-    parser.add_argument("--bite-plane", metavar="FILE", default=None,
-                        help="articulograph files: the bite-plane recording (default: a *bite* "
-                        "file beside)")
+    add_source_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -269,8 +260,7 @@ def _print_dataset(report: dict, out) -> None:
 
 
 def run(args) -> int:
-    report = collect(Path(args.path), list_only=args.list, sensor_map=args.sensor_map,
-                     layout=args.layout, rate=args.rate, bite_plane=args.bite_plane)
+    report = collect(Path(args.path), list_only=args.list, **source_options(args))
     out = sys.stdout
     if args.json:
         json.dump(report, out, indent=2)

@@ -11,8 +11,13 @@ from pathlib import Path
 
 from cassi_fit.options import ALL_JAW_METHODS, JAW_SENSOR_SETS, SOLVERS
 
-from ._corpus import add_run_arguments, finish, run_options
-from .animate import add_source_arguments, load_recording_args
+from ._options import (
+    add_run_arguments,
+    add_source_arguments,
+    finish,
+    load_recording_args,
+    run_options,
+)
 
 DIAGNOSTIC_COLUMNS = ("method", "jaw_sensors", "frames_used", "jaw_distance_sd_mm",
                       "jaw_distance_range_mm", "residual_median_mm", "pivot_iqr_x_mm",

@@ -1,0 +1,304 @@
+"""The command-line options several commands share, in one place: where a recording comes
+from (:func:`add_recording_argument`, :func:`add_source_arguments`), how the model runs
+(:func:`add_model_arguments` -> ``run_spec.RunSpec``), the image options (``--size``,
+``--views``) and where a corpus runs (:func:`add_run_arguments` -> ``corpus.run_corpus``'s
+keywords, :func:`finish`). Each command module adds only its own options."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from cassi_fit.options import (
+    ALL_JAW_METHODS,
+    COLLISION_MODES,
+    GAP_POLICIES,
+    JAW_SENSOR_SETS,
+    JAW_WEIGHTS,
+    MODES,
+    TONGUE_ANCHORS,
+    TONGUE_SHAPES,
+    VIEWS,
+)
+
+# ------------------------------------------------------------------ where a recording comes from
+
+
+def add_recording_argument(parser: argparse.ArgumentParser) -> None:
+    """``RECORDING`` (a file, or DATASET SUBJECT TASK) and :func:`add_source_arguments`."""
+    parser.add_argument(
+        "recording",
+        nargs="+",
+        metavar="RECORDING",
+        help="a pellet file (.txy) or an articulograph file (EST Track .ema, Carstens .pos, "
+        "NDI Wave .tsv, mview .mat, a .npy/.npz/.csv array; docs/EMA.md), or three words "
+        "DATASET SUBJECT TASK: a dataset folder (per-subject folders or flat files) and the "
+        "subject and task in it",
+    )
+    add_source_arguments(parser)
+
+
+def add_source_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options an articulograph file may need (``dataset.load_recording``'s)."""
+    parser.add_argument("--sensor-map", metavar="MAP", default=None,
+                        help="articulograph sensor map: a built-in name (auto, mocha, mngu0, "
+                        "sparc, synthetic) or a .toml file (default: sensors.toml beside the "
+                        "files, else the built-in names)")
+    parser.add_argument("--layout", default=None,
+                        help="array files: a built-in layout (sparc, mngu0) or comma-separated "
+                        "column names")
+    parser.add_argument("--rate", type=float, default=None,
+                        help="array files (and headerless .pos files): the sampling rate, Hz")
+    parser.add_argument("--bite-plane", metavar="FILE", default=None,
+                        help="articulograph files: the bite-plane recording (default: a *bite* "
+                        "file beside)")
+
+
+def source_options(args: argparse.Namespace) -> dict:
+    """``dataset.load_recording``'s keywords from :func:`add_source_arguments`' options."""
+    return {"sensor_map": args.sensor_map, "layout": args.layout, "rate": args.rate,
+            "bite_plane": args.bite_plane}
+
+
+def load_recording_args(words, args: argparse.Namespace | None = None):
+    """A ``Recording`` from ``[PATH]`` or ``[DATASET, SUBJECT, TASK]``, with the
+    articulograph options of :func:`add_source_arguments` in ``args``."""
+    from cassi_fit.errors import CassiError
+
+    options = source_options(args) if args is not None else {}
+    if len(words) == 1:
+        from cassi_fit.dataset import load_recording
+
+        path = Path(words[0])
+        if not os.path.lexists(path):  # anything else load_recording names (a pipe, ...)
+            raise CassiError(f"{path}: no such recording file")
+        return load_recording(path, **options)  # a pipe, device or folder: one line saying which
+    if len(words) == 3:
+        from cassi_fit.dataset import Dataset
+
+        root = Path(words[0])
+        if not root.is_dir():
+            raise CassiError(f"{root}: no such dataset folder")
+        return Dataset(root, sensor_map=options.get("sensor_map")).load(words[1], words[2])
+    raise CassiError(f"RECORDING is a pellet file or DATASET SUBJECT TASK, got {len(words)} words")
+
+
+# ------------------------------------------------------------------ how the model runs
+
+
+def add_model_arguments(parser: argparse.ArgumentParser) -> None:
+    """The run spec's options (:func:`spec_from_args`): the mode, the jaw, the tongue, the
+    gaps, the calibration and the collisions."""
+    parser.add_argument(
+        "--mode",
+        choices=MODES,
+        default=None,
+        help="every choice at once (docs/CASSI_MODE.md): improved (default: thick tongue "
+        "whose back follows T4, conformation from Headmeasures) or cassi (the paper's: "
+        "flat tongue of zero thickness, back anchored behind and below T4, only the jaw "
+        "shape adjusted, no collisions); the options below override it",
+    )
+    add_jaw_arguments(parser)
+    add_shape_arguments(parser)
+
+
+def add_jaw_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--jaw``, ``--jaw-sensors``, ``--jaw-weights`` and ``--stride``."""
+    parser.add_argument(
+        "--jaw",
+        choices=ALL_JAW_METHODS,
+        default=None,
+        help="how the jaw moves: the paper's closed form from the two jaw pellets (the "
+        "default with two jaw sensors), or a least-squares fit: per frame (frame-fit), about "
+        "one pivot for the whole recording (fixed-pivot), or about a pivot that moves "
+        "smoothly (smooth-pivot); with one jaw sensor (most EMA corpora) the default is "
+        "coupled-rotation (the rotation coupled to the sensor's displacement, learned from "
+        "two-sensor recordings; docs/JAW.md), and the pivot fits run on a stated prior",
+    )
+    parser.add_argument(
+        "--jaw-sensors",
+        choices=JAW_SENSOR_SETS,
+        default=None,
+        help="the jaw sensors to use (default: every jaw pellet the recording tracks); MNI "
+        "alone animates as a one-sensor recording would be",
+    )
+    parser.add_argument(
+        "--jaw-weights",
+        choices=JAW_WEIGHTS,
+        default=None,
+        help="region weights of the jaw rotation: CASSI's (teeth 100%%; default) or Parke's "
+        "(teeth 90%%)",
+    )
+    parser.add_argument(
+        "--stride",
+        type=int,
+        default=None,
+        metavar="N",
+        help="use every Nth data line from the first valid one (default 1: every line; "
+        "CASSI showed every 10th); video time stays real time",
+    )
+
+
+def add_shape_arguments(parser: argparse.ArgumentParser) -> None:
+    """The tongue, the gaps, the calibration, ``--cassi`` and the collisions."""
+    parser.add_argument(
+        "--tongue-anchor",
+        choices=TONGUE_ANCHORS,
+        default=None,
+        help="the tongue's back anchor points: fixed (CASSI: they never move, hence its V "
+        "shape), follow (they move with T4; default) or none",
+    )
+    parser.add_argument(
+        "--tongue-shape",
+        choices=TONGUE_SHAPES,
+        default=None,
+        help="thick (default) or flat (CASSI: a surface of zero thickness through the "
+        "four tongue pellets)",
+    )
+    parser.add_argument(
+        "--gap",
+        choices=GAP_POLICIES,
+        default=None,
+        help="untracked or mistracked pellet values: hold the last good value (default) or "
+        "interpolate between good ones; repaired frames are flagged in the caption",
+    )
+    parser.add_argument(
+        "--calibration",
+        metavar="PATH",
+        help="the subject's calibration: a folder written by 'cassi calibrate' (the file "
+        "SUBJECT.calibration.json in it is used) or one such file; default: the subject's "
+        "shape straight from Headmeasures and the first valid line",
+    )
+    parser.add_argument(
+        "--cassi",
+        action="store_true",
+        help="the same as --mode cassi (every choice of the paper); not with --calibration",
+    )
+    parser.add_argument(
+        "--collisions",
+        choices=COLLISION_MODES,
+        default=None,
+        help="off (default; as CASSI: the tongue may pass through the teeth and palate) or "
+        "project (every frame, the tongue is pushed out of the teeth and the palate and "
+        "the lips out of the teeth); penetration depths are measured either way",
+    )
+
+
+def chosen_mode(args: argparse.Namespace) -> str | None:
+    """The mode of ``--mode`` and ``--cassi`` (the same as ``--mode cassi``); a
+    ``CassiError`` if they disagree."""
+    from cassi_fit.errors import CassiError
+
+    mode, cassi = getattr(args, "mode", None), getattr(args, "cassi", False)
+    if cassi and mode not in (None, "cassi"):
+        raise CassiError(f"--cassi and --mode {mode} disagree")
+    return "cassi" if cassi else mode
+
+
+def spec_from_args(args: argparse.Namespace):
+    """The ``run_spec.RunSpec`` of the options of :func:`add_model_arguments`, checked once
+    (for one recording and for every recording of a dataset alike)."""
+    from cassi_fit.run_spec import run_spec
+
+    mode = chosen_mode(args)
+    return run_spec(mode, calibration=getattr(args, "calibration", None) or None,
+                    jaw=args.jaw, stride=args.stride, jaw_weights=args.jaw_weights,
+                    tongue_anchor=args.tongue_anchor, gap_policy=args.gap,
+                    collisions=args.collisions, tongue_shape=args.tongue_shape,
+                    jaw_sensors=getattr(args, "jaw_sensors", None))
+
+
+def run_args(recording, args):
+    """``pipeline.run_recording`` of one recording with the options of
+    :func:`add_model_arguments`."""
+    from cassi_fit.pipeline import run_recording
+
+    return run_recording(recording, spec_from_args(args))
+
+
+# ------------------------------------------------------------------ images
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``--size WxH`` -> ``(width, height)`` pixels, each 16..8192."""
+    from cassi_fit.errors import CassiError
+
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise CassiError(f"--size must look like 640x480, got {text!r}") from None
+    if not (16 <= width <= 8192 and 16 <= height <= 8192):
+        raise CassiError(f"--size {text}: each side must be between 16 and 8192 pixels")
+    return width, height
+
+
+def parse_views(text: str) -> tuple[str, ...]:
+    """``--views a,b`` -> the views, each one of ``options.VIEWS``."""
+    from cassi_fit.errors import CassiError
+
+    views = tuple(v.strip() for v in text.split(",") if v.strip())
+    unknown = [v for v in views if v not in VIEWS]
+    if unknown or not views:
+        raise CassiError(
+            f"--views: unknown view(s) {', '.join(unknown) or '(none)'}; use {','.join(VIEWS)}"
+        )
+    return views
+
+
+# ------------------------------------------------------------------ where a corpus runs
+
+
+def add_run_arguments(parser: argparse.ArgumentParser, *, force: bool = True) -> None:
+    """``--jobs``, ``--scheduler``, ``--resume`` (and ``--force`` unless the command has
+    its own)."""
+    parser.add_argument("--jobs", type=int, metavar="N",
+                        help="recordings run in N local worker processes (default: all "
+                        "cores; 1: in this process)")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="send the recordings to a running dask.distributed cluster "
+                        "(e.g. tcp://host:8786) instead of local processes (needs the "
+                        "'corpus' extra)")
+    parser.add_argument("--scheduler-timeout", type=float, metavar="SECONDS",
+                        help="time allowed to reach the --scheduler (default: "
+                        "$CASSI_SCHEDULER_TIMEOUT or 10 s)")
+    parser.add_argument("--resume", action="store_true",
+                        help="skip recordings whose outputs an earlier run of the same "
+                        "settings completed (checked by their markers), run the rest")
+    if force:
+        parser.add_argument("--force", action="store_true",
+                            help="replace existing outputs (and rerun every recording)")
+
+
+def run_options(args: argparse.Namespace) -> dict:
+    """``corpus.run_corpus`` keywords from the parsed options."""
+    from cassi_fit.errors import CassiError
+
+    if args.jobs is not None and args.jobs < 1:
+        raise CassiError(f"--jobs must be at least 1, got {args.jobs}")
+    if args.jobs is not None and args.scheduler:
+        raise CassiError("--jobs and --scheduler exclude each other (the cluster decides "
+                         "its workers)")
+    timeout = getattr(args, "scheduler_timeout", None)
+    if args.scheduler is not None:  # a malformed address fails before any work
+        from cassi_fit.corpus import parse_scheduler_address, scheduler_timeout
+
+        parse_scheduler_address(args.scheduler)
+        scheduler_timeout(timeout)
+    elif timeout is not None:
+        raise CassiError("--scheduler-timeout is for --scheduler")
+    return {"jobs": args.jobs, "scheduler": args.scheduler, "scheduler_timeout": timeout,
+            "resume": args.resume, "overwrite": args.force,
+            "progress": not getattr(args, "quiet", False)}
+
+
+def finish(run) -> int:
+    """Print what was resumed and the failures (stderr); 1 if any recording failed."""
+    if run.resumed:
+        print(f"resumed: {run.resumed} of {len(run.results)} already done", file=sys.stderr)
+    summary = run.failure_summary()
+    if summary:
+        print(summary, file=sys.stderr)
+        return 1
+    return 0
