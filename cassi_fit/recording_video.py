@@ -16,6 +16,7 @@ import numpy as np
 from jaxtyping import Float, Integer, UInt8
 
 from .errors import CassiError
+from .options import DEFAULT_FPS as DEFAULT_FPS  # "native": one frame per data line
 from .video import PIPELINE_DEPTH, _drain, _put, frame_rate, write_video
 
 if TYPE_CHECKING:
@@ -23,9 +24,6 @@ if TYPE_CHECKING:
     from .labels import Labels
     from .render import Renderer
 
-DEFAULT_FPS = 60
-"""Frames per second of a video unless ``fps`` says otherwise (``--fps``): about what a
-screen shows. ``"native"``: one frame per (strided) data line, as before issue 30."""
 
 TRAIL_S = 0.1
 """Seconds of pellet trail behind each pellet in the midsagittal view (at least 2 of the

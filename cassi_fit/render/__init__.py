@@ -51,11 +51,11 @@ from ._gl import probe_gl_platform as probe_gl_platform
 from ._images import add_caption as add_caption
 from ._images import save_png as save_png
 from ._pieces import MARKER_COLOURS as MARKER_COLOURS
-from ._pool import FramePool as FramePool
 from ._pieces import MATERIAL_COLOURS as MATERIAL_COLOURS
 from ._pieces import SKINS as SKINS
 from ._pieces import PieceInfo as PieceInfo
 from ._pieces import triangle_winding as triangle_winding
+from ._pool import FramePool as FramePool
 from ._scene import Markers as Markers
 from ._scene import MeshModel as MeshModel
 from ._scene import Renderer as Renderer
