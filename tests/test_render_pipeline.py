@@ -112,3 +112,22 @@ def test_worker_processes_draw_the_same_bytes_in_order(run, renderer):
         assert len({f.tobytes() for f in parallel}) == len(parallel)  # not one frame
         with pytest.raises(Exception, match="vertices"):
             list(pool.draw([(np.zeros((3, 3)), {})]))
+
+
+def test_the_egl_device_is_chosen_by_cassi_egl_device(monkeypatch):
+    """Issue 30: ``CASSI_EGL_DEVICE`` picks the EGL device (a GPU first by default, Mesa's
+    software device where there is none); one that does not exist is one line saying
+    which devices there are."""
+    from cassi_fit.render import _gl
+
+    if _gl.probe_gl_platform("egl") is not None:
+        pytest.skip("no EGL here")
+    device = _gl.egl_device()
+    assert device is not None and device["renderer"]
+    assert device["file"] or "pipe" in device["renderer"].lower()  # a GPU, or llvmpipe
+    monkeypatch.setenv("CASSI_EGL_DEVICE", "99")
+    reason = _gl.probe_gl_platform("egl")
+    assert reason is not None and "CASSI_EGL_DEVICE=99: no such EGL device" in reason
+    monkeypatch.setenv("CASSI_EGL_DEVICE", "software")
+    assert _gl.probe_gl_platform("egl") is None
+    assert not _gl.egl_device()["file"]
