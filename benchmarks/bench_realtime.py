@@ -16,6 +16,8 @@ views at 640x480, improved mode):
 - the render floor: the same video frames drawn by the bare OpenGL pass of the same scene
   at the same size (``Renderer.render_gl``: vertex upload, draw, read-back; no caption,
   no midsagittal view, no encoding, no start-up), in this process after a warm-up;
+- the phases of a warm 60 fps video in one fresh process (start-up, initialize, animate,
+  video) and a bare ``python -c "import jax, ...; jnp.zeros(1)"`` beside them;
 - drawing the 60 fps frames whole (caption, midsagittal view) in this process against
   ``--jobs`` worker processes (``render.FramePool``, their start-up included), and the
   whole command with ``--jobs`` against one process. The serial runs use the default
@@ -74,6 +76,66 @@ def animate_wall(recording: Path, out: Path, cache: Path, *extra: str) -> float:
     return wall
 
 
+def phases(recording: Path, out: Path) -> None:
+    """The child of :func:`phases_wall`: one warm 60 fps video in this fresh process, its
+    phases' wall seconds as JSON on stdout."""
+    import json
+    import warnings
+
+    start = time.perf_counter()
+    times = {}
+
+    def mark(name: str) -> None:
+        times[name] = time.perf_counter() - start - sum(times.values())
+
+    import jax.numpy as jnp
+
+    import cassi_fit  # noqa: F401
+
+    jnp.zeros(1).block_until_ready()
+    from cassi_fit import recording_video as rv
+    from cassi_fit.corpus._process import default_compile_cache, use_compile_cache
+    from cassi_fit.dataset import load_recording
+    from cassi_fit.initialize import initialize
+    from cassi_fit.pipeline import RecordingRun
+
+    use_compile_cache(default_compile_cache())
+    mark("start-up (Python, JAX, imports)")
+    warnings.simplefilter("ignore")
+    loaded = load_recording(recording)
+    state = initialize(loaded)
+    mark("initialize (load, fit the subject)")
+    from cassi_fit.animate import animate
+
+    animation = animate(state, loaded)
+    animation.vertices.block_until_ready()
+    mark("animate (every line's geometry)")
+    rv.write_recording_video(out, RecordingRun(loaded, state.spec, state, animation),
+                             progress=False, overwrite=True)
+    mark("video (renderer, drawing, encoding, sound)")
+    print(json.dumps(times))
+
+
+def phases_wall(recording: Path, out: Path, cache: Path) -> dict[str, float]:
+    """Phases of a warm 60 fps video in a fresh process, and the bare start-up of
+    ``python -c "import jax, jax.numpy as jnp, cassi_fit; jnp.zeros(1)..."``."""
+    import json
+
+    env = {**os.environ, "CASSI_COMPILE_CACHE": str(cache), "JAX_PLATFORMS": "cpu"}
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    done = subprocess.run([sys.executable, __file__, "--phases-of", str(recording), "--out",
+                           str(out)], env=env, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"the phases run failed: {done.stderr[-500:]}")
+    times = json.loads(done.stdout.strip().splitlines()[-1])
+    start = time.perf_counter()
+    subprocess.run([sys.executable, "-c", "import jax, jax.numpy as jnp, cassi_fit; "
+                    "jnp.zeros(1).block_until_ready()"], env=env, check=True)
+    times["bare"] = time.perf_counter() - start
+    print(f"  phases: {times}", flush=True)
+    return times
+
+
 def in_process(recording: Path, jobs: int) -> dict[str, float]:
     """The render floor, serial and parallel drawing of the 60 fps frames, here."""
     import numpy as np
@@ -121,6 +183,8 @@ def table(m: dict, length: float, jobs: int) -> list[tuple[str, str, str, str, s
     def met(ok: bool) -> str:
         return "yes" if ok else "NOT MET"
 
+    phases = {k: v for k, v in m["phases"].items() if k != "bare"}
+    total = sum(phases.values())
     rtf60, rtfn = m["warm60"] / length, m["native"] / length
     floor_x = m["warm60"] / m["floor"]
     draw_x = m["serial"] / m["parallel"]
@@ -143,7 +207,11 @@ def table(m: dict, length: float, jobs: int) -> list[tuple[str, str, str, str, s
          f">= {PARALLEL_X}x", met(draw_x >= PARALLEL_X)),
         (f"`cassi animate` JW11, 60 fps, warm, --jobs {jobs}", f"{m['jobs']:.2f}",
          f"--jobs 1 / --jobs {jobs}: {cmd_x:.2f}", "", ""),
-    ]
+        ("`python -c \"import jax, jax.numpy as jnp, cassi_fit; jnp.zeros(1)...\"`",
+         f"{m['phases']['bare']:.2f}", "1 (a process's floor)", "", ""),
+    ] + [(f"warm 60 fps video in one fresh process: {name}", f"{value:.2f}",
+          f"{value / total:.0%} of that process's {total:.1f} s", "", "")
+         for name, value in phases.items()]
 
 
 def markdown(rows: list[tuple], note: str) -> str:
@@ -168,7 +236,12 @@ def main(argv=None) -> int:
     parser.add_argument("--recording", type=Path, default=_recording_default())
     parser.add_argument("--jobs", type=int, default=2, help="drawing processes (default 2)")
     parser.add_argument("--docs", metavar="DIR", help="also write DIR/bench_realtime.md")
+    parser.add_argument("--phases-of", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--out", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.phases_of is not None:  # the child of phases_wall
+        phases(args.phases_of, args.out)
+        return 0
     if args.recording is None or not args.recording.is_file():
         print("SKIPPED: the real JW11 recording is absent (../shared/data/xrmb_jw11/); give "
               "--recording FILE.txy", file=sys.stderr)
@@ -188,6 +261,7 @@ def main(argv=None) -> int:
         m["warm60"] = animate_wall(args.recording, out, cache)
         m["native"] = animate_wall(args.recording, out, cache, "--fps", "native")
         m["jobs"] = animate_wall(args.recording, out, cache, "--jobs", str(args.jobs))
+        m["phases"] = phases_wall(args.recording, out, cache)
     m.update(in_process(args.recording, args.jobs))
     after = os.getloadavg()
     ensure_headless_gl()
