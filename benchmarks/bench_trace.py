@@ -9,9 +9,7 @@ jnp.zeros(1).block_until_ready()"``. Ratios measured in this one run.
 
 A measurement, not a change: the toolkit does not ship exported kernels (yet). JAX's
 serialization needs the ``flatbuffers`` package (``pip install flatbuffers``); without it
-the script says so and stops. One run on a shared 2-core machine (load average 8.0):
-``cassi jaw --method smooth-pivot`` warm 14.57 s, bare start-up 2.73 s (5.34x); the kernel
-traced 5.21 s against exported 1.58 s (3.30x), 3.63 s saved, 25% of the command.
+the script says so and stops.
 """
 
 from __future__ import annotations
