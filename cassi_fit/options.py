@@ -51,6 +51,9 @@ VIEWS = ("front", "side", "inside", "top", "midsagittal")
 PAPER_VIEWS = ("front", "side", "inside", "top")
 #: Output kinds of ``cassi animate``.
 ANIMATION_SUFFIXES = (".mp4", ".gif", ".png")
+#: A video's frames per second unless ``--fps`` says otherwise (about what a screen shows;
+#: ``recording_video.video_frames``).
+DEFAULT_FPS = 60
 
 
 def check_choice(what: str, value: object, choices: Sequence[str]) -> str:

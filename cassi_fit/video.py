@@ -5,7 +5,10 @@ about 145.6 Hz; EMA: 2 ms at 500 Hz, 5 ms at 200 Hz ...). An animation that show
 ``stride``-th line plays at ``fps = 1 / (stride * step)`` (``Animation.frame_step_s``),
 stored exactly as the rational ``1000000 / (step_us * stride)`` (for XRMB, a non-integer
 rate). Frame ``k`` of the video shows data line ``first + k * stride``, recording time
-``t_0 + k * stride * step``, and it is on screen from video time ``k / fps``.
+``t_0 + k * stride * step``, and it is on screen from video time ``k / fps``. That is the
+native video (``--fps native``); by default a video has 60 frames a second, frame ``k``
+recording time ``t_0 + k / 60`` showing the (strided) line nearest that time
+(``recording_video.video_frames``).
 
 Speech synchronization (the report's future work, section 5): the video's time ``tau``
 corresponds to the recording's time ``t_0 + tau``, where ``t_0`` is the time of the first

@@ -97,6 +97,23 @@ def test_animate_dataset_subject_task_to_mp4_with_sound(corpus, sentence, tmp_pa
     assert code == 0 and not media_info(out)["audio"]
 
 
+def test_animate_at_a_display_rate_in_two_drawing_processes(sentence, tmp_path, capsys):
+    """Issue 30: ``--fps 20`` over every 4th line (36.4 lines/s): 20 frames a second of
+    the lines' span, the sound as long as the picture; ``--jobs 2`` draws them in two
+    processes; the report still counts every strided line."""
+    _, recording = sentence
+    out = tmp_path / "f20.mp4"
+    code, stdout, _ = _run(capsys, "animate", recording.path, "--stride", 4, "--fps", 20,
+                           "--jobs", 2, "--size", SIZE, "--views", "front,midsagittal",
+                           "--out", out, "--quiet")
+    lines = _expected_frames(recording, 4)
+    assert code == 0 and f"({lines} frames, stride 4" in stdout
+    frames = count_frames(out)
+    assert frames == round(lines * 4 * 0.006866 * 20)
+    info = media_info(out)
+    assert info["audio"] and info["duration"] == pytest.approx(frames / 20, abs=0.05)
+
+
 def test_animate_pellet_file_to_gif_and_png(sentence, tmp_path, capsys):
     _, recording = sentence
     gif = tmp_path / "front.gif"
@@ -280,6 +297,8 @@ def test_demo_writes_everything_and_reruns(corpus, tmp_path, capsys, monkeypatch
         (["animate", "{txy}", "--views", "front,back"], "back"),
         (["animate", "{txy}", "--out", "x.avi"], ".avi"),
         (["animate", "{txy}", "--stride", "0"], "stride"),
+        (["animate", "{txy}", "--fps", "fast"], "--fps"),
+        (["animate", "{txy}", "--fps", "0"], "--fps"),
         (["animate", "a", "b"], "DATASET SUBJECT TASK"),
         (["animate", "{root}", "NOBODY", "tp040"], "NOBODY"),
         (["export", "{txy}", "--out", "x.stl"], ".stl"),

@@ -91,7 +91,7 @@ def test_worker_threads_are_limited_before_jax_starts():
     assert env["XLA_FLAGS"].split() == ["--xla_dump_to=/tmp/d",
                                         "--xla_cpu_multi_thread_eigen=false",
                                         "intra_op_parallelism_threads=1"]
-    assert env["OMP_NUM_THREADS"] == env["NPROC"] == "1"
+    assert env["OMP_NUM_THREADS"] == env["NPROC"] == env["LP_NUM_THREADS"] == "1"
     assert worker_thread_env(3, {})["XLA_FLAGS"] == "intra_op_parallelism_threads=3"
     assert _process.threads_per_worker(2, cores=8) == 4
     assert _process.threads_per_worker(4, cores=2) == 1

@@ -84,3 +84,50 @@ def test_the_writer_thread_hands_ffmpeg_every_frame(tmp_path):
     assert video.count_frames(path) == 23
     assert not [t for t in threading.enumerate() if t.name == "cassi-video-writer"]
     assert [p.name for p in tmp_path.iterdir()] == ["v.mp4"]
+
+
+def test_worker_processes_draw_the_same_bytes_in_order(run, renderer):
+    """Issue 30: frames drawn by two worker processes (each its own OpenGL context, the
+    model sent as arrays) come back in order, byte for byte the serial loop's, at the
+    60 fps schedule; a worker's error reaches the caller."""
+    from cassi_fit.render import FramePool
+
+    recording, state, animation = run
+    schedule = recording_video.video_frames(animation, 60)
+    assert len(schedule.index) < animation.n_frames  # 60 fps draws fewer frames than lines
+    picked = recording_video.VideoFrames(schedule.rate, schedule.index[::5],
+                                         schedule.times[::5])
+    options = {"subject": "JWT", "task": "sentence", "markers": True, "frames": picked}
+    serial = list(recording_video.animation_frames(animation, renderer, progress=False,
+                                                   **options))
+    setup = {"size": renderer.size, "views": renderer.views,
+             "traces": recording_video.subject_traces(recording, state.scale)}
+    with FramePool(state.model, jobs=2, **setup) as pool:
+        assert pool.threads >= 1
+        work = recording_video.frame_work(animation, section=True, **options)
+        parallel = list(pool.draw(work))
+        assert len(parallel) == len(serial) >= 4
+        for a, b in zip(parallel, serial, strict=True):
+            assert a.shape == b.shape and a.tobytes() == b.tobytes()
+        assert len({f.tobytes() for f in parallel}) == len(parallel)  # not one frame
+        with pytest.raises(Exception, match="vertices"):
+            list(pool.draw([(np.zeros((3, 3)), {})]))
+
+
+def test_the_egl_device_is_chosen_by_cassi_egl_device(monkeypatch):
+    """Issue 30: ``CASSI_EGL_DEVICE`` picks the EGL device (a GPU first by default, Mesa's
+    software device where there is none); one that does not exist is one line saying
+    which devices there are."""
+    from cassi_fit.render import _gl
+
+    if _gl.probe_gl_platform("egl") is not None:
+        pytest.skip("no EGL here")
+    device = _gl.egl_device()
+    assert device is not None and device["renderer"]
+    assert device["file"] or "pipe" in device["renderer"].lower()  # a GPU, or llvmpipe
+    monkeypatch.setenv("CASSI_EGL_DEVICE", "99")
+    reason = _gl.probe_gl_platform("egl")
+    assert reason is not None and "CASSI_EGL_DEVICE=99: no such EGL device" in reason
+    monkeypatch.setenv("CASSI_EGL_DEVICE", "software")
+    assert _gl.probe_gl_platform("egl") is None
+    assert not _gl.egl_device()["file"]

@@ -167,37 +167,93 @@ class _FlatRenderer:
         return np.full((40, 48, 3), int(vertices[0, 0]) % 256, np.uint8)
 
 
-@pytest.mark.parametrize("stride", [1, 7])
-def test_animation_sound_is_aligned_for_any_stride(tmp_path, stride):
-    """Lines from index 50 (t_0 = 0.343 s); a click at recording time 0.9 s must sound at
-    video time 0.9 - t_0, whatever the stride."""
+def _fake_animation(lines, stride, times=None, step=FRAME_STEP_S):
+    """An animation of the data ``lines`` whose frame ``k`` is drawn (by _FlatRenderer)
+    in the shade ``k % 256``, unless ``shade`` is given per frame."""
     from types import SimpleNamespace
 
-    lines = np.arange(50, 250, stride)
     m = len(lines)
-    animation = SimpleNamespace(
-        times=lines * FRAME_STEP_S,
+    return SimpleNamespace(
+        times=lines * step if times is None else times,
         frame_index=lines,
         stride=stride,
-        frame_step_s=stride * FRAME_STEP_S,
+        frame_step_s=stride * step,
         n_frames=m,
         vertices=np.arange(m)[:, None, None] * np.ones((m, 3, 3)),
         pellets_measured=np.zeros((m, 8, 2)),
         pellets_model=np.zeros((m, 8, 2)),
         frame_status=np.zeros(m, int),
     )
+
+
+def _decoded_shades(path):
+    """The mean grey level of each decoded frame of a video."""
+    done = subprocess.run([_ffmpeg(), "-loglevel", "error", "-i", str(path), "-f", "rawvideo",
+                           "-pix_fmt", "gray", "-"], capture_output=True, check=True)
+    return np.frombuffer(done.stdout, np.uint8).reshape(-1, 40 * 48).mean(axis=1)
+
+
+@pytest.mark.parametrize(("stride", "fps"), [(1, "native"), (7, "native"), (1, 60), (2, 60)])
+def test_animation_sound_is_aligned_for_any_stride(tmp_path, stride, fps):
+    """Lines from index 50 (t_0 = 0.343 s); a click at recording time 0.9 s must sound at
+    video time 0.9 - t_0, whatever the stride and frame rate; at 60 fps, the picture too:
+    the frames turn white at the line of the click, and the first white frame is on
+    screen when the click sounds (to within a frame); every caption's time is its video
+    frame's."""
+    lines = np.arange(50, 250, stride)
+    m = len(lines)
+    animation = _fake_animation(lines, stride)
+    click_line = int(np.ceil(0.9 / FRAME_STEP_S))
+    animation.vertices[:] = np.where(lines >= click_line, 255, 0)[:, None, None]
     samples = np.zeros(2 * RATE)
     samples[int(0.9 * RATE) : int(0.9 * RATE) + 80] = 20000
     wav = _write_wav(tmp_path / "s.wav", samples)
     renderer = _FlatRenderer()
-    path = write_animation(
-        tmp_path / "a.mp4", animation, renderer, subject="S", task="t", audio=wav, progress=False
-    )
-    assert count_frames(path) == m
+    path = write_animation(tmp_path / "a.mp4", animation, renderer, subject="S", task="t",
+                           audio=wav, progress=False, fps=fps)
+    span = m * stride * FRAME_STEP_S  # the lines' time, first to the end of the last
+    frames = count_frames(path)
+    assert frames == (m if fps == "native" else round(span * fps))
     assert "line 51" in renderer.captions[0] and "S t" in renderer.captions[0]
     heard = _decoded_audio(path, tmp_path)
     onset = np.argmax(np.abs(heard) > 5000) / RATE
     assert onset == pytest.approx(0.9 - 50 * FRAME_STEP_S, abs=0.01)
+    # sound and picture last as long as each other: frames / fps = the sound's length
+    assert len(heard) / RATE == pytest.approx(frames / float(video_rate(fps, stride)), abs=0.03)
+    if fps != "native":
+        white = int(np.argmax(_decoded_shades(path) > 128))
+        assert white / fps == pytest.approx(onset, abs=1 / fps + stride * FRAME_STEP_S / 2)
+        j = 37  # a caption's time is its video frame's: t_0 + j / 60
+        assert f"t = {50 * FRAME_STEP_S + j / 60:7.3f} s" in renderer.captions[j]
+
+
+def video_rate(fps, stride):
+    return frame_rate(stride * FRAME_STEP_S) if fps == "native" else fps
+
+
+def test_video_frames_pick_the_nearest_line_on_the_files_own_clock():
+    """An articulograph file at 200 Hz whose clock drops samples (a 50 ms hole): at 60
+    fps each video frame shows the line nearest its time, so the picture after the hole
+    stays on the sound's clock; at the data's own rate or more, one frame per line."""
+    from cassi_fit.recording_video import video_frames
+
+    times = np.arange(400) * 0.005
+    times[200:] += 0.05  # ten samples never written
+    animation = _fake_animation(np.arange(400), 1, times=times, step=0.005)
+    chosen = video_frames(animation, 60)
+    assert chosen.rate == 60
+    expected = np.array([np.argmin(np.abs(times - t)) for t in chosen.times])
+    assert np.array_equal(chosen.index, expected)
+    assert chosen.times[0] == 0 and np.allclose(np.diff(chosen.times), 1 / 60)
+    assert len(chosen.index) == round((times[-1] + 0.005) * 60)
+    late = chosen.times > 1.2  # after the hole: never a line more than half a line away
+    assert np.all(np.abs(times[chosen.index[late]] - chosen.times[late]) <= 0.0025 + 1e-12)
+    # a rate above the data's: one frame per line, at the data's rate (no repeated frames)
+    regular = _fake_animation(np.arange(10, 100, 3), 3)
+    for fps in (500, "native"):
+        chosen = video_frames(regular, fps)
+        assert np.array_equal(chosen.index, np.arange(30))
+        assert chosen.rate == frame_rate(3 * FRAME_STEP_S)
 
 
 # -- no lost, destroyed or partial files (issue 12) -------------------------------------------

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from cassi_fit.options import ANIMATION_SUFFIXES, VIEWS
+from cassi_fit.options import ANIMATION_SUFFIXES, DEFAULT_FPS, VIEWS
 
 from ._options import (
     add_model_arguments,
@@ -29,7 +29,8 @@ def register(subparsers) -> None:
         "with every data line and render it (front, side, inside, top and midsagittal "
         "views) to a video "
         "or a still. An .mp4 carries the recording's sound (a .wav with the pellet file's "
-        "stem), aligned to the frames for any stride.",
+        "stem), aligned to the frames for any stride and --fps. With one recording, --jobs "
+        "N draws its frames in N processes (the same video).",
     )
     add_recording_argument(parser)
     add_model_arguments(parser)
@@ -59,7 +60,19 @@ def register(subparsers) -> None:
         type=int,
         default=0,
         metavar="K",
-        help="for a .png: which animation frame to draw (0 = the first valid line)",
+        help="for a .png: which animation frame to draw (0 = the first valid line; with "
+        "--stride N, frame K is data line first + K*N; --fps does not change it)",
+    )
+    parser.add_argument(
+        "--fps",
+        default=str(DEFAULT_FPS),
+        metavar="RATE",
+        help=f"frames per second of a video (default {DEFAULT_FPS}; a number or 'native': "
+        "one frame per data line, XRMB's 145.6 per second). Each video frame shows the data "
+        "line nearest its time, on the file's own clock (irregular articulograph times "
+        "included), with that line's status; nothing is interpolated. --stride N first keeps "
+        "every Nth line; a video never has more frames than those lines (XRMB with --stride "
+        "10: 14.6 fps). The penetration CSV and the reports keep every (strided) line",
     )
     parser.add_argument(
         "--markers",
@@ -100,10 +113,12 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from cassi_fit.errors import CassiError
+    from cassi_fit.recording_video import parse_fps
 
     if len(args.recording) == 1 and Path(args.recording[0]).is_dir():
         return run_dataset(args)
     size, views = parse_size(args.size), parse_views(args.views)
+    parse_fps(args.fps)  # a bad --fps fails before any work
     out = Path(args.out) if args.out else None
     if out is not None and out.suffix.lower() not in ANIMATION_SUFFIXES:
         raise CassiError(f"--out {out}: must end in {', '.join(ANIMATION_SUFFIXES)}")
@@ -153,7 +168,20 @@ def write_output(out: Path, run, size, views, args) -> Path:
     return video.write_recording_video(out, run, size=size, views=views, markers=args.markers,
                                        audio=not args.no_audio, progress=not args.quiet,
                                        accept_mismatch=args.accept_mismatch,
-                                       overwrite=args.force)
+                                       overwrite=args.force, fps=args.fps,
+                                       jobs=drawing_jobs(args))
+
+
+def drawing_jobs(args) -> int:
+    """``--jobs`` for one recording: the frames drawn by N processes (default 1)."""
+    from cassi_fit.errors import CassiError
+
+    if args.scheduler:
+        raise CassiError("--scheduler is for a DATASET; one recording's frames are drawn "
+                         "here (--jobs N: in N local processes)")
+    if args.jobs is not None and args.jobs < 1:
+        raise CassiError(f"--jobs must be at least 1, got {args.jobs}")
+    return args.jobs or 1
 
 
 def run_dataset(args) -> int:
@@ -167,7 +195,7 @@ def run_dataset(args) -> int:
         raise CassiError(f"{args.recording[0]}: a dataset folder; give --out DIR for its videos")
     video_options = {"suffix": f".{args.format}", "size": parse_size(args.size),
                      "views": parse_views(args.views), "audio": not args.no_audio,
-                     "markers": args.markers}
+                     "markers": args.markers, "fps": args.fps}
     run, written, _ = animate_corpus(args.recording[0], args.out, spec=spec_from_args(args),
                                      video_options=video_options,
                                      run_options=run_options(args))

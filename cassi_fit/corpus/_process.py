@@ -186,9 +186,10 @@ def _update_config(jax, folder: Path | None, settings: Mapping[str, str]) -> Non
 
 
 # --------------------------------------------------------------------------- threads
-#: Thread-count variables of the numerical libraries a worker may load.
+#: Thread-count variables of the numerical libraries a worker may load (and of Mesa's
+#: llvmpipe, which draws a video's frames with one thread per core by default).
 _THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-                     "NPROC")
+                     "NPROC", "LP_NUM_THREADS")
 
 
 def worker_thread_env(threads: int, environ: Mapping[str, str] | None = None

@@ -30,12 +30,14 @@ Speed (llvmpipe, the software OpenGL of headless machines, is the target):
   away from the cut).
 
 The package, by concern: ``_gl`` chooses the OpenGL platform (probes in subprocesses;
-EGL with llvmpipe when there is no display, OSMesa as fallback) before OpenGL is
+EGL when there is no display, on a GPU if there is one (``CASSI_EGL_DEVICE``) else
+llvmpipe, OSMesa as fallback) before OpenGL is
 imported; ``_pieces`` cuts the mesh into drawable pieces (numpy); ``_section`` cuts it
 at z = 0 and draws the midsagittal view (numpy and Pillow); ``_scene`` holds the
 :class:`Renderer` (cameras, layout, markers); ``_draw`` the shaders and the OpenGL calls
 (the only module that imports pyrender and OpenGL, when a Renderer is made); ``_images``
-captions and PNG files. Importing :mod:`cassi_fit.render` imports neither OpenGL nor
+captions and PNG files; ``_pool`` draws frames in worker processes, each with its own
+context (:class:`FramePool`). Importing :mod:`cassi_fit.render` imports neither OpenGL nor
 pyrender, JAX or Pillow.
 """
 
@@ -45,6 +47,7 @@ from ..options import PAPER_VIEWS as PAPER_VIEWS
 from ..options import VIEWS as VIEWS
 from ._gl import HEADLESS_PLATFORMS as HEADLESS_PLATFORMS
 from ._gl import choose_gl_platform as choose_gl_platform
+from ._gl import egl_device as egl_device
 from ._gl import ensure_headless_gl as ensure_headless_gl
 from ._gl import probe_gl_platform as probe_gl_platform
 from ._images import add_caption as add_caption
@@ -57,6 +60,7 @@ from ._pieces import PieceInfo as PieceInfo
 from ._pieces import hair_share as hair_share
 from ._pieces import triangle_winding as triangle_winding
 from ._pieces import vertex_colours_srgb as vertex_colours_srgb
+from ._pool import FramePool as FramePool
 from ._scene import Markers as Markers
 from ._scene import MeshModel as MeshModel
 from ._scene import Renderer as Renderer
@@ -73,6 +77,7 @@ __all__ = [
     "MARKER_COLOURS",
     "MATERIAL_COLOURS",
     "SKINS",
+    "FramePool",
     "VIEWS",
     "Markers",
     "MeshModel",
@@ -83,6 +88,7 @@ __all__ = [
     "Section",
     "add_caption",
     "choose_gl_platform",
+    "egl_device",
     "midsagittal_figure",
     "ensure_headless_gl",
     "hair_share",

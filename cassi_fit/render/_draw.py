@@ -9,6 +9,8 @@ platform at first import).
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import OpenGL
 
@@ -145,8 +147,11 @@ class ColourOnlyRenderer(pyrender.Renderer):
         for k in range(4):
             gl.glEnable(gl.GL_CLIP_DISTANCE0 + k)
         view, projection = self._get_camera_matrices(scene)
+        # in the order the meshes were made (scene.mesh_nodes is a set, ordered by memory
+        # address): see-through pieces blend in the same order in every renderer, so
+        # two renderers of one model (worker processes) draw the same bytes
         nodes = [n for n in scene.mesh_nodes if n.mesh.is_visible]
-        nodes.sort(key=lambda n: n.mesh.is_transparent)
+        nodes.sort(key=lambda n: (n.mesh.is_transparent, getattr(n.mesh, "cassi_order", -1)))
         bound = None
         for node in nodes:
             for primitive in node.mesh.primitives:
@@ -285,6 +290,16 @@ def _framebuffer(gl, dims, samples):
     for attachment, rb in ((gl.GL_COLOR_ATTACHMENT0, colour), (gl.GL_DEPTH_ATTACHMENT, depth)):
         gl.glFramebufferRenderbuffer(gl.GL_DRAW_FRAMEBUFFER, attachment, gl.GL_RENDERBUFFER, rb)
     return fb, colour, depth
+
+
+_MESH_ORDER = itertools.count()
+
+
+def add_mesh(scene: pyrender.Scene, mesh: pyrender.Mesh) -> pyrender.Node:
+    """Add ``mesh`` to ``scene``, numbered so that it is drawn after the meshes added
+    before it (opaque ones first, then see-through ones)."""
+    mesh.cassi_order = next(_MESH_ORDER)
+    return scene.add(mesh)
 
 
 def set_poses(primitive: pyrender.Primitive, poses: np.ndarray) -> None:

@@ -5,8 +5,9 @@ PyOpenGL fixes its platform (``PYOPENGL_PLATFORM``: the native window system, ``
 made here, by probing each candidate in a fresh interpreter, and written into
 ``PYOPENGL_PLATFORM`` before this process imports pyrender or OpenGL (which only
 :mod:`cassi_fit.render._draw` does, when a :class:`~cassi_fit.render.Renderer` is made).
-Without a display, EGL with Mesa's llvmpipe (software rendering, no GPU needed) comes
-first, OSMesa second.
+Without a display, EGL comes first, OSMesa second. EGL draws on a GPU when there is one
+(a device with a DRM render node), else on Mesa's llvmpipe (software rendering);
+``CASSI_EGL_DEVICE`` chooses (:func:`egl_device`).
 """
 
 from __future__ import annotations
@@ -22,43 +23,81 @@ from ..errors import RenderingUnavailableError
 HEADLESS_PLATFORMS = ("egl", "osmesa")
 
 _PLATFORM: str | None = None  # the answer of ensure_headless_gl, cached per process
+_DEVICE: dict | None = None  # the EGL device the probe chose: {"device", "file", "renderer"}
 
 # Probes run in a fresh interpreter (PyOpenGL fixes its platform at first import). They
 # create a context the way pyrender will (EGL: the first device's platform display) but
 # import only PyOpenGL, not pyrender: about 0.1 s instead of 1 s.
 _PROBES = {
     "egl": """
-import ctypes, os
+import ctypes, json, os, sys
 os.environ["PYOPENGL_PLATFORM"] = "egl"
 from OpenGL import EGL
-def ext(name, restype):
+def ext(name, restype, *argtypes):
     address = EGL.eglGetProcAddress(name)
     if address is None:
         return None
-    return ctypes.CFUNCTYPE(restype)(address)
+    function = ctypes.CFUNCTYPE(restype)(address)
+    function.argtypes = list(argtypes)
+    return function
 query = ext("eglQueryDevicesEXT", EGL.EGLBoolean)
-display = None
+devices = []
 if query is not None:
     from OpenGL._opaque import opaque_pointer_cls
     device_type = opaque_pointer_cls("EGLDeviceEXT")
     n = EGL.EGLint()
-    devices = (device_type * 8)()
+    found = (device_type * 16)()
     query.argtypes = [EGL.EGLint, ctypes.POINTER(device_type), ctypes.POINTER(EGL.EGLint)]
-    if query(8, devices, ctypes.pointer(n)) and n.value > 0:
-        get_display = ext("eglGetPlatformDisplayEXT", EGL.EGLDisplay)
-        display = get_display(0x313F, devices[0], None)
-if display is None:
-    display = EGL.eglGetDisplay(EGL.EGL_DEFAULT_DISPLAY)
-EGL.eglInitialize(display, None, None)
+    if query(16, found, ctypes.pointer(n)) and n.value > 0:
+        devices = list(found)[: n.value]
+get_display = ext("eglGetPlatformDisplayEXT", EGL.EGLDisplay)
+name_of = ext("eglQueryDeviceStringEXT", ctypes.c_char_p, ctypes.c_void_p, EGL.EGLint)
+def drm_file(device):
+    if name_of is None:
+        return ""
+    name = name_of(ctypes.cast(device, ctypes.c_void_p), 0x3233)  # EGL_DRM_DEVICE_FILE_EXT
+    return name.decode() if name else ""
+files = [drm_file(d) for d in devices]
+wanted = os.environ.get("CASSI_EGL_DEVICE", "auto").strip() or "auto"
+if not devices:
+    order = [None]
+elif wanted == "auto":  # a device with a render node (a GPU) first, the software one last
+    order = sorted(range(len(devices)), key=lambda i: (not files[i], i))
+elif wanted == "software":
+    order = [i for i in range(len(devices)) if not files[i]][:1]
+elif wanted.isdigit():
+    order = [int(wanted)] if int(wanted) < len(devices) else []
+else:
+    order = [i for i in range(len(devices)) if files[i] == wanted]
+if not order:
+    listed = ", ".join(str(i) + " " + (f or "software") for i, f in enumerate(files))
+    sys.exit(f"CASSI_EGL_DEVICE={wanted}: no such EGL device (devices: {listed})")
 attrs = [EGL.EGL_SURFACE_TYPE, EGL.EGL_PBUFFER_BIT, EGL.EGL_RENDERABLE_TYPE,
          EGL.EGL_OPENGL_BIT, EGL.EGL_DEPTH_SIZE, 24, EGL.EGL_NONE]
-config, n = EGL.EGLConfig(), EGL.EGLint()
-ok = EGL.eglChooseConfig(display, (EGL.EGLint * len(attrs))(*attrs), ctypes.pointer(config),
-                         1, ctypes.pointer(n))
-assert ok and n.value > 0, "no EGL configuration with OpenGL and a depth buffer"
-EGL.eglBindAPI(EGL.EGL_OPENGL_API)
-context = EGL.eglCreateContext(display, config, EGL.EGL_NO_CONTEXT, None)
-EGL.eglMakeCurrent(display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, context)
+failures = []
+for index in order:
+    display = (EGL.eglGetDisplay(EGL.EGL_DEFAULT_DISPLAY) if index is None
+               else get_display(0x313F, devices[index], None))
+    try:
+        EGL.eglInitialize(display, None, None)
+        config, n = EGL.EGLConfig(), EGL.EGLint()
+        ok = EGL.eglChooseConfig(display, (EGL.EGLint * len(attrs))(*attrs),
+                                 ctypes.pointer(config), 1, ctypes.pointer(n))
+        assert ok and n.value > 0, "no EGL configuration with OpenGL and a depth buffer"
+        EGL.eglBindAPI(EGL.EGL_OPENGL_API)
+        context = EGL.eglCreateContext(display, config, EGL.EGL_NO_CONTEXT, None)
+        assert context, "no OpenGL context"
+        assert EGL.eglMakeCurrent(display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, context)
+        from OpenGL import GL
+        renderer = (GL.glGetString(GL.GL_RENDERER) or b"").decode(errors="replace")
+    except Exception as exc:
+        failures.append(f"device {index}: {exc}".splitlines()[0])
+        continue
+    print(json.dumps({"device": index, "file": files[index] if index is not None else "",
+                      "renderer": renderer}))
+    break
+else:
+    sys.exit("; ".join(failures))
 """,
     "osmesa": """
 import os
@@ -78,6 +117,8 @@ pyrender.OffscreenRenderer(16, 16).delete()
 def probe_gl_platform(platform: str) -> str | None:
     """Try an offscreen context with ``platform`` (``"native"``, ``"egl"``, ``"osmesa"``)
     in a fresh interpreter; ``None`` if a context was created, else the reason (one line).
+    EGL: on the device :func:`egl_device` describes (``CASSI_EGL_DEVICE``), remembered
+    for :func:`ensure_headless_gl`.
 
     PyOpenGL fixes its platform at first import, so each candidate needs its own process.
     """
@@ -89,6 +130,8 @@ def probe_gl_platform(platform: str) -> str | None:
     except (OSError, subprocess.TimeoutExpired) as exc:
         return f"{type(exc).__name__}: {exc}"
     if proc.returncode == 0:
+        if platform == "egl":
+            _remember_device(proc.stdout)
         return None
     lines = [ln.strip() for ln in proc.stderr.strip().splitlines() if ln.strip()]
     return lines[-1] if lines else f"exit code {proc.returncode}"
@@ -155,6 +198,29 @@ def choose_gl_platform(
     )
 
 
+def _remember_device(stdout: str) -> None:
+    global _DEVICE
+    import json
+
+    lines = [ln for ln in stdout.splitlines() if ln.startswith("{")]
+    _DEVICE = json.loads(lines[-1]) if lines else None
+
+
+def egl_device() -> dict | None:
+    """The EGL device this process draws on, once :func:`ensure_headless_gl` chose EGL:
+    ``{"device": index (pyrender's EGL_DEVICE_ID) or None, "file": its DRM render node
+    ("" for Mesa's software device), "renderer": OpenGL's GL_RENDERER string, e.g.
+    "llvmpipe (LLVM 15.0.7, 256 bits)"}``; None if not known (another platform, or
+    ``PYOPENGL_PLATFORM`` set without ``CASSI_EGL_DEVICE``).
+
+    The device is chosen by ``CASSI_EGL_DEVICE``: ``auto`` (default) the first device
+    with a DRM render node (a GPU) that makes a context, else Mesa's software one
+    (llvmpipe); ``software`` llvmpipe; a number, that device; a path such as
+    ``/dev/dri/renderD128``, the device with that render node. ``EGL_DEVICE_ID`` set by
+    hand is respected as pyrender reads it."""
+    return None if _DEVICE is None else dict(_DEVICE)
+
+
 def ensure_headless_gl() -> str:
     """Choose the OpenGL platform for offscreen rendering (:func:`choose_gl_platform`),
     once per process; returns its name.
@@ -166,7 +232,15 @@ def ensure_headless_gl() -> str:
     global _PLATFORM
     if _PLATFORM is None:
         platform = choose_gl_platform()
+        if (platform == "egl" and _DEVICE is None and os.environ.get("CASSI_EGL_DEVICE")
+                and "OpenGL.platform" not in sys.modules):
+            reason = probe_gl_platform("egl")  # PYOPENGL_PLATFORM set: choose the device
+            if reason is not None:
+                raise RenderingUnavailableError(f"no EGL context: {reason}")
         if platform != "native" and "OpenGL.platform" not in sys.modules:
             os.environ["PYOPENGL_PLATFORM"] = platform
+        if (platform == "egl" and _DEVICE is not None and _DEVICE.get("device") is not None
+                and "EGL_DEVICE_ID" not in os.environ):
+            os.environ["EGL_DEVICE_ID"] = str(_DEVICE["device"])  # read by pyrender
         _PLATFORM = platform
     return _PLATFORM

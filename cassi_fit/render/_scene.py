@@ -217,6 +217,8 @@ class Renderer:
         self._gl._renderer.samples = samples
 
     def _add_piece(self, pyrender, piece):
+        from . import _draw
+
         alpha = 0.35 if piece.glass else 1.0
         if piece.glass and piece.views == ("top",):  # the palate over the tongue's relief
             alpha = _TOP_GLASS_ALPHA
@@ -238,7 +240,7 @@ class Renderer:
         )
         piece.primitive.cassi_cull = piece.cull
         piece.mesh = pyrender.Mesh([piece.primitive])
-        self._scene.add(piece.mesh)
+        _draw.add_mesh(self._scene, piece.mesh)
 
     # -- per frame ---------------------------------------------------------------------
 
@@ -315,7 +317,9 @@ class Renderer:
         from . import _draw
 
         markers = {} if markers is None else dict(markers)
-        for label in set(self._markers) | set(markers):
+        # in a fixed order (not a set's, which varies with each process's string hashes):
+        # the markers are drawn at one depth, so the first drawn shows where they overlap
+        for label in [*self._markers, *(k for k in markers if k not in self._markers)]:
             pts = _marker_points(markers.get(label, np.zeros((0, 3))))
             poses = self._marker_poses(pts)
             if label not in self._markers:
@@ -349,6 +353,8 @@ class Renderer:
         return np.concatenate(out) if out else np.zeros((0, 4, 4))
 
     def _marker_mesh(self, pyrender, label, poses):
+        from . import _draw
+
         colours = _EXTRA_MARKER_COLOURS
         colour = MARKER_COLOURS.get(label, colours[len(self._markers) % len(colours)])
         material = pyrender.MetallicRoughnessMaterial(
@@ -362,7 +368,7 @@ class Renderer:
             positions=positions, normals=normals, indices=faces, material=material, poses=poses
         )
         mesh = pyrender.Mesh([primitive])
-        self._scene.add(mesh)
+        _draw.add_mesh(self._scene, mesh)
         return mesh
 
     def _draw(self) -> np.ndarray:
