@@ -381,6 +381,8 @@ __all__ = [
     "RunSpec", "run_spec", "CalibrationFiles", "run_recording", "RecordingRun",
     "write_recording_video",
     "view", "write_view", "ViewerPage",
+    "Acoustics", "FormantTrack", "TractParams", "fit_tract", "formants", "measure_formants",
+    "plot_acoustics", "recording_acoustics", "tract_geometry",
     "write_animation", "write_calibration", "write_headmeasures", "write_lab", "write_outline",
     "write_penetration_csv", "write_report", "write_table", "write_textgrid", "write_txy",
 ]

@@ -148,16 +148,18 @@ def recording_acoustics(
     those beside the pellet file unless ``labels`` (a :class:`~cassi_fit.labels.Labels`) is
     given. ``MissingDataError`` if there is no sound."""
     from .errors import MissingDataError
-    from .labels import labels_for
+    from .labels import recording_labels
 
     rec, anim = run.recording, run.animation
     if samples is None:
-        if rec.audio is None:
-            raise MissingDataError(f"{rec.subject}/{rec.task}: no sound (.wav) beside the "
-                                   "pellet file: the formants cannot be measured")
-        samples, rate_hz = read_wav(rec.audio)
-    if labels is None and rec.path is not None:
-        labels = labels_for(rec.path)
+        sound = rec.sound
+        if sound is None:
+            raise MissingDataError(f"{rec.subject}/{rec.task}: no sound (a .wav beside the "
+                                   "file or inside it): the formants cannot be measured")
+        with sound.wav_file() as wav:
+            samples, rate_hz = read_wav(wav)
+    if labels is None:  # beside the file or inside it (mview, EMU levels)
+        labels = recording_labels(rec)
     times = np.asarray(anim.times, np.float64)
     names = labels.at(times) if labels is not None else np.full(times.shape, "")
     tract = af.default_tract(jnp.asarray(anim.vertices).dtype) if tract is None else tract

@@ -378,17 +378,17 @@ def write_recording_video(
         if renderer is None and int(jobs) > 1:
             with FramePool(state.model, jobs=int(jobs), **setup) as pool:
                 return write_animation(path, run.animation, None, workers=pool, **options)
-        return _draw_with(renderer, state.model, setup, traces, path, run.animation, options)
+        return _draw_with(renderer, state, setup, traces, path, run.animation, options)
 
 
-def _draw_with(renderer, model, setup, traces, path, animation, options) -> Path:
+def _draw_with(renderer, state, setup, traces, path, animation, options) -> Path:
     """:func:`write_animation` with ``renderer`` (its traces replaced), or with one opened
-    here for ``model`` as ``setup`` says and closed after."""
+    here for ``state.model`` as ``setup`` says and closed after."""
     from .render import Renderer
 
     own = renderer is None
     if own:
-        renderer = Renderer(model, **setup)
+        renderer = Renderer(state.model, **setup)
     else:
         renderer.set_traces(traces)
     try:

@@ -55,7 +55,7 @@ def test_docstrings_are_shown_as_markdown(site):
     code (``:class:`RecordingRun``` -> ``RecordingRun``), not as ``:class:`` text."""
     out, _ = site
     page = (out / "reference" / "pipeline.html").read_text(encoding="utf-8")
-    assert "The spec is checked once, here." in page
+    assert "The spec is checked once, here;" in page
     assert "<code>RecordingRun</code>" in page
     for name in ("pipeline", "run_spec", "jaw_fit", "dataset"):
         text = (out / "reference" / f"{name}.html").read_text(encoding="utf-8")

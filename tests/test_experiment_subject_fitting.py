@@ -279,7 +279,6 @@ def test_dataset_run_has_residuals_but_no_truth(tmp_path, capsys):
 @pytest.mark.slow
 def test_notebook_runs_and_shows_figures_and_the_table():
     nb = nbformat.read(ROOT / "notebooks" / "subject_fitting.ipynb", as_version=4)
-    assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code")
     NotebookClient(nb, timeout=None, kernel_name="python3",
                    resources={"metadata": {"path": str(ROOT / "notebooks")}}).execute()
     outputs = [o for cell in nb.cells if cell.cell_type == "code" for o in cell.outputs]

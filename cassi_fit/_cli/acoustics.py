@@ -35,7 +35,7 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from cassi_fit.acoustics import plot_acoustics, recording_acoustics
-    from cassi_fit.errors import OutputExistsError
+    from cassi_fit.errors import CassiError, OutputExistsError
     from cassi_fit.formant_track import read_wav
     from cassi_fit.tables import markdown_text, write_table
 
@@ -43,7 +43,8 @@ def run(args) -> int:
         if out and Path(out).exists() and not args.force:
             raise OutputExistsError(f"{out}: exists (use --force to replace it)")
     recording = load_recording_args(args.recording, args)
-    run_ = run_args(recording, args)
+    face_args = _acoustic_only_folder(recording, args)
+    run_ = run_args(recording, face_args)
     tract = _calibrated_tract(recording, getattr(args, "calibration", None))
     result = recording_acoustics(run_, ceiling_hz=args.ceiling, tract=tract)
     segments = result.segment_rows()
@@ -56,10 +57,36 @@ def run(args) -> int:
             write_table(segments, seg_path, overwrite=args.force, digits=3)
         print(f"wrote {args.csv}")
     if args.plot:
-        samples, rate = read_wav(recording.audio)
+        sound = recording.sound
+        if sound is None:
+            raise CassiError(f"{recording.path}: no sound (a .wav beside it or inside it) "
+                             "for the spectrogram of --plot")
+        with sound.wav_file() as wav:
+            samples, rate = read_wav(wav)
         plot_acoustics(result, samples, rate, args.plot)
         print(f"wrote {args.plot}")
     return 0
+
+
+def _acoustic_only_folder(recording, args):
+    """A ``--calibration`` folder holding the subject's acoustic calibration but no
+    ``SUBJECT.calibration.json`` (``cassi calibrate --acoustic`` writes only the former):
+    the pellets' model keeps its defaults, said in one line, and the folder serves the
+    vocal tract alone. Returns the options for the face's run (a copy; ``args`` kept)."""
+    import argparse
+
+    from cassi_fit.acoustic_fit import acoustic_calibration_path
+    from cassi_fit.calibration import calibration_path
+
+    folder = getattr(args, "calibration", None)
+    if not folder or not Path(folder).is_dir():
+        return args
+    if (acoustic_calibration_path(folder, recording.subject).is_file()
+            and not calibration_path(folder, recording.subject).is_file()):
+        print(f"{folder}: no calibration of {recording.subject}'s face, only its vocal "
+              "tract: the face with the default calibration")
+        return argparse.Namespace(**{**vars(args), "calibration": None})
+    return args
 
 
 def _calibrated_tract(recording, calibration):
@@ -111,7 +138,7 @@ def calibrate_acoustic(args) -> int:
         results, names = [], []
         for task in dataset.tasks(subject):
             recording = dataset.load(subject, task)
-            if recording.audio is None:
+            if recording.sound is None:
                 continue
             result = recording_acoustics(run_recording(recording))
             if result.scored.any():
