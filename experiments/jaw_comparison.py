@@ -238,6 +238,7 @@ def dataset_report(root, out, overwrite, limit):
     from cassi_fit._io import atomic_write
     from cassi_fit.dataset import Dataset
     from cassi_fit.jaw_fit import jaw_from_track
+    from cassi_fit.status import fitted
 
     data = Dataset(root)
     rows, fig = [], plt.figure(figsize=(6, 5))
@@ -249,7 +250,7 @@ def dataset_report(root, out, overwrite, limit):
             track = data.load(subject, task).track
         fits = {m: jaw_from_track(track, method=m) for m in _methods()}
         for m, fit in fits.items():
-            use = fit.status <= 1
+            use = fitted(fit.status)
             diff = np.rad2deg(fit.theta[use] - fits["frame-fit"].theta[use])
             rows.append({"subject": subject, "task": task, "method": m,
                          "median_residual_mm": float(np.median(fit.residual[use])),

@@ -114,6 +114,7 @@ def frame_errors(track, truth, anatomy, method):  # method: an alias or a method
     """Per-frame errors of one method on one recording: dict of (n,) arrays, NaN in the
     frames the method did not use (so methods are compared on the same frames)."""
     from cassi_fit.jaw_fit import fit_jaw
+    from cassi_fit.status import fitted
 
     jaw = track.positions[:, 6:8, :]
     valid = track.valid[:, 6:8].all(axis=(1, 2))
@@ -122,7 +123,7 @@ def frame_errors(track, truth, anatomy, method):  # method: an alias or a method
     fit = fit_jaw(jaw[f0], np.where(valid[:, None, None], jaw, 0.0), method=method,
                   valid=valid, **options)
     theta, t, pivot, defined = true_motion(truth, f0)
-    use = valid & (fit.status <= 1) & (np.arange(len(valid)) > f0)
+    use = valid & fitted(fit.status) & (np.arange(len(valid)) > f0)
     out = {"theta_deg": np.rad2deg(np.abs(theta)),
            "angle_err_deg": np.rad2deg(np.abs(fit.theta - theta))}  # fmt: skip
     est_pivot = np.where(fit.pivot_defined[:, None], fit.pivot, np.nan)

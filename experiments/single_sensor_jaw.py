@@ -111,11 +111,12 @@ def _predictions(track, visible, couplings):
         SmoothPivot,
         jaw_from_track,
     )
+    from cassi_fit.status import Status, fitted
 
     jaw = _jaw(track)
     v, h = SENSORS.index(visible), 1 - SENSORS.index(visible)
     procrustes = jaw_from_track(track, method="frame-fit")  # both tracked, neither mistracked
-    frames = (procrustes.status <= 1) & np.isfinite(jaw).all(axis=(1, 2))
+    frames = fitted(procrustes.status) & np.isfinite(jaw).all(axis=(1, 2))
     ref = procrustes.reference_frame
     both = jaw_from_track(track, method="fixed-pivot")
     out = {"static (baseline)": (np.broadcast_to(jaw[ref, h], jaw[:, h].shape), "", True),
@@ -132,7 +133,7 @@ def _predictions(track, visible, couplings):
     for label, method in methods.items():
         fit = jaw_from_track(track, method=method, jaw_sensors=visible,
                              reference_frame=ref)
-        ok = (fit.status <= 1) | (fit.status == 5)  # 5: NOT_CONVERGED, scored as it stands
+        ok = fitted(fit.status) | (fit.status == Status.NOT_CONVERGED)  # scored as it stands
         out[label] = (np.where(ok[:, None], fit.hidden_predicted, np.nan), fit.prior,
                       fit.converged)
     return out, frames
@@ -185,20 +186,21 @@ def _rows(source, recordings, visible, couplings_for):
 def _split_rows(recordings, visible):
     """The real recordings' coupling learned from the other half of the same recording."""
     from cassi_fit.jaw_fit import CoupledRotation, jaw_from_track, learn_jaw_coupling
+    from cassi_fit.status import fitted
 
     h = 1 - SENSORS.index(visible)
     series = []
     for name, _, track in recordings:
         measured = _jaw(track)[:, h]
         both = jaw_from_track(track, method="frame-fit")
-        frames = (both.status <= 1) & np.isfinite(_jaw(track)).all(axis=(1, 2))
+        frames = fitted(both.status) & np.isfinite(_jaw(track)).all(axis=(1, 2))
         first = np.arange(track.n_frames) < track.n_frames // 2
         for learn_first in (True, False):
             coupling = learn_jaw_coupling([_half(track, learn_first)], visible,
                                           source=f"the other half of {name}")
             fit = jaw_from_track(track, method=CoupledRotation(coupling=coupling),
                                  jaw_sensors=visible, reference_frame=both.reference_frame)
-            use = frames & (fit.status <= 1) & (first != learn_first)
+            use = frames & fitted(fit.status) & (first != learn_first)
             series.append(np.linalg.norm(fit.hidden_predicted[use] - measured[use], axis=1))
     pooled = np.concatenate(series)
     lo, hi = _bootstrap_median(series, seed=99)

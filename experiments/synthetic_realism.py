@@ -35,6 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cassi_fit.txy import FRAME_STEP_US
+
 ROOT = Path(__file__).resolve().parents[1]
 # the real recording in a "shared" folder beside the checkout or above it
 REALS = [p / "shared" / "data" / "xrmb_jw11" / "jw11_tp005.txy" for p in ROOT.parents]
@@ -43,7 +45,7 @@ N_FRAMES = 730  # as the real file
 SEED = 20
 METHODS = ("closed-form", "frame-fit", "fixed-pivot", "smooth-pivot")
 NOISES = ("realistic", "xrmb")
-DT = 6866e-6
+DT = FRAME_STEP_US * 1e-6  # XRMB's frame step, as the real file
 
 
 def real_path() -> Path | None:
@@ -66,6 +68,7 @@ def diagnostics(track) -> dict[str, float]:
     from scipy.ndimage import gaussian_filter1d
 
     from cassi_fit.jaw_fit import jaw_diagnostics, jaw_from_track
+    from cassi_fit.status import fitted
 
     pos = track.positions
     out: dict[str, float] = {}
@@ -82,7 +85,7 @@ def diagnostics(track) -> dict[str, float]:
             out["closed_form_pivot_iqr_x_mm"] = diag.pivot_iqr_x_mm
             out["closed_form_pivot_iqr_y_mm"] = diag.pivot_iqr_y_mm
         if method == "fixed-pivot":
-            used = fit.status <= 1
+            used = fitted(fit.status)
             out["fixed_pivot_x_mm"], out["fixed_pivot_y_mm"] = np.median(fit.pivot[used], axis=0)
     fit = fits["frame-fit"]
     used = np.asarray(fit.status) <= 1
