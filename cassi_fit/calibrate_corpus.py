@@ -48,7 +48,7 @@ def calibrate_task(item: CorpusItem, out_dir: str, *, tasks: Sequence[str] | Non
     subject from ``tasks`` (default: all its recordings) with the worker's model and write
     ``out_dir/SUBJECT.calibration.json``. Row: method, scale, lip thicknesses, face width
     (mm), convergence."""
-    ds = Dataset(item.root)
+    ds = item.dataset()
     wanted = chosen_tasks(ds, item.subject, tasks)
     if not wanted:
         raise MissingDataError(f"{ds.root}: subject {item.subject} has none of the tasks "

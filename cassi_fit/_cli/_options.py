@@ -92,6 +92,29 @@ def load_recording_args(words, args: argparse.Namespace | None = None):
     raise CassiError(f"RECORDING is a pellet file or DATASET SUBJECT TASK, got {len(words)} words")
 
 
+def dataset_args(root, args: argparse.Namespace):
+    """The dataset folder ``root`` as a corpus command reads it: a ``dataset.Dataset``
+    with ``--sensor-map`` (or ``--accept-proposed-map``) when given, else the folder.
+    The options that describe one file (``--layout``, ``--rate``, ``--bite-plane``) are
+    refused for a dataset in one line, never silently ignored."""
+    from cassi_fit.errors import CassiError
+
+    options = source_options(args)
+    per_file = [f"--{k.replace('_', '-')}" for k in ("layout", "rate", "bite_plane")
+                if options.get(k) is not None]
+    if per_file:
+        raise CassiError(f"{root}: {', '.join(per_file)} describe one file, not a dataset; "
+                         f"give them with one recording (or put a sensor map beside the files)")
+    smap = options.get("sensor_map")
+    if smap is None:
+        return root
+    from cassi_fit.dataset import Dataset
+
+    if isinstance(smap, str) and os.path.lexists(smap):
+        smap = os.path.abspath(smap)  # a worker may run in another folder
+    return Dataset(os.path.abspath(root), sensor_map=smap)
+
+
 # ------------------------------------------------------------------ how the model runs
 
 

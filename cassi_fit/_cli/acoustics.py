@@ -128,7 +128,10 @@ def calibrate_acoustic(args) -> int:
     root, out = Path(args.dataset), Path(args.out)
     if not root.is_dir():
         raise CassiError(f"{root}: no such dataset folder")
-    dataset = Dataset(root)
+    from ._options import dataset_args
+
+    source = dataset_args(root, args)  # with --sensor-map when given
+    dataset = source if isinstance(source, Dataset) else Dataset(root)
     subjects = [w.strip() for w in (args.subjects or "").split(",") if w.strip()] or dataset.subjects()
     status = 0
     for subject in subjects:

@@ -11,6 +11,7 @@ from ._options import (
     add_model_arguments,
     add_recording_argument,
     add_run_arguments,
+    dataset_args,
     finish,
     load_recording_args,
     parse_size,
@@ -196,7 +197,7 @@ def run_dataset(args) -> int:
     video_options = {"suffix": f".{args.format}", "size": parse_size(args.size),
                      "views": parse_views(args.views), "audio": not args.no_audio,
                      "markers": args.markers, "fps": args.fps}
-    run, written, _ = animate_corpus(args.recording[0], args.out, spec=spec_from_args(args),
+    run, written, _ = animate_corpus(dataset_args(args.recording[0], args), args.out, spec=spec_from_args(args),
                                      video_options=video_options,
                                      run_options=run_options(args))
     print(f"{len(run.results) - len(run.failed)} of {len(run.results)} videos written to "

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from cassi_fit.options import CALIBRATION_METHODS
 
-from ._options import add_run_arguments, finish, run_options
+from ._options import add_run_arguments, add_source_arguments, dataset_args, finish, run_options
 
 
 def register(subparsers) -> None:
@@ -44,6 +44,7 @@ def register(subparsers) -> None:
                         help="exit 0 even if a subject's fit did not converge or reached "
                         "an anatomical bound (still named on stderr and recorded in its "
                         "file)")
+    add_source_arguments(parser)  # a dataset's articulograph files: --sensor-map, ...
     add_run_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--acoustic", action="store_true",
@@ -72,8 +73,10 @@ def run(args) -> int:
     root = Path(args.dataset)
     if not root.is_dir():
         raise CassiError(f"{root}: no such dataset folder")
+    source = dataset_args(root, args)  # the folder, or a Dataset with its sensor map
     out = Path(args.out)
-    subjects = _words(args.subjects) or Dataset(root).subjects()
+    subjects = _words(args.subjects) or (
+        source if isinstance(source, Dataset) else Dataset(root)).subjects()
     targets = [calibration_path(out, s) for s in subjects] + [out / "calibration_summary.csv"]
     if not (args.force or args.resume):
         existing = [str(p) for p in targets if p.exists()]
@@ -82,7 +85,7 @@ def run(args) -> int:
                                     "or --resume to continue)")
     with warnings.catch_warnings():  # the problems are printed below, one line each
         warnings.simplefilter("ignore", CalibrationWarning)
-        run, _, cals = calibrate_corpus(root, out, subjects=subjects,
+        run, _, cals = calibrate_corpus(source, out, subjects=subjects,
                                         tasks=_words(args.tasks), run_options=run_options(args),
                                         method=args.method, collisions=not args.no_collisions)
     print(f"{'subject':8} {'scale':>7} {'UL mm':>7} {'LL mm':>7} {'LL bias mm':>12} "

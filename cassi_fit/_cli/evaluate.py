@@ -9,6 +9,8 @@ from pathlib import Path
 from ._options import (
     add_model_arguments,
     add_run_arguments,
+    add_source_arguments,
+    dataset_args,
     finish,
     run_options,
     spec_from_args,
@@ -36,6 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "tp106); default: every task of every subject")
     parser.add_argument("--subjects", nargs="+", metavar="SUBJECT",
                         help="only these subjects (default: all)")
+    add_source_arguments(parser)  # a dataset's articulograph files: --sensor-map, ...
     add_run_arguments(parser)  # recordings in parallel: --jobs, --scheduler, --resume, --force
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
@@ -64,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
         raise OutputExistsError(f"{', '.join(existing)}: file exists (pass --force to replace)")
     from cassi_fit.evaluate import evaluate_corpus, markdown_table, write_report
 
-    run, _, result = evaluate_corpus(dataset, out, spec=spec, tasks=_words(args.tasks),
+    run, _, result = evaluate_corpus(dataset_args(dataset, args), out, spec=spec, tasks=_words(args.tasks),
                                      subjects=_words(args.subjects),
                                      run_options=run_options(args))
     print(markdown_table(result), end="")

@@ -13,6 +13,7 @@ from cassi_fit.options import ALL_JAW_METHODS, JAW_SENSOR_SETS, SOLVERS
 from ._options import (
     add_run_arguments,
     add_source_arguments,
+    dataset_args,
     finish,
     load_recording_args,
     run_options,
@@ -159,7 +160,7 @@ def run_dataset(args) -> int:
     """``cassi jaw DATASET --out DIR``."""
     from cassi_fit.jaw_table import jaw_corpus
 
-    result = jaw_corpus(args.recording[0], args.out, spec=jaw_spec_from_args(args),
+    result = jaw_corpus(dataset_args(args.recording[0], args), args.out, spec=jaw_spec_from_args(args),
                         labels=not args.no_labels, run_options=run_options(args))
     run = result.run
     ok = len(run.results) - len(run.failed)

@@ -7,7 +7,7 @@ import os
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..status import Status
 
@@ -20,12 +20,22 @@ if TYPE_CHECKING:
 class CorpusItem:
     """One unit of work: ``subject`` (upper case), ``task`` (lower case; ``""`` for
     per-subject work), ``path``: the pellet file (or, per subject, the dataset folder),
-    and ``root``: the dataset folder it came from (``""`` for a lone file)."""
+    ``root``: the dataset folder it came from (``""`` for a lone file), and
+    ``sensor_map``: the dataset's articulograph sensor map as it was given
+    (``dataset.Dataset``'s; None: a map beside the files, else the built-in names), so a
+    worker reads the recording as the dataset does."""
 
     subject: str
     task: str
     path: str
     root: str = ""
+    sensor_map: Any = field(default=None, compare=False)
+
+    def dataset(self) -> Dataset:
+        """The item's ``dataset.Dataset`` (its folder, with its sensor map)."""
+        from ..dataset import Dataset
+
+        return Dataset(self.root, sensor_map=self.sensor_map)
 
 
 def load_item(item: CorpusItem, *, quiet: bool = False) -> Recording:
@@ -35,14 +45,14 @@ def load_item(item: CorpusItem, *, quiet: bool = False) -> Recording:
     conformation each row used; a warning per worker would only repeat it)."""
     import warnings
 
-    from ..dataset import Dataset, DefaultHeadMeasuresWarning, load_recording
+    from ..dataset import DefaultHeadMeasuresWarning, load_recording
 
     with warnings.catch_warnings():
         if quiet:
             warnings.simplefilter("ignore", DefaultHeadMeasuresWarning)
         if item.root:
-            return Dataset(item.root).load(item.subject, item.task)
-        return load_recording(item.path)
+            return item.dataset().load(item.subject, item.task)
+        return load_recording(item.path, sensor_map=item.sensor_map)
 
 
 @dataclass(frozen=True)
@@ -98,10 +108,10 @@ def dataset_items(dataset: Dataset | str | os.PathLike, *, subjects: Iterable[st
     for subject in names:
         chosen = chosen_tasks(ds, subject, tasks)
         if per_subject and chosen:
-            items.append(CorpusItem(subject, "", root, root))
+            items.append(CorpusItem(subject, "", root, root, ds.sensor_map))
         elif not per_subject:
-            items += [CorpusItem(subject, t, os.path.abspath(ds.pellet_path(subject, t)), root)
-                      for t in chosen]
+            items += [CorpusItem(subject, t, os.path.abspath(ds.pellet_path(subject, t)), root,
+                                 ds.sensor_map) for t in chosen]
     return items
 
 

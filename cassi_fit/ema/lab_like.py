@@ -255,7 +255,8 @@ def write_lab_like_corpus(out_dir: str | os.PathLike, *, format: str = "ag501",
     file) and ``truth_sensors.toml`` (the true names, for checking a proposed map; not
     named ``sensors.toml`` so the toolkit does not find it). A folder with files is
     refused unless ``overwrite``, and never one holding real data."""
-    from .._io import atomic_write, refuse_foreign_data
+    from .._io import atomic_write
+    from ..synth._foreign import refuse_foreign_data
     from ..synth import AUDIO_RATE_HZ
     from ..synth._audio import _write_wav
 
