@@ -23,6 +23,8 @@ def session(tmp_path_factory):
     assert cli.main(["synth", str(root), "--format", "ag501", "--lab-like", "--subjects", "1",
                      "--no-audio"]) == 0
     (speaker,) = [p for p in root.iterdir() if p.is_dir()]
+    assert sorted(p.suffix for p in speaker.iterdir() if p.suffix in (".pos", ".wav")) == [
+        ".pos", ".pos"]  # --no-audio: no sound beside the files
     truth = root.parent / "lab_map.toml"  # kept away from the files: only the option gives it
     shutil.move(speaker / "truth_sensors.toml", truth)
     return root, truth

@@ -99,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
         tasks = None if args.tasks is None else tuple(
             t.strip() for t in args.tasks.split(",") if t.strip())
         out = write_lab_like_corpus(args.out_dir, format=args.format, n_subjects=args.subjects,
-                                    seed=args.seed, overwrite=args.force, tasks=tasks)
+                                    seed=args.seed, overwrite=args.force, tasks=tasks,
+                                    audio=not args.no_audio)
         print(f"wrote {args.subjects} lab-like {args.format} sessions to {out} (seed "
               f"{args.seed}; the truth in each placement.json)")
         return 0

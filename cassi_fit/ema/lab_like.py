@@ -249,16 +249,17 @@ def true_sensor_map(rec: LabLike) -> str:
 
 def write_lab_like_corpus(out_dir: str | os.PathLike, *, format: str = "ag501",
                           n_subjects: int = 6, seed: int = 0, overwrite: bool = False,
-                          tasks: tuple[str, ...] | None = None) -> Path:
+                          tasks: tuple[str, ...] | None = None, audio: bool = True) -> Path:
     """Write ``n_subjects`` lab-like sessions (module docstring) in ``format`` to
-    ``out_dir/<subject>/``: each task's file, ``placement.json`` (the truth of every
+    ``out_dir/<subject>/``: each task's file with its sound (inside an mview file, else a
+    ``.wav`` beside it; none with ``audio=False``), ``placement.json`` (the truth of every
     file) and ``truth_sensors.toml`` (the true names, for checking a proposed map; not
     named ``sensors.toml`` so the toolkit does not find it). A folder with files is
     refused unless ``overwrite``, and never one holding real data."""
     from .._io import atomic_write
-    from ..synth._foreign import refuse_foreign_data
     from ..synth import AUDIO_RATE_HZ
     from ..synth._audio import _write_wav
+    from ..synth._foreign import refuse_foreign_data
 
     if format not in FORMATS:
         raise CassiError(f"lab-like files: format {format!r} is not one of {', '.join(FORMATS)}")
@@ -277,12 +278,13 @@ def write_lab_like_corpus(out_dir: str | os.PathLike, *, format: str = "ag501",
         truth = {}
         for rec in recs:
             name = f"{rec.truth['task']}{suffix}"
-            if format == "mview":  # the sound inside the file, as Haskins' files carry it
+            if format == "mview" and audio:  # the sound inside, as Haskins' files carry it
                 _write(format, folder / name, rec.raw,
                        (rec.audio.astype(np.float64) / 32768.0, float(AUDIO_RATE_HZ)))
-            else:  # the sound beside the file
+            else:  # the sound (unless audio=False) beside the file
                 _write(format, folder / name, rec.raw)
-                _write_wav(folder / f"{rec.truth['task']}.wav", rec.audio, overwrite=True)
+                if audio:
+                    _write_wav(folder / f"{rec.truth['task']}.wav", rec.audio, overwrite=True)
             truth[name] = rec.truth
         atomic_write(folder / "placement.json", json.dumps(truth, indent=1) + "\n",
                      overwrite=True)
