@@ -172,17 +172,15 @@ def run_jw11(folder: Path, one_jaw: bool):
 
 
 def run_emu(folder: Path):
-    import _emu_bundle
-
+    """The EMU bundle read as every command reads it (``dataset.load_recording``: the IPS
+    Munich sensor map, the occlusal frame estimated from the recording, the sound and the
+    ``Segment`` labels inside the bundle)."""
     from cassi_fit.acoustics import recording_acoustics
-    from cassi_fit.labels import Labels
+    from cassi_fit.dataset import load_recording
     from cassi_fit.pipeline import run_recording
 
-    rec, b = _emu_bundle.bundle_recording(next(folder.glob("*_bndl.json")))
-    run = run_recording(rec)
-    seg = b["segments"]
-    labels = Labels([s for s, _, _ in seg], [e for _, e, _ in seg], [lab for _, _, lab in seg])
-    return run, recording_acoustics(run, samples=b["samples"], rate_hz=b["rate"], labels=labels)
+    run = run_recording(load_recording(next(folder.glob("*_bndl.json"))))
+    return run, recording_acoustics(run)
 
 
 def main(argv=None) -> int:

@@ -195,7 +195,8 @@ def _print_file(report: dict, out) -> None:
     print(f"  palate {report['palate_points'] or '-'} points  pharynx "
           f"{report['pharynx_points'] or '-'} points  head measures "
           f"{'DEFAULTS' if report['head_is_default'] else 'from file'}  audio "
-          f"{report['audio'] or '-'}", file=out)  # fmt: skip
+          f"{report['audio'] or ('in the file' if report.get('sound') else '-')}",
+          file=out)  # fmt: skip
     print("  pellet  valid%  mistracked  reasons", file=out)
     reasons = q.get("mistrack_reasons") or {}
     for name, frac in q["valid_fraction"].items():
