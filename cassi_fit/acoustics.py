@@ -170,6 +170,53 @@ def recording_acoustics(
                      anim.vertices, float(run.state.scale))
 
 
+#: The frequencies of the tract view's spectrum (Hz): 0-5 kHz, F1-F4's range.
+PANEL_HZ = np.arange(25.0, 5000.0 + 1.0, 25.0)
+
+
+def _spectra(areas, lengths, frequency_hz, chunk: int = 256) -> np.ndarray:
+    """``(m, k)`` dB of the lossy tube of every frame at ``frequency_hz``, in chunks of
+    ``chunk`` frames (one compilation per chunk size)."""
+    run = jax.jit(jax.vmap(tube.spectrum, in_axes=(None, 0, 0)))
+    f = jnp.asarray(frequency_hz)
+    out, m = [], len(areas)
+    for start in range(0, m, chunk):
+        a, ln = areas[start:start + chunk], lengths[start:start + chunk]
+        n = len(a)
+        if n < chunk and m > chunk:  # the last chunk padded: no second compilation
+            a = np.concatenate([a, np.repeat(a[-1:], chunk - n, axis=0)])
+            ln = np.concatenate([ln, np.repeat(ln[-1:], chunk - n, axis=0)])
+        out.append(np.asarray(run(f, jnp.asarray(a), jnp.asarray(ln)))[:n])
+    return np.concatenate(out) if out else np.zeros((0, len(frequency_hz)))
+
+
+def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
+                 ceiling_hz: float = CEILING_HZ["male"]) -> list[dict]:
+    """What ``cassi animate --views ...,tract`` draws beside the face, per animation frame
+    of ``run``: ``lengths_mm``, ``areas_mm2`` (the area function, glottis first, as
+    :func:`recording_acoustics` makes it), ``frequency_hz`` (:data:`PANEL_HZ`) and
+    ``gain_db`` (the lossy tube's transfer function), ``model_hz`` (F1-F3) and
+    ``measured_hz`` (the sound's F1-F3 where the recording has a sound and the
+    measurement is reliable at that frame, else NaN). ``tract``: default the norms
+    (``area_function.default_tract``)."""
+    anim = run.animation
+    tract = af.default_tract(jnp.asarray(anim.vertices).dtype) if tract is None else tract
+    geometry = af.tract_geometry(run.state.model)
+    freq, _, areas, lengths = model_formants(geometry, anim.vertices, tract, run.state.scale)
+    gain = _spectra(areas, lengths, PANEL_HZ)
+    measured = np.full((len(freq), 3), np.nan)
+    sound = getattr(run.recording, "sound", None)
+    if sound is not None:
+        with sound.wav_file() as wav:
+            samples, rate_hz = read_wav(wav)
+        track = measure_formants(samples, rate_hz, np.asarray(anim.times, np.float64),
+                                 ceiling_hz=ceiling_hz)
+        measured = np.where(track.reliable[:, None], track.frequency[:, :3], np.nan)
+    return [{"lengths_mm": lengths[k], "areas_mm2": areas[k], "frequency_hz": PANEL_HZ,
+             "gain_db": gain[k], "model_hz": freq[k, :3], "measured_hz": measured[k]}
+            for k in range(len(freq))]
+
+
 def plot_acoustics(result: Acoustics, samples: Float[np.ndarray, " n"], rate_hz: float,
                    path: str | os.PathLike, *, title: str = "") -> Path:
     """The spectrogram with the measured (dots) and model (lines) F1-F3 and the vowel

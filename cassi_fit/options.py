@@ -49,6 +49,11 @@ JAW_WEIGHTS = ("cassi", "parke")
 VIEWS = ("front", "side", "inside", "top", "midsagittal")
 #: The paper's four views (a Renderer's default; ``midsagittal`` is the toolkit's 2D section).
 PAPER_VIEWS = ("front", "side", "inside", "top")
+#: The vocal tract beside the face (the area function and the tube's spectrum, drawn in 2D
+#: from ``acoustics.tract_panels``): asked for by name, never among the default views.
+TRACT_VIEW = "tract"
+#: Every view a renderer draws: :data:`VIEWS` and :data:`TRACT_VIEW`.
+ALL_VIEWS = (*VIEWS, TRACT_VIEW)
 #: Output kinds of ``cassi animate``.
 ANIMATION_SUFFIXES = (".mp4", ".gif", ".png")
 #: A video's frames per second unless ``--fps`` says otherwise (about what a screen shows;

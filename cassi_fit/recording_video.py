@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import os
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from fractions import Fraction
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
@@ -118,12 +118,15 @@ def frame_work(
     frames: VideoFrames | None = None,
     indices: Iterable[int] | None = None,
     labels: Labels | None = None,
+    panels: Sequence[Any] | None = None,
 ) -> Iterator[tuple[np.ndarray, dict[str, Any]]]:
     """``(vertices (V, 3), Renderer.render keywords)`` of each video frame, in order: the
     video frames ``frames`` (:func:`video_frames`), or the animation frames ``indices``
     each at its own time (default: every animation frame, the native video). What
     :func:`animation_frames` draws, and what drawing workers are sent
-    (``render.draw_in_workers``); see :func:`animation_frames` for the keywords."""
+    (``render.draw_in_workers``); see :func:`animation_frames` for the keywords.
+    ``panels``: the tract view's panel of every animation frame
+    (``acoustics.tract_panels``), handed to the renderer as ``tract``."""
     from .mistracks import mistrack_labels
     from .status import Status
 
@@ -153,6 +156,8 @@ def frame_work(
         status = Status(int(animation.frame_status[k])).label
         if reasons is not None and reasons[k].any():  # which pellet, and why
             status = f"{status} {mistrack_labels(reasons[k])}"
+        if panels is not None:
+            kwargs["tract"] = panels[k]
         kwargs["caption"] = frame_caption(
             subject, task, time_s, int(animation.frame_index[k]), status, str(current[j]),
         )
@@ -171,6 +176,7 @@ def animation_frames(
     labels: Labels | None = None,
     helper_thread: bool = False,
     frames: VideoFrames | None = None,
+    panels: Sequence[Any] | None = None,
 ) -> Iterator[UInt8[np.ndarray, "h w 3"]]:
     """Render the video frames ``frames`` (:func:`video_frames`; default: the animation
     frames ``indices``, each at its own time, default all) of an ``animate.Animation``
@@ -191,7 +197,7 @@ def animation_frames(
 
     work = frame_work(animation, section="midsagittal" in getattr(renderer, "views", ()),
                       subject=subject, task=task, markers=markers, frames=frames,
-                      indices=indices, labels=labels)
+                      indices=indices, labels=labels, panels=panels)
     if frames is not None:
         total = len(frames.index)
     else:
@@ -289,6 +295,7 @@ def write_animation(
     labels: Labels | None = None,
     fps: object = DEFAULT_FPS,
     workers: Any = None,
+    panels: Sequence[Any] | None = None,
 ) -> Path:
     """Render ``animation`` to an MP4/GIF at ``fps`` (default :data:`DEFAULT_FPS`;
     ``"native"``: one frame per animation frame, ``frame_rate(animation.frame_step_s)``;
@@ -296,13 +303,15 @@ def write_animation(
     aligned so that the first frame sounds at its own recording time; ``labels``
     (``labels.Labels``, e.g. ``labels.labels_for(pellet_path)``) put the current
     phone/word in each caption. ``workers``: a ``render.FramePool`` drawing the frames in
-    worker processes instead of ``renderer`` (the same bytes). Returns the path written."""
+    worker processes instead of ``renderer`` (the same bytes). ``panels``: the tract
+    view's panel of every animation frame (``acoustics.tract_panels``). Returns the path
+    written."""
     schedule = video_frames(animation, fps)
     start = float(schedule.times[0])
     if workers is None:
         frames = animation_frames(
             animation, renderer, subject=subject, task=task, markers=markers,
-            progress=progress, labels=labels, frames=schedule,
+            progress=progress, labels=labels, frames=schedule, panels=panels,
         )
     else:
         import sys
@@ -310,7 +319,8 @@ def write_animation(
         from tqdm import tqdm
 
         work = frame_work(animation, section="midsagittal" in workers.views, subject=subject,
-                          task=task, markers=markers, frames=schedule, labels=labels)
+                          task=task, markers=markers, frames=schedule, labels=labels,
+                          panels=panels)
         frames = tqdm(workers.draw(work), desc="rendering", unit="frame", file=sys.stderr,
                       total=len(schedule.index), disable=not progress, leave=False)
     return write_video(path, frames, schedule.rate, audio=audio, audio_start=start,
@@ -333,6 +343,7 @@ def write_recording_video(
     overwrite: bool = False,
     fps: object = DEFAULT_FPS,
     jobs: int = 1,
+    panels: Sequence[Any] | None = None,
 ) -> Path:
     """The video of a ``pipeline.RecordingRun``: the one place that sets up the renderer
     for a recording (the model, its ``views`` (default all of ``options.VIEWS``, in a
@@ -347,7 +358,9 @@ def write_recording_video(
     the error. ``renderer``: reuse an open ``render.Renderer`` of the same model (its
     traces are replaced). ``jobs``: frames drawn by that many worker processes
     (``render.FramePool``, each its own OpenGL context; the same bytes) instead of one
-    renderer here. Returns the path written."""
+    renderer here. ``panels``: with the ``tract`` view among ``views``, the panel of every
+    animation frame (``acoustics.tract_panels(run)``; without them its cell says there is
+    no tract). Returns the path written."""
     from .options import VIEWS
     from .render import FramePool
     from .sound import Sound, check_sound, recording_seconds
@@ -369,7 +382,7 @@ def write_recording_video(
     traces = subject_traces(recording, state.scale)
     options = {"subject": recording.subject, "task": recording.task,
                "markers": markers, "progress": progress, "overwrite": overwrite,
-               "labels": labels, "fps": fps}
+               "labels": labels, "fps": fps, "panels": panels}
     views = tuple(views or VIEWS)
     setup = {"size": tuple(size), "views": views, "grid": len(views) > 1, "traces": traces}
     # the sound as a .wav for the encoder (a temporary one for a sound held in memory)
@@ -406,12 +419,15 @@ def video_output_path(out_dir: str | os.PathLike, item: Any, suffix: str = ".mp4
 def animate_task(item: Any, out_dir: str, *, spec: Any, suffix: str = ".mp4",
                  size: tuple[int, int] = (640, 480), views: Sequence[str] | None = None,
                  audio: bool = True, markers: bool = False, labels: bool = True,
-                 overwrite: bool = False, fps: object = DEFAULT_FPS) -> Any:
+                 overwrite: bool = False, fps: object = DEFAULT_FPS,
+                 tract_panels: Callable[[Any], Sequence[Any]] | None = None) -> Any:
     """``cassi animate DATASET``'s task: run one recording (``pipeline.run_recording``
     with the ``run_spec.RunSpec`` ``spec`` and the worker's model) and write
     ``out_dir/SUBJECT/TASK.mp4`` (or ``.gif``) by :func:`write_recording_video`, the
     current label (``labels.labels_for``) in each frame's caption, at ``fps``
-    (:func:`video_frames`). Row: frames (the animation's: every strided data line),
+    (:func:`video_frames`); ``tract_panels`` (``acoustics.tract_panels``, a module-level
+    function a worker can be sent) makes the tract view's panels of the run. Row: frames
+    (the animation's: every strided data line),
     stride, the video, the label file, the tongue's volume range."""
     from .corpus import TaskResult, load_item, worker_model
     from .labels import recording_labels
@@ -422,7 +438,8 @@ def animate_task(item: Any, out_dir: str, *, spec: Any, suffix: str = ".mp4",
     found = recording_labels(run.recording) if labels else None
     path = write_recording_video(video_output_path(out_dir, item, suffix), run, size=size,
                                  views=views, markers=markers, audio=audio, labels=found,
-                                 progress=False, overwrite=overwrite, fps=fps)
+                                 progress=False, overwrite=overwrite, fps=fps,
+                                 panels=None if tract_panels is None else tract_panels(run))
     volume = tongue_volumes(run.state.model, run.animation.vertices)
     row = {"frames": int(run.animation.n_frames), "stride": int(run.animation.stride),
            "video": str(Path(path).relative_to(Path(out_dir))),

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from cassi_fit.options import (
     ALL_JAW_METHODS,
+    ALL_VIEWS,
     COLLISION_MODES,
     GAP_POLICIES,
     JAW_SENSOR_SETS,
@@ -20,7 +21,6 @@ from cassi_fit.options import (
     MODES,
     TONGUE_ANCHORS,
     TONGUE_SHAPES,
-    VIEWS,
 )
 
 # ------------------------------------------------------------------ where a recording comes from
@@ -265,14 +265,14 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def parse_views(text: str) -> tuple[str, ...]:
-    """``--views a,b`` -> the views, each one of ``options.VIEWS``."""
+    """``--views a,b`` -> the views, each one of ``options.ALL_VIEWS``."""
     from cassi_fit.errors import CassiError
 
     views = tuple(v.strip() for v in text.split(",") if v.strip())
-    unknown = [v for v in views if v not in VIEWS]
+    unknown = [v for v in views if v not in ALL_VIEWS]
     if unknown or not views:
         raise CassiError(
-            f"--views: unknown view(s) {', '.join(unknown) or '(none)'}; use {','.join(VIEWS)}"
+            f"--views: unknown view(s) {', '.join(unknown) or '(none)'}; use {','.join(ALL_VIEWS)}"
         )
     return views
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from cassi_fit.options import ANIMATION_SUFFIXES, DEFAULT_FPS, VIEWS
+from cassi_fit.options import ANIMATION_SUFFIXES, DEFAULT_FPS, TRACT_VIEW, VIEWS
 
 from ._options import (
     add_model_arguments,
@@ -41,7 +41,9 @@ def register(subparsers) -> None:
         metavar="LIST",
         help="comma-separated views among front, side, inside, top (the paper's four) and "
         "midsagittal (the model cut at z = 0 as a 2D tracing, with the subject's palate and "
-        "pharynx traces and the pellets with trails); default: all five",
+        "pharynx traces and the pellets with trails); default: all five. Also tract: the "
+        "frame's area function and the tube's spectrum with the model's F1-F3 (and the "
+        "sound's, where measured), as in cassi acoustics",
     )
     parser.add_argument(
         "--size",
@@ -152,6 +154,11 @@ def write_output(out: Path, run, size, views, args) -> Path:
     from cassi_fit.errors import CassiError
 
     recording, animation = run.recording, run.animation
+    panels = None
+    if TRACT_VIEW in views:  # the area function and the tube's spectrum beside the face
+        from cassi_fit.acoustics import tract_panels
+
+        panels = tract_panels(run)
     if out.suffix.lower() == ".png":
         from cassi_fit.render import Renderer, save_png
 
@@ -161,7 +168,7 @@ def write_output(out: Path, run, size, views, args) -> Path:
                       traces=video.subject_traces(recording, run.state.scale)) as renderer:
             (image,) = video.animation_frames(
                 animation, renderer, subject=recording.subject, task=recording.task,
-                markers=args.markers, progress=False, indices=[args.frame])
+                markers=args.markers, progress=False, indices=[args.frame], panels=panels)
         return save_png(out, image, overwrite=args.force)
     sound = getattr(recording, "sound", None)  # beside the file or inside it
     if not args.no_audio and out.suffix.lower() == ".mp4" and sound is not None:
@@ -170,7 +177,7 @@ def write_output(out: Path, run, size, views, args) -> Path:
                                        audio=not args.no_audio, progress=not args.quiet,
                                        accept_mismatch=args.accept_mismatch,
                                        overwrite=args.force, fps=args.fps,
-                                       jobs=drawing_jobs(args))
+                                       jobs=drawing_jobs(args), panels=panels)
 
 
 def drawing_jobs(args) -> int:
@@ -197,6 +204,10 @@ def run_dataset(args) -> int:
     video_options = {"suffix": f".{args.format}", "size": parse_size(args.size),
                      "views": parse_views(args.views), "audio": not args.no_audio,
                      "markers": args.markers, "fps": args.fps}
+    if TRACT_VIEW in video_options["views"]:
+        from cassi_fit.acoustics import tract_panels
+
+        video_options["tract_panels"] = tract_panels
     run, written, _ = animate_corpus(dataset_args(args.recording[0], args), args.out, spec=spec_from_args(args),
                                      video_options=video_options,
                                      run_options=run_options(args))

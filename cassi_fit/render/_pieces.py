@@ -63,6 +63,7 @@ _SHOWN = {
     "inside": set(_MATERIALS) - {"eye"},  # an eyeball floating in the cut head distracts
     "top": {"teeth", "tongue", "palate"},
     "midsagittal": set(),  # drawn in 2D by _section, not by OpenGL
+    "tract": set(),  # drawn in 2D by _tract
 }
 _CUT = {"skin", "lips", "eye", "teeth", "palate", "pharynx"}  # near half removed in the inside view
 _GLASS = {"skin", "lips", "eye"}  # near half see-through with skin="transparent"

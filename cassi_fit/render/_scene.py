@@ -21,7 +21,7 @@ import numpy as np
 from jaxtyping import Float, Integer, UInt8
 
 from ..errors import CassiError, RenderingUnavailableError
-from ..options import PAPER_VIEWS, VIEWS, check_choice
+from ..options import ALL_VIEWS, PAPER_VIEWS, check_choice
 from ._gl import ensure_headless_gl
 from ._images import add_caption
 from ._pieces import (
@@ -43,6 +43,10 @@ from ._pieces import (
     height_colours,
 )
 from ._section import SECTION_VIEW, Section
+from ._tract import TRACT_VIEW, draw_tract
+
+#: The views drawn in 2D after the OpenGL pass (no camera, no mesh pieces).
+_FLAT_VIEWS = (SECTION_VIEW, TRACT_VIEW)
 
 RGB = tuple[float, float, float]
 #: Marker points per label: ``(k, 3)`` or ``(k, 2)`` mm (numpy or JAX).
@@ -170,8 +174,8 @@ class Renderer:
                 landmarks=getattr(model, "landmarks", None),
                 measures=getattr(model, "measures", None), traces=traces,
             )  # fmt: skip
-        self._section_box = None
-        self._fits = {v: self._fit(v, rest) for v in self.views if v != SECTION_VIEW}
+        self._section_box = self._tract_box = None
+        self._fits = {v: self._fit(v, rest) for v in self.views if v not in _FLAT_VIEWS}
         height = (
             self._fits.get("side", next(iter(self._fits.values())))[3][1]
             if self._fits
@@ -257,15 +261,14 @@ class Renderer:
             else {key: (width / 2, height / 2, width, height)}
         )
         self._placements = {
-            v: self._placement(v, cell) for v, cell in cells.items() if v != SECTION_VIEW
+            v: self._placement(v, cell) for v, cell in cells.items() if v not in _FLAT_VIEWS
         }
-        self._section_box = None
-        if SECTION_VIEW in cells:  # (left, top, right, bottom) in image rows, y down
-            cx, cy, cw, ch = cells[SECTION_VIEW]
-            self._section_box = tuple(
-                int(round(c)) for c in (cx - cw / 2, height - cy - ch / 2,
-                                        cx + cw / 2, height - cy + ch / 2)
-            )  # fmt: skip
+        # the 2D views' boxes: (left, top, right, bottom) in image rows, y down
+        boxes = {v: tuple(int(round(c)) for c in (cx - cw / 2, height - cy - ch / 2,
+                                                  cx + cw / 2, height - cy + ch / 2))
+                 for v, (cx, cy, cw, ch) in cells.items() if v in _FLAT_VIEWS}  # fmt: skip
+        self._section_box = boxes.get(SECTION_VIEW)
+        self._tract_box = boxes.get(TRACT_VIEW)
         for piece in self._pieces:
             poses = [self._placements[v] for v in piece.views if v in self._placements]
             piece.mesh.is_visible = bool(poses)
@@ -390,6 +393,7 @@ class Renderer:
         caption: str | None = None,
         trails: Mapping[str, Float[Any, "t k 2"]] | None = None,
         time: float | None = None,
+        tract: Mapping[str, Any] | None = None,
     ) -> UInt8[np.ndarray, "h w 3"]:
         """One frame as an (H, W, 3) uint8 image: the grid (or the single view).
 
@@ -400,10 +404,11 @@ class Renderer:
         ``caption``: text drawn onto the image. Midsagittal view only: ``trails``
         ``{label: (T, k, 2) mm}``, each point's last T positions (oldest first; the last
         is drawn as a dot when ``markers`` lacks the label) and ``time`` in seconds.
+        Tract view only: ``tract``, the frame's panel (``acoustics.tract_panels``).
         """
         image, frame = self.render_gl(vertices, markers=markers)
         return self.finish_frame(image, frame, markers=markers, caption=caption,
-                                 trails=trails, time=time)
+                                 trails=trails, time=time, tract=tract)
 
     def render_gl(
         self, vertices: Float[Any, "v 3"], *, markers: Markers | None = None
@@ -427,13 +432,17 @@ class Renderer:
         caption: str | None = None,
         trails: Mapping[str, Float[Any, "t k 2"]] | None = None,
         time: float | None = None,
+        tract: Mapping[str, Any] | None = None,
     ) -> UInt8[np.ndarray, "h w 3"]:
         """The second of :meth:`render`'s steps, on :meth:`render_gl`'s ``(image,
-        frame)``: the midsagittal view drawn into its cell (in place) and the caption.
+        frame)``: the 2D views (midsagittal, tract) drawn into their cells (in place) and
+        the caption.
         numpy and Pillow only, no OpenGL: it may run in another thread while the next
         frame's OpenGL views are drawn (one thread at a time), and gives the same bytes
         as :meth:`render`."""
         self._draw_section(image, frame, markers, trails, time)
+        if self._tract_box is not None:
+            draw_tract(image, self._tract_box, tract)
         return add_caption(image, caption) if caption else image
 
     def set_traces(self, traces: Mapping[str, Float[Any, "n 2"] | None] | None) -> None:
@@ -468,6 +477,7 @@ class Renderer:
         markers: Markers | None = None,
         trails: Mapping[str, Float[Any, "t k 2"]] | None = None,
         time: float | None = None,
+        tract: Mapping[str, Any] | None = None,
     ) -> dict[str, UInt8[np.ndarray, "h w 3"]]:
         """Each view alone, filling the whole image: ``{view: (H, W, 3) uint8}``."""
         frame = _as_frame(vertices, self._n_vertices)
@@ -476,6 +486,8 @@ class Renderer:
             self._set_layout(view)
             out[view] = self._draw_gl(frame, markers)
             self._draw_section(out[view], frame, markers, trails, time)
+            if self._tract_box is not None:
+                draw_tract(out[view], self._tract_box, tract)
         return out
 
     def close(self) -> None:
@@ -521,7 +533,7 @@ def view_cameras(model: MeshModel, views: Sequence[str] = PAPER_VIEWS,
     the image kept free on each side): the scale is
     ``min(W / (width + 2 margin_mm), H / (height + 2 margin_mm)) * (1 - 2 margin)``."""
     rest, faces, face_material, materials = _model_arrays(model)
-    views = tuple(v for v in views if v != SECTION_VIEW)
+    views = tuple(v for v in views if v not in _FLAT_VIEWS)
     drawn, drawn_materials = _with_mouth_wall(
         faces, face_material, materials, getattr(model, "regions", None)
     )
@@ -547,9 +559,9 @@ def _check_options(size, views, skin, background) -> tuple[tuple[int, int], tupl
         raise CassiError(f"render: size must be at least 8x8 pixels, got {width}x{height}")
     views = (views,) if isinstance(views, str) else tuple(views)
     for view in views:
-        check_choice("view", view, VIEWS)
+        check_choice("view", view, ALL_VIEWS)
     if not views or len(set(views)) != len(views):
-        raise CassiError(f"render: views must be distinct names from {VIEWS}, got {views}")
+        raise CassiError(f"render: views must be distinct names from {ALL_VIEWS}, got {views}")
     check_choice("skin", skin, SKINS)
     if len(background) != 3:
         raise CassiError(f"render: background must be an RGB triple, got {background!r}")
