@@ -108,10 +108,28 @@ def fit_tract(geometry: af.TractGeometry, vertices: Float[ArrayLike, "m V 3"],
 
 
 @jax.jit
+def _compiled_tract_areas(geometry: af.TractGeometry, vertices, tract: af.TractParams, scale):
+    return af.area_functions(geometry, vertices, tract, scale)[:2]
+
+
+def _tract_areas(geometry: af.TractGeometry, vertices, tract: af.TractParams, scale):
+    """``(areas, lengths)`` ``(m, n)`` of the frames ``vertices (m, V, 3)``, compiled once
+    per frame count and model topology: the geometry is an argument (every subject of the
+    topology shares it) and the tract's weakly typed numbers (Python floats,
+    ``jnp.asarray(40.0)``) are given the frames' dtype, as arithmetic with the frames would
+    give them, so that they compile nothing of their own."""
+    vertices = jnp.asarray(vertices)
+    dtype = vertices.dtype
+    tract = jax.tree.map(lambda a: jnp.asarray(a, dtype) if isinstance(a, (int, float)) or getattr(
+        a, "weak_type", False) else a, tract)
+    return _compiled_tract_areas(geometry, vertices, tract, jnp.asarray(scale, dtype))
+
+
 def tract_formants(geometry: af.TractGeometry, vertices, tract: af.TractParams, scale):
-    """F1-F4 ``(m, 4)`` Hz of the frames ``vertices (m, V, 3)`` with ``tract`` (compiled)."""
-    areas, lengths, _ = af.area_functions(geometry, vertices, tract, scale)
-    return jax.vmap(tube.formants)(areas, lengths).frequency
+    """F1-F4 ``(m, 4)`` Hz of the frames ``vertices (m, V, 3)`` with ``tract`` (compiled:
+    the area functions, then ``tube.formants_batch``, the formants every other caller
+    compiles for that many frames)."""
+    return tube.formants_batch(*_tract_areas(geometry, vertices, tract, scale)).frequency
 
 
 def _median_error(geometry, vertices, tract, scale, measured) -> np.ndarray:

@@ -48,8 +48,10 @@ def is_vowel(label: str) -> bool:
 def model_formants(geometry: af.TractGeometry, vertices: Float[jax.Array, "m V 3"],
                    tract: af.TractParams, scale: float, chunk: int = 256):
     """``(frequency (m, 4), bandwidth (m, 4), areas (m, n), lengths (m, n))`` of every
-    frame, in chunks of ``chunk`` frames (one compilation per chunk size)."""
-    run = jax.jit(lambda v, t, s: af.area_functions(geometry, v, t, s)[:2])
+    frame, in chunks of ``chunk`` frames (one compilation per chunk size, shared by every
+    subject of the model's topology)."""
+    from .acoustic_fit import _tract_areas
+
     out = []
     m = vertices.shape[0]
     for start in range(0, m, chunk):
@@ -57,7 +59,7 @@ def model_formants(geometry: af.TractGeometry, vertices: Float[jax.Array, "m V 3
         n = v.shape[0]
         if n < chunk and m > chunk:  # pad the last chunk: no second compilation
             v = jnp.concatenate([v, jnp.broadcast_to(v[-1:], (chunk - n,) + v.shape[1:])])
-        a, ln = run(v, tract, jnp.asarray(scale, v.dtype))
+        a, ln = _tract_areas(geometry, v, tract, jnp.asarray(scale, v.dtype))
         f = tube.formants_batch(a, ln)
         out.append([np.asarray(x)[:n] for x in (f.frequency, f.bandwidth, a, ln)])
     return tuple(np.concatenate(parts) for parts in zip(*out, strict=True))
@@ -170,6 +172,9 @@ def recording_acoustics(
                      anim.vertices, float(run.state.scale))
 
 
+#: ``tube.spectrum`` of many tracts at the same frequencies (compiled once per shape).
+_batched_spectrum = jax.jit(jax.vmap(tube.spectrum, in_axes=(None, 0, 0)))
+
 #: The frequencies of the tract view's spectrum (Hz): 0-5 kHz, F1-F4's range.
 PANEL_HZ = np.arange(25.0, 5000.0 + 1.0, 25.0)
 
@@ -177,7 +182,7 @@ PANEL_HZ = np.arange(25.0, 5000.0 + 1.0, 25.0)
 def _spectra(areas, lengths, frequency_hz, chunk: int = 256) -> np.ndarray:
     """``(m, k)`` dB of the lossy tube of every frame at ``frequency_hz``, in chunks of
     ``chunk`` frames (one compilation per chunk size)."""
-    run = jax.jit(jax.vmap(tube.spectrum, in_axes=(None, 0, 0)))
+    run = _batched_spectrum
     f = jnp.asarray(frequency_hz)
     out, m = [], len(areas)
     for start in range(0, m, chunk):

@@ -85,18 +85,21 @@ def default_tract(dtype=float) -> TractParams:
 
 class TractGeometry(eqx.Module):
     """What the area function needs of one subject's model: the vertex indices of the
-    front wall and of the upper lip (static), and the back wall's fixed parts (the wall,
-    palate and velum do not move with the frames) as segments with their regions."""
+    front wall and of the upper lip (static: the model's topology), and the back wall's
+    fixed parts (the wall, palate and velum do not move with the frames) as segments with
+    their regions. What differs between subjects of one topology (the wall, the palate,
+    the regions and heights) is data, not static: a compiled function of the geometry
+    serves every subject."""
 
     tongue_tops: tuple[int, ...] = eqx.field(static=True)
     lower: tuple[int, ...] = eqx.field(static=True)
     upper: tuple[int, ...] = eqx.field(static=True)
     wall: Float[Array, "h 2"]
     palate: Float[Array, "p 2"]
-    palate_region: tuple[int, ...] = eqx.field(static=True)
-    hyoid_y: float = eqx.field(static=True)
-    velum_tip_y: float = eqx.field(static=True)
-    back_region: tuple[int, ...] = eqx.field(static=True, default=())
+    palate_region: Int[np.ndarray, " p1"]
+    hyoid_y: Float[np.ndarray, ""]
+    velum_tip_y: Float[np.ndarray, ""]
+    back_region: Int[np.ndarray, " s"] | None = None
 
 
 def _lip_points(model: FaceModel, region: str, upper: bool) -> np.ndarray:
@@ -135,9 +138,11 @@ def tract_geometry(model: FaceModel) -> TractGeometry:
     upper = np.concatenate([[lm["upper_incisor_tip"]], _lip_points(model, "upper_lip", True)])
     as_ints = lambda x: tuple(int(i) for i in np.asarray(x).reshape(-1))  # noqa: E731
     geometry = TractGeometry(as_ints(tops), as_ints(lower), as_ints(upper), jnp.asarray(wall),
-                             jnp.asarray(palate), as_ints(region), float(vertices[tops[-1], 1]),
-                             float(palate[-1, 1]))
-    return dataclasses.replace(geometry, back_region=as_ints(_wall_regions(geometry)))
+                             jnp.asarray(palate), np.asarray(region, np.int32),
+                             np.asarray(vertices[tops[-1], 1], np.float64),
+                             np.asarray(palate[-1, 1], np.float64))
+    return dataclasses.replace(geometry,
+                               back_region=np.asarray(_wall_regions(geometry), np.int32))
 
 
 def _nearest(p, a, b):
@@ -184,9 +189,10 @@ def _wall_regions(geometry: TractGeometry) -> np.ndarray:
     down = (w[-1] - w[-2]) / np.linalg.norm(w[-1] - w[-2])
     wall = np.concatenate([w, (w[-1] + WALL_EXTENSION_MM * down)[None]])
     mid_y = 0.5 * (wall[:-1, 1] + wall[1:, 1])
-    third = (geometry.velum_tip_y - geometry.hyoid_y) / 3.0
-    wall_region = np.where(mid_y < geometry.hyoid_y, 0,
-                           np.clip(1 + (mid_y - geometry.hyoid_y) // third, 1, 3)).astype(int)
+    hyoid_y, velum_tip_y = float(geometry.hyoid_y), float(geometry.velum_tip_y)
+    third = (velum_tip_y - hyoid_y) / 3.0
+    wall_region = np.where(mid_y < hyoid_y, 0,
+                           np.clip(1 + (mid_y - hyoid_y) // third, 1, 3)).astype(int)
     return np.concatenate([wall_region, np.asarray(geometry.palate_region), [6],
                            [7] * (len(geometry.upper) - 1)])
 
@@ -201,7 +207,7 @@ def area_function(
     the vertices and ``params``; vmap over frames (:func:`area_functions`)."""
     params = eqx.tree_at(lambda p: p.larynx_drop_mm, params, params.larynx_drop_mm * scale)
     front, a, b = _walls(geometry, vertices, params)
-    region_of = jnp.asarray(np.asarray(geometry.back_region, np.int32))
+    region_of = jnp.asarray(geometry.back_region, jnp.int32)
     points = _resample(front, N_SECTIONS)
 
     def one(p):

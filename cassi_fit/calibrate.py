@@ -489,7 +489,7 @@ def _summary_arrays(model, data, measured, x):
 
     problem = _Problem(model, data, measured)
     v = problem.vertices(x)
-    d = depths(model, v)
+    d = depths(model, v, ("lips_upper", "lips_lower"))  # the tongue's are not reported
     lips = jnp.maximum(jnp.max(d["lips_upper"]), jnp.max(d["lips_lower"]))
     s = jnp.exp(x.log_scale)
     return (v, problem.residual_groups(x, False), problem.lip_thickness_model(v),

@@ -263,28 +263,53 @@ def _parts(model):
     return tongue, np.asarray(lips)
 
 
-def depths(model: FaceModel, vertices: Float[Array, "V 3"]) -> dict[str, Array]:
+#: The keys of :func:`depths`, in its order.
+DEPTH_KEYS = ("tongue_palate", "tongue_pharynx", "tongue_upper", "tongue_upper_front",
+              "lips_upper", "tongue_lower", "tongue_lower_front", "lips_lower")
+
+
+def depths(model: FaceModel, vertices: Float[Array, "V 3"],
+           keys: tuple[str, ...] | None = None) -> dict[str, Array]:
     """Per-vertex depths (mm) of one frame: ``tongue_palate``, ``tongue_pharynx``
     (behind the pharyngeal wall), ``tongue_upper`` and
     ``tongue_lower`` (tongue vertices, the teeth of that arch), ``lips_upper`` and
     ``lips_lower`` (lip vertices); plus ``tongue_upper_front``/``tongue_lower_front``,
-    the teeth depths counted only where the closest crown is a front tooth."""
+    the teeth depths counted only where the closest crown is a front tooth.
+
+    ``keys``: only these of :data:`DEPTH_KEYS` (default all), the others not computed
+    (a caller that needs the lips alone does not trace, compile and run the tongue's)."""
     require_collision_data(model)
+    want = DEPTH_KEYS if keys is None else tuple(keys)
+    unknown = [k for k in want if k not in DEPTH_KEYS]
+    if unknown:
+        raise CassiError(f"unknown depth key(s) {', '.join(unknown)}; "
+                         f"known: {', '.join(DEPTH_KEYS)}")
     tongue, lips = _parts(model)
     vt, vl = vertices[tongue], vertices[lips]
-    sheet = _palate_sheet(model, vertices)
-    wall = _wall_sheet(model, vertices)
-    out = {"tongue_palate": jax.vmap(lambda q: _palate_depth(q, sheet)[0])(vt),
-           "tongue_pharynx": jax.vmap(lambda q: _pharynx_depth(q, wall)[0])(vt)}
+    out = {}
+    if "tongue_palate" in want:
+        sheet = _palate_sheet(model, vertices)
+        out["tongue_palate"] = jax.vmap(lambda q: _palate_depth(q, sheet)[0])(vt)
+    if "tongue_pharynx" in want:
+        wall = _wall_sheet(model, vertices)
+        out["tongue_pharynx"] = jax.vmap(lambda q: _pharynx_depth(q, wall)[0])(vt)
     for arch in ("upper", "lower"):
+        of_tongue = {f"tongue_{arch}", f"tongue_{arch}_front"} & set(want)
+        of_lips = f"lips_{arch}" in want
+        if not (of_tongue or of_lips):
+            continue
         chains, teeth = arch_chains(model, vertices, arch)
         upper = arch == "upper"
-        d_t = jax.vmap(lambda q, c=chains, u=upper: teeth_depth(q, c, u, "lingual")[0])(vt)
-        d_l = jax.vmap(lambda q, c=chains, u=upper: teeth_depth(q, c, u, "labial")[0])(vl)
-        front = _front_mask(vt, chains, teeth)
-        out[f"tongue_{arch}"] = d_t
-        out[f"tongue_{arch}_front"] = jnp.where(front, d_t, 0.0)
-        out[f"lips_{arch}"] = d_l
+        if of_tongue:
+            d_t = jax.vmap(lambda q, c=chains, u=upper: teeth_depth(q, c, u, "lingual")[0])(vt)
+            if f"tongue_{arch}" in want:
+                out[f"tongue_{arch}"] = d_t
+            if f"tongue_{arch}_front" in want:
+                front = _front_mask(vt, chains, teeth)
+                out[f"tongue_{arch}_front"] = jnp.where(front, d_t, 0.0)
+        if of_lips:
+            out[f"lips_{arch}"] = jax.vmap(
+                lambda q, c=chains, u=upper: teeth_depth(q, c, u, "labial")[0])(vl)
     return out
 
 
@@ -443,7 +468,6 @@ def penalty_residuals(
     """Residuals for a least-squares fit: every depth (mm) of the chosen parts, one per
     vertex and obstacle, flattened. Zero where nothing collides; the sum of their squares
     is the penalty. Differentiable almost everywhere (its gradient pushes points out)."""
-    d = depths(model, vertices)
     keys = []
     if tongue:
         keys += ["tongue_palate", "tongue_pharynx", "tongue_upper", "tongue_lower"]
@@ -451,4 +475,5 @@ def penalty_residuals(
         keys += ["lips_upper", "lips_lower"]
     if not keys:
         return jnp.zeros(0, vertices.dtype)
+    d = depths(model, vertices, tuple(keys))  # only the chosen parts' depths computed
     return jnp.concatenate([d[k] for k in keys])

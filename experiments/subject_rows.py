@@ -83,11 +83,16 @@ class Plan:
 FULL = Plan(n_subjects=15, tasks=("tp106", "tp040", "tp020_2"), noise_subjects=15)
 
 
-SMALL = Plan(n_subjects=2, tasks=("tp106", "tp040"), noise_subjects=2, stride=5)
+#: ``--small`` (the tests' run). Every 12th line: each recording's frames (at most 58 of
+#: these tasks) fit the smallest frame bucket (``cassi_fit.frames.frame_bucket``: 64), so
+#: every recording of the plan shares one compiled animation and computes half the frames
+#: of the next bucket.
+SMALL = Plan(n_subjects=2, tasks=("tp106", "tp040"), noise_subjects=2, stride=12)
 
 
-#: the notebook: one subject, one task, every step of the run
-TINY = Plan(n_subjects=1, tasks=("tp106",), noise_subjects=1, stride=5)
+#: the notebook: one subject, every step of the run; the tasks and stride of ``SMALL`` (the
+#: same compilations: a calibration's depends on the number of recordings per subject)
+TINY = Plan(n_subjects=1, tasks=("tp106", "tp040"), noise_subjects=1, stride=12)
 
 
 # ------------------------------------------------------------------ pure helpers

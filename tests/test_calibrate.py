@@ -205,13 +205,15 @@ def test_the_lip_estimate_is_each_first_line_and_their_least_squares_compromise(
     assert cal.residuals["upper_lip"] == pytest.approx(observed.std(), abs=0.01)
 
 
-def test_the_penalty_keeps_an_implausible_lip_out_of_the_teeth(corpus):
-    recs = _recordings(corpus, "S03")[:1]
-    rec = recs[0]
+def _lip_in_the_teeth(rec):
     positions = np.array(rec.track.positions)
     positions[:, 0, 0] = -4.0  # the UL pellet behind the incisor tip: the lip in the teeth
-    track = dataclasses.replace(rec.track, positions=positions)
-    bad = [dataclasses.replace(rec, track=track)]
+    return dataclasses.replace(rec, track=dataclasses.replace(rec.track, positions=positions))
+
+
+def test_the_penalty_keeps_an_implausible_lip_out_of_the_teeth(corpus):
+    # every recording of S03 (as the module's other calibrations: one compiled solver)
+    bad = [_lip_in_the_teeth(rec) for rec in _recordings(corpus, "S03")]
     with jax.enable_x64(True):
         # the lip lands behind the incisor tip: flagged, penalised or not (never written)
         with pytest.warns(CalibrationWarning) as caught:
@@ -261,6 +263,19 @@ def test_a_jaw_beyond_its_bound_is_held_there_and_the_fit_converges(corpus, monk
                                                           abs=1e-6)
     assert [str(w.message) for w in caught] == stalled.problems()
     assert len(stalled.problems()) == 2 and "not converge (stage jaw_shape)" in stalled.problems()[0]
+
+
+def test_calibrating_an_impossible_chin_hits_the_bound_and_warns(corpus):
+    """A Headmeasures gnathion 40 mm below the subject's asks for a jaw taller than
+    JAW_SCALE_BOUND allows: the fit reaches the bound along y and says so (moved here from
+    test_cassi_mode: with the module's three recordings it shares their compiled solver)."""
+    recs = _recordings(corpus, "S01")
+    head = dataclasses.replace(recs[0].head, gnathion_y=recs[0].head.gnathion_y - 40.0)
+    odd = [dataclasses.replace(r, head=head, head_is_default=False) for r in recs]
+    with jax.enable_x64(True):
+        with pytest.warns(UserWarning, match="anatomical bound"):
+            result = calibrate.calibrate_subject(odd, method="separate", collisions=False)
+    assert "jaw_scale_y" in result.bounds_hit
 
 
 def test_calibration_files_round_trip_and_bad_files_are_named(tmp_path, separate):

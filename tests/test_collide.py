@@ -19,6 +19,7 @@ TOL = 0.01  # mm; the projection leaves points 1 um outside
 _deform = jax.jit(lambda p: deform(MODEL, p))
 _project = jax.jit(lambda v: collide.project(MODEL, v))
 _report_c = jax.jit(lambda v: collide.report(MODEL, v))
+_palate_depths = jax.jit(lambda v: collide.depths(MODEL, v)["tongue_palate"])
 
 
 def _posed(**changes):
@@ -47,13 +48,15 @@ def test_depth_is_the_shortest_way_out_of_a_crown():
     # 0.3 mm above the biting edge, halfway between the lingual and the labial face:
     # 0.3 mm from the way out downward, more than 0.45 mm from either face
     mid = 0.5 * (lingual + labial)
-    depth, move = collide.teeth_depth(jnp.array([mid[0], 0.3, mid[2]]), chains, True, "lingual")
+    # one compilation for the three points (op by op, each costs seconds)
+    teeth_depth = jax.jit(lambda q: collide.teeth_depth(q, chains, True, "lingual"))
+    depth, move = teeth_depth(jnp.array([mid[0], 0.3, mid[2]]))
     assert float(depth) == pytest.approx(0.3, abs=1e-6)
     np.testing.assert_allclose(np.asarray(move), [0.0, -0.3 - collide.PROJECTION_MARGIN_MM, 0.0])
     # between the open teeth (below the upper edge) the same point is inside nothing, and
     # neither is one 2 mm in front of the crown (a tongue out over the lower lip)
     for point in ([mid[0], -0.3, mid[2]], [labial[0] + 2.0, 3.0, labial[2]]):
-        assert float(collide.teeth_depth(jnp.array(point), chains, True, "lingual")[0]) == 0.0
+        assert float(teeth_depth(jnp.array(point))[0]) == 0.0
 
 
 def test_a_tongue_pushed_through_the_front_teeth_is_measured_and_projected_out():
@@ -75,7 +78,7 @@ def test_a_tongue_pushed_into_the_palate_is_pushed_down():
     assert max(_report(projected).values()) < TOL
     idx = np.asarray(MODEL.regions["tongue"])
     moved = np.asarray(projected - v)[idx]
-    inside = np.asarray(collide.depths(MODEL, v)["tongue_palate"]) > 0
+    inside = np.asarray(_palate_depths(v)) > 0
     assert np.all(moved[inside, 1] <= 0)  # the way out of the palate is down
 
 
@@ -115,14 +118,15 @@ def test_lips_closed_past_each_other_are_pressed_together_instead():
 
 
 def test_penalty_is_zero_at_rest_and_its_gradient_pushes_the_tongue_back():
-    @jax.jit
     def penalty(t1_x):
         tongue = jnp.zeros((4, 2)).at[0, 0].set(t1_x).at[0, 1].set(6.0)
         p = eqx.tree_at(lambda q: q.tongue, default_params(MODEL), tongue)
         return jnp.sum(collide.penalty_residuals(MODEL, deform(MODEL, p)) ** 2)
 
-    assert float(jnp.sum(collide.penalty_residuals(MODEL, MODEL.vertices) ** 2)) == 0.0
-    value, grad = jax.value_and_grad(penalty)(18.0)
+    # both compiled (op by op, the penalty's many small operations cost seconds)
+    at_rest = jax.jit(lambda v: jnp.sum(collide.penalty_residuals(MODEL, v) ** 2))
+    assert float(at_rest(MODEL.vertices)) == 0.0
+    value, grad = jax.jit(jax.value_and_grad(penalty))(18.0)
     assert float(value) > 0 and np.isfinite(float(grad))
     assert float(grad) > 0  # more forward = deeper: gradient descent moves the tip back
 

@@ -1,6 +1,11 @@
 """The subject-fitting experiment: its helpers on hand-made numbers, the small run, the
 dataset run and the notebook. Bounds on the runs are the numbers the experiment itself
-documented in docs/generated/calibration_recovery.md (written by ``make experiments``)."""
+documented in docs/generated/calibration_recovery.md (written by ``make experiments``).
+
+The notebook, the small run and the dataset run share one notebook kernel (``runs``):
+most of each one's time is JAX tracing and compiling the calibration and the animation
+(with collisions projected, above all), which the notebook's plan (``subject_rows.TINY``)
+shares with the other two; in one process that is done once instead of in every one."""
 
 import csv
 import sys
@@ -19,6 +24,7 @@ import subject_report  # noqa: E402
 import subject_rows  # noqa: E402
 
 RECOVERY = ROOT / "docs" / "generated" / "calibration_recovery.md"
+NOTEBOOK = ROOT / "notebooks" / "subject_fitting.ipynb"
 #: the subjects of the small plan (the notebook's and the small run's)
 SMALL_SUBJECTS = tuple(f"S{i:02d}" for i in range(1, subject_rows.SMALL.n_subjects + 1))
 
@@ -200,11 +206,87 @@ def test_main_refuses_existing_outputs_before_any_work(tmp_path, capsys):
     assert not (tmp_path / "new").exists()
 
 
+#: Run first in the kernel: this process's JAX settings and warnings (tests/conftest.py,
+#: pyproject's filterwarnings), so that the runs in the kernel are held to what they would be
+#: held to here.
+KERNEL_SETUP = """\
+import sys, warnings
+import jax
+jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_numpy_rank_promotion", "raise")
+warnings.filterwarnings("error", category=DeprecationWarning, module=r"cassi_fit.*")
+sys.path.insert(0, {experiments!r})
+import subject_fitting
+"""
+
+#: A run of the experiment in the kernel: its stdout, then its exit status on the last line.
+KERNEL_MAIN = """\
+status = subject_fitting.main({argv!r})
+print("exit status", status)
+"""
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """One kernel runs the notebook top to bottom, then ``main`` of the small run (``--small
+    --docs``) and of the dataset run (``--dataset`` on a one-subject corpus of the small
+    plan's tasks, at its stride). Returns ``part -> (outputs or None, error or None, tmp)``
+    for ``"notebook"`` (the notebook's executed cells), ``"small"`` and ``"dataset"``
+    (the stdout of ``main``); each test raises its own part's error."""
+    tmp = tmp_path_factory.mktemp("subject_fitting_runs")
+    corpus = subject_rows.make_corpus(tmp / "corpus", subject_rows.Plan(
+        1, subject_rows.SMALL.tasks, 1))
+    argv = {"small": ["--small", "--out", str(tmp / "small" / "out"),
+                      "--docs", str(tmp / "small" / "docs")],
+            "dataset": ["--dataset", str(corpus), "--out", str(tmp / "dataset" / "out"),
+                        "--stride", str(subject_rows.SMALL.stride)]}
+    nb = nbformat.read(NOTEBOOK, as_version=4)
+    notebook = list(nb.cells)
+    setup = nbformat.v4.new_code_cell(KERNEL_SETUP.format(experiments=str(ROOT / "experiments")))
+    mains = {k: nbformat.v4.new_code_cell(KERNEL_MAIN.format(argv=a)) for k, a in argv.items()}
+    nb.cells = [setup, *notebook, *mains.values()]
+    client = NotebookClient(nb, timeout=None, kernel_name="python3",
+                            resources={"metadata": {"path": str(ROOT / "notebooks")}})
+    out = {}
+    with client.setup_kernel():
+        client.execute_cell(setup, 0)
+        try:
+            for i, cell in enumerate(notebook, start=1):
+                client.execute_cell(cell, i)
+            out["notebook"] = (nb.cells[1:len(notebook) + 1], None, tmp)
+        except Exception as exc:  # noqa: BLE001 -- raised by its test
+            out["notebook"] = (None, exc, tmp)
+        for i, (part, cell) in enumerate(mains.items(), start=len(notebook) + 1):
+            try:
+                client.execute_cell(cell, i)
+                text = "".join(o.get("text", "") for o in nb.cells[i].outputs
+                               if o.get("name") == "stdout")
+                out[part] = (text, None, tmp / part)
+            except Exception as exc:  # noqa: BLE001
+                out[part] = (None, exc, tmp / part)
+    return out
+
+
+def _part(runs, name):
+    """``(result, folder)`` of one part of ``runs``; its error raised if it failed."""
+    result, error, folder = runs[name]
+    if error is not None:
+        raise error
+    return result, folder
+
+
+def _main_output(runs, name):
+    """``main``'s stdout in ``runs`` (its exit status asserted 0) and its folder."""
+    text, folder = _part(runs, name)
+    assert text.rstrip().splitlines()[-1] == "exit status 0", text[-2000:]
+    return text, folder
+
+
 @pytest.mark.slow
-def test_small_run_explains_the_lower_lip_and_writes_the_docs_tables(tmp_path, capsys):
+def test_small_run_explains_the_lower_lip_and_writes_the_docs_tables(runs):
     summary, per_subject = _documented()
-    out, docs = tmp_path / "out", tmp_path / "docs"
-    assert sf.main(["--small", "--out", str(out), "--docs", str(docs)]) == 0
+    printed, folder = _main_output(runs, "small")
+    out, docs = folder / "out", folder / "docs"
     for name in subject_report.output_names(synthetic=True):
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
     for name in subject_report.DOC_TABLES:
@@ -249,18 +331,16 @@ def test_small_run_explains_the_lower_lip_and_writes_the_docs_tables(tmp_path, c
     assert [r["setting"].split(" (")[0] for r in totals] == [
         "CASSI's Table 2", "CASSI-like", "calibrated", "calibrated"]
     assert all(sum(map(int, r["teeth"].split("/"))) == len(SMALL_SUBJECTS) for r in totals[1:])
-    printed = capsys.readouterr().out
     assert "lower lip: largest |error - tip offset difference|" in printed
     assert "face width is set from Headmeasures (not fitted)" in printed
     assert "ratings CASSI-like" in printed and "ratings calibrated" in printed
 
 
 @pytest.mark.slow
-def test_dataset_run_has_residuals_but_no_truth(tmp_path, capsys):
+def test_dataset_run_has_residuals_but_no_truth(runs):
     summary, _ = _documented()
-    corpus = subject_rows.make_corpus(tmp_path / "corpus", subject_rows.Plan(1, ("tp106", "tp040"), 1))
-    out = tmp_path / "out"
-    assert sf.main(["--dataset", str(corpus), "--out", str(out), "--stride", "5"]) == 0
+    printed, folder = _main_output(runs, "dataset")
+    out = folder / "out"
     for name in subject_report.output_names(synthetic=False):
         assert (out / name).is_file(), name
     assert not (out / "calibration_recovery.csv").exists()
@@ -273,15 +353,13 @@ def test_dataset_run_has_residuals_but_no_truth(tmp_path, capsys):
         for point in ("gonion", "gnathion"):
             lo, hi = (float(v) for v in summary[r["method"]][f"{point} residual mm"].split("-"))
             assert lo - 0.05 <= float(r[f"residual_{point}_mm"]) <= hi + 0.05, (r["method"], point)
-    assert "converged 1/1" in capsys.readouterr().out
+    assert "converged 1/1" in printed
 
 
 @pytest.mark.slow
-def test_notebook_runs_and_shows_figures_and_the_table():
-    nb = nbformat.read(ROOT / "notebooks" / "subject_fitting.ipynb", as_version=4)
-    NotebookClient(nb, timeout=None, kernel_name="python3",
-                   resources={"metadata": {"path": str(ROOT / "notebooks")}}).execute()
-    outputs = [o for cell in nb.cells if cell.cell_type == "code" for o in cell.outputs]
+def test_notebook_runs_and_shows_figures_and_the_table(runs):
+    cells, _ = _part(runs, "notebook")
+    outputs = [o for cell in cells if cell.cell_type == "code" for o in cell.outputs]
     assert sum("image/png" in o.get("data", {}) for o in outputs) == 2
     tables = "".join(o.get("data", {}).get("text/markdown", "") for o in outputs)
     assert "| CASSI-like (1 subject) |" in tables

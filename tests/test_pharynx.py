@@ -1,6 +1,7 @@
 """The pharyngeal wall from PHA.DAT (or the default), the tongue kept in front of it, and
 the airway between them."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -22,6 +23,25 @@ from cassi_fit.pharynx import (
 jax.config.update("jax_enable_x64", True)
 MODEL = load_model()
 S01_WALL = np.array([(-73.530, 15.572), (-73.471, -28.551)])  # the synthetic S01's PHA.DAT
+
+
+@eqx.filter_jit
+def _measures(model, v):
+    """One frame's airway, collision report, per-vertex depths behind the wall and
+    tongue penalty residuals, compiled once for both tests below (op by op, their many
+    small operations compile one by one: seconds each); the model is a traced argument,
+    so the default model and one with the subject's wall share the compilation."""
+    return (collide.airway(model, v), collide.report(model, v),
+            collide.depths(model, v)["tongue_pharynx"],
+            collide.penalty_residuals(model, v, lips=False))
+
+
+def _airway(model, v):
+    return _measures(model, v)[0]
+
+
+def _report(model, v):
+    return _measures(model, v)[1]
 
 
 def _front(verts):
@@ -88,15 +108,15 @@ def test_airway_against_a_hand_computed_wall_distance():
     # the default wall's midline at y = 0 lies on its PHA line: x = -74 + 18.5 * 4 / 48.5
     wall_x = -74.0 + 18.5 * 4.0 / 48.5
     v = _tongue_at(MODEL, [(-60.0, 0.0, 0.0), (-50.0, 5.0, 0.0), (-70.0, 0.0, 0.0)])
-    assert float(collide.airway(MODEL, v)) == pytest.approx(-70.0 - wall_x, abs=1e-3)  # model.csv keeps 4 decimals
+    assert float(_airway(MODEL, v)) == pytest.approx(-70.0 - wall_x, abs=1e-3)  # model.csv keeps 4 decimals
     v = _tongue_at(MODEL, [(-60.0, 0.0, 0.0), (-75.0, 0.0, 0.0)])
-    assert float(collide.airway(MODEL, v)) == pytest.approx(-75.0 - wall_x, abs=1e-3)  # model.csv keeps 4 decimals
-    assert float(collide.report(MODEL, v)["tongue_pharynx"]) == pytest.approx(wall_x + 75.0, abs=1e-3)
+    assert float(_airway(MODEL, v)) == pytest.approx(-75.0 - wall_x, abs=1e-3)  # model.csv keeps 4 decimals
+    assert float(_report(MODEL, v)["tongue_pharynx"]) == pytest.approx(wall_x + 75.0, abs=1e-3)
     # at the side (z = half width) the lateral wall is SIDE_DEPTH_MM further forward
     front = front_sheet(MODEL, jnp.asarray(MODEL.vertices))
     half = float(np.interp(0.0, -np.asarray(front[:, -1, 1]), np.asarray(front[:, -1, 2])))
     v = _tongue_at(MODEL, [(-50.0, 0.0, half)])
-    assert float(collide.airway(MODEL, v)) == pytest.approx(-50.0 - wall_x - SIDE_DEPTH_MM, abs=1e-3)
+    assert float(_airway(MODEL, v)) == pytest.approx(-50.0 - wall_x - SIDE_DEPTH_MM, abs=1e-3)
     frames = collide.airway_frames(MODEL, jnp.stack([v, v]))
     assert frames.shape == (2,)
 
@@ -106,15 +126,17 @@ def test_a_tongue_pushed_through_the_wall_is_projected_in_front_of_it():
     v = np.asarray(model.vertices).copy()
     tongue = np.asarray(model.regions["tongue"])
     # the whole tongue pushed back through the wall: 12 mm beyond its rest airway
-    v[tongue, 0] -= 12.0 + max(float(collide.airway(model, jnp.asarray(v))), 0.0)
+    v[tongue, 0] -= 12.0 + max(float(_airway(model, jnp.asarray(v))), 0.0)
     v = jnp.asarray(v)
-    before = np.asarray(collide.depths(model, v)["tongue_pharynx"])
-    assert before.max() > 10.0 and float(collide.airway(model, v)) < -10.0
-    after = collide.project(model, v)
-    assert float(np.max(np.asarray(collide.depths(model, after)["tongue_pharynx"]))) == 0.0
-    assert float(collide.airway(model, after)) >= 0.0
+    airway_before, _, before, penalty = _measures(model, v)
+    before = np.asarray(before)
+    assert before.max() > 10.0 and float(airway_before) < -10.0
+    after = eqx.filter_jit(collide.project)(model, v)
+    airway_after, _, behind_after, _ = _measures(model, after)
+    assert float(np.max(np.asarray(behind_after))) == 0.0
+    assert float(airway_after) >= 0.0
     moved = np.asarray(after - v)
     # out of the wall is forward: every tongue point that was behind it moved forward
     behind = tongue[before > 0]  # depths are per tongue vertex
     assert behind.size > 0 and np.all(moved[behind, 0] > 0.0)
-    assert np.any(np.asarray(collide.penalty_residuals(model, v, lips=False)) > 10.0)
+    assert np.any(np.asarray(penalty) > 10.0)
