@@ -59,6 +59,8 @@ PROJECTION_MARGIN_MM = 1e-3
 #: Alternating passes over the obstacles in :func:`project` (a push out of one obstacle
 #: may enter another; the measured depth after the passes is reported).
 PROJECTION_PASSES = 4
+#: Rounds of lips apart, then out of the teeth, in :func:`project`.
+LIP_ROUNDS = 3
 #: Names of the per-frame depths :func:`report` returns (max over the part's vertices, mm).
 REPORT_KEYS = (
     "tongue_palate",
@@ -401,11 +403,13 @@ def project(model: FaceModel, vertices: Float[Array, "V 3"], passes: int = PROJE
     arches = [(arch_chains(model, vertices, a)[0], a == "upper") for a in ("upper", "lower")]
 
     def until_out(step):
-        # up to ``passes`` rounds, stopping as soon as a round moves nothing
+        # all points together, up to ``passes`` rounds, stopping as soon as a round moves
+        # nothing: a point that did not move does not move again (``step`` depends on the
+        # point alone), so this is each point's own loop, traced once instead of batched
         def push(q):
             def body(carry):
                 q, k, _ = carry
-                move = step(q).astype(q.dtype)
+                move = jax.vmap(step)(q).astype(q.dtype)
                 return q + move, k + 1, jnp.any(move != 0)
 
             q, _, _ = jax.lax.while_loop(
@@ -419,18 +423,21 @@ def project(model: FaceModel, vertices: Float[Array, "V 3"], passes: int = PROJE
         moved = q + _escape(q, arches, "lingual", _palate_ceiling(q, sheet)).astype(q.dtype)
         return moved + _pharynx_depth(moved, wall)[1].astype(q.dtype) - q
 
-    walled = until_out(tongue_step)
-
-    def push_tongue(q):
-        q = walled(q)
+    def out_of_wall(q):
         return q + _pharynx_depth(q, wall)[1].astype(q.dtype)
-    push_lip = until_out(lambda q: _escape(q, arches, "labial"))
 
-    vertices = vertices.at[tongue].set(jax.vmap(push_tongue)(vertices[tongue]))
-    for _ in range(3):  # the lips apart, then out of the teeth (which win where both pull)
+    push_tongue = until_out(tongue_step)
+    push_lips = until_out(lambda q: _escape(q, arches, "labial"))
+
+    def lips_round(_, vertices):
+        # the lips apart, then out of the teeth (which win where both pull)
         vertices = lips_apart(model, vertices)
-        vertices = vertices.at[lips].set(jax.vmap(push_lip)(vertices[lips]))
-    return vertices
+        return vertices.at[lips].set(push_lips(vertices[lips]))
+
+    vertices = vertices.at[tongue].set(jax.vmap(out_of_wall)(push_tongue(vertices[tongue])))
+    # three rounds in a loop: traced once (tracing, not running, is what an unrolled
+    # Python loop costs every process that animates)
+    return jax.lax.fori_loop(0, LIP_ROUNDS, lips_round, vertices)
 
 
 def lips_crossing(model: FaceModel, vertices: Float[Array, "V 3"]) -> Float[Array, " C"]:

@@ -161,10 +161,12 @@ def _project_keeping_volume(model, vertices, tongue_shape):
     if tongue_shape != "thick":  # CASSI's flat sheet has no volume to keep
         return collide.project(model, vertices)
     volume = closed_mesh_volume(vertices, tongue_faces(model))
-    vertices = collide.project(model, vertices)
-    for _ in range(TONGUE_VOLUME_PASSES):
-        vertices = collide.project(model, keep_volume(model, vertices, volume))
-    return vertices
+
+    def one_pass(i, v):  # pass 0 projects as it is; the others restore the volume first
+        return collide.project(model, jnp.where(i == 0, v, keep_volume(model, v, volume)))
+
+    # a loop, not Python's: the projection is traced once, not 1 + TONGUE_VOLUME_PASSES times
+    return jax.lax.fori_loop(0, 1 + TONGUE_VOLUME_PASSES, one_pass, vertices)
 
 
 @eqx.filter_jit
