@@ -94,12 +94,15 @@ def test_every_recording_has_its_own_seed():
 def test_the_errors_are_measured_against_the_true_motion():
     """Noise-free fixed-condyle truth: the fixed pivot is the condyle and the closed-form angle
     is exact, so the per-frame errors the tables pool must be ~0 (a wrong true motion, a
-    wrong reference frame or a sign error in the jaw points would show here)."""
+    wrong reference frame or a sign error in the jaw points would show here). Recordings as
+    long as the small run's: the fits compiled here are the ones it uses."""
     from cassi_fit import synth
 
+    duration = jaw_truth.SMALL["duration_s"]
     anatomy = synth.make_subject("X01", np.random.default_rng(300), jaw_kinematics="fixed-condyle")
-    track, truth = synth.synth_recording(anatomy, "tp106", seed=1, noise_mm=0.0, duration_s=2.0,
-                                         dropouts=False, mistracks=False)  # fmt: skip
+    track, truth = synth.synth_recording(anatomy, "tp106", seed=1, noise_mm=0.0,
+                                         duration_s=duration, dropouts=False,
+                                         mistracks=False)  # fmt: skip
     fixed = jaw_truth.frame_errors(track, truth, anatomy, "fixed-pivot")
     assert fixed["theta_deg"].max() > 8.0
     pivot_err = fixed["pivot_err_mm"]  # NaN where the true motion has no pivot (theta 0)
@@ -111,8 +114,9 @@ def test_the_errors_are_measured_against_the_true_motion():
     assert np.nanmax(closed["incisor_err_mm"]) < 0.05
     # The physiological truth moves its pivot: Parke's fixed pivot then misses the chin.
     anatomy = synth.make_subject("X01", np.random.default_rng(300), jaw_kinematics="physiological")
-    track, truth = synth.synth_recording(anatomy, "tp106", seed=1, noise_mm=0.0, duration_s=2.0,
-                                         dropouts=False, mistracks=False)  # fmt: skip
+    track, truth = synth.synth_recording(anatomy, "tp106", seed=1, noise_mm=0.0,
+                                         duration_s=duration, dropouts=False,
+                                         mistracks=False)  # fmt: skip
     biased = jaw_truth.frame_errors(track, truth, anatomy, "fixed-pivot")
     assert np.nanpercentile(biased["chin_err_mm"], 90) > 0.3
 
