@@ -196,15 +196,24 @@ def _spectra(areas, lengths, frequency_hz, chunk: int = 256) -> np.ndarray:
 
 
 def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
+                 calibration: str | os.PathLike | None = None,
                  ceiling_hz: float = CEILING_HZ["male"]) -> list[dict]:
     """What ``cassi animate --views ...,tract`` draws beside the face, per animation frame
     of ``run``: ``lengths_mm``, ``areas_mm2`` (the area function, glottis first, as
     :func:`recording_acoustics` makes it), ``frequency_hz`` (:data:`PANEL_HZ`) and
     ``gain_db`` (the lossy tube's transfer function), ``model_hz`` (F1-F3) and
     ``measured_hz`` (the sound's F1-F3 where the recording has a sound and the
-    measurement is reliable at that frame, else NaN). ``tract``: default the norms
-    (``area_function.default_tract``)."""
+    measurement is reliable at that frame, else NaN), ``tract`` (which vocal tract, in
+    words). ``tract``: default the subject's acoustic calibration when ``calibration``
+    (what ``--calibration`` names) holds one (``acoustic_fit.calibrated_tract``), else the
+    adult norms (``area_function.default_tract``)."""
+    from .acoustic_fit import calibrated_tract
+
     anim = run.animation
+    if tract is None:
+        tract, words = calibrated_tract(calibration, run.recording.subject)
+    else:
+        words = "vocal tract: as given"
     tract = af.default_tract(jnp.asarray(anim.vertices).dtype) if tract is None else tract
     geometry = af.tract_geometry(run.state.model)
     freq, _, areas, lengths = model_formants(geometry, anim.vertices, tract, run.state.scale)
@@ -218,7 +227,8 @@ def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
                                  ceiling_hz=ceiling_hz)
         measured = np.where(track.reliable[:, None], track.frequency[:, :3], np.nan)
     return [{"lengths_mm": lengths[k], "areas_mm2": areas[k], "frequency_hz": PANEL_HZ,
-             "gain_db": gain[k], "model_hz": freq[k, :3], "measured_hz": measured[k]}
+             "gain_db": gain[k], "model_hz": freq[k, :3], "measured_hz": measured[k],
+             "tract": words}
             for k in range(len(freq))]
 
 

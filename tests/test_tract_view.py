@@ -94,3 +94,52 @@ def test_cassi_animate_writes_the_tract_view(run, tmp_path, capsys):
     assert cli.main(["animate", str(run.recording.path), "--views", "front,throat",
                      "--out", str(tmp_path / "x.png")]) == 2
     assert "tract" in capsys.readouterr().err  # the error lists the views, tract among them
+
+
+def test_the_subjects_fitted_vocal_tract_is_drawn_when_the_calibration_holds_one(
+        run, panels, tmp_path, capsys):
+    """``--calibration FOLDER`` with ``SUBJECT.acoustic.json`` in it (``cassi calibrate
+    --acoustic``): the tract view shows that tract (its areas and formants, and says so),
+    not the adult norms; a folder without one says the norms are used."""
+    import json
+
+    from cassi_fit.acoustic_fit import (
+        AcousticFit,
+        acoustic_calibration_path,
+        write_acoustic_calibration,
+    )
+    from cassi_fit.area_function import GLOTTIS_BELOW_HYOID_MM, TractParams
+
+    subject = run.recording.subject
+    # a longer tract (the glottis 12 mm lower), wider everywhere: other formants, areas
+    fitted = TractParams(*(np.float64(v) for v in (GLOTTIS_BELOW_HYOID_MM + 12.0, 1.5, 1.2, 1.3)))
+    folder = tmp_path / "cal"
+    folder.mkdir()
+    nothing = tract_panels(run, calibration=folder)
+    assert nothing[0]["tract"] == f"no acoustic calibration for {subject} in {folder}: the adult norms"
+    np.testing.assert_array_equal(nothing[0]["areas_mm2"], panels[0]["areas_mm2"])
+    write_acoustic_calibration(acoustic_calibration_path(folder, subject), subject,
+                               AcousticFit(fitted, True, 5, np.zeros(3), np.zeros(3)),
+                               recordings=["x"], frames=10, qualities=["a"])
+    assert json.loads(acoustic_calibration_path(folder, subject).read_text())["converged"]
+    own = tract_panels(run, calibration=folder)
+    assert own[0]["tract"] == f"vocal tract: fitted to the sound ({subject}.acoustic.json)"
+    assert panels[0]["tract"] == "vocal tract: the adult norms"
+    # the same frames through the fitted tract: what cassi acoustics computes with it
+    expected = recording_acoustics(run, tract=fitted)
+    np.testing.assert_allclose(np.stack([p["model_hz"] for p in own]), expected.model[:, :3],
+                               rtol=1e-9)
+    assert not np.allclose(np.stack([p["model_hz"] for p in own]),
+                           np.stack([p["model_hz"] for p in panels]))
+    # and the command line takes it from --calibration (a still: the view's cell differs)
+    from PIL import Image
+
+    stills = {}
+    for name, extra in (("norms", []), ("fitted", ["--calibration", str(folder)])):
+        out = tmp_path / f"{name}.png"
+        code = cli.main(["animate", str(run.recording.path), "--views", "midsagittal,tract",
+                         "--size", "480x240", "--stride", "6", "--frame", "3",
+                         "--out", str(out), *extra])
+        assert code == 0, capsys.readouterr().err
+        stills[name] = _cell(np.asarray(Image.open(out).convert("RGB")))
+    assert np.abs(stills["norms"] - stills["fitted"]).sum(axis=2).astype(bool).mean() > 0.005

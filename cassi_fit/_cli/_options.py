@@ -248,6 +248,26 @@ def run_args(recording, args):
     return run_recording(recording, spec_from_args(args))
 
 
+def acoustic_only_folder(recording, args):
+    """A ``--calibration`` folder holding the subject's acoustic calibration but no
+    ``SUBJECT.calibration.json`` (``cassi calibrate --acoustic`` writes only the former):
+    the pellets' model keeps its defaults, said in one line, and the folder serves the
+    vocal tract alone (``cassi acoustics``, ``cassi animate --views ...,tract``). Returns
+    the options for the face's run (a copy; ``args`` kept)."""
+    from cassi_fit.acoustic_fit import acoustic_calibration_path
+    from cassi_fit.calibration import calibration_path
+
+    folder = getattr(args, "calibration", None)
+    if not folder or not Path(folder).is_dir():
+        return args
+    if (acoustic_calibration_path(folder, recording.subject).is_file()
+            and not calibration_path(folder, recording.subject).is_file()):
+        print(f"{folder}: no calibration of {recording.subject}'s face, only its vocal "
+              "tract: the face with the default calibration")
+        return argparse.Namespace(**{**vars(args), "calibration": None})
+    return args
+
+
 # ------------------------------------------------------------------ images
 
 

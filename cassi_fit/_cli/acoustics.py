@@ -5,7 +5,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._options import add_model_arguments, add_recording_argument, load_recording_args, run_args
+from ._options import (
+    acoustic_only_folder,
+    add_model_arguments,
+    add_recording_argument,
+    load_recording_args,
+    run_args,
+)
 
 
 def register(subparsers) -> None:
@@ -43,7 +49,7 @@ def run(args) -> int:
         if out and Path(out).exists() and not args.force:
             raise OutputExistsError(f"{out}: exists (use --force to replace it)")
     recording = load_recording_args(args.recording, args)
-    face_args = _acoustic_only_folder(recording, args)
+    face_args = acoustic_only_folder(recording, args)
     run_ = run_args(recording, face_args)
     tract = _calibrated_tract(recording, getattr(args, "calibration", None))
     result = recording_acoustics(run_, ceiling_hz=args.ceiling, tract=tract)
@@ -68,41 +74,15 @@ def run(args) -> int:
     return 0
 
 
-def _acoustic_only_folder(recording, args):
-    """A ``--calibration`` folder holding the subject's acoustic calibration but no
-    ``SUBJECT.calibration.json`` (``cassi calibrate --acoustic`` writes only the former):
-    the pellets' model keeps its defaults, said in one line, and the folder serves the
-    vocal tract alone. Returns the options for the face's run (a copy; ``args`` kept)."""
-    import argparse
-
-    from cassi_fit.acoustic_fit import acoustic_calibration_path
-    from cassi_fit.calibration import calibration_path
-
-    folder = getattr(args, "calibration", None)
-    if not folder or not Path(folder).is_dir():
-        return args
-    if (acoustic_calibration_path(folder, recording.subject).is_file()
-            and not calibration_path(folder, recording.subject).is_file()):
-        print(f"{folder}: no calibration of {recording.subject}'s face, only its vocal "
-              "tract: the face with the default calibration")
-        return argparse.Namespace(**{**vars(args), "calibration": None})
-    return args
-
-
 def _calibrated_tract(recording, calibration):
     """The vocal tract of the subject's acoustic calibration (``SUBJECT.acoustic.json`` in
     the ``--calibration`` folder, or beside the given file), or None (the adult norms)."""
-    if not calibration:
-        return None
-    from cassi_fit.acoustic_fit import acoustic_calibration_path, read_acoustic_calibration
+    from cassi_fit.acoustic_fit import calibrated_tract
 
-    folder = Path(calibration)
-    folder = folder if folder.is_dir() else folder.parent
-    path = acoustic_calibration_path(folder, recording.subject)
-    if not path.exists():
-        print(f"no acoustic calibration for {recording.subject} in {folder}: the adult norms")
-        return None
-    return read_acoustic_calibration(path)[0]
+    tract, words = calibrated_tract(calibration, recording.subject)
+    if calibration and tract is None:
+        print(words)
+    return tract
 
 
 def calibrate_acoustic(args) -> int:

@@ -8,6 +8,7 @@ from pathlib import Path
 from cassi_fit.options import ANIMATION_SUFFIXES, DEFAULT_FPS, TRACT_VIEW, VIEWS
 
 from ._options import (
+    acoustic_only_folder,
     add_model_arguments,
     add_recording_argument,
     add_run_arguments,
@@ -131,7 +132,7 @@ def run(args) -> int:
     from cassi_fit._io import check_outputs  # before any work: no input, no clash, no overwrite
 
     check_outputs([out, csv_out], overwrite=args.force)
-    run = run_args(recording, args)
+    run = run_args(recording, acoustic_only_folder(recording, args))
     state, animation = run.state, run.animation
     from cassi_fit.reports import penetration_summary, tongue_volume_summary, write_penetration_csv
 
@@ -158,7 +159,7 @@ def write_output(out: Path, run, size, views, args) -> Path:
     if TRACT_VIEW in views:  # the area function and the tube's spectrum beside the face
         from cassi_fit.acoustics import tract_panels
 
-        panels = tract_panels(run)
+        panels = tract_panels(run, calibration=getattr(args, "calibration", None))
     if out.suffix.lower() == ".png":
         from cassi_fit.render import Renderer, save_png
 
@@ -205,9 +206,12 @@ def run_dataset(args) -> int:
                      "views": parse_views(args.views), "audio": not args.no_audio,
                      "markers": args.markers, "fps": args.fps}
     if TRACT_VIEW in video_options["views"]:
+        from functools import partial
+
         from cassi_fit.acoustics import tract_panels
 
-        video_options["tract_panels"] = tract_panels
+        # a worker is sent the function and the folder: each subject's own vocal tract
+        video_options["tract_panels"] = partial(tract_panels, calibration=args.calibration)
     run, written, _ = animate_corpus(dataset_args(args.recording[0], args), args.out, spec=spec_from_args(args),
                                      video_options=video_options,
                                      run_options=run_options(args))

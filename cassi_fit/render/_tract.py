@@ -35,7 +35,8 @@ def draw_tract(image: np.ndarray, box: tuple[int, int, int, int],
     """Draw one frame's ``panel`` into ``image[top:bottom, left:right]`` (``box``: left,
     top, right, bottom in pixels), in place. ``panel``: ``lengths_mm (n,)`` and
     ``areas_mm2 (n,)`` glottis first, ``frequency_hz (k,)`` and ``gain_db (k,)``,
-    ``model_hz (3,)``, ``measured_hz (3,)`` (NaN where not measured). None: the cell says
+    ``model_hz (3,)``, ``measured_hz (3,)`` (NaN where not measured), optionally
+    ``tract`` (which vocal tract, in words; written in the area plot). None: the cell says
     that there is no tract for this frame."""
     from PIL import Image, ImageDraw
 
@@ -58,6 +59,9 @@ def draw_tract(image: np.ndarray, box: tuple[int, int, int, int],
     caption = max(16, image.shape[0] // 32 + 12) if bottom >= image.shape[0] - 2 else 0
     half = (h - caption) // 2
     _area_plot(draw, font, (pad_l, 6, w - pad_r, half - below), panel)
+    if panel.get("tract"):  # which vocal tract: the adult norms or the subject's fitted one
+        draw.text((pad_l + 3, 8), str(panel["tract"]).removeprefix("vocal tract: "),
+                  font=font, fill=_INK)
     _spectrum_plot(draw, font, (pad_l, half + 6, w - pad_r, h - caption - below), panel)
     image[top:bottom, left:right] = np.asarray(cell)
 
