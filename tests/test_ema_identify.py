@@ -101,3 +101,38 @@ def test_named_channels_keep_their_names_under_the_accept_option():
     assert not numbered(raw.names)
     _, report = ema_to_track(raw, "proposed")
     assert report.sensor_map == "auto" and report.roles["T1"] == "tt"
+
+
+def _session_outcomes(seed, index):
+    """``(truth, guess)`` per channel of a lab-like session proposed from its files together
+    (development seeds: the experiment's table is measured on seed 2)."""
+    recs = lab_like_speaker(index, seed=seed)
+    proposal = propose_map([r.raw for r in recs])
+    return [(_truth(recs[0], g.channel), g) for g in proposal.guesses], recs[0].truth
+
+
+def test_a_loose_reference_leaves_only_the_references_not_sure():
+    # one loose reference: the head group is not sure (its distances vary nearly as much as
+    # a jaw's against two mastoids), but the roles found with it are the same with every
+    # rival group, so they keep their own confidence instead of the head group's
+    outcomes, truth = _session_outcomes(12, 22)
+    assert truth["loose_reference"] and not truth["head_normalised"]
+    refs = [g for t, g in outcomes if g.role == "reference"]
+    assert {t for t, g in outcomes if g.role == "reference"} == {"reference"} and len(refs) == 3
+    assert all(not g.sure for g in refs) and "do not rule out" in refs[0].evidence
+    for t, g in outcomes:
+        if g.role != "reference":
+            assert g.sure and g.role == t, g
+    assert any("other candidate head group" in g.evidence for _, g in outcomes)
+
+
+def test_a_wrong_head_group_names_nothing_wrong():
+    # the most rigid group is a jaw sensor and a mastoid (the true skull group has a loose
+    # reference): roles that change with another candidate group stay as unsure as the
+    # head group; none is named wrong
+    outcomes, truth = _session_outcomes(13, 13)
+    assert truth["loose_reference"]
+    assert any(g.role == "reference" and t != "reference" for t, g in outcomes)  # wrong group
+    for t, g in outcomes:
+        assert not g.sure or g.role == t, g
+    assert any("no surer than the head references" in g.evidence for _, g in outcomes)

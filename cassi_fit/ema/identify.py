@@ -6,10 +6,11 @@ evidence and a confidence in [0, 1]; a guess under :data:`SURE` is marked *not s
 order:
 
 1. **unused**: never tracked, or exactly constant;
-2. **head references**: the largest group of channels rigid among themselves (the 95 %
-   range of every pairwise distance under :data:`RIGID_SD_MM`) spanning a skull (two of them
-   more than :data:`SKULL_MM` apart: a jaw's two sensors are closer); the other channels
-   are corrected for head movement with them (:mod:`cassi_fit.ema.head`);
+2. **head references**: the candidates are the groups of channels rigid among themselves
+   (the 95 % range of every pairwise distance under :data:`RIGID_SD_MM`) spanning a skull
+   (two of them more than :data:`SKULL_MM` apart: a jaw's two sensors are closer); the most
+   rigid is kept, and the other channels are corrected for head movement with it
+   (:mod:`cassi_fit.ema.head`);
 3. **the midline**: the plane through the moving channels; a channel whose median lies
    more than 8 mm from it is *parasagittal* (a lip corner, a lateral tongue sensor) and
    gets no role;
@@ -19,7 +20,17 @@ order:
    jaw); the **jaw sensor** is the next channel from the front, moving with the lower
    lip; a channel **rigid to it** 25-65 mm away, more than 20 mm behind it, is the
    second jaw sensor; the rest are
-   the **tongue**, front to back ``T1..T4`` (more than four: the extra back ones get none).
+   the **tongue**, front to back ``T1..T4`` (more than four: the extra back ones get none);
+5. **the same with every rival head group**: steps 3-4 rest on the head correction, and the
+   kept group may be the wrong one (a loose reference varies nearly as much as the jaw
+   against two mastoid references). So they are done again with each rival: every other
+   candidate group, and, when the evidence does not rule it out at :data:`SURE`, the group
+   without a member not clearly rigid to the others (``none``: no correction, when the rest
+   spans no skull) or with a channel outside it nearly rigid to it. A channel's role found
+   with every rival keeps its own confidence (the lowest with the kept group and the
+   rivals not ruled out); one that changes is capped at the head group's confidence:
+   nothing is surer than the head correction it rests on. The references keep the head
+   group's confidence.
 
 Nothing here is used unless asked: ``cassi info --write-sensor-map FILE`` writes the
 proposal as an editable TOML sensor map; ``--accept-proposed-map`` (every command) uses
@@ -151,13 +162,21 @@ def _rigidity(pos: np.ndarray, a: int, b: int) -> tuple[float, float]:
     return float(hi - lo), float(mid)
 
 
-def _head_group(pos: np.ndarray, idx: list[int]) -> tuple[list[int], float, str]:
-    """The head references among channels ``idx``: ``(members, confidence, evidence)``.
+def _head_group(pos: np.ndarray, idx: list[int]
+                ) -> tuple[list[int], float, str, dict[tuple[int, ...], bool]]:
+    """The head references among channels ``idx``: ``(members, confidence, evidence,
+    rivals)``.
 
     Candidates are the groups of channels rigid among themselves spanning a skull; the
     most rigid is kept (a jaw's sensors can be nearly rigid with two mastoid references,
     the jaw turning about an axis near them: about 1 mm, where skull references vary by
-    their noise), its confidence lowered when another group comes close."""
+    their noise), its confidence lowered when another group comes close. ``rivals`` maps
+    the other head groups to whether the evidence leaves them open (does not rule them out
+    at :data:`SURE`; each such one lowered the confidence under it): every other candidate
+    (open when nearly as rigid), and, open, the group without a member whose distance to
+    another varies nearly as much as :data:`RIGID_SD_MM` (a loose reference, or not a
+    reference at all; ``()`` when the rest spans no skull) and the group with a channel
+    outside it rigid to it nearly within :data:`RIGID_SD_MM`."""
     k = len(idx)
     sd = np.full((k, k), np.inf)
     dist = np.zeros((k, k))
@@ -174,7 +193,7 @@ def _head_group(pos: np.ndarray, idx: list[int]) -> tuple[list[int], float, str]
         if len(group) >= 2 and max(dist[a, b] for a in group for b in group) > SKULL_MM:
             groups.add(tuple(sorted(group)))
     if not groups:
-        return [], 1.0, ""
+        return [], 1.0, "", {}
     groups = {_trimmed(sd, dist, g) for g in groups}
     scored = sorted((_worst(sd, g), -len(g), g) for g in groups)
     worst, _, best = scored[0]
@@ -190,10 +209,25 @@ def _head_group(pos: np.ndarray, idx: list[int]) -> tuple[list[int], float, str]
         conf = min(conf, _conf(scored[1][0] - worst, 0.8))
         words = (f"; the next most rigid group of channels spanning a skull varies by "
                  f"{scored[1][0]:.1f} mm")
-    span = max(dist[a, b] for a in best for b in best)
+    rivals: dict[tuple[int, ...], bool] = {}  # group -> left open at SURE
+    for t in scored[1:]:  # every other candidate
+        rivals[_extended(sd, dist, t[2])] = _conf(t[0] - worst, 0.8) < SURE
+    for m in best:  # a member not rigid to another beyond doubt: the group without it
+        if any(_conf(RIGID_SD_MM - sd[m, g], 1.0) < SURE for g in best if g != m):
+            rest = tuple(g for g in best if g != m)
+            rivals[rest if len(rest) >= 2 and _span(dist, rest) > SKULL_MM else ()] = True
+    for j in others:  # a channel nearly rigid to the group: the group with it
+        if _conf(max(sd[j, g] for g in best) - RIGID_SD_MM, 1.0) < SURE:
+            rivals[tuple(sorted(best + (j,)))] = True
+    rivals = {tuple(idx[j] for j in r): p for r, p in rivals.items()}
     return [idx[j] for j in best], conf, (f"rigid among themselves (their distances vary by "
-                                         f"at most {worst:.1f} mm, span {span:.0f} mm); every "
-                                         f"other channel's by {nearest:.1f} mm or more{words}")
+                                         f"at most {worst:.1f} mm, span "
+                                         f"{_span(dist, best):.0f} mm); every other channel's "
+                                         f"by {nearest:.1f} mm or more{words}"), rivals
+
+
+def _span(dist: np.ndarray, group) -> float:
+    return max((dist[a, b] for a in group for b in group), default=0.0)
 
 
 def _near_mouth(dist: np.ndarray, member: int, group) -> bool:
@@ -394,6 +428,51 @@ def _session_positions(raws) -> tuple[list[str], np.ndarray]:
     return names, np.concatenate(parts)
 
 
+def _across_rivals(found: dict[str, Guess], pos: np.ndarray, names: list[str],
+                   moving: list[int], conf: float, rivals: dict[tuple[int, ...], bool]
+                   ) -> dict[str, Guess]:
+    """The in-plane guesses ``found`` (made with the head group kept) checked against every
+    rival head group (:func:`_head_group`): the roles are found again among the same
+    channels (less the rival's own members), corrected with the rival group instead. A
+    role the same under every rival does not rest on which group is the head: it keeps its
+    own confidence, the lowest it has with the kept group and the rivals the evidence does
+    not rule out. A role that changes under some rival (or that a rival takes for a
+    reference) is capped at the head group's confidence: nothing is surer than the head
+    correction it rests on."""
+    others = []  # (rival, not ruled out, its guesses)
+    for rival, plausible in rivals.items():
+        try:
+            got = _in_plane(_corrected(pos, list(rival)), [j for j in moving if j not in rival],
+                            names)
+        except placement.PlacementError:
+            got = {}
+        others.append((rival, plausible, got))
+    out = {}
+    for name, g in found.items():
+        alt = {rival: got.get(name) for rival, _, got in others}
+        if all(a is not None and a.role == g.role for a in alt.values()):
+            least = min(((a.confidence, rival) for rival, plausible, _ in others
+                         if plausible and (a := alt[rival]).confidence < g.confidence),
+                        default=None)
+            words = ""
+            if alt:
+                words = (f"; the same with {'each of the ' if len(alt) > 1 else ''}{len(alt)}"
+                         f" other candidate head group{'s' * (len(alt) > 1)}")
+            if least is not None and f"{least[0]:.2f}" != f"{g.confidence:.2f}":
+                words += (f" (with {'+'.join(names[j] for j in least[1]) or 'no head group'}, "
+                          f"not ruled out, only {least[0]:.2f} sure)")
+            out[name] = Guess(name, g.role, least[0] if least else g.confidence,
+                              g.evidence + words)
+        else:
+            roles = sorted({"reference" if names.index(name) in rival else
+                            "no role" if a is None else a.role
+                            for rival, a in alt.items()} - {g.role})
+            out[name] = Guess(name, g.role, min(g.confidence, conf), g.evidence + (
+                f"; with another candidate head group it would be {' or '.join(roles)}, so "
+                "no surer than the head references"))
+    return out
+
+
 def propose_map(raw) -> Proposal:
     """A proposed map for the channels of ``raw`` (a :class:`RawEma`, or a session's files:
     a list of them, read together; module docstring). A session tells more than a file:
@@ -402,20 +481,24 @@ def propose_map(raw) -> Proposal:
     guesses = dict(_unused(pos, names))
     idx = [j for j, n in enumerate(names) if n not in guesses]
     notes = []
-    refs, conf, words = (_head_group(pos, idx) if pos.shape[2] == 3 else ([], 1.0, ""))
+    refs, conf, words, rivals = (_head_group(pos, idx) if pos.shape[2] == 3
+                                 else ([], 1.0, "", {}))
+    plausible = ["+".join(names[j] for j in r) or "none (no head correction)"
+                 for r, p in rivals.items() if p]
+    if plausible:
+        words += "; other head groups the data do not rule out: " + ", ".join(plausible)
     for j in refs:
         guesses[names[j]] = Guess(names[j], "reference", conf, words)
     if not refs:
         notes.append("no head references found (head-normalised data, or none recorded)")
     moving = [j for j in idx if j not in refs]
-    corrected = _corrected(pos, refs)
     try:
-        found = _in_plane(corrected, moving, names) if pos.shape[2] == 3 else {}
+        found = _in_plane(_corrected(pos, refs), moving, names) if pos.shape[2] == 3 else {}
     except placement.PlacementError as exc:
         found = {}
         notes.append(f"roles not proposed: {exc}")
-    for name, g in found.items():  # nothing is surer than the head correction it rests on
-        guesses[name] = Guess(name, g.role, min(g.confidence, conf), g.evidence) if refs else g
+    for name, g in _across_rivals(found, pos, names, moving, conf, rivals).items():
+        guesses[name] = g
     for n in names:
         guesses.setdefault(n, Guess(n, "extra", 0.0, "no role found"))
     return Proposal(tuple(guesses[n] for n in names), tuple(notes))
