@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from ema_files import mocha_binary
+from real_data import XRMB_JW11, missing, real_data
 
 from cassi_fit import cli
 from cassi_fit.dataset import Dataset, DefaultHeadMeasuresWarning, load_recording
@@ -21,8 +22,7 @@ from cassi_fit.txy import read_txy
 
 FIXTURES = Path(__file__).parent / "fixtures" / "ema"
 _HERE = Path(__file__).resolve()
-JW11 = next((p for p in (_HERE.parents[2] / "shared/data/xrmb_jw11",
-                         _HERE.parents[3] / "shared/data/xrmb_jw11") if p.is_dir()), None)
+JW11 = real_data(XRMB_JW11)
 
 
 def _quiet(load, *args, **kw):
@@ -107,8 +107,7 @@ def test_formats_told_apart_by_content(tmp_path):
         load_recording(tmp_path / "f.dat")
 
 
-@pytest.mark.skipif(JW11 is None, reason="the real XRMB recording JW11 task 5 is not here "
-                    "(/work/shared/data/xrmb_jw11)")
+@pytest.mark.skipif(JW11 is None, reason=missing(XRMB_JW11))
 def test_real_jw11_recording_through_mocha_layout(tmp_path):
     """JW11 task 5 (one real recording of one speaker), written by hand as MOCHA does (x
     toward the back, 1/100 mm, NaN untracked, fixed ui and bn references): the EMA path

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from real_data import EMU_MO1, missing, real_data
 
 from cassi_fit.dataset import Dataset, DefaultHeadMeasuresWarning, load_recording
 from cassi_fit.ema.detect import detect_format
@@ -21,9 +22,8 @@ from cassi_fit.labels import recording_labels
 from cassi_fit.pellets import PELLET_NAMES
 
 _HERE = Path(__file__).resolve()
-IPS = next((p for p in (_HERE.parents[2] / "shared/data/emu_ips_mo1",
-                        _HERE.parents[3] / "shared/data/emu_ips_mo1") if p.is_dir()), None)
-NO_IPS = "the real IPS Munich EMU bundle is not here (../shared/data/emu_ips_mo1)"
+IPS = real_data(EMU_MO1)
+NO_IPS = missing(EMU_MO1)
 IPS_BUNDLE = "dfgspp_mo1_prosody_0024_bndl.json"
 
 

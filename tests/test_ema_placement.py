@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from real_data import XRMB_JW11, missing, real_data
 
 from cassi_fit.ema import RawEma, SensorMap, ema_to_track
 from cassi_fit.ema.lab_like import lab_like_speaker, true_frame, true_sensor_map
@@ -17,7 +18,7 @@ from cassi_fit.ema.sensor_map import read_sensor_map
 from cassi_fit.ema.track import session_placement
 from cassi_fit.errors import DataFormatError
 
-JW11 = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "xrmb_jw11"
+JW11 = real_data(XRMB_JW11)
 
 
 def _map(tmp_path: Path, rec, extra: str = "", name: str = "m.toml") -> SensorMap:
@@ -138,7 +139,7 @@ def test_3d_data_with_nothing_to_place_them_say_what_to_give(tmp_path):
         ema_to_track(raw)  # sensors at random: never placed (what to give, or which roles)
 
 
-@pytest.mark.skipif(not (JW11 / "jw11_tp005.txy").is_file(), reason="real data absent")
+@pytest.mark.skipif(JW11 is None, reason=missing(XRMB_JW11))
 def test_the_real_xrmb_speaker_is_placed_from_his_own_data():
     from cassi_fit.txy import read_txy
 

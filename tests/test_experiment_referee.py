@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from real_data import XRMB_JW11, missing, real_data  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "experiments"))
@@ -22,9 +23,8 @@ import zoo  # noqa: E402
 GENERATED = ROOT / "docs" / "generated" / "real_referee.csv"
 GENERATED_COUPLINGS = ROOT / "docs" / "generated" / "real_referee_couplings.csv"
 GENERATED_MD = GENERATED.with_suffix(".md")
-# The real recording (read-only, never copied): beside the checkout, or the shared copy.
-JW11 = next((p for p in (ROOT.parent / "shared" / "data" / "xrmb_jw11",
-                         Path("/work/shared/data/xrmb_jw11")) if p.is_dir()), None)
+# The real recording (read-only, never copied; tests/real_data.py says where it is looked for)
+JW11 = real_data(XRMB_JW11)
 KEY = ("dataset", "subject", "task", "part", "metric", "predictor", "versus")
 
 
@@ -247,8 +247,7 @@ def test_a_synthetic_slice_reproduces_the_generated_table(tmp_path_factory, gene
     _compare(fresh, generated)
 
 
-@pytest.mark.skipif(JW11 is None, reason="the real XRMB recording (shared/data/xrmb_jw11) "
-                    "is not on this machine")
+@pytest.mark.skipif(JW11 is None, reason=missing(XRMB_JW11))
 def test_the_real_recording_reproduces_the_table_and_the_issues_hand_measurements(
         generated, couplings):
     import warnings

@@ -7,13 +7,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from real_data import EMU_MO1, missing, real_data
 from scipy.signal import lfilter
 
 from cassi_fit import formant_track as ft
 
 ROOT = Path(__file__).resolve().parents[1]
-EMU = next((p for p in (ROOT.parent / "shared/data/emu_ips_mo1", ROOT.parents[1] / "shared/data/emu_ips_mo1",
-                        Path("/work/shared/data/emu_ips_mo1")) if p.is_dir()), None)
+EMU = real_data(EMU_MO1)
 RATE = 16000.0
 TRUE_F = (550.0, 1450.0, 2550.0)
 
@@ -53,7 +53,7 @@ def test_bad_input_is_one_clear_error(tmp_path):
         ft.measure_wav(bad, np.array([0.1]))
 
 
-@pytest.mark.skipif(EMU is None, reason="the EMU bundle (../shared/data/emu_ips_mo1) is absent")
+@pytest.mark.skipif(EMU is None, reason=missing(EMU_MO1))
 def test_praat_agrees_with_the_emu_bundles_own_formant_track():
     """Praat's Burg against the bundle's ``fms`` track (EMU's own tracker, computed by its
     makers): on the vowels' reliable frames, the median relative difference is under 3 % for

@@ -3,7 +3,7 @@
 Each case is one mutation of a good dataset: the synthetic corpus's subject S01 task
 tp040 (folder layout, with its palate, pharynx, head measures and sound) and, when it is
 here, the real recording JW11 task 5 (flat layout: one recording of one speaker, from
-/work/shared/data/xrmb_jw11, copied into the test's temporary folder). The mutated dataset
+shared/data/xrmb_jw11 (tests/real_data.py), copied into the test's temporary folder). The mutated dataset
 goes through the library's loaders and, in this process, ``cassi info`` on the file and
 on the folder (and, for a few cases, ``cassi jaw``). Every case must end in one of:
 
@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zoo
+from real_data import XRMB_JW11, missing, real_data
 from special_files import FifoGuard, make_fifo, make_socket
 
 from cassi_fit import cli
@@ -57,9 +58,8 @@ from cassi_fit.dataset import (
 from cassi_fit.errors import CassiError
 
 _HERE = Path(__file__).resolve()
-JW11 = next((p for p in (_HERE.parents[2] / "shared/data/xrmb_jw11",
-                         _HERE.parents[3] / "shared/data/xrmb_jw11") if p.is_dir()), None)
-NO_JW11 = "the real XRMB recording JW11 task 5 is not here (/work/shared/data/xrmb_jw11)"
+JW11 = real_data(XRMB_JW11)
+NO_JW11 = missing(XRMB_JW11)
 
 
 # ------------------------------------------------------------------ the good datasets

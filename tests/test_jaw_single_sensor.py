@@ -3,12 +3,12 @@ reason, the pivot methods from far starts (failing against a stubbed solver), th
 rotation and its learning on exactly coupled data, the hidden sensor's prediction, and the
 real XRMB recording JW11 when it is present."""
 
-import os
 from pathlib import Path
 
 import jax
 import numpy as np
 import pytest
+from real_data import XRMB_JW11, missing, real_data
 
 from cassi_fit import rigid
 from cassi_fit.errors import InvalidChoiceError
@@ -45,20 +45,9 @@ def _rotate(theta, p):
     return np.stack([c * p[..., 0] + s * p[..., 1], -s * p[..., 0] + c * p[..., 1]], -1)
 
 
-def _real_recording() -> Path | None:
-    """The real XRMB recording JW11 task 5 (``shared/data/xrmb_jw11`` beside a checkout or a
-    worktree, or ``$CASSI_XRMB_JW11``), or None."""
-    if os.environ.get("CASSI_XRMB_JW11"):
-        candidates = [Path(os.environ["CASSI_XRMB_JW11"])]
-    else:
-        candidates = [p / "shared" / "data" / "xrmb_jw11" for p in Path(__file__).resolve().parents]
-    return next((c / "jw11_tp005.txy" for c in candidates if (c / "jw11_tp005.txy").is_file()),
-                None)
-
-
-REAL = _real_recording()
-needs_real = pytest.mark.skipif(REAL is None, reason="the real XRMB recording JW11 "
-                                "(shared/data/xrmb_jw11/jw11_tp005.txy) is not on this machine")
+_JW11 = real_data(XRMB_JW11)
+REAL = None if _JW11 is None else _JW11 / "jw11_tp005.txy"  # task 5
+needs_real = pytest.mark.skipif(REAL is None, reason=missing(XRMB_JW11))
 
 
 # ------------------------------------------------------------------------------- refusals

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zoo
+from real_data import XRMB_JW11, missing, real_data  # noqa: E402
 
 from cassi_fit.mistracks import Reason, detect, mistrack_report
 from cassi_fit.pellets import MNI, MNM, T2, T3, first_valid_line
@@ -25,23 +26,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "experiments"))
 import mistrack_detection as experiment  # noqa: E402
 
-
-def _jw11_folder() -> Path | None:
-    for parent in Path(__file__).resolve().parents:
-        folder = parent / "shared" / "data" / "xrmb_jw11"
-        if (folder / "jw11_tp005.txy").is_file():
-            return folder
-    return None
-
-
-JW11 = _jw11_folder()
+JW11 = real_data(XRMB_JW11)
 
 
 @pytest.fixture(scope="module")
 def real():
     if JW11 is None:
-        pytest.skip("the real recording shared/data/xrmb_jw11/jw11_tp005.txy is not in a "
-                    "folder above the checkout")
+        pytest.skip(missing(XRMB_JW11))
     return read_txy(JW11 / "jw11_tp005.txy")
 
 

@@ -6,6 +6,7 @@ import jax
 import numpy as np
 import pytest
 import zoo
+from real_data import XRMB_JW11, missing, real_data
 
 from cassi_fit import rigid, synth
 from cassi_fit.cli import main
@@ -635,15 +636,12 @@ def test_foreign_data_of_a_synthetic_corpus(tmp_path_factory, tmp_path):
 
 
 def test_the_real_recording_is_foreign_data():
-    from pathlib import Path
 
     from cassi_fit.synth import foreign_data
 
-    here = Path(__file__).resolve()
-    jw11 = next((p for p in (here.parents[2] / "shared/data/xrmb_jw11",
-                             here.parents[3] / "shared/data/xrmb_jw11") if p.is_dir()), None)
+    jw11 = real_data(XRMB_JW11)
     if jw11 is None:
-        pytest.skip("the real XRMB recording JW11 task 5 is not here (/work/shared/data/xrmb_jw11)")
+        pytest.skip(missing(XRMB_JW11))
     names = {p.name for p in foreign_data(jw11)}
     assert {"jw11_tp005.txy", "jw11_pal.dat", "jw11_pha.dat", "jw11_tp005.wav",
             "jw11_tp005.lab"} <= names

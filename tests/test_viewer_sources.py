@@ -7,6 +7,7 @@ every data line and the sound, and draws a different mouth at two times."""
 from pathlib import Path
 
 import pytest
+from real_data import XRMB_JW11, missing, real_data
 
 from cassi_fit import cli
 from cassi_fit.dataset import load_recording
@@ -15,9 +16,7 @@ from cassi_fit.viewer._browser import browser_missing, chromium, open_page
 
 pytestmark = pytest.mark.render
 ROOT = Path(__file__).resolve().parents[1]
-JW11 = next((p / "jw11_tp005.txy" for p in (ROOT.parent / "shared/data/xrmb_jw11",
-                                             ROOT.parents[1] / "shared/data/xrmb_jw11")
-             if (p / "jw11_tp005.txy").is_file()), None)
+JW11 = None if real_data(XRMB_JW11) is None else real_data(XRMB_JW11) / "jw11_tp005.txy"
 BROWSER_MISSING = browser_missing()
 
 
@@ -75,7 +74,7 @@ def test_a_lab_like_articulograph_file_with_its_sound_inside(browser, mview, tmp
     _check_page(browser, page, recording)
 
 
-@pytest.mark.skipif(JW11 is None, reason="the real JW11 recording (../shared/data) is absent")
+@pytest.mark.skipif(JW11 is None, reason=missing(XRMB_JW11))
 def test_the_real_jw11_recording(browser, tmp_path):
     page = _page(tmp_path, [str(JW11)])
     from cassi_fit.labels import recording_labels
