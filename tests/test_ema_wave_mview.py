@@ -109,3 +109,38 @@ def test_mview_refusals(tmp_path):
     junk.write_bytes(b"MATLAB 5.0 MAT-file" + b"\xff" * 50)
     with pytest.raises(DataFormatError, match="junk.mat"):
         read_mview(junk)
+
+
+# ------------------------------------------------------ lab-like mview: labels inside
+def test_lab_like_mview_files_carry_phones_and_words_in_step_with_the_lips(tmp_path):
+    """Haskins' files carry WORDS/PHONES beside AUDIO; the lab-like mview files do too
+    (issue 28 part 5), on the recording's own clock: the lips are closer during the
+    task's b's than during its a's (tp011: "aba ada aga ...")."""
+    from cassi_fit import cli
+    from cassi_fit.dataset import load_recording
+    from cassi_fit.labels import recording_labels
+    from cassi_fit.pellets import LL, UL
+
+    assert cli.main(["synth", str(tmp_path / "c"), "--format", "mview", "--lab-like",
+                     "--subjects", "1", "--tasks", "tp011,tp106"]) == 0
+    folder = tmp_path / "c" / "L01"
+    rec = load_recording(folder / "tp011.mat", sensor_map=folder / "truth_sensors.toml")
+    assert {t.tier for t in rec.labels} == {"phones", "words"}
+    words = next(t for t in rec.labels if t.tier == "words")
+    assert words.labels == ("aba", "ada", "aga", "ibi", "idi", "igi", "ufu", "usu")
+    phones = recording_labels(rec)  # what every output uses: the phones
+    assert phones.tier == "phones" and len(phones) == 24
+    times = rec.track.times
+    gap = np.where(rec.track.valid[:, UL].all(-1) & rec.track.valid[:, LL].all(-1),
+                   rec.track.positions[:, UL, 1] - rec.track.positions[:, LL, 1], np.nan)
+
+    def mean_gap(symbol):
+        inside = np.zeros(times.shape, bool)
+        for seg in phones.segments():
+            if seg.label == symbol:
+                inside |= (times >= seg.start) & (times < seg.end)
+        return np.nanmean(gap[inside])
+
+    assert mean_gap("b") < mean_gap("a") - 3.0
+    jaw = load_recording(folder / "tp106.mat", sensor_map=folder / "truth_sensors.toml")
+    assert jaw.labels == () or not any(len(t) for t in jaw.labels)  # no text, no labels

@@ -28,8 +28,10 @@ assumptions:
   skin drift and noise).
 
 Every file: its sound (the synthetic corpus's buzz that follows the articulators: inside
-an mview file as its ``AUDIO`` entry, beside the others as ``<task>.wav``; no word or
-phone labels), shuffled channels named by number (``Ch1``... / ``S1``...), one or two unused
+an mview file as its ``AUDIO`` entry, beside the others as ``<task>.wav``); an mview file
+of a speech task also carries its ``PHONES`` and ``WORDS`` (the task's phone string on the
+schedule of its articulatory targets, ``synth._tasks.task_labels``; the other formats
+carry none, as their devices export none), shuffled channels named by number (``Ch1``... / ``S1``...), one or two unused
 channels (never tracked), a lip-corner and a lateral tongue sensor (parasagittal), per-
 sensor offsets of up to 2 mm from the midline, extra dropouts. The truth
 (``placement.json`` beside the files): the origin (the upper incisor's tip) and the
@@ -69,6 +71,7 @@ class LabLike:
     raw: RawEma
     truth: dict
     audio: np.ndarray | None = None  # int16 samples at synth.AUDIO_RATE_HZ, time 0 = the file's
+    labels: tuple = ()  # a speech task's phones and words tiers (labels.Labels), file time
 
 
 def _rot2(theta: np.ndarray) -> np.ndarray:
@@ -186,8 +189,8 @@ def _recording(anatomy, task, seed, d, m, origin, fmt, order, rate, rng) -> LabL
     from ..synth import DEFAULT_NOISE_MM, synth_audio
     from ..synth._measurement import _simulate  # synth_recording, with the controls
 
-    track, truth, controls = _simulate(anatomy, task, seed, DEFAULT_NOISE_MM, None, True, True,
-                                       "realistic")
+    track, truth, controls, labels = _simulate(anatomy, task, seed, DEFAULT_NOISE_MM, None,
+                                               True, True, "realistic")
     audio = synth_audio(controls, truth.times, anatomy.f0_hz, np.random.default_rng([*seed, 3]))
     arts = _articulators(anatomy, track, truth, d)
     roles, toolkit = _layout(arts, d, rng)
@@ -214,7 +217,7 @@ def _recording(anatomy, task, seed, d, m, origin, fmt, order, rate, rng) -> LabL
         "jaw_sensor": d["jaw_glued"], "second_jaw_sensor": bool(d["molar"]),
         "loose_reference": None if d["loose"] is None else list(REFERENCES)[d["loose"]],
     }
-    return LabLike(raw=raw, truth=truth_json, audio=audio)
+    return LabLike(raw=raw, truth=truth_json, audio=audio, labels=labels)
 
 
 def lab_like_speaker(index: int, *, seed: int = 0, fmt: str = "ag501",
@@ -278,9 +281,10 @@ def write_lab_like_corpus(out_dir: str | os.PathLike, *, format: str = "ag501",
         truth = {}
         for rec in recs:
             name = f"{rec.truth['task']}{suffix}"
-            if format == "mview" and audio:  # the sound inside, as Haskins' files carry it
+            if format == "mview" and audio:  # sound and labels inside, as Haskins' files carry them
                 _write(format, folder / name, rec.raw,
-                       (rec.audio.astype(np.float64) / 32768.0, float(AUDIO_RATE_HZ)))
+                       (rec.audio.astype(np.float64) / 32768.0, float(AUDIO_RATE_HZ)),
+                       labels=rec.labels)
             else:  # the sound (unless audio=False) beside the file
                 _write(format, folder / name, rec.raw)
                 if audio:

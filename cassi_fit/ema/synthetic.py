@@ -161,7 +161,7 @@ def _to_device(pos: np.ndarray, m: np.ndarray, origin: np.ndarray, rotation: np.
     return np.einsum("nij,nkj->nki", rotation, rest) + translation[:, None]
 
 
-def _write(fmt: str, path: Path, raw: RawEma, audio=None) -> None:
+def _write(fmt: str, path: Path, raw: RawEma, audio=None, labels=()) -> None:
     from . import carstens, est, mview, wave
 
     if fmt == "est":
@@ -173,7 +173,7 @@ def _write(fmt: str, path: Path, raw: RawEma, audio=None) -> None:
     elif fmt == "wave":
         wave.write_wave_tsv(path, raw, overwrite=True)
     else:
-        mview.write_mview(path, raw, audio=audio, overwrite=True)
+        mview.write_mview(path, raw, audio=audio, labels=labels, overwrite=True)
 
 
 def _sensor_map_text(names: Sequence[str]) -> str:

@@ -246,7 +246,7 @@ def _write_corpus(root: Path, names, plan, options) -> None:
         anatomy = anatomies[name]
         rec_seed = _recording_seed(seed, i, task)
         noise_mm = noise_scale * DEFAULT_NOISE_MM
-        track, truth, controls = _simulate(
+        track, truth, controls, _ = _simulate(
             anatomy, task, rec_seed, noise_mm, None, True, True, noise_family
         )
         write_txy(files["txy"], track, overwrite=True)

@@ -19,7 +19,7 @@ from ._kinematics import (
     speech_protrusion_mm,
     thrust_protrusion_mm,
 )
-from ._tasks import control_trajectories, get_task, task_duration
+from ._tasks import control_trajectories, get_task, task_duration, task_labels
 
 # Each coordinate's noise SD (mm), white and drift contributing equal variance; the jaw
 # inter-pellet distance then has SD sqrt(2) * 0.212 = 0.3 mm, as in real files.
@@ -143,7 +143,9 @@ def synth_recording(
 
 
 def _simulate(anatomy, task, seed, noise_mm, duration_s, dropouts, mistracks, noise_family):
-    """``(track, truth, controls)``; see :func:`synth_recording`."""
+    """``(track, truth, controls, labels)``; see :func:`synth_recording`. ``labels``: a
+    speech task's phone and word tiers (``_tasks.task_labels``, cut at the recording's
+    end), ``()`` for the others."""
     spec = get_task(task)
     if not (np.isfinite(noise_mm) and 0 <= noise_mm <= MAX_NOISE_SCALE * DEFAULT_NOISE_MM):
         raise CassiError(
@@ -180,7 +182,20 @@ def _simulate(anatomy, task, seed, noise_mm, duration_s, dropouts, mistracks, no
     flags &= ~dropped.all(axis=2)
     truth = _replace(truth, dropped=dropped, mistracked=flags)
     track = PelletTrack(times=times, positions=measured, valid=~dropped)
-    return track, truth, controls
+    return track, truth, controls, _cut(task_labels(spec, keyframes, times[n_lead]), times[-1])
+
+
+def _cut(tiers, end_s: float) -> tuple:
+    """The tiers without what starts after ``end_s``, their last interval ending there."""
+    from ..labels import Labels
+
+    out = []
+    for tier in tiers:
+        keep = tier.starts < end_s
+        if keep.any():
+            out.append(Labels(tier.starts[keep], np.minimum(tier.ends[keep], end_s),
+                              tuple(np.asarray(tier.labels, object)[keep]), tier=tier.tier))
+    return tuple(out)
 
 
 def _replace(truth: JawTruth, **changes) -> JawTruth:

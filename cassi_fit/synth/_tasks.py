@@ -273,6 +273,42 @@ def task_duration(spec: TaskSpec, rng: np.random.Generator) -> tuple[float, list
     return sum(d for d, _ in frames) + 0.15, frames
 
 
+def task_labels(spec: TaskSpec, keyframes, start_s: float) -> tuple:
+    """The phone and word tiers (``labels.Labels``, tiers ``phones`` and ``words``) of a
+    speech task's trial: each phone over its keyframe's span (the targets' schedule, from
+    ``start_s``, the first keyframe's time in the recording), pauses (``|``) unlabelled, a
+    word over its phones (its label the phone string); ``()`` for a task without text.
+    The articulators reach a phone's targets after it begins (the controls are smoothed):
+    the intervals are the speaker's plan, as a forced aligner's are the sound's."""
+    from ..labels import Labels
+
+    if not spec.text or keyframes is None:
+        return ()
+    phones, words, t, word = [], [], float(start_s), []
+    symbols = [c for c in spec.text if c != " "]
+    boundaries = []  # after which phone index a word ends (a space or a pause)
+    k = -1
+    for c in spec.text:
+        if c == " ":
+            boundaries.append(k)
+        else:
+            k += 1
+            if c == "|":
+                boundaries += [k - 1, k]
+    ends = set(boundaries) | {len(symbols) - 1}
+    for i, (symbol, (duration, _)) in enumerate(zip(symbols, keyframes, strict=True)):
+        if symbol != "|":
+            phones.append((t, t + duration, symbol))
+            word.append((t, t + duration, symbol))
+        if i in ends and word:
+            words.append((word[0][0], word[-1][1], "".join(w[2] for w in word)))
+            word = []
+        t += duration
+    tier = lambda rows, name: Labels(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),  # noqa: E731
+                                     tuple(r[2] for r in rows), tier=name)
+    return tier(phones, "phones"), tier(words, "words")
+
+
 def control_trajectories(spec: TaskSpec, keyframes, n: int, dt: float, rng) -> np.ndarray:
     """``(n, len(CONTROLS))`` smooth control curves of one trial on a grid of step ``dt`` s."""
     if spec.kind == "jaw_wagging":
