@@ -284,28 +284,31 @@ def task_labels(spec: TaskSpec, keyframes, start_s: float) -> tuple:
 
     if not spec.text or keyframes is None:
         return ()
-    phones, words, t, word = [], [], float(start_s), []
-    symbols = [c for c in spec.text if c != " "]
-    boundaries = []  # after which phone index a word ends (a space or a pause)
-    k = -1
-    for c in spec.text:
-        if c == " ":
-            boundaries.append(k)
-        else:
-            k += 1
-            if c == "|":
-                boundaries += [k - 1, k]
-    ends = set(boundaries) | {len(symbols) - 1}
-    for i, (symbol, (duration, _)) in enumerate(zip(symbols, keyframes, strict=True)):
-        if symbol != "|":
-            phones.append((t, t + duration, symbol))
-            word.append((t, t + duration, symbol))
-        if i in ends and word:
+    durations = iter(d for d, _ in keyframes)  # one per phone symbol, pauses included
+    phones, words, word, t = [], [], [], float(start_s)
+
+    def end_word():  # a space or a pause ends the word being spoken
+        if word:
             words.append((word[0][0], word[-1][1], "".join(w[2] for w in word)))
-            word = []
+            word.clear()
+
+    for symbol in spec.text:
+        if symbol == " ":
+            end_word()
+            continue
+        duration = next(durations)
+        if symbol == "|":
+            end_word()
+        else:
+            phones.append((t, t + duration, symbol))
+            word.append(phones[-1])
         t += duration
-    tier = lambda rows, name: Labels(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),  # noqa: E731
-                                     tuple(r[2] for r in rows), tier=name)
+    end_word()
+
+    def tier(rows, name):
+        starts, ends, labels = zip(*rows, strict=True) if rows else ((), (), ())
+        return Labels(np.array(starts, float), np.array(ends, float), labels, tier=name)
+
     return tier(phones, "phones"), tier(words, "words")
 
 
