@@ -190,7 +190,7 @@ def _head_group(pos: np.ndarray, idx: list[int]
         for j in np.argsort(sd[seed]):
             if j not in group and all(sd[j, g] < RIGID_SD_MM for g in group):
                 group.append(int(j))
-        if len(group) >= 2 and max(dist[a, b] for a in group for b in group) > SKULL_MM:
+        if len(group) >= 2 and _span(dist, group) > SKULL_MM:
             groups.add(tuple(sorted(group)))
     if not groups:
         return [], 1.0, "", {}
@@ -227,6 +227,7 @@ def _head_group(pos: np.ndarray, idx: list[int]
 
 
 def _span(dist: np.ndarray, group) -> float:
+    """The largest distance (median, mm) between two channels of ``group``."""
     return max((dist[a, b] for a in group for b in group), default=0.0)
 
 
@@ -247,14 +248,14 @@ def _trimmed(sd: np.ndarray, dist: np.ndarray, group: tuple[int, ...]) -> tuple[
     for m in sorted(group, key=lambda m: -max(sd[m, g] for g in group if g != m)):
         rest = tuple(g for g in group if g != m)
         if (len(rest) >= 2 and max(sd[m, g] for g in rest) > 0.5 and _near_mouth(dist, m, group)
-                and max(dist[a, b] for a in rest for b in rest) > SKULL_MM):
+                and _span(dist, rest) > SKULL_MM):
             group = rest  # a sensor near the mouth that moves against the skull: the jaw
     while len(group) > 2:
         worst_member = max(group, key=lambda m: max(sd[m, g] for g in group if g != m))
         rest = tuple(g for g in group if g != worst_member)
         own = max(sd[worst_member, g] for g in rest)
-        enough = len(rest) >= 3 or (_near_mouth(dist, worst_member, group) and max(
-            dist[a, b] for a in rest for b in rest) > SKULL_MM)
+        enough = len(rest) >= 3 or (_near_mouth(dist, worst_member, group)
+                                    and _span(dist, rest) > SKULL_MM)
         if own > 0.5 and own > 2.0 * _worst(sd, rest) and enough:
             group = rest
         else:
