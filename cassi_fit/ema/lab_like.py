@@ -31,8 +31,8 @@ Every file: its sound (the synthetic corpus's buzz that follows the articulators
 an mview file as its ``AUDIO`` entry, beside the others as ``<task>.wav``); an mview file
 of a speech task also carries its ``PHONES`` and ``WORDS`` (the task's phone string on the
 schedule of its articulatory targets, ``synth._tasks.task_labels``; the other formats
-carry none, as their devices export none), shuffled channels named by number (``Ch1``... / ``S1``...), one or two unused
-channels (never tracked), a lip-corner and a lateral tongue sensor (parasagittal), per-
+carry none, as their devices export none), shuffled channels named by number (``Ch1``...
+/ ``S1``...), one or two unused channels (never tracked), a lip-corner and a lateral tongue sensor (parasagittal), per-
 sensor offsets of up to 2 mm from the midline, extra dropouts. The truth
 (``placement.json`` beside the files): the origin (the upper incisor's tip) and the
 occlusal plane's forward and up directions in each file's coordinates (at rest, for files
@@ -281,7 +281,7 @@ def write_lab_like_corpus(out_dir: str | os.PathLike, *, format: str = "ag501",
         truth = {}
         for rec in recs:
             name = f"{rec.truth['task']}{suffix}"
-            if format == "mview" and audio:  # sound and labels inside, as Haskins' files carry them
+            if format == "mview" and audio:  # sound and labels inside, as Haskins' files
                 _write(format, folder / name, rec.raw,
                        (rec.audio.astype(np.float64) / 32768.0, float(AUDIO_RATE_HZ)),
                        labels=rec.labels)
