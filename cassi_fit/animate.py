@@ -139,11 +139,9 @@ def animate(state: eqx.Module, recording: Recording, **changes: object) -> Anima
         state, scaled[:, list(JAW_INDEX)], method, sensors, size
     )
     params = frame_params(state, pad_frames(scaled, size), theta, translation)
-    from .collide import has_collision_data, require_collision_data
+    from .collide import has_collision_data
 
     report = has_collision_data(state.model)
-    if spec.collisions != "off":
-        require_collision_data(state.model)
     out = batch_geometry(state.model, params, collisions=spec.collisions, report=report,
                          **spec.deform_style)
     vertices, sites, params = unpad((out[0], out[1], params), m)

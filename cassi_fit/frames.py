@@ -12,7 +12,9 @@ that initialization does not depend on animation.
   three tongue sensors) is filled in from the tracked ones along the tongue
   (:func:`tongue_fill`), so the model's tongue follows the sensors it has.
 * :func:`batch_geometry`: the vertices and model pellet sites of a batch (one compiled,
-  vmapped ``deform.deform``; with collisions, a projection keeping the tongue's volume).
+  vmapped ``deform.deform``); each frame's posed vertices are handed down to
+  ``collide.settle`` (the penetration depths, and with collisions the projection keeping
+  the tongue's volume), which hands back the settled vertices.
 * :func:`frame_bucket`, :func:`pad_frames`: frames are padded to a few sizes so that
   recordings of similar length (and different strides) share compiled functions.
 """
@@ -35,8 +37,6 @@ from .pellets import LL, PELLET_NAMES, T1, T4, UL
 # so that recordings of similar length (and different strides) share compiled functions.
 _FRAME_BUCKET = 64
 _COLLISION_BATCH = 32
-#: Volume-restoring passes after the collision projection (``_project_keeping_volume``).
-TONGUE_VOLUME_PASSES = 3
 _TONGUE_SITES = ("T1", "T2", "T3", "T4")
 
 
@@ -146,27 +146,8 @@ def frame_params(
     ``scaled (m, 8, 2)`` mm, the pellets times ``p / d``; ``theta (m,)`` rad and
     ``translation (m, 2)`` mm, the jaw motion since the first valid line. One compiled
     call per frame count ``m`` (pass padded frames, :func:`pad_frames`)."""
-    return _batched_params(_frame_inputs(state), scaled, theta, translation)
-
-
-def _project_keeping_volume(model, vertices, tongue_shape):
-    """``collide.project``; for the thick tongue, then ``TONGUE_VOLUME_PASSES`` times:
-    the tongue's volume restored to what it was before the projection
-    (``tongue.keep_volume``: its width scaled) and projected again. Pushing the tongue
-    out of the teeth and the palate takes up to about 6 % of its volume off; each pass
-    gives back most of what is left (docs/TONGUE.md)."""
-    from . import collide
-    from .tongue import closed_mesh_volume, keep_volume, tongue_faces
-
-    if tongue_shape != "thick":  # CASSI's flat sheet has no volume to keep
-        return collide.project(model, vertices)
-    volume = closed_mesh_volume(vertices, tongue_faces(model))
-
-    def one_pass(i, v):  # pass 0 projects as it is; the others restore the volume first
-        return collide.project(model, jnp.where(i == 0, v, keep_volume(model, v, volume)))
-
-    # a loop, not Python's: the projection is traced once, not 1 + TONGUE_VOLUME_PASSES times
-    return jax.lax.fori_loop(0, 1 + TONGUE_VOLUME_PASSES, one_pass, vertices)
+    inputs = _frame_inputs(state)
+    return _batched_params(inputs, scaled, theta, translation)
 
 
 @eqx.filter_jit
@@ -178,12 +159,9 @@ def _geometry_kernel(model, params, style, collisions, report):
 
     def one(p):
         vertices = deform(model, p, **dict(style))
-        before = collide.report(model, vertices) if report else None
-        if collisions == "project":
-            vertices = _project_keeping_volume(model, vertices, dict(style)["tongue_shape"])
-        after = before
-        if report and collisions == "project":
-            after = collide.report(model, vertices)
+        vertices, before, after = collide.settle(model, vertices, collisions=collisions,
+                                                 measure=report,
+                                                 tongue_shape=dict(style)["tongue_shape"])
         return vertices, model_pellets(model, vertices), before, after
 
     if not report and collisions == "off":
@@ -202,8 +180,14 @@ def batch_geometry(
     call: vertices ``(m, V, 3)`` and model pellet sites ``(m, 8, 2)`` mm; with ``report``,
     also the per-frame penetration depths before and after projection (two dicts of
     ``(m,)`` mm, keys ``collide.REPORT_KEYS``). ``m`` is not padded here. ``jaw_weights``,
-    ``tongue_anchor``, ``tongue_shape``, ``lip_rounding``: as ``deform.deform``."""
+    ``tongue_anchor``, ``tongue_shape``, ``lip_rounding``: as ``deform.deform``. A model
+    without collision data (``collide.has_collision_data``) raises ``CassiError`` when
+    ``collisions`` or ``report`` asks for them."""
     check_choice("collisions", collisions, COLLISION_MODES)
+    if collisions != "off" or report:  # a model without collision data: one clear error
+        from .collide import require_collision_data
+
+        require_collision_data(model)
     style = (("jaw_weights", jaw_weights), ("tongue_anchor", tongue_anchor),
              ("tongue_shape", tongue_shape), ("lip_rounding", bool(lip_rounding)))
     out = _geometry_kernel(model, params, style, collisions, bool(report))
