@@ -169,6 +169,19 @@ def _noise_variance(residuals, usable, n_params):
     return float(np.sum(residuals[usable] ** 2) / dof) if dof > 0 else float("nan")
 
 
+def _fit_padded(reference, current, method, valid, jaw_sensors, pad_to: int) -> JawFit:
+    """:func:`fit_jaw` of ``current (n, 2, 2)`` followed by ``pad_to - n`` untracked frames
+    (never usable: they weigh nothing), cut back to the ``n`` given frames."""
+    n = np.shape(current)[0]
+    padded = np.concatenate([np.asarray(current, float), np.full((pad_to - n, 2, 2), np.nan)])
+    use = np.ones(n, bool) if valid is None else np.asarray(valid, bool)
+    fit = fit_jaw(reference, padded, method=method, jaw_sensors=jaw_sensors,
+                  valid=np.concatenate([use, np.zeros(pad_to - n, bool)]))
+    return replace(fit, **{f.name: getattr(fit, f.name)[:n] for f in fields(fit)
+                           if np.ndim(getattr(fit, f.name)) and
+                           np.shape(getattr(fit, f.name))[0] == pad_to})
+
+
 def fit_jaw(
     reference: Float[ArrayLike, "2 2"],
     current: Float[ArrayLike, "n 2 2"],
@@ -207,15 +220,8 @@ def fit_jaw(
     pivot's knots) is not padded.
     """
     method = as_method(method, solver, smoothness, knot_spacing)
-    n = np.shape(current)[0]
-    if pad_to is not None and pad_to > n and method.paddable:
-        padded = np.concatenate([np.asarray(current, float), np.full((pad_to - n, 2, 2), np.nan)])
-        use = np.ones(n, bool) if valid is None else np.asarray(valid, bool)
-        fit = fit_jaw(reference, padded, method=method, jaw_sensors=jaw_sensors,
-                      valid=np.concatenate([use, np.zeros(pad_to - n, bool)]))
-        return replace(fit, **{f.name: getattr(fit, f.name)[:n] for f in fields(fit)
-                               if np.ndim(getattr(fit, f.name)) and
-                               np.shape(getattr(fit, f.name))[0] == pad_to})
+    if pad_to is not None and pad_to > np.shape(current)[0] and method.paddable:
+        return _fit_padded(reference, current, method, valid, jaw_sensors, pad_to)
     sensors = jaw_sensor_set(jaw_sensors)
     check_sensors(method, sensors)
     full_reference = np.asarray(reference, dtype=float)
