@@ -247,11 +247,10 @@ def main(argv=None) -> int:
               "--recording FILE.txy", file=sys.stderr)
         return 0
     from cassi_fit.render import egl_device, ensure_headless_gl
-    from cassi_fit.sound import recording_seconds
     from cassi_fit.txy import read_txy
 
     track = read_txy(args.recording)
-    length = recording_seconds(track.times)
+    length = track.length_s
     load = os.getloadavg()
     m = {"ref": reference_workload()}
     with tempfile.TemporaryDirectory() as folder:

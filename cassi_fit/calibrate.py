@@ -74,7 +74,7 @@ from .calibration import (
     warn_problems,
 )
 from .conformation import lips_ahead, skin_landmarks, with_values
-from .dataset import Dataset, Recording, recording_source
+from .dataset import Dataset, Recording
 from .errors import CassiError, DegenerateGeometryError, MissingDataError
 from .face_model import FaceModel
 from .options import CALIBRATION_METHODS, check_choice
@@ -146,7 +146,7 @@ UNKNOWN_NAMES = ("log_scale", "upper_lip", "lower_lip", "face_width", "jaw_theta
 
 def _first_line(recording):
     """``(first index, pellets (8, 2) mm with NaN for pellets never tracked)``."""
-    source = recording_source(recording)
+    source = recording.source
     first, tracked = first_valid_line(recording.track, source)
     missing = [name for name in ("MNI", "MNM") if name not in tracked]
     if missing:  # one jaw sensor starts an animation, but p/d is the two sensors' distance

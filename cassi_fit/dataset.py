@@ -133,16 +133,15 @@ class Recording:
         return self.file_sound
 
     @property
+    def source(self) -> str:
+        """The recording's name in messages: its pellet file, else ``SUBJECT/TASK``."""
+        path = self.path or self.track.path
+        return str(path) if path is not None else f"{self.subject}/{self.task}"
+
+    @property
     def format(self) -> str:
         """``"xrmb"``, or the articulograph file's format (``est``, ``ag501``...)."""
         return "xrmb" if self.sensors is None else self.sensors.format
-
-
-def recording_source(recording: Recording) -> str:
-    """The name of a recording in messages: its pellet file, else ``SUBJECT/TASK`` (any
-    object with ``subject``, ``task``, ``track`` and optionally ``path``)."""
-    path = getattr(recording, "path", None) or getattr(recording.track, "path", None)
-    return str(path) if path is not None else f"{recording.subject}/{recording.task}"
 
 
 def _names(names: Sequence[str]) -> str:

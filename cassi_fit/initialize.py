@@ -42,7 +42,7 @@ from jaxtyping import Float
 
 from .calibration import Calibration
 from .conformation import default_conformation
-from .dataset import Recording, recording_source
+from .dataset import Recording
 from .errors import DegenerateGeometryError
 from .face_model import FaceModel
 from .frames import batch_geometry, frame_bucket, frame_params
@@ -209,7 +209,7 @@ def initialize(
     spec = run_spec(spec if spec is not None else mode, **changes)
     calibration = spec.calibration_for(recording.subject)
     fitted = calibration if isinstance(calibration, Calibration) else None
-    source = recording_source(recording)
+    source = recording.source
     model = load_model() if model is None else model
     track = recording.track
     first, tracked = first_valid_line(track, source)

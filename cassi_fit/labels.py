@@ -539,10 +539,9 @@ def recording_labels(recording, *, tier: str | None = None, units: str = "auto",
     (:func:`labels_for`), else the tiers inside it (``recording.labels``: mview
     ``WORDS``/``PHONES``, EMU levels; :func:`choose_tier`), else None; checked against
     its length (``recording_s``, default the track's) as :func:`labels_for` checks."""
-    from .sound import recording_seconds
 
     if recording_s is None:
-        recording_s = recording_seconds(recording.track.times)
+        recording_s = recording.track.length_s
     path = getattr(recording, "path", None)
     if path is not None and label_path_for(path) is not None:
         return labels_for(path, tier=tier, units=units, recording_s=recording_s,

@@ -363,10 +363,10 @@ def write_recording_video(
     no tract). Returns the path written."""
     from .options import VIEWS
     from .render import FramePool
-    from .sound import Sound, check_sound, recording_seconds
+    from .sound import Sound, check_sound
 
     recording, state = run.recording, run.state
-    length_s = recording_seconds(recording.track.times)
+    length_s = recording.track.length_s
     if labels is True:  # beside the file or inside it (labels.recording_labels)
         from .labels import recording_labels
 

@@ -42,7 +42,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-from jaxtyping import Float
 
 from .errors import DataFormatError
 from .status import LengthFit
@@ -80,17 +79,6 @@ class SoundCheck:
 
     def to_dict(self) -> dict[str, object]:
         return asdict(self)
-
-
-def recording_seconds(times: Float[np.ndarray, " n"]) -> float:
-    """A recording's length (s) from its frame times ``(n,)`` s: time 0 to the end of its
-    last frame (the last time plus one frame step)."""
-    times = np.asarray(times, np.float64)
-    if times.size == 0:
-        return 0.0
-    from .txy import frame_step
-
-    return float(times[-1] + frame_step(times))
 
 
 def open_pcm(path: str | os.PathLike, *, samples: bool = True
@@ -143,7 +131,7 @@ def _held_frames(params: wave._wave_params, data: bytes) -> int:
 def check_sound(path: str | os.PathLike | Sound, recording_s: float, *,
                 accept_mismatch: bool = False) -> SoundCheck:
     """Compare the ``.wav`` at ``path`` with a recording of ``recording_s`` seconds (e.g.
-    :func:`recording_seconds` of the pellet times); see the module docstring.
+    ``PelletTrack.length_s``); see the module docstring.
 
     Returns a :class:`SoundCheck`. A mismatch that would make a wrong result raises
     :class:`DataFormatError` naming the file (one line: the numbers and the likely

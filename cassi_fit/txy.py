@@ -140,6 +140,15 @@ class PelletTrack:
         return frame_step(self.times)
 
     @property
+    def length_s(self) -> float:
+        """The recording's length (s): time 0 to the end of its last frame (the last time
+        plus one line period, :attr:`frame_step_s`); 0 for a track without frames. What its
+        sound and labels are checked against."""
+        if self.n_frames == 0:
+            return 0.0
+        return float(self.times[-1] + self.frame_step_s)
+
+    @property
     def duration(self) -> float:
         """Seconds from the first to the last frame (0 for fewer than two frames)."""
         return float(self.times[-1] - self.times[0]) if self.n_frames > 1 else 0.0

@@ -683,9 +683,8 @@ def _bases(request_param: str, tmp_path: Path, corpus: Path) -> Base:
 
 
 def _recording_s(base: Base) -> float:
-    from cassi_fit.sound import recording_seconds
 
-    return recording_seconds(_quiet_load(load_recording, base.pellets)[0].track.times)
+    return _quiet_load(load_recording, base.pellets)[0].track.length_s
 
 
 LABEL_CASES = {  # name -> (time scale, shift s, outcome, what the message says)

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from cassi_fit.errors import DataFormatError
-from cassi_fit.sound import SoundMismatchWarning, check_sound, recording_seconds
+from cassi_fit.sound import SoundMismatchWarning, check_sound
+from cassi_fit.txy import PelletTrack
 
 RECORDING_S = 730 * 6866e-6  # JW11 task 5: 730 frames of 6866 us (5.012 s)
 
@@ -20,8 +21,16 @@ def _wav(path, n_samples: int, rate: int):
     return path
 
 
-def test_recording_seconds_is_time_zero_to_the_end_of_the_last_frame():
-    assert recording_seconds(np.arange(730) * 6866e-6) == pytest.approx(RECORDING_S, abs=1e-9)
+def _track(times):
+    n = len(times)
+    return PelletTrack(np.asarray(times, float), np.zeros((n, 8, 2)), np.ones((n, 8, 2), bool))
+
+
+def test_a_recordings_length_is_time_zero_to_the_end_of_the_last_frame():
+    assert _track(np.arange(730) * 6866e-6).length_s == pytest.approx(RECORDING_S, abs=1e-9)
+    # an articulograph's own line period (AG501: 4 ms), not XRMB's
+    assert _track(0.5 + np.arange(250) * 0.004).length_s == pytest.approx(1.5, abs=1e-9)
+    assert _track([]).length_s == 0.0
 
 
 def test_sound_that_fits(tmp_path):

@@ -78,7 +78,7 @@ def _sound(recording) -> dict | None:
     import warnings
 
     from cassi_fit.errors import CassiError
-    from cassi_fit.sound import check_sound, recording_seconds
+    from cassi_fit.sound import check_sound
 
     sound = getattr(recording, "sound", None)
     if sound is None:
@@ -87,7 +87,7 @@ def _sound(recording) -> dict | None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the report carries the message
         try:
-            return {**check_sound(sound, recording_seconds(recording.track.times),
+            return {**check_sound(sound, recording.track.length_s,
                                   accept_mismatch=True).to_dict(), **found}
         except CassiError as exc:
             return {"error": str(exc), **found}

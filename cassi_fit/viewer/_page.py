@@ -205,11 +205,10 @@ def view(recording: Any, spec: Any = None, *, labels: Any = True, sound: bool = 
     this version reads it; checked against its length); ``accept_mismatch`` keeps sound or labels
     whose length does not fit (with a warning). In Jupyter the page shows inline; save it
     with ``.save(path)``."""
-    from ..sound import recording_seconds
 
     run = _run_of(recording, spec, changes)
     rec = run.recording
-    length_s = recording_seconds(rec.track.times)
+    length_s = rec.track.length_s
     if labels is True:
         labels = _recording_labels(rec, length_s, accept_mismatch)
     wav, note = _sound(rec, length_s, accept_mismatch) if sound else (None, "sound left out")
