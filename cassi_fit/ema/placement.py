@@ -46,9 +46,11 @@ degrees, said in the report).
 * the upper lip: its sensor's median lies ahead of the incisor tip by the lip's thickness
   at the vermilion, 13 +- 3 mm (Holdaway 1983: 13-15 mm), and above it by the incisor's
   exposure below the lip at rest, 1-4 mm (Vig & Brundo 1978), plus the sensor's height on
-  the vermilion, 0-12 mm (Farkas 1994: upper vermilion height about 8-9 mm; labs glue the
-  sensor anywhere from its middle to just above its border; the XRMB speaker JW11's
-  upper-lip pellet sits 18 mm above his incisor tip, beyond this range).
+  the vermilion, 4-12 mm (Farkas 1994: upper vermilion height about 8-9 mm; labs glue the
+  sensor anywhere from its middle, about 4 mm, to just above its border; until issue 28
+  the draw began at 0 mm, the lip's free edge, where no sensor is glued: the estimate sat
+  above the tip. The XRMB speaker JW11's upper-lip pellet sits 18 mm above his incisor
+  tip, beyond this range).
 
 The uncertainty is a Monte Carlo over every norm above and the plane's own uncertainty
 (:data:`N_DRAWS` draws, a fixed seed): the origin's SD along and across the plane (mm)
@@ -80,6 +82,9 @@ _PATH_BACK_DEG = 13.0
 _COARSE_SD_DEG = 15.0
 _MAX_SAMPLES = 1500
 _BACK_FIRST = ("T4", "T3", "T2", "T1")
+#: The upper-lip sensor's height above the lip's free edge (mm): from the vermilion's middle
+#: to just above its border (module docstring).
+_UL_ON_VERMILION_MM = (4.0, 12.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -310,7 +315,7 @@ def _origin_draws(mni2, ul2, pitch_draws, jaw_sensor, rng) -> tuple[np.ndarray, 
     if ul2.shape[0] >= 20:
         ul = np.median(ul2, axis=0)
         ahead = rng.normal(13.0, 3.0, n)
-        above = rng.uniform(1.0, 4.0, n) + rng.uniform(0.0, 12.0, n)
+        above = rng.uniform(1.0, 4.0, n) + rng.uniform(*_UL_ON_VERMILION_MM, n)
         cues["upper_lip"] = ul - np.einsum("nij,nj->ni", rot, np.stack([ahead, above], 1))
     if not cues:
         raise PlacementError("no jaw sensor and no upper-lip sensor to estimate the origin")
