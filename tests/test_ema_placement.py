@@ -101,6 +101,27 @@ def test_the_jaw_sensor_option_moves_the_origin(speakers, tmp_path):
     assert heights["gum"] < heights["edge"] - 3.0  # a gum sensor lies deeper below the edge
 
 
+def test_the_jaw_sensor_is_at_one_place_not_between_two(speakers, tmp_path):
+    """Not told where the jaw sensor is glued, the estimate weighs the edge and the gum
+    as two hypotheses (with the upper lip and the plane's cues), never their average: a
+    depth between the two places, where no sensor is, would put the origin midway."""
+    confident = 0
+    for i, recs in enumerate(speakers):
+        placed = {kind: session_placement([r.raw for r in recs], _map(
+            tmp_path, recs[0], "" if kind == "unknown" else f'\n[file]\njaw_sensor = "{kind}"\n',
+            name=f"{kind}{i}.toml")) for kind in ("unknown", "edge", "gum")}
+        gum = placed["unknown"].cues["jaw_sensor_gum_probability"]
+        assert 0.0 <= gum <= 1.0
+        if 0.1 < gum < 0.9:
+            continue
+        confident += 1
+        near, far = ("gum", "edge") if gum >= 0.9 else ("edge", "gum")
+        origin = placed["unknown"].frame.origin
+        assert np.linalg.norm(placed[near].frame.origin - origin) < 1.0, i
+        assert np.linalg.norm(placed[far].frame.origin - origin) > 4.0, i
+    assert confident >= 2
+
+
 def test_the_files_of_a_session_share_one_frame(speakers, tmp_path):
     from cassi_fit.dataset import Dataset
 

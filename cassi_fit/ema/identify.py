@@ -30,7 +30,9 @@ order:
    with every rival keeps its own confidence (the lowest with the kept group and the
    rivals not ruled out); one that changes is capped at the head group's confidence:
    nothing is surer than the head correction it rests on. The references keep the head
-   group's confidence.
+   group's confidence, but for one that every rival group holds too and that lies far
+   from the mouth: it is a reference whichever group is the head (its role the same under
+   every rival), so it keeps its own, from its rigidity to the other members.
 
 Nothing here is used unless asked: ``cassi info --write-sensor-map FILE`` writes the
 proposal as an editable TOML sensor map; ``--accept-proposed-map`` (every command) uses
@@ -164,8 +166,8 @@ def _rigidity(pos: np.ndarray, a: int, b: int) -> tuple[float, float]:
 
 def _head_group(pos: np.ndarray, idx: list[int]
                 ) -> tuple[list[int], float, str, dict[tuple[int, ...], bool]]:
-    """The head references among channels ``idx``: ``(members, confidence, evidence,
-    rivals)``.
+    """The head references among channels ``idx``: ``(members, confidence, each
+    member's confidence (:func:`_held`), evidence, rivals)``.
 
     Candidates are the groups of channels rigid among themselves spanning a skull; the
     most rigid is kept (a jaw's sensors can be nearly rigid with two mastoid references,
@@ -193,7 +195,7 @@ def _head_group(pos: np.ndarray, idx: list[int]
         if len(group) >= 2 and _span(dist, group) > SKULL_MM:
             groups.add(tuple(sorted(group)))
     if not groups:
-        return [], 1.0, "", {}
+        return [], 1.0, {}, "", {}
     groups = {_trimmed(sd, dist, g) for g in groups}
     scored = sorted((_worst(sd, g), -len(g), g) for g in groups)
     worst, _, best = scored[0]
@@ -219,11 +221,25 @@ def _head_group(pos: np.ndarray, idx: list[int]
     for j in others:  # a channel nearly rigid to the group: the group with it
         if _conf(max(sd[j, g] for g in best) - RIGID_SD_MM, 1.0) < SURE:
             rivals[tuple(sorted(best + (j,)))] = True
+    own = {idx[m]: _held(sd, dist, best, m, rivals, conf, nearest) for m in best}
     rivals = {tuple(idx[j] for j in r): p for r, p in rivals.items()}
-    return [idx[j] for j in best], conf, (f"rigid among themselves (their distances vary by "
-                                         f"at most {worst:.1f} mm, span "
-                                         f"{_span(dist, best):.0f} mm); every other channel's "
-                                         f"by {nearest:.1f} mm or more{words}"), rivals
+    return [idx[j] for j in best], conf, own, (
+        f"rigid among themselves (their distances vary by at most {worst:.1f} mm, span "
+        f"{_span(dist, best):.0f} mm); every other channel's by {nearest:.1f} mm or "
+        f"more{words}"), rivals
+
+
+def _held(sd, dist, best, m, rivals, conf, nearest) -> float:
+    """Member ``m``'s confidence as a reference: the head group's, or, when every rival
+    head group holds it too and it lies far from the mouth, its own (its distances to the
+    other members varying within :data:`RIGID_SD_MM`, and no other channel nearly rigid
+    to the group): it is a reference whichever group is the head, as a role the same
+    under every rival keeps its own confidence (step 5)."""
+    if not rivals or not all(m in r for r in rivals) or _near_mouth(dist, m, best):
+        return conf
+    own = min(_conf(RIGID_SD_MM - max(sd[m, g] for g in best if g != m), 1.0),
+              _conf(nearest - RIGID_SD_MM, 1.0))
+    return max(conf, own)
 
 
 def _span(dist: np.ndarray, group) -> float:
@@ -482,14 +498,15 @@ def propose_map(raw) -> Proposal:
     guesses = dict(_unused(pos, names))
     idx = [j for j, n in enumerate(names) if n not in guesses]
     notes = []
-    refs, conf, words, rivals = (_head_group(pos, idx) if pos.shape[2] == 3
-                                 else ([], 1.0, "", {}))
+    refs, conf, own, words, rivals = (_head_group(pos, idx) if pos.shape[2] == 3
+                                      else ([], 1.0, {}, "", {}))
     plausible = ["+".join(names[j] for j in r) or "none (no head correction)"
                  for r, p in rivals.items() if p]
     if plausible:
         words += "; other head groups the data do not rule out: " + ", ".join(plausible)
     for j in refs:
-        guesses[names[j]] = Guess(names[j], "reference", conf, words)
+        guesses[names[j]] = Guess(names[j], "reference", own[j], words + (
+            "; every rival head group holds this one too" if own[j] > conf else ""))
     if not refs:
         notes.append("no head references found (head-normalised data, or none recorded)")
     moving = [j for j in idx if j not in refs]

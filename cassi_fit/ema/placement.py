@@ -19,8 +19,8 @@ anterior axis); else the speaker's jaw, two cues combined by their variances:
 * the second jaw sensor (``MNM``, on a lower molar) and the lower-incisor one (``MNI``) at
   the speaker's closed-jaw frames: the line between them runs along the occlusal plane,
   offset by the sensors' depths below the teeth's edges (incisor crown 9.0 mm and molar
-  crown 7.5 mm long, Wheeler's Dental Anatomy; each sensor between its tooth's edge and
-  its gum), over a molar-incisor distance of 35-45 mm;
+  crown 7.5 mm long, Wheeler's Dental Anatomy; each sensor at its tooth's edge or its
+  gum: below, *One sensor, one place*), over a molar-incisor distance of 35-45 mm;
 * the incisor sensor's opening path in speech (its positions' principal axis): taken as
   pointing down and 13 degrees backward from the occlusal plane's normal, +-12 degrees.
   This is a weak assumption of ours, not a published norm: rotation about the condyles
@@ -46,13 +46,26 @@ degrees, said in the report).
 * the upper lip: its sensor's median lies ahead of the incisor tip by the lip's thickness
   at the vermilion, 13 +- 3 mm (Holdaway 1983: 13-15 mm), and above it by the incisor's
   exposure below the lip at rest, 1-4 mm (Vig & Brundo 1978), plus the sensor's height on
-  the vermilion, 0-12 mm (Farkas 1994: upper vermilion height about 8-9 mm; labs glue the
-  sensor anywhere from its middle to just above its border; the XRMB speaker JW11's
-  upper-lip pellet sits 18 mm above his incisor tip, beyond this range).
+  the vermilion, 4-12 mm (Farkas 1994: upper vermilion height about 8-9 mm; labs glue the
+  sensor anywhere from its middle, about 4 mm, to just above its border; until issue 28
+  the draw began at 0 mm, the lip's free edge, where no sensor is glued: the estimate sat
+  above the tip. The XRMB speaker JW11's upper-lip pellet sits 18 mm above his incisor
+  tip, beyond this range).
+
+**One sensor, one place.** Where the jaw sensors are glued is not a norm drawn afresh for
+each cue: the incisor sensor's place (edge or gum, unless ``[file] jaw_sensor`` says)
+and a molar sensor's (its edge, 1-4 mm, or its gum, 7.5 +- 0.8 mm crown, Wheeler, plus
+0.5-2 mm) are hypotheses, one half each. Under each the plane and the origin are found as
+above, and each is weighted by its prior times how well its cues agree: the molar line
+with the opening path, the jaw's origin with the upper lip's. The frame is the weighted
+mean; the report gives the posterior probability of a gum sensor. (Averaging the
+two-peaked depth into one Gaussian, as before issue 28, put the origin between the two
+places, where the sensor is not, and let the plane and the origin assume different
+depths of one sensor.)
 
 The uncertainty is a Monte Carlo over every norm above and the plane's own uncertainty
-(:data:`N_DRAWS` draws, a fixed seed): the origin's SD along and across the plane (mm)
-and the plane's SD (degrees), reported with the frame.
+(:data:`N_DRAWS` draws, a fixed seed), mixed over the hypotheses: the origin's SD along
+and across the plane (mm) and the plane's SD (degrees), reported with the frame.
 """
 
 from __future__ import annotations
@@ -80,6 +93,10 @@ _PATH_BACK_DEG = 13.0
 _COARSE_SD_DEG = 15.0
 _MAX_SAMPLES = 1500
 _BACK_FIRST = ("T4", "T3", "T2", "T1")
+_MOLAR_CROWN_MM = (7.5, 0.8)  # a lower first molar's crown length, mean and SD (Wheeler)
+#: The upper-lip sensor's height above the lip's free edge (mm): from the vermilion's middle
+#: to just above its border (module docstring).
+_UL_ON_VERMILION_MM = (4.0, 12.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -249,30 +266,47 @@ def _pitch_from_path(mni2: np.ndarray) -> tuple[float, float] | None:
     return _angle(path) + 90.0 + _PATH_BACK_DEG, _PATH_SD_DEG
 
 
-def _depth_draws(rng, jaw_sensor, n) -> np.ndarray:
-    """The jaw sensor's depth below the incisal edge along the crown (mm), ``(n,)``."""
-    if not isinstance(jaw_sensor, str):
-        return np.full(n, float(jaw_sensor)) + rng.normal(0, 0.5, n)
-    edge = rng.uniform(1.0, 4.0, n)
-    gum = rng.normal(9.0, 1.0, n) + rng.uniform(0.5, 2.0, n)
-    if jaw_sensor == "edge":
-        return edge
-    if jaw_sensor == "gum":
-        return gum
-    return np.where(rng.random(n) < 0.5, edge, gum)
+def _depth_draws(rng, kind, n, crown: tuple[float, float] = (9.0, 1.0)) -> np.ndarray:
+    """A jaw sensor's depth below its tooth's edge along the crown (mm), ``(n,)``: ``"edge"``
+    1-4 mm; ``"gum"`` at the crown's cervical line (``crown``: its length's mean and SD,
+    Wheeler) plus 0.5-2 mm; or a given depth (mm) +-0.5."""
+    if not isinstance(kind, str):
+        return np.full(n, float(kind)) + rng.normal(0, 0.5, n)
+    if kind == "edge":
+        return rng.uniform(1.0, 4.0, n)
+    return rng.normal(*crown, n) + rng.uniform(0.5, 2.0, n)
 
 
-def _pitch_from_molar(mni2, mnm2, pitch0, jaw_sensor, rng) -> tuple[float, float] | None:
-    """The occlusal plane's angle from the MNM -> MNI line at the closed jaw, and SD."""
-    if mni2.shape[0] < 20 or mnm2.shape[0] < 20:
-        return None
-    p_i, _ = _closed(mni2, pitch0)
-    p_m, _ = _closed(mnm2, pitch0)
+def _kinds(jaw_sensor) -> list[tuple[object, float]]:
+    """The incisor sensor's placements to weigh, each with its prior probability: the one
+    the sensor map gives, else the edge and the gum, one half each."""
+    if isinstance(jaw_sensor, str) and jaw_sensor == "unknown":
+        return [("edge", 0.5), ("gum", 0.5)]
+    return [(jaw_sensor, 1.0)]
+
+
+@dataclass(frozen=True)
+class _Hypothesis:
+    """One placement of the jaw sensors on their teeth and the occlusal plane it gives."""
+
+    kind: object  # the incisor sensor's: "edge", "gum" or a depth (mm)
+    molar: str | None  # the molar sensor's: "edge", "gum", or None (no molar sensor)
+    prior: float
+    pitch: float  # deg, plane coordinates
+    pitch_sd: float  # NaN: given, no uncertainty
+    log_like: float = 0.0  # how well this placement's plane cues agree (log density)
+    molar_pitch: float = np.nan  # the molar-incisor line's plane alone (for the report)
+
+
+def _pitch_from_molar(mni2, mnm2, kind, molar_kind, rng) -> tuple[float, float]:
+    """The occlusal plane's angle from the MNM -> MNI line at the closed jaw, and its SD,
+    with the incisor sensor glued as ``kind`` and the molar's as ``molar_kind``."""
+    p_i, _ = _closed(mni2, 0.0)
+    p_m, _ = _closed(mnm2, 0.0)
     observed = _angle(p_i - p_m)
     n = N_DRAWS
-    d_i = _depth_draws(rng, jaw_sensor, n)
-    d_m = np.where(rng.random(n) < 0.5, rng.uniform(1.0, 4.0, n),
-                   rng.normal(7.5, 0.8, n) + rng.uniform(0.5, 2.0, n))
+    d_i = _depth_draws(rng, kind, n)
+    d_m = _depth_draws(rng, molar_kind, n, _MOLAR_CROWN_MM)
     length = rng.uniform(35.0, 45.0, n)
     # MNM -> MNI in the occlusal frame: forward `length`, down by (d_i - d_m)
     expected = np.degrees(np.arctan2(-(d_i - d_m), length))
@@ -285,18 +319,52 @@ def _combine(cues: Sequence[tuple[float, float]]) -> tuple[float, float]:
     return mean, float(1.0 / np.sqrt(w.sum()))
 
 
-def _origin_draws(mni2, ul2, pitch_draws, jaw_sensor, rng) -> tuple[np.ndarray, dict]:
+def _log_agreement(diff, cov) -> float:
+    """``log N(diff; 0, cov)``: how well two cues' estimates of one quantity agree."""
+    diff, cov = np.atleast_1d(diff), np.atleast_2d(cov)
+    return float(-0.5 * diff @ np.linalg.solve(cov, diff)
+                 - 0.5 * np.log(np.linalg.det(2.0 * np.pi * cov)))
+
+
+def _jaw_hypotheses(jaw_sensor, mni2, mnm2, rng) -> tuple[list[_Hypothesis], str] | None:
+    """The occlusal plane under each placement of the jaw sensors (the incisor's by
+    :func:`_kinds`, a molar sensor's at its edge or gum, one half each): the molar-incisor
+    line and the opening path combined, each placement scored by how well the two agree;
+    and the words. None without a jaw cue."""
+    path = _pitch_from_path(mni2)
+    molar = mni2.shape[0] >= 20 and mnm2.shape[0] >= 20
+    if path is None and not molar:
+        return None
+    out = []
+    for kind, prior in _kinds(jaw_sensor):
+        for molar_kind, molar_prior in ((("edge", 0.5), ("gum", 0.5)) if molar
+                                        else ((None, 1.0),)):
+            found = [] if molar_kind is None else [
+                _pitch_from_molar(mni2, mnm2, kind, molar_kind, rng)]
+            found += [path] if path is not None else []
+            log_like = 0.0 if len(found) < 2 else _log_agreement(
+                found[0][0] - found[1][0], found[0][1] ** 2 + found[1][1] ** 2)
+            pitch, sd = _combine(found)
+            out.append(_Hypothesis(kind, molar_kind, prior * molar_prior, pitch, sd, log_like,
+                                   found[0][0] if molar else np.nan))
+    words = " and ".join(w for w, c in (("the molar-incisor jaw line", molar),
+                                        ("the jaw's opening path", path is not None)) if c)
+    return out, words
+
+
+def _origin_draws(mni2, ul2, pitch_draws, kind, rng) -> tuple[np.ndarray, dict, float]:
     """Monte Carlo origins (plane coordinates) ``(n, 2)`` combining the jaw and upper-lip
-    cues, and each cue's own draws (for the report)."""
+    cues with the incisor sensor glued as ``kind``, each cue's own draws (for the report)
+    and how well the two cues agree (log density; 0 with one cue)."""
     n = pitch_draws.shape[0]
     rot = _rot2(pitch_draws)  # occlusal frame -> plane coordinates
-    cues, spreads = {}, []
+    cues = {}
     if mni2.shape[0] >= 20:
         closed = np.stack([_closed(mni2, float(p))[0] for p in np.quantile(
             pitch_draws, np.linspace(0.02, 0.98, 9))])
         closed = closed[rng.integers(0, closed.shape[0], n)]
         tilt = np.deg2rad(rng.normal(14.5, 4.0, n))
-        depth = _depth_draws(rng, jaw_sensor, n)
+        depth = _depth_draws(rng, kind, n)
         labial = rng.uniform(1.5, 3.0, n)
         # in the occlusal frame: from the sensor to the lower edge, then to the upper edge
         to_edge = (depth[:, None] * np.stack([np.sin(tilt), np.cos(tilt)], 1)
@@ -305,25 +373,21 @@ def _origin_draws(mni2, ul2, pitch_draws, jaw_sensor, rng) -> tuple[np.ndarray, 
         overbite = rng.normal(2.0, 1.0, n)
         speaking = rng.uniform(0.0, 3.0, n)
         to_upper = np.stack([overjet, -overbite + speaking], 1)
-        jaw = closed + np.einsum("nij,nj->ni", rot, to_edge + to_upper)
-        cues["jaw"] = jaw
+        cues["jaw"] = closed + np.einsum("nij,nj->ni", rot, to_edge + to_upper)
     if ul2.shape[0] >= 20:
         ul = np.median(ul2, axis=0)
         ahead = rng.normal(13.0, 3.0, n)
-        above = rng.uniform(1.0, 4.0, n) + rng.uniform(0.0, 12.0, n)
+        above = rng.uniform(1.0, 4.0, n) + rng.uniform(*_UL_ON_VERMILION_MM, n)
         cues["upper_lip"] = ul - np.einsum("nij,nj->ni", rot, np.stack([ahead, above], 1))
     if not cues:
         raise PlacementError("no jaw sensor and no upper-lip sensor to estimate the origin")
-    weights, means = [], {}
-    for name, draws in cues.items():
-        cov = np.cov(draws.T) + 1e-9 * np.eye(2)
-        weights.append(np.linalg.inv(cov))
-        means[name] = draws
-        spreads.append(draws)
-    total = np.linalg.inv(sum(weights))
-    combined = sum(np.einsum("ij,nj->ni", total @ w, d) for w, d in zip(weights, spreads,
-                                                                        strict=True))
-    return combined, means
+    covs = {k: np.cov(d.T) + 1e-9 * np.eye(2) for k, d in cues.items()}
+    weights = {k: np.linalg.inv(c) for k, c in covs.items()}
+    total = np.linalg.inv(sum(weights.values()))
+    combined = sum(np.einsum("ij,nj->ni", total @ weights[k], d) for k, d in cues.items())
+    log_like = 0.0 if len(cues) < 2 else _log_agreement(
+        cues["jaw"].mean(0) - cues["upper_lip"].mean(0), covs["jaw"] + covs["upper_lip"])
+    return combined, cues, log_like
 
 
 # ------------------------------------------------------------------ the estimate
@@ -367,50 +431,79 @@ def _plane_basis(fwd: np.ndarray, up_hint: np.ndarray | None, normal: np.ndarray
     return e1, e2
 
 
+def _weights(hyps: Sequence[_Hypothesis], log_like=0.0) -> np.ndarray:
+    """Each placement's posterior probability: its prior times how well its cues agree."""
+    logs = np.log([h.prior for h in hyps]) + np.array([h.log_like for h in hyps]) + log_like
+    w = np.exp(logs - logs.max())
+    return w / w.sum()
+
+
+def _mixed_pitch(hyps: Sequence[_Hypothesis], w: np.ndarray) -> tuple[float, float]:
+    """The occlusal plane's angle and SD over the weighted placements (SD NaN: given)."""
+    pitch = float(sum(wi * h.pitch for wi, h in zip(w, hyps, strict=True)))
+    if not all(np.isfinite(h.pitch_sd) for h in hyps):
+        return pitch, np.nan
+    var = sum(wi * (h.pitch_sd ** 2 + (h.pitch - pitch) ** 2)
+              for wi, h in zip(w, hyps, strict=True))
+    return pitch, float(np.sqrt(var))
+
+
 def _pitch(given, e1, e2, mni2, mnm2, rng, declared_words):
-    """``(pitch deg in plane coordinates, SD deg, words, cues)``."""
+    """``(placement hypotheses, words, cues)``: the occlusal plane under each placement of
+    the jaw sensors (:func:`_jaw_hypotheses`), or the one plane given or assumed."""
     cues: dict[str, object] = {}
     if isinstance(given.occlusal, str):
-        return 0.0, np.nan, "the declared anterior axis (occlusal_plane = \"declared\")", cues
-    if given.occlusal is not None:
+        pitch, sd, words = (0.0, np.nan,
+                            "the declared anterior axis (occlusal_plane = \"declared\")")
+    elif given.occlusal is not None:
         v = np.asarray(given.occlusal, float)
-        return (_angle(np.array([v @ e1, v @ e2])), np.nan,
-                "given by the sensor map ([file] occlusal_plane)", cues)
-    found = []
-    molar = _pitch_from_molar(mni2, mnm2, 0.0, given.jaw_sensor, rng)
-    if molar is not None:
-        found.append(molar)
-        cues["plane_from_molar_deg"] = round(molar[0], 2)
-    path = _pitch_from_path(mni2)
-    if path is not None:
-        found.append(path)
-        cues["plane_from_jaw_path_deg"] = round(path[0], 2)
-    if not found:
-        if declared_words == "declared axes":
-            return 0.0, np.nan, "the declared anterior axis (no jaw sensor to estimate it)", cues
-        return 0.0, _COARSE_SD_DEG, ("the line from the back of the tongue to the lips (no jaw "
-                                     "sensor to estimate it)"), cues
-    pitch, sd = _combine(found)
-    words = " and ".join(w for w, c in (("the molar-incisor jaw line", molar),
-                                        ("the jaw's opening path", path)) if c is not None)
-    return pitch, sd, f"estimated from {words}", cues
+        pitch, sd, words = (_angle(np.array([v @ e1, v @ e2])), np.nan,
+                            "given by the sensor map ([file] occlusal_plane)")
+    elif (found := _jaw_hypotheses(given.jaw_sensor, mni2, mnm2, rng)) is not None:
+        hyps, words = found
+        if np.isfinite(hyps[0].molar_pitch):
+            cues["plane_from_molar_deg"] = round(sum(h.prior * h.molar_pitch for h in hyps), 2)
+        if (path := _pitch_from_path(mni2)) is not None:
+            cues["plane_from_jaw_path_deg"] = round(path[0], 2)
+        return hyps, f"estimated from {words}", cues
+    elif declared_words == "declared axes":
+        pitch, sd, words = 0.0, np.nan, "the declared anterior axis (no jaw sensor to estimate it)"
+    else:
+        pitch, sd, words = 0.0, _COARSE_SD_DEG, ("the line from the back of the tongue to the "
+                                                 "lips (no jaw sensor to estimate it)")
+    return [_Hypothesis(k, None, p, pitch, sd) for k, p in _kinds(given.jaw_sensor)], words, cues
 
 
-def _estimated_origin(mni2, ul2, draws, pitch, given, rng, cues):
-    """``(origin (2,), SD (2,) along/across the plane, words)`` from the jaw and upper-lip
-    cues; each cue's estimate is added to ``cues`` (occlusal axes, from the estimate)."""
-    combined, means = _origin_draws(mni2, ul2, draws, given.jaw_sensor, rng)
-    o2 = combined.mean(0)
-    origin_sd = np.einsum("ij,nj->ni", _rot2(-pitch), combined - o2).std(0)
-    words = " and ".join({"jaw": "the jaw sensor at the closed jaw with dental norms",
-                          "upper_lip": "the upper lip"}[k] for k in means)
-    for k, v in means.items():
-        cues[f"origin_from_{k}_mm"] = [round(float(x), 2) for x in
-                                       _rot2(-pitch) @ (v.mean(0) - o2)]
-    if len(means) == 2:
-        apart = np.einsum("ij,nj->ni", _rot2(-pitch), means["jaw"] - means["upper_lip"])
+def _estimated_origin(mni2, ul2, hyps, rng, cues):
+    """``(pitch, its SD, origin (2,), its SD (2,) along/across the plane, words)``: the jaw
+    and upper-lip cues under each placement hypothesis, the placements weighted by their
+    prior and how well their cues agree (on the plane and on the origin). Each cue's own
+    estimate (the placements weighted by their prior alone) is added to ``cues``, in
+    occlusal axes from the estimate, with the posterior probability of a gum sensor."""
+    n, runs = N_DRAWS, []
+    for h in hyps:
+        draws = h.pitch + (rng.normal(0, h.pitch_sd, n) if np.isfinite(h.pitch_sd)
+                           else np.zeros(n))
+        runs.append(_origin_draws(mni2, ul2, draws, h.kind, rng))
+    w = _weights(hyps, np.array([r[2] for r in runs]))
+    pitch, pitch_sd = _mixed_pitch(hyps, w)
+    back, pick = _rot2(-pitch), np.arange(n)
+    o2 = sum(wi * r[0].mean(0) for wi, r in zip(w, runs, strict=True))
+    combined = np.stack([r[0] for r in runs])[rng.choice(len(hyps), n, p=w), pick]
+    origin_sd = np.einsum("ij,nj->ni", back, combined - combined.mean(0)).std(0)
+    idx = rng.choice(len(hyps), n, p=np.array([h.prior for h in hyps]))
+    own = {k: np.stack([r[1][k] for r in runs])[idx, pick] for k in runs[0][1]}
+    for k, v in own.items():
+        cues[f"origin_from_{k}_mm"] = [round(float(x), 2) for x in back @ (v.mean(0) - o2)]
+    if len(own) == 2:
+        apart = np.einsum("ij,nj->ni", back, own["jaw"] - own["upper_lip"])
         cues["origin_cue_sd_mm"] = [round(float(x), 2) for x in apart.std(0)]
-    return o2, origin_sd, f"estimated from {words}"
+    if len({str(h.kind) for h in hyps}) > 1:
+        cues["jaw_sensor_gum_probability"] = round(float(sum(
+            wi for wi, h in zip(w, hyps, strict=True) if h.kind == "gum")), 3)
+    words = " and ".join({"jaw": "the jaw sensor at the closed jaw with dental norms",
+                          "upper_lip": "the upper lip"}[k] for k in own)
+    return pitch, pitch_sd, o2, origin_sd, f"estimated from {words}"
 
 
 def estimate_placement(sessions: Sequence[tuple[np.ndarray, Sequence[str]]],
@@ -454,19 +547,20 @@ def estimate_placement(sessions: Sequence[tuple[np.ndarray, Sequence[str]]],
     mni2 = plane2(_samples(sessions, roles.get("MNI")))
     mnm2 = plane2(_samples(sessions, roles.get("MNM")))
     ul2 = plane2(_samples(sessions, roles.get("UL")))
-    pitch, pitch_sd, pitch_words, cues = _pitch(given, e1, e2, mni2, mnm2, rng, declared_words)
-    draws = pitch + (rng.normal(0, pitch_sd, N_DRAWS) if np.isfinite(pitch_sd)
-                     else np.zeros(N_DRAWS))
+    hyps, pitch_words, cues = _pitch(given, e1, e2, mni2, mnm2, rng, declared_words)
     ui = _samples(sessions, upper_incisor)
+    origin_sd = np.full(2, np.nan)
     if given.origin is not None:
         o2 = plane2(np.asarray(given.origin, float)[None])[0]
-        origin_sd, origin_words = np.full(2, np.nan), "given by the sensor map ([file] origin)"
+        origin_words = "given by the sensor map ([file] origin)"
     elif ui.shape[0]:
         o2 = plane2(np.median(ui, axis=0)[None])[0]
-        origin_sd, origin_words = np.full(2, np.nan), f"the upper-incisor sensor {upper_incisor}"
+        origin_words = f"the upper-incisor sensor {upper_incisor}"
     else:
-        o2, origin_sd, origin_words = _estimated_origin(mni2, ul2, draws, pitch, given, rng,
-                                                        cues)
+        pitch, pitch_sd, o2, origin_sd, origin_words = _estimated_origin(mni2, ul2, hyps, rng,
+                                                                         cues)
+    if given.origin is not None or ui.shape[0]:
+        pitch, pitch_sd = _mixed_pitch(hyps, _weights(hyps))
     x2 = np.array([np.cos(np.deg2rad(pitch)), np.sin(np.deg2rad(pitch))])
     y2 = np.array([-x2[1], x2[0]])
     x, y = x2[0] * e1 + x2[1] * e2, y2[0] * e1 + y2[1] * e2
