@@ -20,8 +20,9 @@ lateral tongue sensor as "parasagittal". Written to
 ``docs/generated/channel_identification.md``.
 
 The identifier was developed looking at seeds 0 and 1 (and seeds 10-19 for the check of
-its roles against the rival head groups, step 5 of :mod:`cassi_fit.ema.identify`, and for
-the references every rival group holds, issue 28), so the
+its roles against the rival head groups, step 5 of :mod:`cassi_fit.ema.identify`, for
+the references every rival group holds, and for the head groups that leave no mouth,
+issue 28), so the
 tables are measured on seed 2, whose channels it never saw (the table of the version
 before that check was read, not its channels); ``--also-seed`` adds the frame table of
 seeds never looked at at all (3).

@@ -132,13 +132,35 @@ def test_a_loose_reference_leaves_only_the_references_not_sure():
     assert any("other candidate head group" in g.evidence for _, g in outcomes)
 
 
-def test_a_wrong_head_group_names_nothing_wrong():
+def test_a_wrong_head_group_names_nothing_wrong(monkeypatch):
     # the most rigid group is a jaw sensor and a mastoid (the true skull group has a loose
-    # reference): roles that change with another candidate group stay as unsure as the
-    # head group; none is named wrong
+    # reference); with the lips' check off (below) it is kept as the head: roles that change
+    # with another candidate group stay as unsure as the head group; none is named wrong
+    import cassi_fit.ema.identify as identify
+
+    monkeypatch.setattr(identify, "LIPS_APART_MM", np.inf)
     outcomes, truth = _session_outcomes(13, 13)
     assert truth["loose_reference"]
     assert any(g.role == "reference" and t != "reference" for t, g in outcomes)  # wrong group
     for t, g in outcomes:
         assert not g.sure or g.role == t, g
     assert any("no surer than the head references" in g.evidence for _, g in outcomes)
+
+
+def test_a_head_group_that_leaves_no_mouth_is_not_the_head():
+    # the same session: with the jaw sensors and a mastoid taken as the head, the two
+    # channels at the lips' end would lie over 45 mm apart (no pair of lip sensors does in
+    # speech), so that group is ruled out, the loose skull group is the head and every
+    # channel's role is right
+    from cassi_fit.ema.identify import LIPS_APART_MM
+
+    outcomes, truth = _session_outcomes(13, 13)
+    assert truth["loose_reference"] and not truth["head_normalised"]
+    refs = [g for t, g in outcomes if g.role == "reference"]
+    assert {t for t, g in outcomes if g.role == "reference"} == {"reference"}
+    assert "the lips would lie too far apart" in refs[0].evidence
+    ruled = float(refs[0].evidence.split("too far apart: ")[1].split("(")[1].split(" mm")[0])
+    assert ruled > LIPS_APART_MM
+    for t, g in outcomes:
+        assert not g.sure or g.role == t, g
+    assert sum(g.sure for _, g in outcomes) >= len(outcomes) - 2  # the loose one, at most

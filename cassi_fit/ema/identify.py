@@ -8,7 +8,10 @@ order:
 1. **unused**: never tracked, or exactly constant;
 2. **head references**: the candidates are the groups of channels rigid among themselves
    (the 95 % range of every pairwise distance under :data:`RIGID_SD_MM`) spanning a skull
-   (two of them more than :data:`SKULL_MM` apart: a jaw's two sensors are closer); the most
+   (two of them more than :data:`SKULL_MM` apart: a jaw's two sensors are closer), but
+   for a group that leaves no mouth: with it as the head, the two channels taken for the
+   lips (step 4) would lie more than :data:`LIPS_APART_MM` apart (a jaw that barely moves
+   can be as rigid to two mastoid references as a loose nasion reference is); the most
    rigid is kept, and the other channels are corrected for head movement with it
    (:mod:`cassi_fit.ema.head`);
 3. **the midline**: the plane through the moving channels; a channel whose median lies
@@ -60,6 +63,12 @@ SKULL_MM = 80.0
 JAW_RIGID_MM = 1.5
 #: A channel within this distance (median, mm) of an articulator lies near the mouth.
 MOUTH_MM = 25.0
+#: The lip sensors' median distance across the midline (mm) is below this in speech: each
+#: sits on its vermilion (upper about 8-9 mm high, lower 9-10 mm, Farkas 1994), and the
+#: lips' median opening in speech is well under the 50 mm of a maximal jaw opening
+#: (Gallagher et al. 2004); a head group under which the lips would lie farther apart
+#: leaves no mouth and is not the head.
+LIPS_APART_MM = 45.0
 _MAX_FRAMES = 3000
 
 
@@ -164,7 +173,7 @@ def _rigidity(pos: np.ndarray, a: int, b: int) -> tuple[float, float]:
     return float(hi - lo), float(mid)
 
 
-def _head_group(pos: np.ndarray, idx: list[int]
+def _head_group(pos: np.ndarray, idx: list[int], mouth=None
                 ) -> tuple[list[int], float, str, dict[tuple[int, ...], bool]]:
     """The head references among channels ``idx``: ``(members, confidence, each
     member's confidence (:func:`_held`), evidence, rivals)``.
@@ -178,7 +187,10 @@ def _head_group(pos: np.ndarray, idx: list[int]
     (open when nearly as rigid), and, open, the group without a member whose distance to
     another varies nearly as much as :data:`RIGID_SD_MM` (a loose reference, or not a
     reference at all; ``()`` when the rest spans no skull) and the group with a channel
-    outside it rigid to it nearly within :data:`RIGID_SD_MM`."""
+    outside it rigid to it nearly within :data:`RIGID_SD_MM`. ``mouth``: a function of a
+    group (channel indices) giving how far apart the lips would lie with it as the head
+    (:func:`_lips_apart`); a group whose lips would lie more than :data:`LIPS_APART_MM`
+    apart is neither kept nor a rival (unless every candidate is such a group)."""
     k = len(idx)
     sd = np.full((k, k), np.inf)
     dist = np.zeros((k, k))
@@ -197,6 +209,16 @@ def _head_group(pos: np.ndarray, idx: list[int]
     if not groups:
         return [], 1.0, {}, "", {}
     groups = {_trimmed(sd, dist, g) for g in groups}
+    no_mouth = {}  # group -> how far apart the lips would lie with it as the head
+
+    def mouthless(g) -> bool:
+        if mouth is None or not g:
+            return False
+        if g not in no_mouth:
+            no_mouth[g] = mouth(tuple(idx[j] for j in g))
+        return no_mouth[g] > LIPS_APART_MM
+
+    groups = {g for g in groups if not mouthless(g)} or groups
     scored = sorted((_worst(sd, g), -len(g), g) for g in groups)
     worst, _, best = scored[0]
     best = _extended(sd, dist, best)
@@ -221,6 +243,7 @@ def _head_group(pos: np.ndarray, idx: list[int]
     for j in others:  # a channel nearly rigid to the group: the group with it
         if _conf(max(sd[j, g] for g in best) - RIGID_SD_MM, 1.0) < SURE:
             rivals[tuple(sorted(best + (j,)))] = True
+    rivals = {r: p for r, p in rivals.items() if not mouthless(r)}
     own = {idx[m]: _held(sd, dist, best, m, rivals, conf, nearest) for m in best}
     rivals = {tuple(idx[j] for j in r): p for r, p in rivals.items()}
     return [idx[j] for j in best], conf, own, (
@@ -367,7 +390,9 @@ def _front_and_up(med, series, mids):
     return s1, conf, upper, lower, conf_up, words
 
 
-def _in_plane(pos, moving, names) -> dict[str, Guess]:
+def _in_plane(pos, moving, names) -> tuple[dict[str, Guess], float]:
+    """The roles of the midline channels ``moving`` (head-corrected ``pos``; steps 3-4) and
+    how far apart across the midline the two channels taken for the lips lie (median, mm)."""
     samples = {names[j]: pos[np.isfinite(pos[:, j]).all(-1), j][:_MAX_FRAMES] for j in moving}
     normal, centre, used, dropped = placement.midsagittal_plane(samples)
     guesses: dict[str, Guess] = {}
@@ -423,7 +448,17 @@ def _in_plane(pos, moving, names) -> dict[str, Guess]:
                                                               3.0),
                                   f"{abs(d):.0f} mm off the midline (a lip corner or a lateral "
                                   "tongue sensor)")
-    return guesses
+    return guesses, float(abs(med[upper][1] - med[lower][1]))
+
+
+def _lips_apart(pos, names, idx, group) -> float:
+    """How far apart the lips would lie (median, mm; :func:`_in_plane`) with ``group`` as
+    the head references; inf where no midline is found."""
+    try:
+        return _in_plane(_corrected(pos, list(group)), [j for j in idx if j not in group],
+                         names)[1]
+    except placement.PlacementError:
+        return np.inf
 
 
 def _session_positions(raws) -> tuple[list[str], np.ndarray]:
@@ -460,7 +495,7 @@ def _across_rivals(found: dict[str, Guess], pos: np.ndarray, names: list[str],
     for rival, plausible in rivals.items():
         try:
             got = _in_plane(_corrected(pos, list(rival)), [j for j in moving if j not in rival],
-                            names)
+                            names)[0]
         except placement.PlacementError:
             got = {}
         others.append((rival, plausible, got))
@@ -498,8 +533,18 @@ def propose_map(raw) -> Proposal:
     guesses = dict(_unused(pos, names))
     idx = [j for j, n in enumerate(names) if n not in guesses]
     notes = []
-    refs, conf, own, words, rivals = (_head_group(pos, idx) if pos.shape[2] == 3
+    apart = {}  # head group -> how far apart the lips would lie with it
+
+    def mouth(group):
+        apart[group] = _lips_apart(pos, names, idx, group)
+        return apart[group]
+
+    refs, conf, own, words, rivals = (_head_group(pos, idx, mouth) if pos.shape[2] == 3
                                       else ([], 1.0, {}, "", {}))
+    ruled = [g for g, gap in apart.items() if gap > LIPS_APART_MM and list(g) != refs]
+    if ruled and apart.get(tuple(refs), 0.0) <= LIPS_APART_MM:
+        words += "; not the head, with it the lips would lie too far apart: " + ", ".join(
+            f"{'+'.join(names[j] for j in g)} ({apart[g]:.0f} mm)" for g in ruled)
     plausible = ["+".join(names[j] for j in r) or "none (no head correction)"
                  for r, p in rivals.items() if p]
     if plausible:
@@ -511,7 +556,7 @@ def propose_map(raw) -> Proposal:
         notes.append("no head references found (head-normalised data, or none recorded)")
     moving = [j for j in idx if j not in refs]
     try:
-        found = _in_plane(_corrected(pos, refs), moving, names) if pos.shape[2] == 3 else {}
+        found = _in_plane(_corrected(pos, refs), moving, names)[0] if pos.shape[2] == 3 else {}
     except placement.PlacementError as exc:
         found = {}
         notes.append(f"roles not proposed: {exc}")
