@@ -24,6 +24,12 @@ Paper section 2; :func:`initialize`:
 6. beyond the paper (its future work): face and mouth width from Headmeasures, lip
    thickness per speaker, nose tip (``conformation.default_conformation``), or a fitted
    ``calibration.Calibration``; tongue (#55-#62) and lips (#63-#66) from the first frame.
+   The model's lip sites are where the X-ray microbeam pellets sit on the lips; an
+   articulograph lab glues its lip sensors elsewhere on the vermilion, so for an
+   articulograph recording without a fitted calibration the lips are at rest where its
+   first valid line has them (the report's and the calibration's assumption: the sensors'
+   heights above the sites on that line, ``SubjectState.lip_rest``, said by ``cassi
+   animate``), instead of being pushed into each other or apart by the placement.
 
 Every choice of the run comes from one :class:`~cassi_fit.run_spec.RunSpec` (the
 ``"improved"`` or ``"cassi"`` preset, docs/CASSI_MODE.md, with any changes), checked once
@@ -67,6 +73,9 @@ class SubjectState(eqx.Module):
     spec: the run's :class:`~cassi_fit.run_spec.RunSpec` (its calibration resolved for
     this subject); calibration: what the conformation came from (None: Headmeasures;
     ``"cassi"``; or the fitted ``Calibration``). source: the recording's name in messages.
+    lip_rest: ``(upper, lower)`` model mm for an articulograph recording without a fitted
+    calibration: how far above the model's UL and LL sites its lip sensors sit on the
+    first valid line (step 6 of the module docstring), else None.
     """
 
     model: eqx.Module
@@ -81,6 +90,7 @@ class SubjectState(eqx.Module):
     source: str = eqx.field(static=True)
     spec: RunSpec = eqx.field(static=True)
     calibration: object = eqx.field(static=True, default=None)
+    lip_rest: tuple | None = eqx.field(static=True, default=None)
 
     @property
     def calibration_problems(self) -> tuple[str, ...]:
@@ -93,9 +103,17 @@ class SubjectState(eqx.Module):
     @property
     def calibration_caveats(self) -> tuple[str, ...]:
         """The limits every fitted calibration has, with their size
-        (``Calibration.caveats``: the lower lip's unobservable offset, ...)."""
+        (``Calibration.caveats``: the lower lip's unobservable offset, ...), and where the
+        lip sensors' rest was taken from the first valid line (:attr:`lip_rest`)."""
         cal = self.calibration
-        return tuple(cal.caveats()) if isinstance(cal, Calibration) else ()
+        out = tuple(cal.caveats()) if isinstance(cal, Calibration) else ()
+        if self.lip_rest is not None:
+            out += (f"the lip sensors sit {self.lip_rest[0]:+.1f} mm (upper) and "
+                    f"{self.lip_rest[1]:+.1f} mm (lower) above the model's lip sites on the "
+                    f"first valid line ({self.first_frame + 1}), taken as the lips at rest "
+                    "(an articulograph's lip sensors are glued elsewhere than the X-ray "
+                    "microbeam pellets the model's sites stand for)",)
+        return out
 
     @property
     def jaw_sensors(self) -> tuple[str, ...]:
@@ -141,15 +159,30 @@ def _scale(model, pellets: Float[np.ndarray, "8 2"], source: str, first: int) ->
     return float(np.linalg.norm(sites[MNI] - sites[MNM])) / d
 
 
-def _rest_pellets(model, conformation, size, spec, calibration):
+def _rest_pellets(model, conformation, size, spec):
     """The model's pellet sites ``(8, 2)`` mm in the subject's shape, computed by the same
     compiled call (batch ``size``) that animate() will use for this recording."""
     batch = jax.tree.map(lambda x: jnp.broadcast_to(x, (size, *jnp.shape(x))), conformation)
-    rest = batch_geometry(model, batch, **spec.deform_style)[1][0]
-    if calibration is not None:  # the lips' vertical rest where the first valid lines have them
-        rest = rest.at[UL, 1].add(calibration.lip_rest_offset[0])
-        rest = rest.at[LL, 1].add(calibration.lip_rest_offset[1])
-    return rest
+    return batch_geometry(model, batch, **spec.deform_style)[1][0]
+
+
+def _lips_at_rest(rest, offset) -> jax.Array:
+    """``rest`` with the UL and LL sites raised by ``offset`` (upper, lower) model mm: the
+    lips' vertical rest where the lip pellets sit (a calibration's ``lip_rest_offset``)."""
+    return rest.at[UL, 1].add(offset[0]).at[LL, 1].add(offset[1])
+
+
+def _first_line_lips(model, spec, rest, initial_jaw, scaled) -> tuple[float, float]:
+    """``(upper, lower)`` model mm: how far above the model's UL and LL sites the lip
+    sensors sit on the first valid line ``scaled (8, 2)`` (the lower one after the model's
+    jaw is placed there by ``initial_jaw``), as a calibration's ``lip_rest_offset``; 0 for
+    a lip the recording does not track."""
+    from . import rigid
+
+    w_ll = jnp.asarray(model.jaw_weights[spec.jaw_weights])[model.landmarks["LL"]]
+    ll = rigid.apply(*rigid.fractional(initial_jaw, w_ll), rest[LL])
+    up, low = float(scaled[UL, 1] - rest[UL, 1]), float(scaled[LL, 1] - ll[1])
+    return (up if np.isfinite(up) else 0.0, low if np.isfinite(low) else 0.0)
 
 
 def _initial_jaw(rest, reference, tracked) -> tuple:
@@ -228,13 +261,21 @@ def initialize(
     # at the batch size animate() will use for every line of this recording, so that both
     # share one compilation (the extra frames cost ~0.1 s)
     size = frame_bucket(track.times.shape[0] - first)
-    rest = _rest_pellets(model, conformation, size, spec, fitted)
+    rest = _rest_pellets(model, conformation, size, spec)
     reference = jnp.asarray(scale * pellets[[MNI, MNM]])  # NaN for a jaw pellet not tracked
+    initial_jaw = _initial_jaw(rest, reference, tracked)
+    lip_rest = None
+    if fitted is not None:  # the lips' vertical rest where the first valid lines have them
+        rest = _lips_at_rest(rest, fitted.lip_rest_offset)
+    elif calibration is None and getattr(recording, "sensors", None) is not None:
+        # an articulograph's lip sensors: the same rest, from this recording's first line
+        lip_rest = _first_line_lips(model, spec, rest, initial_jaw, scale * pellets)
+        rest = _lips_at_rest(rest, lip_rest)
     state = SubjectState(
         model=model, scale=scale, first_frame=first, reference_jaw=reference,
-        initial_jaw=_initial_jaw(rest, reference, tracked), conformation=conformation,
+        initial_jaw=initial_jaw, conformation=conformation,
         rest_pellets=rest, initial_params=conformation, tracked_pellets=tracked,
-        source=source, spec=spec, calibration=calibration,
+        source=source, spec=spec, calibration=calibration, lip_rest=lip_rest,
     )  # fmt: skip
     first_params = frame_params(
         state, np.broadcast_to(scale * pellets, (size, 8, 2)), np.zeros(size), np.zeros((size, 2))
