@@ -25,13 +25,14 @@ hyoid end about 32 mm in front of C3 (Bibby & Preston 1981, Am J Orthod 80:92-97
 31.8 +- 2.9 mm), the base about 10-15 mm in front of the wall (McNamara 1984, Am J Orthod
 86:449-469; ``docs/TONGUE.md``). Both placements are measured from the cervical spine, which
 the subject's own wall (``PHA.DAT``) follows; a subject whose wall lies elsewhere keeps the
-template's base against the template's wall (JW11: 22.7 mm behind it, so a pharynx about
-27-41 mm deep instead of 10-15). The area function carries the base by the difference of
-the two walls in x at the hyoid end's height (``TractGeometry.base_shift_x``): in full at
-the hyoid end, falling linearly in the rest arc length to nothing at T4 (the linear fall of
-CASSI's fixed tongue anchor, ``cassi_fit.tongue``), so the pellets' tongue is kept exactly.
-A subject without ``PHA.DAT`` has the template's wall and is not moved. The posed mesh is
-not changed: the face's renderer still draws the template's base.
+template's base against the template's wall (JW11's wall lies 22.7 mm behind it: its /a/
+pharynx was wide open, ``docs/ACOUSTICS.md``). The area function carries the base by the
+difference of the two walls in x at the hyoid end's height
+(``TractGeometry.base_shift_x``): in full at the hyoid end, falling linearly in the rest
+arc length to nothing at T4 (the linear fall of CASSI's fixed tongue anchor,
+``cassi_fit.tongue``), so the pellets' tongue is kept exactly. A subject without
+``PHA.DAT`` has the template's wall and is not moved. The posed mesh is not changed: the
+face's renderer still draws the template's base.
 
 **Cross-distances to areas**: the front wall is resampled at ``N_SECTIONS`` points equally
 spaced in arc length; each point's cross-distance ``d`` is its distance to the nearest
