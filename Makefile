@@ -67,6 +67,7 @@ experiments: $(STAMP)
 	    --docs docs/generated --force; \
 	else echo "real_referee: skipped, no real recording (make experiments XRMB_JW11=DIR)"; fi
 	$(BIN)/python experiments/acoustic_referee.py $(if $(XRMB_JW11),--jw11 $(XRMB_JW11),) --docs docs/generated --force
+	$(BIN)/python experiments/acoustic_tract_diagnosis.py $(if $(XRMB_JW11),--jw11 $(XRMB_JW11),) --docs docs/generated --force
 	$(BIN)/python experiments/mistrack_detection.py --docs docs/generated --force
 	$(BIN)/python experiments/placement.py --docs docs/generated --xrmb $(XRMB_JW11)
 	$(BIN)/python experiments/channel_identification.py --docs docs/generated

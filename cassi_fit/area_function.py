@@ -19,6 +19,21 @@ the handle acoustic calibration moves for the vocal tract's length), and
 ``GLOTTIS_DEPTH_MM`` in front of the wall (the male glottis is about 16 mm long front to
 back, Hirano et al. 1988's adult men: 14-17 mm).
 
+**The tongue base** (below T4, the last pellet: no pellet sees it): the model's template
+placed it for the synthetic corpus's walls (``pharynx.DEFAULT_WALL``, x = -66..-78 mm): the
+hyoid end about 32 mm in front of C3 (Bibby & Preston 1981, Am J Orthod 80:92-97: C3-H
+31.8 +- 2.9 mm), the base about 10-15 mm in front of the wall (McNamara 1984, Am J Orthod
+86:449-469; ``docs/TONGUE.md``). Both placements are measured from the cervical spine, which
+the subject's own wall (``PHA.DAT``) follows; a subject whose wall lies elsewhere keeps the
+template's base against the template's wall (JW11's wall lies 22.7 mm behind it: its /a/
+pharynx was wide open, ``docs/ACOUSTICS.md``). The area function carries the base by the
+difference of the two walls in x at the hyoid end's height
+(``TractGeometry.base_shift_x``): in full at the hyoid end, falling linearly in the rest
+arc length to nothing at T4 (the linear fall of CASSI's fixed tongue anchor,
+``cassi_fit.tongue``), so the pellets' tongue is kept exactly. A subject without
+``PHA.DAT`` has the template's wall and is not moved. The posed mesh is not changed: the
+face's renderer still draws the template's base.
+
 **Cross-distances to areas**: the front wall is resampled at ``N_SECTIONS`` points equally
 spaced in arc length; each point's cross-distance ``d`` is its distance to the nearest
 segment of the back wall (unsigned; a tongue through the palate gives a small area, not a
@@ -100,6 +115,8 @@ class TractGeometry(eqx.Module):
     hyoid_y: Float[np.ndarray, ""]
     velum_tip_y: Float[np.ndarray, ""]
     back_region: Int[np.ndarray, " s"] | None = None
+    base_weight: Float[np.ndarray, " t"] | None = None
+    base_shift_x: Float[np.ndarray, ""] | None = None
 
 
 def _lip_points(model: FaceModel, region: str, upper: bool) -> np.ndarray:
@@ -141,8 +158,34 @@ def tract_geometry(model: FaceModel) -> TractGeometry:
                              jnp.asarray(palate), np.asarray(region, np.int32),
                              np.asarray(vertices[tops[-1], 1], np.float64),
                              np.asarray(palate[-1, 1], np.float64))
+    weight, shift = _base_transfer(model, tops, wall)
     return dataclasses.replace(geometry,
-                               back_region=np.asarray(_wall_regions(geometry), np.int32))
+                               back_region=np.asarray(_wall_regions(geometry), np.int32),
+                               base_weight=weight, base_shift_x=shift)
+
+
+def _line_x(points: np.ndarray, y: float) -> float:
+    """The x at height ``y`` of the straight line through a wall's last two points."""
+    (x0, y0), (x1, y1) = np.asarray(points, np.float64)[-2:]
+    return float(x0 + (x1 - x0) * (y - y0) / (y1 - y0))
+
+
+def _base_transfer(model: FaceModel, tops: np.ndarray, wall: np.ndarray):
+    """``(weight (t,), shift_x)``: how far the tongue base is carried to this subject's
+    pharyngeal wall (module docstring, *the tongue base*). ``tops`` tip -> hyoid end; the
+    weight is 0 up to T4 and rises linearly in the rest arc length to 1 at the hyoid end;
+    the shift is the subject's wall minus the template's (``pharynx.DEFAULT_WALL``) in x
+    at the hyoid end's height, both walls as the straight lines of their lowest stretch."""
+    from .pharynx import DEFAULT_WALL
+
+    s = np.asarray(model.fields["tongue_s"], np.float64)[tops]
+    s_t4 = float(s[np.nonzero(tops == model.landmarks["T4"])[0][0]])
+    weight = np.clip((s - s_t4) / (s[-1] - s_t4), 0.0, 1.0)
+    y_h = float(np.asarray(model.vertices)[tops[-1], 1])
+    # to a hundredth of a millimetre: the model's single-precision vertices round the
+    # template's own wall by about 1e-4 mm, which must carry nothing
+    shift = round(_line_x(wall, y_h) - _line_x(DEFAULT_WALL, y_h), 2)
+    return weight, np.asarray(shift, np.float64)
 
 
 def _nearest(p, a, b):
@@ -168,6 +211,9 @@ def _walls(geometry: TractGeometry, vertices, params: TractParams):
     :func:`_wall_regions`, in the same order)."""
     g = geometry
     tongue = vertices[np.asarray(g.tongue_tops[::-1]), :2]  # hyoid end -> tip
+    if g.base_weight is not None:  # the base carried to the subject's wall
+        carry = jnp.asarray(g.base_weight[::-1], tongue.dtype) * jnp.asarray(g.base_shift_x, tongue.dtype)
+        tongue = tongue.at[:, 0].add(carry)
     hyoid = tongue[0]
     w = g.wall
     down = (w[-1] - w[-2]) / jnp.linalg.norm(w[-1] - w[-2])

@@ -67,3 +67,28 @@ def test_vmapped_equals_one_frame(setup):
     one = jax.jit(lambda v, t: af.area_function(geometry, v, t))(frames[1], af.default_tract())
     for x, y in zip(many, one, strict=True):
         np.testing.assert_allclose(np.asarray(x)[1], np.asarray(y), rtol=1e-12)
+
+
+def test_tongue_base_is_carried_to_the_subjects_wall(setup):
+    """A subject whose pharyngeal wall lies 20 mm behind the template's: the area function
+    carries the tongue's hyoid end 20 mm back with it, T4 and everything in front of it
+    (where the pellets put the tongue) not at all, and the stretch between by the share
+    its arc length gives; the template's own wall carries nothing."""
+    from cassi_fit.pharynx import DEFAULT_WALL, with_pharynx
+
+    model, geometry, frames, _ = setup
+    assert float(geometry.base_shift_x) == 0.0
+    deeper = af.tract_geometry(with_pharynx(model, DEFAULT_WALL + np.array([-20.0, 0.0])))
+    np.testing.assert_allclose(float(deeper.base_shift_x), -20.0, atol=1e-3)
+    tract = af.default_tract()
+    front0 = np.asarray(af._walls(geometry, frames[1], tract)[0])
+    front1 = np.asarray(af._walls(deeper, frames[1], tract)[0])
+    n_tongue = len(geometry.tongue_tops)
+    moved = (front1 - front0)[1:1 + n_tongue]  # hyoid end -> tip (after the glottis)
+    np.testing.assert_allclose(moved[:, 1], 0.0, atol=1e-9)
+    np.testing.assert_allclose(moved[0, 0], -20.0, atol=1e-3)
+    t4 = list(geometry.tongue_tops[::-1]).index(model.landmarks["T4"])
+    np.testing.assert_allclose(moved[t4:, 0], 0.0, atol=1e-9)
+    assert np.all(np.diff(moved[:t4 + 1, 0]) > 0)  # less and less carried toward T4
+    # the glottis keeps its place in front of the (moved) wall
+    np.testing.assert_allclose(front1[0, 0] - front0[0, 0], -20.0, atol=1e-3)

@@ -121,3 +121,22 @@ def test_formant_gradient_matches_finite_differences(formants_jit):
     # a longer tract lowers the formants
     assert float(jnp.sum(grad_l)) < 0
     assert np.all(np.isfinite(np.asarray(grad_a)))
+
+
+def test_yielding_wall_raises_f1_by_the_closed_tract_resonance(formants_jit):
+    """The magnitude of the wall's F1 shift: a uniform tube whose walls are a mass per area
+    ``m`` (Maeda 1982's 1.5 g/cm^2) resonates where F1^2 = F1_rigid^2 + Fw^2, with the
+    closed-tract resonance Fw^2 = S rho c^2 / (4 pi^2 A m) (the air's compliance against
+    the walls' mass; Fant 1972, "Vocal tract wall effects, losses, and resonance
+    bandwidths", STL-QPSR; about 180-250 Hz for adult men).
+    The walls' resistance and stiffness move it by well under 1 %."""
+    length, area_mm2 = 175.0, 300.0
+    areas, lengths = tube.uniform_tube(length, area_mm2, N)
+    wall_only = tube.Losses(viscous=True, thermal=False, wall=True, radiation=False)
+    f1_wall = float(formants_jit(areas, lengths, wall_only).frequency[0])
+    f1_rigid = float(formants_jit(areas, lengths, NEARLY_LOSSLESS).frequency[0])
+    a_cm2 = area_mm2 / 100.0
+    perimeter = 2.0 * np.sqrt(np.pi * a_cm2)
+    fw = np.sqrt(perimeter * tube.RHO * tube.C_CM_S**2 / (a_cm2 * tube.WALL_MASS)) / (2 * np.pi)
+    assert 180.0 < fw < 250.0
+    np.testing.assert_allclose(f1_wall, np.hypot(f1_rigid, fw), rtol=0.01)

@@ -1,0 +1,222 @@
+"""Where the model's formant errors on the real recordings come from (issue 29's diagnosis).
+
+    python experiments/acoustic_tract_diagnosis.py [--jw11 DIR] [--emu DIR] --docs docs/generated --force
+
+Writes ``acoustic_tract_diagnosis.md``: three tables, each from one recording of one
+speaker (the referee's recordings, read as ``acoustic_referee.py`` reads them).
+
+1. **JW11's pharynx** (XRMB, nine /a/): for the tongue base as the template placed it
+   (against ``pharynx.DEFAULT_WALL``) and as the area function carries it to JW11's wall
+   (``area_function``, *the tongue base*): the narrowest pharyngeal section and the
+   pharynx's mean area (mm^2, median over the scored frames), and the median signed F1-F3
+   errors. Then the same with the pharynx's areas scaled down (``pharynx_scale``), to show
+   how narrow the unseen pharynx of these /a/ would have to be for F1: a diagnosis, not a
+   fit (nothing here is used by the model).
+2. **What moves JW11's formants**: ``d log F / d log alpha`` per area-rule region
+   (``jax.jacfwd`` of the formants in each region's scale, the sections' regions held),
+   the mean over the scored frames: the regions whose width the formants depend on.
+3. **EMU mo1 by vowel quality** (IPS Munich, one sentence, no palate or wall trace): the
+   median signed F1-F3 errors per quality, front vowels first, the share of frames
+   whose narrowest pharyngeal section is at most ``CLOSED_MM2`` (a pharynx pressed shut),
+   and the model's lip opening (the upper lip's lowest midsagittal point above the lower
+   lip's highest: negative where the lips cross) and incisor opening (mm, medians).
+   JW11's /a/ has both given in a line below table 1 for comparison, with its wall's
+   distance behind the template's; a line below table 3 gives mo1's upper-lip sensor's
+   height above its lower-lip sensor, and the one below table 1 JW11's UL above its LL.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+FRAMES = 60  # JW11 frames analysed (an even subsample of the scored ones)
+PHARYNX_SCALES = (1.0, 0.5, 0.25, 0.12, 0.06)
+CLOSED_MM2 = 20.0
+FRONT = ("i", "e", "E", "aI")  # German front (and fronting) vowel qualities of mo1
+PHARYNX = (1, 2, 3)  # area_function.REGIONS: low, mid, upper (oro-) pharynx
+
+
+def _pick(n_total: int, n: int) -> np.ndarray:
+    return np.unique(np.round(np.linspace(0, n_total - 1, min(n, n_total))).astype(int))
+
+
+def _tract(geometry, vertices, tract, scale):
+    import jax.numpy as jnp
+
+    from cassi_fit import area_function as af
+    from cassi_fit import tube
+
+    areas, lengths, regions = af.area_functions(geometry, jnp.asarray(vertices), tract, scale)
+    f = np.asarray(tube.formants_batch(areas, lengths).frequency)[:, :3]
+    return np.asarray(areas), np.asarray(regions), f
+
+
+def _pharynx_stats(areas, regions):
+    ph = np.isin(regions, PHARYNX)
+    narrow = np.where(ph, areas, np.inf).min(1)
+    mean = np.where(ph, areas, 0).sum(1) / np.maximum(ph.sum(1), 1)
+    return narrow, mean
+
+
+def jw11_rows(result) -> tuple[list[dict], list[dict]]:
+    """Tables 1 and 2 (module docstring)."""
+    import equinox as eqx
+
+    idx = np.nonzero(result.scored)[0]
+    idx = idx[_pick(len(idx), FRAMES)]
+    v, meas = np.asarray(result.vertices)[idx], result.measured.frequency[idx, :3]
+    g = result.geometry
+    template = dataclasses.replace(g, base_weight=None, base_shift_x=None)
+    rows = []
+    for name, geom in (("tongue base as the template placed it", template),
+                       ("tongue base carried to JW11's wall", g)):
+        for ps in PHARYNX_SCALES if geom is g else (1.0,):
+            tract = eqx.tree_at(lambda t: t.pharynx_scale, result.tract, ps * result.tract.pharynx_scale)
+            areas, regions, f = _tract(geom, v, tract, result.scale)
+            narrow, mean = _pharynx_stats(areas, regions)
+            err = np.nanmedian(f / meas - 1.0, axis=0)
+            rows.append({"tongue base": name, "pharynx areas x": ps,
+                         "narrowest pharynx mm^2": float(np.median(narrow)),
+                         "mean pharynx mm^2": float(np.median(mean)),
+                         **{f"F{q + 1} signed error %": 100 * float(err[q]) for q in range(3)}})
+    return rows, _elasticities(g, v, result)
+
+
+def _elasticities(geometry, v, result) -> list[dict]:
+    import jax
+    import jax.numpy as jnp
+
+    from cassi_fit import area_function as af
+    from cassi_fit import tube
+
+    areas, lengths, regions = (np.asarray(x) for x in af.area_functions(
+        geometry, jnp.asarray(v), result.tract, result.scale))
+    n_reg = len(af.REGIONS)
+
+    def log_f(log_scale, a, ln, reg):
+        return jnp.log(tube.formants(a * jnp.exp(log_scale[reg]), ln).frequency[:3])
+
+    jac = jax.jit(jax.vmap(jax.jacfwd(log_f), in_axes=(None, 0, 0, 0)))
+    e = np.asarray(jac(jnp.zeros(n_reg, areas.dtype), jnp.asarray(areas), jnp.asarray(lengths),
+                       jnp.asarray(regions)))
+    mean = np.nanmean(e, axis=0)  # (3, regions)
+    share = np.array([(regions == r).mean() for r in range(n_reg)])
+    return [{"region": af.REGIONS[r], "share of sections": float(share[r]),
+             **{f"dlogF{q + 1}/dlog alpha": float(mean[q, r]) for q in range(3)}}
+            for r in range(n_reg)]
+
+
+def emu_rows(result) -> list[dict]:
+    """Table 3 (module docstring)."""
+    from cassi_fit.acoustic_fit import vowel_quality
+
+    quality = np.array([vowel_quality(str(s)) for s in result.labels])
+    narrow, _ = _pharynx_stats(result.areas, np.asarray(_regions(result)))
+    err = result.relative_error
+    v = np.asarray(result.vertices)
+    g = result.geometry
+    # the lips' opening (mm): the upper lip's lowest midsagittal point above the lower lip's
+    # highest (negative: the lips cross); the jaw's: the lower incisor below the upper
+    lips = (v[:, np.asarray(g.upper[1:]), 1].min(1) - v[:, np.asarray(g.lower[1:]), 1].max(1))
+    jaw = v[:, g.upper[0], 1] - v[:, g.lower[0], 1]
+    rows = []
+    qualities = sorted(set(quality[result.scored]), key=lambda q: (q not in FRONT, q))
+    for q in qualities:
+        m = result.scored & (quality == q)
+        med = np.nanmedian(err[m], axis=0)
+        rows.append({"quality": q, "front": q in FRONT, "frames": int(m.sum()),
+                     "measured F2 Hz": float(np.median(result.measured.frequency[m, 1])),
+                     "model F2 Hz": float(np.median(result.model[m, 1])),
+                     **{f"F{k + 1} signed error %": 100 * float(med[k]) for k in range(3)},
+                     f"pharynx <= {CLOSED_MM2:.0f} mm^2": float(np.mean(narrow[m] <= CLOSED_MM2)),
+                     "lip opening mm": float(np.median(lips[m] / result.scale)),
+                     "incisors apart mm": float(np.median(jaw[m] / result.scale))})
+    return rows
+
+
+def _openings(result) -> str:
+    """JW11's lip and incisor openings over its scored frames, in words."""
+    v, g = np.asarray(result.vertices)[result.scored], result.geometry
+    lips = v[:, np.asarray(g.upper[1:]), 1].min(1) - v[:, np.asarray(g.lower[1:]), 1].max(1)
+    jaw = v[:, g.upper[0], 1] - v[:, g.lower[0], 1]
+    return (f"JW11's wall lies {-float(g.base_shift_x):.1f} mm behind the template's at the "
+            "hyoid end's height (the tongue base's carry, model mm). JW11's /a/ (scored frames, "
+            f"medians): lip opening {np.median(lips) / result.scale:.1f} mm, incisors "
+            f"{np.median(jaw) / result.scale:.1f} mm apart.")
+
+
+def _lip_sensors(run) -> float:
+    """The recording's upper-lip sensor above its lower-lip sensor (mm, median over the
+    frames where both are tracked, the recording's own frame)."""
+    track = run.recording.track
+    p, ok = np.asarray(track.positions, float), np.asarray(track.valid)
+    both = ok[:, 0].all(-1) & ok[:, 1].all(-1) if ok.ndim == 3 else ok[:, 0] & ok[:, 1]
+    return float(np.median(p[both, 0, 1] - p[both, 1, 1]))
+
+
+def _regions(result):
+    import jax.numpy as jnp
+
+    from cassi_fit import area_function as af
+
+    return af.area_functions(result.geometry, jnp.asarray(result.vertices), result.tract,
+                             result.scale)[2]
+
+
+def main(argv=None) -> int:
+    import acoustic_referee as ref
+
+    from cassi_fit.tables import markdown_text
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--jw11", type=Path, default=ref._default("xrmb_jw11"))
+    ap.add_argument("--emu", type=Path, default=ref._default("emu_ips_mo1"))
+    ap.add_argument("--docs", type=Path, default=ROOT / "docs" / "generated")
+    ap.add_argument("--force", action="store_true")
+    args = ap.parse_args(argv)
+    if not args.jw11 and not args.emu:
+        print("acoustic_tract_diagnosis: skipped, no real recording (../shared/data absent)")
+        return 0
+    out = args.docs / "acoustic_tract_diagnosis.md"
+    if out.exists() and not args.force:
+        print(f"{out} exists (use --force)")
+        return 1
+    text = ["<!-- written by `python experiments/acoustic_tract_diagnosis.py --docs "
+            "docs/generated --force`; do not edit -->",
+            "# Where the model's formant errors come from: JW11's pharynx, EMU's vowels", "",
+            "Written by `experiments/acoustic_tract_diagnosis.py` (docstring: the method). One "
+            "recording of one speaker per table: no figure generalises to other speakers. "
+            "Signed error = model / measured - 1 (Praat's Burg formants).", ""]
+    if args.jw11:
+        run, result = ref.run_jw11(args.jw11, False)
+        pharynx, elastic = jw11_rows(result)
+        text += ["## JW11 (XRMB, two jaw pellets, nine /a/): the pharynx", "",
+                 markdown_text(pharynx, digits=2), "",
+                 _openings(result) + f" Its UL pellet lies {_lip_sensors(run):.1f} mm above "
+                 "its LL pellet (median over the recording).", "",
+                 "## JW11: what moves the formants (tongue base carried to JW11's wall)", "",
+                 markdown_text(elastic, digits=3), ""]
+        print("JW11 done", flush=True)
+    if args.emu:
+        run, result = ref.run_emu(args.emu)
+        text += ["## EMU mo1 (IPS Munich, one jaw sensor, default palate and wall): by vowel "
+                 "quality", "", markdown_text(emu_rows(result), digits=1), "",
+                 f"Its upper-lip sensor lies {_lip_sensors(run):.1f} mm above its lower-lip "
+                 "sensor (median over the recording); the model's lips are fitted to XRMB's "
+                 "UL and LL pellet sites.", ""]
+    args.docs.mkdir(parents=True, exist_ok=True)
+    out.write_text("\n".join(text))
+    print(out)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
