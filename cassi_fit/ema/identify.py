@@ -50,7 +50,6 @@ import numpy as np
 
 from . import head, placement
 from ._raw import RawEma
-from .sensor_map import numbered  # noqa: F401  (re-exported: which files need a proposal)
 
 #: A guess at or above this confidence is "sure".
 SURE = 0.9
