@@ -12,9 +12,11 @@ the same XLA).
 
 An entry is keyed by the function's qualified name, a digest of the cassi_fit package's
 source files (any change of the code invalidates every entry), the versions of JAX and of
-the libraries the kernels trace through, the platform, the float64 flag, the non-array
-arguments (pickled) and the arrays' shapes, dtypes and places in the arguments. It is
-looked up in this process, then on disk, and only then traced.
+the libraries the kernels trace through, the platform, the JAX settings that change a
+trace (float64, the promotion rules, the matmul precision), the non-array arguments
+(pickled) and the arrays' shapes, dtypes and places in the arguments. It is looked up in
+this process, then on disk, and only then traced. (A kernel's code changed while a process
+runs, as a test's monkeypatch changes it, is not seen: turn the folder off there.)
 
 The folder, first match wins:
 
@@ -203,7 +205,7 @@ class Exported:
             return entry
         try:
             exported, skeleton = self._trace(in_tree, avals, static)
-        except Exception:  # noqa: BLE001 - eqx.filter_jit then traces it (and raises)
+        except Exception:  # eqx.filter_jit then traces it (and raises what it raises)
             return None
         self.traces += 1
         _write(path, digest, exported, skeleton)
@@ -266,7 +268,7 @@ def _read(path: Path, digest: str) -> _Entry | None:
         if form != _FORMAT or stored != digest:
             return None
         entry = _Entry(export.deserialize(bytearray(blob)), skeleton)
-    except Exception:  # noqa: BLE001 - a broken entry is traced again and replaced
+    except Exception:  # a broken entry is traced again and replaced
         return None
     try:
         os.utime(path)  # its last use, for the size limit
@@ -282,8 +284,11 @@ def _write(path: Path, digest: str, exported, skeleton) -> None:
 
     try:
         content = pickle.dumps((_FORMAT, digest, skeleton, exported.serialize()), protocol=4)
+    except Exception:  # an output that does not pickle, a computation JAX cannot serialize
+        return
+    try:
         atomic_write(path, content, overwrite=True)
-    except (OSError, CassiError, pickle.PicklingError, TypeError, ValueError):
+    except (OSError, CassiError):
         return
     _evict(path.parent, EXPORT_CACHE_MAX_BYTES, keep=path)
 
