@@ -4,7 +4,8 @@ calibration reports (:func:`summary_arrays`).
 
 The unknowns are the named pytree :class:`Unknowns`; :class:`Problem` gives one subject's
 residual groups (model mm) at them, every one computed on the vertices that
-``deform.deform`` produces.
+``deform.deform`` produces. Both kernels are :func:`cassi_fit._exported.exported`: a new
+process loads them instead of tracing them again.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
+from ._exported import exported
 from .calibration import JAW_SCALE_BOUND, JAW_TURN_BOUND_RAD
 from .conformation import lips_ahead, with_values
 from .pellets import LL, MNI, MNM, UL
@@ -182,7 +184,7 @@ class Problem:
 GROUPS = ("jaw_pellets", "upper_lip", "lower_lip", "jaw_shape", "face_width", "collision")
 
 
-@eqx.filter_jit
+@exported
 def stage_kernel(model, data, measured, x, mask, weights):
     """One compiled solver per (model topology, head measured): which unknowns are free
     (``mask``, an ``Unknowns`` of 0/1, per element) and which residual groups count
@@ -205,7 +207,7 @@ def stage_kernel(model, data, measured, x, mask, weights):
     return unravel(flat + free * (y - flat)), converged, gradient
 
 
-@eqx.filter_jit
+@exported
 def summary_arrays(model, data, measured, x):
     """Everything ``calibrate._summarise`` reports, in one compiled call per model topology."""
     from .collide import depths
