@@ -145,3 +145,24 @@ def test_the_folder_is_held_under_its_size_limit(folder, monkeypatch):
     fresh = Exported(ek.kernel.fn)
     fresh(*ek.inputs(5))
     assert (fresh.traces, fresh.loads) == (0, 1)  # the newest one stayed
+
+
+def test_the_jaw_kernels_give_filter_jits_results(folder):
+    """Two of the toolkit's exported kernels, each against its own ``eqx.filter_jit``."""
+    import zoo
+
+    from cassi_fit.jaw_fit._kernels import closed_form_kernel, fixed_pivot_kernel
+    from cassi_fit.jaw_fit._solve import as_solver
+
+    track, _ = zoo.jaw_wagging(clean=True)
+    jaw = np.asarray(track.positions)[:, 6:8]
+    jaw = jaw[np.isfinite(jaw).all(axis=(1, 2))]
+    reference, current = jaw[0], jaw[1:]
+    weight = np.ones(len(current))
+    prior = (np.zeros(2), np.zeros(2))
+    for wrapped, args in ((closed_form_kernel, (reference, current)),
+                          (fixed_pivot_kernel, (as_solver("optimistix-lm"), reference, current,
+                                                weight, np.array([-80.0, 10.0]), prior))):
+        kernel = Exported(wrapped.fn)
+        _same(kernel(*args), kernel.jitted(*args))
+        assert kernel.traces == 1
