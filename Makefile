@@ -50,6 +50,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_render.py --docs docs/generated
 	$(BIN)/python benchmarks/bench_animation.py --docs docs/generated
 	$(BIN)/python benchmarks/bench_startup.py --docs docs/generated
+	$(BIN)/python benchmarks/bench_trace.py --docs docs/generated
 	$(BIN)/python benchmarks/bench_corpus.py --write docs/generated/bench_corpus.md
 	$(BIN)/python benchmarks/bench_realtime.py --docs docs/generated
 	$(BIN)/python experiments/quote_tables.py

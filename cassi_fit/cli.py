@@ -16,8 +16,9 @@ JAX's and Mesa's threads could crash it. A closed output pipe exits 141 quietly.
 Compilation: the commands that compute keep what JAX compiles in the persistent
 compilation cache (``cassi_fit.corpus._process``: ``CASSI_COMPILE_CACHE=DIR|off``, else
 ``JAX_COMPILATION_CACHE_DIR``, else ``$XDG_CACHE_HOME/cassi_fit/jax`` or
-``~/.cache/cassi_fit/jax``), so a second run loads instead of compiling;
-``--no-compile-cache`` turns it off for one command.
+``~/.cache/cassi_fit/jax``), so a second run loads instead of compiling, and the slowest
+kernels to trace exported beside it (``cassi_fit._exported``; ``CASSI_EXPORT_CACHE=DIR|off``);
+``--no-compile-cache`` turns both off for one command.
 """
 
 from __future__ import annotations
@@ -59,7 +60,9 @@ def build_parser() -> argparse.ArgumentParser:
         "cassi_fit as a library leaves that choice to you. What JAX compiles is kept in "
         "$CASSI_COMPILE_CACHE (a folder, or 'off'), else $JAX_COMPILATION_CACHE_DIR, else "
         "$XDG_CACHE_HOME/cassi_fit/jax (~/.cache/cassi_fit/jax), so that the next command "
-        "loads it instead of compiling again. Ctrl-C or SIGTERM: exit status 130."
+        "loads it instead of compiling again; the slowest kernels to trace are kept in its "
+        "exported/ ($CASSI_EXPORT_CACHE: a folder, or 'off'). Ctrl-C or SIGTERM: exit "
+        "status 130."
     )
     parser.add_argument(
         "--debug", action="store_true", help="show the full traceback when something fails"

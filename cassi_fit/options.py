@@ -59,6 +59,9 @@ ANIMATION_SUFFIXES = (".mp4", ".gif", ".png")
 #: A video's frames per second unless ``--fps`` says otherwise (about what a screen shows;
 #: ``recording_video.video_frames``).
 DEFAULT_FPS = 60
+#: Values of a cache folder's variable (``CASSI_COMPILE_CACHE``, ``CASSI_EXPORT_CACHE``)
+#: that turn the cache off.
+CACHE_OFF = ("", "0", "off", "no", "none", "false")
 
 
 def check_choice(what: str, value: object, choices: Sequence[str]) -> str:

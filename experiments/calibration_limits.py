@@ -76,13 +76,14 @@ def _stage(model, recordings):
     from jax.flatten_util import ravel_pytree
 
     from cassi_fit import calibrate as c
+    from cassi_fit.calibrate_residuals import Problem, Unknowns
 
     data, measured, x0, _ = c._prepare(recordings, model)
     dtype = x0.log_scale.dtype
-    mask = c.Unknowns.mask(JAW_FREE, dtype)
+    mask = Unknowns.mask(JAW_FREE, dtype)
     weights = c._stage_weights(("jaw_shape",), True, dtype)
     flat0, unravel = ravel_pytree(x0)
-    return c._Problem(model, data, measured), x0, mask, weights, flat0, unravel
+    return Problem(model, data, measured), x0, mask, weights, flat0, unravel
 
 
 def _cost(problem, x) -> float:
@@ -112,7 +113,7 @@ def _slope_log_kx(problem, x) -> float:
 
 def _x_scale(x) -> tuple[float, float]:
     """``(u, jaw x scale)`` of the unknowns ``x``."""
-    from cassi_fit.calibrate import bounded_jaw
+    from cassi_fit.calibrate_residuals import bounded_jaw
 
     return float(x.log_jaw_scale[0]), float(np.exp(bounded_jaw(x)[1][0]))
 
@@ -135,6 +136,7 @@ def jaw_stage_rows(root, model) -> tuple[list[dict], list[dict]]:
     from jax.flatten_util import ravel_pytree
 
     from cassi_fit import calibrate as c
+    from cassi_fit.calibrate_residuals import stage_kernel
     from cassi_fit.dataset import Dataset
     from cassi_fit.jaw_fit import LevenbergMarquardt
 
@@ -145,7 +147,7 @@ def jaw_stage_rows(root, model) -> tuple[list[dict], list[dict]]:
             warnings.simplefilter("ignore", UserWarning)
             recs = [ds.load(subject, t) for t in ds.tasks(subject)]
         problem, x0, mask, weights, flat0, unravel = _stage(model, recs)
-        once, ok_once, _ = c._stage_kernel(model, problem.data, True, x0, mask, weights)
+        once, ok_once, _ = stage_kernel(model, problem.data, True, x0, mask, weights)
         now, ok_now = c._solve_stage(model, problem.data, True, x0, JAW_FREE, ("jaw_shape",),
                                      True)
         scale = float(np.exp(x0.log_scale))

@@ -6,7 +6,9 @@ run by tests/test_float32.py in a process of its own.
 One JAX compilation cache for the whole session, shared with every process the tests start
 (the CLI in subprocesses, notebook kernels, corpus workers): the same functions are compiled
 once instead of once per process. It lives in a fresh temporary folder, removed at exit, so
-no run ever reads another run's executables. ``CASSI_TEST_JAX_CACHE=0`` turns it off.
+no run ever reads another run's executables. ``CASSI_TEST_JAX_CACHE=0`` turns it off. The
+exported kernels (``cassi_fit._exported``) are kept in it too, so a kernel is traced once
+in the session, not once in every process.
 """
 
 import atexit
@@ -51,7 +53,9 @@ def solvers_return_their_start(monkeypatch):
     """Every jaw solver's solve step replaced by one that returns its start and reports
     success (the least-squares step and the block-tridiagonal one), for the meta-tests that
     show a far-start test fails without its solver; compiled kernels (which hold the real
-    solver) are dropped before and after."""
+    solver) are dropped before and after, and no kernel is loaded exported (it would hold
+    the real solver) nor exported with the stub in it (``cassi_fit._exported``)."""
+    from cassi_fit._exported import EXPORT_CACHE_ENV
     from cassi_fit.jaw_fit import _solve, _solvers
     from cassi_fit.status import SolverResult
 
@@ -61,6 +65,7 @@ def solvers_return_their_start(monkeypatch):
                         (params0, success))
     monkeypatch.setattr(_solvers, "minimise_block_tridiagonal",
                         lambda system, knots0, **kw: (knots0, success))
+    monkeypatch.setenv(EXPORT_CACHE_ENV, "off")
     jax.clear_caches()
     try:
         yield

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 import zoo
 
-from cassi_fit import calibrate, calibration
+from cassi_fit import calibrate, calibrate_residuals, calibration
 from cassi_fit.animate import animate
 from cassi_fit.calibration import CalibrationWarning
 from cassi_fit.cli import main as cli
@@ -389,11 +389,11 @@ def test_the_run_spec_resolves_a_folder_or_a_file_and_excludes_cassi(tmp_path, s
 def test_the_unknowns_are_named_and_flatten_in_their_documented_order():
     from jax.flatten_util import ravel_pytree
 
-    x = calibrate.Unknowns(*map(np.float64, (1, 2, 3, 4, 5)), np.array([6.0, 7.0]))
+    x = calibrate_residuals.Unknowns(*map(np.float64, (1, 2, 3, 4, 5)), np.array([6.0, 7.0]))
     np.testing.assert_array_equal(ravel_pytree(x)[0], np.arange(1.0, 8.0))
-    mask = calibrate.Unknowns.mask(("face_width", "log_jaw_scale"))
+    mask = calibrate_residuals.Unknowns.mask(("face_width", "log_jaw_scale"))
     np.testing.assert_array_equal(ravel_pytree(mask)[0], [0, 0, 0, 1, 0, 1, 1])
-    assert calibrate.UNKNOWN_NAMES == tuple(f.name for f in dataclasses.fields(x))
+    assert calibrate_residuals.UNKNOWN_NAMES == tuple(f.name for f in dataclasses.fields(x))
     from cassi_fit.errors import InvalidChoiceError
 
     with pytest.raises(InvalidChoiceError, match="calibration method"):

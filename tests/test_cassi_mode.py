@@ -196,7 +196,8 @@ def test_bone_points_map_to_the_models_skin_landmarks():
 def test_jaw_shape_unknowns_are_bounded_and_flagged():
     import jax.numpy as jnp
 
-    from cassi_fit.calibrate import Unknowns, bounded_jaw, bounds_hit
+    from cassi_fit.calibrate import bounds_hit
+    from cassi_fit.calibrate_residuals import Unknowns, bounded_jaw
     from cassi_fit.calibration import JAW_SCALE_BOUND, JAW_TURN_BOUND_RAD
 
     x = Unknowns.zeros()

@@ -12,7 +12,9 @@ The folder, first match wins:
    temporary folder);
 3. ``$XDG_CACHE_HOME/cassi_fit/jax``, else ``~/.cache/cassi_fit/jax``.
 
-``cassi ... --no-compile-cache`` turns it off for one command. Every compiled function is
+``cassi ... --no-compile-cache`` turns it off for one command. The kernels that a process
+would otherwise trace again are kept in its subfolder ``exported/`` (``cassi_fit._exported``;
+``CASSI_EXPORT_CACHE=DIR|off`` moves or turns off that part alone). Every compiled function is
 kept (JAX's default keeps only those that took a second to compile), and the folder is
 held under :data:`COMPILE_CACHE_MAX_BYTES`, the least recently used entries evicted
 first.
@@ -48,10 +50,10 @@ import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
+from ..options import CACHE_OFF
+
 #: The environment variable naming the cache folder (or ``off``).
 COMPILE_CACHE_ENV = "CASSI_COMPILE_CACHE"
-#: Values of ``CASSI_COMPILE_CACHE`` that turn the cache off.
-CACHE_OFF = ("", "0", "off", "no", "none", "false")
 #: The cache's size limit: past it JAX evicts the least recently used entries. A full
 #: run of every command on a few recording lengths takes about a tenth of it.
 COMPILE_CACHE_MAX_BYTES = 2 * 1024**3

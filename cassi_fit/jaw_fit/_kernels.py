@@ -1,13 +1,15 @@
 """The compiled kernels of the jaw methods (module-level ``eqx.filter_jit`` / ``jax.jit``:
-each compiles once per shape and static configuration) and the per-frame covariances."""
+each compiles once per shape and static configuration) and the per-frame covariances. The
+methods' kernels are :func:`cassi_fit._exported.exported`: a new process loads them instead
+of tracing them again."""
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from .. import jaw, rigid
+from .._exported import exported
 from . import _solvers
 from ._residuals import (
     best_angle_about,
@@ -32,7 +34,7 @@ def unit_covariance(params, reference, current):
     return jnp.linalg.inv(jac.T @ jac)
 
 
-@eqx.filter_jit
+@exported
 def closed_form_kernel(reference, current):
     """Per frame: the closed form, and noise propagated through it: ``G G^T`` with
     ``G = d(theta, t)/d(current)``."""
@@ -46,7 +48,7 @@ def closed_form_kernel(reference, current):
     return jax.vmap(one)(current)
 
 
-@eqx.filter_jit
+@exported
 def frame_fit_kernel(solver, reference, current, start):
     """Per frame least squares from ``start`` (n, 3) motions (None: each frame's Procrustes
     motion): ``(params, residuals, result, unit covariance)``."""
@@ -63,7 +65,7 @@ def frame_fit_kernel(solver, reference, current, start):
     return jax.vmap(one)(current, start)
 
 
-@eqx.filter_jit
+@exported
 def procrustes_kernel(reference, current):
     """Per frame, the frame fit's exact answer, in closed form: the two-point least-squares
     rigid motion (2D Procrustes/Kabsch, :func:`jaw.procrustes`), its residuals and its unit
@@ -77,7 +79,7 @@ def procrustes_kernel(reference, current):
     return jax.vmap(one)(current)
 
 
-@eqx.filter_jit
+@exported
 def fixed_pivot_kernel(solver, reference, current, weight, pivot0, prior):
     """Compiled fixed-pivot fit, ``prior = (mean (2,), weight (2,))``: ``-> (q, result, J)``."""
     args = (reference, current, weight, *prior)
@@ -85,7 +87,7 @@ def fixed_pivot_kernel(solver, reference, current, weight, pivot0, prior):
     return pivot, result, jax.jacfwd(pivot_prior_residuals)(pivot, args)
 
 
-@eqx.filter_jit
+@exported
 def smooth_pivot_kernel(config, reference, current, weight, smoothness, knots0, prior):
     """Compiled smooth-pivot fit. ``config = (damped, max_steps, tol, spacing)`` (static);
     ``prior = (mean (2,), weight (2,))``. Returns the pivot path (n, 2), its unit covariance
@@ -143,7 +145,7 @@ def unit_covariance_about(theta, pivot, reference):
     return jnp.outer(g, g) / jnp.sum(j**2)
 
 
-@jax.jit
+@exported
 def about_pivot_params(reference, current, path):
     """Per frame: best angle about the pivot ``path`` (n, 2) -> params (theta, tx, ty),
     unit covariance, residuals. ``reference`` (k, 2): both jaw sensors (the rigid motion's

@@ -1,0 +1,168 @@
+"""Exported kernels (cassi_fit._exported): the same results as ``eqx.filter_jit`` to the
+bit, loaded by a new process without tracing, and never an error from the folder: a broken
+entry is traced again and replaced, an unusable folder leaves the kernel traced."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import equinox as eqx
+import exported_kernels as ek
+import jax
+import numpy as np
+import pytest
+
+from cassi_fit import _exported
+from cassi_fit._exported import EXPORT_CACHE_ENV, SUFFIX, Exported, export_folder
+
+HERE = Path(__file__).resolve().parent
+
+
+def _same(out, ref):
+    assert jax.tree.structure(out) == jax.tree.structure(ref)
+    for a, b in zip(jax.tree.leaves(out), jax.tree.leaves(ref), strict=True):
+        if eqx.is_array(b):
+            assert np.asarray(a).dtype == np.asarray(b).dtype
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        else:
+            assert a == b
+
+
+@pytest.fixture
+def folder(tmp_path, monkeypatch):
+    monkeypatch.setenv(EXPORT_CACHE_ENV, str(tmp_path / "exported"))
+    return tmp_path / "exported"
+
+
+def test_the_exported_kernel_gives_filter_jits_results_and_traces_once(folder):
+    kernel = Exported(ek.kernel.fn)
+    args = ek.inputs()
+    before = len(ek.TRACES)
+    out = kernel(*args)
+    assert len(ek.TRACES) == before + 1
+    _same(out, kernel.jitted(*args))
+    assert (kernel.traces, kernel.loads) == (1, 0)
+    assert len(list(folder.glob(f"*{SUFFIX}"))) == 1
+    traced = len(ek.TRACES)
+    _same(kernel(*args), out)  # the second call: this process's own entry, no trace
+    assert (kernel.traces, kernel.loads, len(ek.TRACES)) == (1, 0, traced)
+    kernel(*ek.inputs(5))  # other shapes: another entry
+    assert kernel.traces == 2 and len(list(folder.glob(f"*{SUFFIX}"))) == 2
+    fresh = Exported(ek.kernel.fn)  # as a new process: from the folder
+    _same(fresh(*args), out)
+    assert (fresh.traces, fresh.loads) == (0, 1)
+
+
+def _child(out, environ):
+    env = {**os.environ, **environ, "JAX_PLATFORMS": "cpu",
+           "PYTHONPATH": os.pathsep.join([str(HERE), str(HERE.parent),
+                                          os.environ.get("PYTHONPATH", "")])}
+    done = subprocess.run([sys.executable, str(HERE / "exported_kernels.py"), str(out)],
+                          env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    with np.load(out) as z:
+        return {k: z[k] for k in z.files}
+
+
+def test_a_new_process_loads_the_kernel_without_tracing(tmp_path):
+    environ = {EXPORT_CACHE_ENV: str(tmp_path / "exported")}
+    first = _child(tmp_path / "first.npz", environ)
+    second = _child(tmp_path / "second.npz", environ)
+    assert list(first["counts"]) == [1, 1, 0]  # traced once (its Python ran once), stored
+    assert list(second["counts"]) == [0, 0, 1]  # loaded: the kernel's Python never ran
+    off = _child(tmp_path / "off.npz", {EXPORT_CACHE_ENV: "off"})
+    assert list(off["counts"]) == [1, 0, 0]  # eqx.filter_jit's own trace
+    for name in ("a", "b", "trace"):
+        np.testing.assert_array_equal(second[name], first[name])
+        np.testing.assert_array_equal(off[name], first[name])
+
+
+def test_a_broken_entry_is_traced_again_and_replaced(folder):
+    args = ek.inputs()
+    out = Exported(ek.kernel.fn)(*args)
+    (entry,) = folder.glob(f"*{SUFFIX}")
+    for broken in (b"", entry.read_bytes()[:1000], b"not a pickle at all"):
+        entry.write_bytes(broken)
+        kernel = Exported(ek.kernel.fn)
+        _same(kernel(*args), out)
+        assert (kernel.traces, kernel.loads) == (1, 0)
+        assert entry.stat().st_size > 1000  # written again, whole
+        again = Exported(ek.kernel.fn)
+        _same(again(*args), out)
+        assert (again.traces, again.loads) == (0, 1)
+    assert [p.name for p in folder.iterdir()] == [entry.name]  # no temporary file left
+
+
+def test_an_unusable_folder_leaves_the_kernel_traced_without_error(tmp_path, monkeypatch):
+    (tmp_path / "a_file").write_text("not a folder")
+    monkeypatch.setenv(EXPORT_CACHE_ENV, str(tmp_path / "a_file" / "exported"))
+    args = ek.inputs()
+    kernel = Exported(ek.kernel.fn)
+    _same(kernel(*args), kernel.jitted(*args))
+    assert (kernel.traces, kernel.loads) == (1, 0)
+    _same(kernel(*args), kernel.jitted(*args))
+    assert kernel.traces == 1  # this process keeps its own
+
+
+def test_the_folder_follows_the_compilation_cache_and_can_be_turned_off(tmp_path, monkeypatch):
+    monkeypatch.delenv(EXPORT_CACHE_ENV, raising=False)
+    previous = jax.config.jax_compilation_cache_dir
+    jax.config.update("jax_compilation_cache_dir", str(tmp_path / "jax"))
+    try:  # nothing compiled meanwhile: JAX's own cache would start in that folder
+        assert export_folder() == tmp_path / "jax" / _exported.SUBFOLDER
+        jax.config.update("jax_enable_compilation_cache", False)  # --no-compile-cache
+        assert export_folder() is None
+    finally:
+        jax.config.update("jax_compilation_cache_dir", previous)
+        jax.config.update("jax_enable_compilation_cache", True)
+    for off in ("off", "0", "none", ""):
+        monkeypatch.setenv(EXPORT_CACHE_ENV, off)
+        assert export_folder() is None
+    kernel = Exported(ek.kernel.fn)
+    _same(kernel(*ek.inputs()), kernel.jitted(*ek.inputs()))
+    assert (kernel.traces, kernel.loads) == (0, 0)
+
+
+def test_under_a_transformation_the_kernel_is_traced_as_by_filter_jit(folder):
+    pair, power, offset = ek.inputs()
+    kernel = Exported(ek.kernel.fn)
+
+    def loss(f, b):
+        return f(eqx.tree_at(lambda p: p.b, pair, b), power, offset)[0].b.sum()
+
+    grad = jax.grad(lambda b: loss(kernel, b))(pair.b)
+    np.testing.assert_array_equal(grad, jax.grad(lambda b: loss(kernel.jitted, b))(pair.b))
+    assert (kernel.traces, kernel.loads) == (0, 0) and not folder.exists()
+
+
+def test_the_folder_is_held_under_its_size_limit(folder, monkeypatch):
+    monkeypatch.setattr(_exported, "EXPORT_CACHE_MAX_BYTES", 1)  # room for the newest only
+    kernel = Exported(ek.kernel.fn)
+    kernel(*ek.inputs(4))
+    kernel(*ek.inputs(5))
+    (kept,) = folder.glob(f"*{SUFFIX}")
+    fresh = Exported(ek.kernel.fn)
+    fresh(*ek.inputs(5))
+    assert (fresh.traces, fresh.loads) == (0, 1)  # the newest one stayed
+
+
+def test_the_jaw_kernels_give_filter_jits_results(folder):
+    """Two of the toolkit's exported kernels, each against its own ``eqx.filter_jit``."""
+    import zoo
+
+    from cassi_fit.jaw_fit._kernels import closed_form_kernel, fixed_pivot_kernel
+    from cassi_fit.jaw_fit._solve import as_solver
+
+    track, _ = zoo.jaw_wagging(clean=True)
+    jaw = np.asarray(track.positions)[:, 6:8]
+    jaw = jaw[np.isfinite(jaw).all(axis=(1, 2))]
+    reference, current = jaw[0], jaw[1:]
+    weight = np.ones(len(current))
+    prior = (np.zeros(2), np.zeros(2))
+    for wrapped, args in ((closed_form_kernel, (reference, current)),
+                          (fixed_pivot_kernel, (as_solver("optimistix-lm"), reference, current,
+                                                weight, np.array([-80.0, 10.0]), prior))):
+        kernel = Exported(wrapped.fn)
+        _same(kernel(*args), kernel.jitted(*args))
+        assert kernel.traces == 1
