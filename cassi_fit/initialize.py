@@ -159,9 +159,11 @@ def _scale(model, pellets: Float[np.ndarray, "8 2"], source: str, first: int) ->
     return float(np.linalg.norm(sites[MNI] - sites[MNM])) / d
 
 
-def _rest_pellets(model, conformation, size, spec):
-    """The model's pellet sites ``(8, 2)`` mm in the subject's shape, computed by the same
-    compiled call (batch ``size``) that animate() will use for this recording."""
+def _rest_pellets(model, conformation, spec):
+    """The model's pellet sites ``(8, 2)`` mm in the subject's shape, by the batched
+    geometry at its smallest frame bucket (``frame_bucket(1)``): one compilation serves
+    every recording, whatever its length (the sites are the same in every row)."""
+    size = frame_bucket(1)
     batch = jax.tree.map(lambda x: jnp.broadcast_to(x, (size, *jnp.shape(x))), conformation)
     return batch_geometry(model, batch, **spec.deform_style)[1][0]
 
@@ -258,10 +260,10 @@ def initialize(
     else:
         conformation = default_conformation(model, recording, pellets, scale,
                                             calibration or "measures")
-    # at the batch size animate() will use for every line of this recording, so that both
-    # share one compilation (the extra frames cost ~0.1 s)
+    # the first line's parameters at the batch size animate() uses for every line of this
+    # recording (stride 1), so that both share one compilation
     size = frame_bucket(track.times.shape[0] - first)
-    rest = _rest_pellets(model, conformation, size, spec)
+    rest = _rest_pellets(model, conformation, spec)
     reference = jnp.asarray(scale * pellets[[MNI, MNM]])  # NaN for a jaw pellet not tracked
     initial_jaw = _initial_jaw(rest, reference, tracked)
     lip_rest = None
