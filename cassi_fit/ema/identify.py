@@ -208,14 +208,9 @@ def _head_group(pos: np.ndarray, idx: list[int], mouth=None
     if not groups:
         return [], 1.0, {}, "", {}
     groups = {_trimmed(sd, dist, g) for g in groups}
-    no_mouth = {}  # group -> how far apart the lips would lie with it as the head
 
     def mouthless(g) -> bool:
-        if mouth is None or not g:
-            return False
-        if g not in no_mouth:
-            no_mouth[g] = mouth(tuple(idx[j] for j in g))
-        return no_mouth[g] > LIPS_APART_MM
+        return mouth is not None and bool(g) and mouth(tuple(idx[j] for j in g)) > LIPS_APART_MM
 
     groups = {g for g in groups if not mouthless(g)} or groups
     scored = sorted((_worst(sd, g), -len(g), g) for g in groups)
@@ -534,8 +529,9 @@ def propose_map(raw) -> Proposal:
     notes = []
     apart = {}  # head group -> how far apart the lips would lie with it
 
-    def mouth(group):
-        apart[group] = _lips_apart(pos, names, idx, group)
+    def mouth(group):  # found once per group
+        if group not in apart:
+            apart[group] = _lips_apart(pos, names, idx, group)
         return apart[group]
 
     refs, conf, own, words, rivals = (_head_group(pos, idx, mouth) if pos.shape[2] == 3
