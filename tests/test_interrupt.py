@@ -36,12 +36,26 @@ def _python_call():
     return sum(k for k in range(100))
 
 
+def _wait_for_the_interrupt(limit_s: float = 120.0) -> None:
+    """Wait, running Python between short sleeps, until the re-delivered interrupt is
+    raised; fail after ``limit_s`` instead of hanging. Not ``signal.pause()``: when the
+    timer's signal lands between Python's last check for signals and the pause itself (a
+    loaded machine descheduling the process for the timer's 20 ms), pause() waits for a
+    signal that has already come and the test hangs for ever."""
+    import time
+
+    deadline = time.monotonic() + limit_s
+    while time.monotonic() < deadline:
+        time.sleep(0.005)
+    pytest.fail(f"the interrupt was not delivered again within {limit_s:.0f} s")
+
+
 def test_an_interrupt_waits_until_an_extension_module_is_initialised():
     loader = ExtensionFileLoader()
     with _signals.interruptible():
         with pytest.raises(KeyboardInterrupt):
             loader.create_module(None)
-            signal.pause()  # the deferred interrupt comes back (its timer) and is raised
+            _wait_for_the_interrupt()  # the deferred interrupt comes back (its timer)
     assert loader.finished and loader.pending_when_done == signal.SIGTERM
 
 
@@ -59,7 +73,7 @@ def test_an_interrupt_a_gc_callback_swallowed_is_delivered_again(capfd):
         with _signals.interruptible():
             with pytest.raises(KeyboardInterrupt):
                 gc.collect()
-                signal.pause()  # delivered again
+                _wait_for_the_interrupt()  # delivered again
     finally:
         gc.callbacks.remove(callback)
     assert fired
