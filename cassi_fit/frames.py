@@ -10,7 +10,10 @@ that initialization does not depend on animation.
   site``, the jaw ``= compose(motion since the first frame, initial motion)``.
   A tongue pellet the recording never tracks (XRMB files that lose T4; EMA corpora with
   three tongue sensors) is filled in from the tracked ones along the tongue
-  (:func:`tongue_fill`), so the model's tongue follows the sensors it has.
+  (:func:`tongue_fill`), so the model's tongue follows the sensors it has. An
+  articulograph's tongue sensors, glued elsewhere than XRMB's pellet sites, drive the
+  sites through :func:`tongue_drive` from where they sit on the tongue
+  (``SubjectState.tongue_sites``), so the tongue passes through each sensor there.
 * :func:`batch_geometry`: the vertices and model pellet sites of a batch (one compiled,
   vmapped ``deform.deform``); each frame's posed vertices are handed down to
   ``collide.settle`` (the penetration depths, and with collisions the projection keeping
