@@ -10,7 +10,10 @@ that initialization does not depend on animation.
   site``, the jaw ``= compose(motion since the first frame, initial motion)``.
   A tongue pellet the recording never tracks (XRMB files that lose T4; EMA corpora with
   three tongue sensors) is filled in from the tracked ones along the tongue
-  (:func:`tongue_fill`), so the model's tongue follows the sensors it has.
+  (:func:`tongue_fill`), so the model's tongue follows the sensors it has. An
+  articulograph's tongue sensors, glued elsewhere than XRMB's pellet sites, drive the
+  sites through :func:`tongue_drive` from where they sit on the tongue
+  (``SubjectState.tongue_sites``), so the tongue passes through each sensor there.
 * :func:`batch_geometry`: the vertices and model pellet sites of a batch (one compiled,
   vmapped ``deform.deform``); each frame's posed vertices are handed down to
   ``collide.settle`` (the penetration depths, and with collisions the projection keeping
@@ -92,6 +95,53 @@ def tongue_fill(tracked: Bool[np.ndarray, " 4"],
     return w
 
 
+def tongue_drive(tracked: Bool[np.ndarray, " 4"], site_s: Float[np.ndarray, " 4"],
+                 sensor_s: Float[np.ndarray, " 4"], anchor_s: float,
+                 anchor: str = "follow") -> Float[np.ndarray, "4 4"]:
+    """The matrix ``W (4, 4)`` that drives the tongue sites T1..T4 from tongue sensors
+    sitting elsewhere on the tongue: ``site displacements = W @ sensor displacements``.
+
+    ``sensor_s (4,)`` mm: the arc lengths at which the recording's T1..T4 sensors sit
+    (those of untracked roles are ignored; the tracked ones increasing); ``site_s``,
+    ``tracked``: as :func:`tongue_fill`; ``anchor_s``, ``anchor``: the tongue's back
+    anchor (``tongue.tongue_displacement``). Each site first gets the displacement of
+    the sensors around it, linear in arc length (the nearest sensor's beyond the first or
+    last: :func:`tongue_fill`'s rule with the sensors where they sit); then the least
+    change to the sites (least squares) that makes the tongue's displacement field
+    (``tongue_displacement``, linear in the sites' displacements) take each sensor's own
+    displacement at that sensor's arc length, so the tongue passes through every sensor
+    as it does through XRMB's pellets. Sensors at the sites give :func:`tongue_fill`'s
+    matrix."""
+    from .tongue import tongue_displacement
+
+    tracked = np.asarray(tracked, bool)
+    have = np.flatnonzero(tracked)
+    w = np.zeros((4, 4))
+    if have.size == 0:
+        return w
+    sensor_s = np.asarray(sensor_s, float)[have]
+    site_s = np.asarray(site_s, float)
+    fill = np.zeros((4, have.size))
+    for k in range(4):
+        before = np.flatnonzero(sensor_s <= site_s[k])
+        after = np.flatnonzero(sensor_s >= site_s[k])
+        if before.size and after.size and before[-1] != after[0]:
+            i, j = before[-1], after[0]
+            u = (site_s[k] - sensor_s[i]) / (sensor_s[j] - sensor_s[i])
+            fill[k, i], fill[k, j] = 1.0 - u, u
+        else:
+            fill[k, before[-1] if before.size else after[0]] = 1.0
+    basis = np.zeros((have.size, 4))  # the field at the sensors per unit site displacement
+    for k in range(4):
+        unit = np.zeros((4, 2))
+        unit[k, 0] = 1.0
+        basis[:, k] = np.asarray(tongue_displacement(
+            jnp.asarray(sensor_s), jnp.asarray(site_s), jnp.asarray(unit), anchor_s,
+            anchor), np.float64)[:, 0]
+    w[:, have] = fill + np.linalg.pinv(basis) @ (np.eye(have.size) - basis @ fill)
+    return w
+
+
 def _frame_inputs(state: eqx.Module) -> dict:
     """The arrays one frame's parameters depend on (all arrays: safe to pass to jit)."""
     model, spec = state.model, state.spec
@@ -99,11 +149,17 @@ def _frame_inputs(state: eqx.Module) -> dict:
     weights = model.jaw_weights[spec.jaw_weights]
     s = np.asarray(model.fields["tongue_s"])
     site_s = np.array([s[model.landmarks[k]] for k in _TONGUE_SITES])
+    sensor_s = getattr(state, "tongue_sites", None)
+    if sensor_s is None:  # XRMB's pellets (and CASSI mode): the sensors at the sites
+        fill = tongue_fill(tracked[T1 : T4 + 1], site_s)
+    else:  # an articulograph's tongue sensors, where they sit on the tongue
+        fill = tongue_drive(tracked[T1 : T4 + 1], site_s,
+                            np.array([np.nan if x is None else x for x in sensor_s]),
+                            float(model.measures["tongue_anchor_s"]), spec.tongue_anchor)
     return {
         "rest": state.rest_pellets,
         "tracked": jnp.asarray(tracked),
-        "tongue_fill": jnp.asarray(tongue_fill(tracked[T1 : T4 + 1], site_s),
-                                   jnp.asarray(state.rest_pellets).dtype),
+        "tongue_fill": jnp.asarray(fill, jnp.asarray(state.rest_pellets).dtype),
         "initial_jaw": state.initial_jaw,
         "conformation": state.conformation,
         "w_ll": jnp.asarray(weights)[model.landmarks["LL"]],

@@ -30,6 +30,13 @@ Paper section 2; :func:`initialize`:
    first valid line has them (the report's and the calibration's assumption: the sensors'
    heights above the sites on that line, ``SubjectState.lip_rest``, said by ``cassi
    animate``), instead of being pushed into each other or apart by the placement.
+   Likewise its tongue sensors are glued where the lab chose, not at XRMB's T1..T4 sites
+   (IPS Munich's back sensor lies near the model's T4 site, not T3's): for an
+   articulograph recording (not in CASSI mode) each tongue sensor is placed along the
+   model's tongue by its distance from the one in front of it (the frontmost taken at its
+   role's site: where it sits from the tongue's tip no sensor says), and the tongue is
+   driven through each sensor at that point (``SubjectState.tongue_sites``,
+   ``frames.tongue_drive``), said by ``cassi animate``.
 
 Every choice of the run comes from one :class:`~cassi_fit.run_spec.RunSpec` (the
 ``"improved"`` or ``"cassi"`` preset, docs/CASSI_MODE.md, with any changes), checked once
@@ -53,7 +60,7 @@ from .errors import DegenerateGeometryError
 from .face_model import FaceModel
 from .frames import batch_geometry, frame_bucket, frame_params
 from .jaw import closed_form_frames
-from .pellets import LL, MNI, MNM, UL, first_valid_line
+from .pellets import LL, MNI, MNM, T1, T4, UL, first_valid_line
 from .run_spec import RunSpec, run_spec
 
 
@@ -75,7 +82,12 @@ class SubjectState(eqx.Module):
     ``"cassi"``; or the fitted ``Calibration``). source: the recording's name in messages.
     lip_rest: ``(upper, lower)`` model mm for an articulograph recording without a fitted
     calibration: how far above the model's UL and LL sites its lip sensors sit on the
-    first valid line (step 6 of the module docstring), else None.
+    first valid line (step 6 of the module docstring), else None. tongue_sites: for an
+    articulograph recording outside CASSI mode, the arc lengths (model mm from the
+    tongue's tip along its upper midline) at which its T1..T4 sensors sit (None for a
+    role no sensor plays), their ``rest_pellets`` rows the rest tongue's points there;
+    else None (the sensors are the model's sites, as XRMB's pellets); tongue_note: the
+    line saying where they were placed and what could not be measured.
     """
 
     model: eqx.Module
@@ -91,6 +103,8 @@ class SubjectState(eqx.Module):
     spec: RunSpec = eqx.field(static=True)
     calibration: object = eqx.field(static=True, default=None)
     lip_rest: tuple | None = eqx.field(static=True, default=None)
+    tongue_sites: tuple | None = eqx.field(static=True, default=None)
+    tongue_note: str | None = eqx.field(static=True, default=None)
 
     @property
     def calibration_problems(self) -> tuple[str, ...]:
@@ -113,6 +127,8 @@ class SubjectState(eqx.Module):
                     f"first valid line ({self.first_frame + 1}), taken as the lips at rest "
                     "(an articulograph's lip sensors are glued elsewhere than the X-ray "
                     "microbeam pellets the model's sites stand for)",)
+        if self.tongue_note is not None:
+            out += (self.tongue_note,)
         return out
 
     @property
@@ -160,12 +176,60 @@ def _scale(model, pellets: Float[np.ndarray, "8 2"], source: str, first: int) ->
 
 
 def _rest_pellets(model, conformation, spec):
-    """The model's pellet sites ``(8, 2)`` mm in the subject's shape, by the batched
-    geometry at its smallest frame bucket (``frame_bucket(1)``): one compilation serves
-    every recording, whatever its length (the sites are the same in every row)."""
+    """The model's vertices ``(V, 3)`` and pellet sites ``(8, 2)`` mm in the subject's
+    shape, by the batched geometry at its smallest frame bucket (``frame_bucket(1)``): one
+    compilation serves every recording, whatever its length (the same in every row)."""
     size = frame_bucket(1)
     batch = jax.tree.map(lambda x: jnp.broadcast_to(x, (size, *jnp.shape(x))), conformation)
-    return batch_geometry(model, batch, **spec.deform_style)[1][0]
+    vertices, sites = batch_geometry(model, batch, **spec.deform_style)
+    return vertices[0], sites[0]
+
+
+def _tongue_sensor_sites(model, vertices, track, tracked, scale, roles) -> tuple:
+    """Where an articulograph's tongue sensors sit on the model's tongue (step 6):
+    ``(sites, points, note)``. ``sites``: per role T1..T4 the arc length (model mm from
+    the tongue's tip along its upper midline) or None; ``points (4, 2)``: the rest
+    tongue's upper midline there (``vertices (V, 3)`` the model at rest; NaN for None);
+    ``note``: one line saying so. The frontmost sensor is taken at its role's site; each
+    next one lies its median distance (over the frames tracking both, times ``scale``)
+    farther along: the chord, a little less than the arc between them."""
+    from .deform import tongue_midline
+
+    names = ("T1", "T2", "T3", "T4")
+    have = [k for k, r in enumerate(names) if r in tracked]
+    if not have:
+        return None, None, None
+    s = np.asarray(model.fields["tongue_s"], np.float64)
+    site_s = np.array([s[model.landmarks[r]] for r in names])
+    top = np.unique(tongue_midline(model)[1])
+    top = top[np.argsort(s[top])]
+    curve_s, curve = s[top], np.asarray(vertices, np.float64)[top, :2]
+    pos = np.asarray(track.positions, np.float64)[:, T1:T4 + 1]
+    ok = np.asarray(track.valid)[:, T1:T4 + 1].all(-1)
+    sites = [None] * 4
+    sites[have[0]] = float(site_s[have[0]])
+    for a, b in zip(have, have[1:], strict=False):
+        both = ok[:, a] & ok[:, b]
+        sites[b] = sites[a] + scale * float(np.median(np.linalg.norm(
+            pos[both, b] - pos[both, a], axis=1)))
+    points = np.full((4, 2), np.nan)
+    for k in have:
+        points[k] = [np.interp(sites[k], curve_s, curve[:, i]) for i in range(2)]
+    sensor = [roles.get(names[k]) or names[k] for k in have]
+    label = [f"{name} ({names[k]})" for name, k in zip(sensor, have, strict=True)]
+    where = ", ".join(f"{sites[k]:.1f}" for k in have)
+    model_sites = ", ".join(f"{x:.1f}" for x in site_s)
+    if len(have) == 1:
+        note = (f"the tongue sensor {label[0]} is taken at the model's {names[have[0]]} site "
+                f"({where} mm from the tongue's tip): with one tongue sensor where it sits on "
+                "the tongue cannot be measured")
+    else:
+        note = (f"the tongue sensors {', '.join(label)} are placed {where} mm from the "
+                f"tongue's tip along the model's tongue (its T1-T4 sites: {model_sites} mm) "
+                "by their median distances apart, and the tongue is driven through each "
+                f"there; {sensor[0]} is taken at the {names[have[0]]} site (where "
+                "it sits from the tip no sensor says)")
+    return tuple(sites), points, note
 
 
 def _lips_at_rest(rest, offset) -> jax.Array:
@@ -263,7 +327,7 @@ def initialize(
     # the first line's parameters at the batch size animate() uses for every line of this
     # recording (stride 1), so that both share one compilation
     size = frame_bucket(track.times.shape[0] - first)
-    rest = _rest_pellets(model, conformation, spec)
+    rest_vertices, rest = _rest_pellets(model, conformation, spec)
     reference = jnp.asarray(scale * pellets[[MNI, MNM]])  # NaN for a jaw pellet not tracked
     initial_jaw = _initial_jaw(rest, reference, tracked)
     lip_rest = None
@@ -273,11 +337,22 @@ def initialize(
         # an articulograph's lip sensors: the same rest, from this recording's first line
         lip_rest = _first_line_lips(model, spec, rest, initial_jaw, scale * pellets)
         rest = _lips_at_rest(rest, lip_rest)
+    tongue_sites = tongue_note = None
+    if spec.mode != "cassi" and getattr(recording, "sensors", None) is not None:
+        # an articulograph's tongue sensors: driven where they sit on the tongue
+        tongue_sites, points, tongue_note = _tongue_sensor_sites(
+            model, rest_vertices, track, tracked, scale, dict(recording.sensors.roles))
+        if tongue_sites is not None:
+            have = np.array([x is not None for x in tongue_sites])
+            rest = rest.at[T1:T4 + 1].set(jnp.where(
+                jnp.asarray(have)[:, None], jnp.asarray(np.nan_to_num(points), rest.dtype),
+                rest[T1:T4 + 1]))
     state = SubjectState(
         model=model, scale=scale, first_frame=first, reference_jaw=reference,
         initial_jaw=initial_jaw, conformation=conformation,
         rest_pellets=rest, initial_params=conformation, tracked_pellets=tracked,
         source=source, spec=spec, calibration=calibration, lip_rest=lip_rest,
+        tongue_sites=tongue_sites, tongue_note=tongue_note,
     )  # fmt: skip
     first_params = frame_params(
         state, np.broadcast_to(scale * pellets, (size, 8, 2)), np.zeros(size), np.zeros((size, 2))

@@ -14,7 +14,9 @@ tb td v bn``), mngu0 (``T1 T2 T3 jaw upper_lip lower_lip``), SPARC (``TD TB TT L
 the synthetic EMA corpus, and the usual AG501/Wave lab names (``TT TB TD TR UL LL JAW
 REF NAS LMA RMA OS MS``). Tongue sensors are ordered front to back by their names (tip,
 blade, body, dorsum, rear; or ``t1``..``t4``) and take ``T1`` ... in that order: three
-tongue sensors give ``T1 T2 T3`` and leave ``T4`` without a sensor.
+tongue sensors give ``T1 T2 T3`` and leave ``T4`` without a sensor. A tongue role names a
+sensor's order, not the model's site: where each sits on the tongue is measured from the
+data when the model is fitted (``initialize``, ``SubjectState.tongue_sites``).
 
 A lab's own naming is a TOML file (every table optional; unknown tables or keys are an
 error, so a typo is not silently ignored)::
@@ -115,7 +117,8 @@ BUILTIN_MAPS: dict[str, dict[str, str]] = {
     "sparc": {"UL": "UL", "LL": "LL", "T1": "TT", "T2": "TB", "T3": "TD", "MNI": "LI"},
     "synthetic": {"UL": "UL", "LL": "LL", "T1": "TT", "T2": "TB", "T3": "TD", "T4": "TR",
                   "MNI": "LI", "MNM": "LMOL"},
-    # IPS Munich EMA (EMU bundles): tb is the tongue's BACK sensor, behind tm (middle)
+    # IPS Munich EMA (EMU bundles): tb is the tongue's BACK sensor, behind tm (middle);
+    # on mo1 it lies near the model's T4 site, found from the data (initialize)
     "ips": {"UL": "ul", "LL": "ll", "T1": "tt", "T2": "tm", "T3": "tb", "MNI": "jw"},
 }
 #: ``[file]`` facts of built-in maps: the IPS data are head-corrected, posy toward the
