@@ -33,6 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
+from ._exported import exported
 from .errors import DegenerateGeometryError
 from .face_model import FaceModel
 
@@ -179,10 +180,11 @@ def model_wall_midline(model: FaceModel) -> Float[Array, "h 2"] | None:
     return sheet[:, N_ACROSS // 2, :2]
 
 
-@eqx.filter_jit
+@exported
 def _pharynx_vertices(points):
     """``build_pharynx``'s vertices, compiled once per shape (op by op, its many small
-    operations cost a second or more of dispatch and compilation per subject)."""
+    operations cost a second or more of dispatch and compilation per subject) and
+    exported (:mod:`cassi_fit._exported`: a warm process loads it instead of tracing)."""
     return build_pharynx(points)[0]
 
 
