@@ -242,7 +242,9 @@ def model_arch(model: FaceModel) -> Float[Array, "k 3"] | None:
     index = model.collision.get("upper_lingual_cervical") if model.collision else None
     if index is None or len(index) != 2 * N_STATIONS:
         return None
-    return jnp.asarray(model.vertices)[np.asarray(index)]
+    if isinstance(model.vertices, jax.core.Tracer):
+        return model.vertices[np.asarray(index)]
+    return jax.device_put(np.asarray(model.vertices)[np.asarray(index)])  # no compilation
 
 
 @exported

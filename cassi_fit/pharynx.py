@@ -29,6 +29,7 @@ column runs strictly downward, so the wall is a height field ``x = w(y, z)`` (wh
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
@@ -176,8 +177,11 @@ def model_wall_midline(model: FaceModel) -> Float[Array, "h 2"] | None:
     """The model's wall midline ``(N_HEIGHT, 2)`` (x, y) top to bottom, or None."""
     if not has_pharynx(model):
         return None
-    sheet = front_sheet(model, jnp.asarray(model.vertices))
-    return sheet[:, N_ACROSS // 2, :2]
+    if isinstance(model.vertices, jax.core.Tracer):
+        return front_sheet(model, model.vertices)[:, N_ACROSS // 2, :2]
+    # concrete: picked out in numpy (the same numbers; jnp would compile each indexing)
+    sheet = front_sheet(model, np.asarray(model.vertices))
+    return jax.device_put(np.ascontiguousarray(sheet[:, N_ACROSS // 2, :2]))
 
 
 @exported
@@ -214,5 +218,10 @@ def replace_region(
         raise DegenerateGeometryError(
             f"the model's {region} region has {len(index)} vertices, {builder} makes "
             f"{verts.shape[0]}{why}")
-    new = jnp.asarray(model.vertices).at[index].set(verts.astype(model.vertices.dtype))
+    if isinstance(model.vertices, jax.core.Tracer) or isinstance(verts, jax.core.Tracer):
+        new = jnp.asarray(model.vertices).at[index].set(verts.astype(model.vertices.dtype))
+    else:  # concrete: copied in numpy (the same numbers; jnp compiles each step)
+        new = np.array(model.vertices)
+        new[index] = np.asarray(verts).astype(new.dtype)
+        new = jax.device_put(new)
     return eqx.tree_at(lambda m: m.vertices, model, new)
