@@ -102,6 +102,9 @@ def phases(recording: Path, out: Path) -> None:
     use_compile_cache(default_compile_cache())
     mark("start-up (Python, JAX, imports)")
     warnings.simplefilter("ignore")
+    from cassi_fit.render import prepare_gl
+
+    prepare_gl()  # as cassi animate does: OpenGL readied while it fits and animates
     loaded = load_recording(recording)
     state = initialize(loaded)
     mark("initialize (load, fit the subject)")

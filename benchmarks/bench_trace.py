@@ -11,9 +11,9 @@ The kernels' arguments are those of a real run, kept once by a first process: th
 calibration of subject S01 of a synthetic corpus (two tasks; ``calibrate_residuals``) and
 ``cassi jaw`` with each method on the recording (the real JW11 one when
 ``../shared/data/xrmb_jw11/`` is there, else S01's sentence; ``jaw_fit._kernels``); beside
-them ``frames._geometry_kernel`` at the arguments an ``animate`` of the recording gives it,
-wrapped here as it would be (it is not yet). Every process runs in float64, as ``cassi
-jaw`` does. With ``--docs DIR`` the table is written to ``DIR/bench_trace.md``.
+them ``frames._geometry_kernel`` at the arguments an ``animate`` of the recording gives it
+(its last call: every frame, with the penetration depths measured, not the rest sites'
+call of ``initialize`` before it). Every process runs in float64, as ``cassi jaw`` does. With ``--docs DIR`` the table is written to ``DIR/bench_trace.md``.
 """
 
 from __future__ import annotations
@@ -49,23 +49,15 @@ def _setup():
     return jax
 
 
-def _geometry_kernel():
-    """``frames._geometry_kernel`` wrapped as it would be (``exported(fn)``)."""
-    from cassi_fit import frames
-    from cassi_fit._exported import exported
-
-    return exported(frames._geometry_kernel.__wrapped__)
-
-
 def capture(work: Path, recording: Path | None) -> None:
     """Run the calibration, ``cassi jaw`` with each method and an animation here, keep
-    each exported kernel's first arguments (and ``frames._geometry_kernel``'s) in
-    ``work/args.pkl``."""
+    each exported kernel's first arguments (``frames._geometry_kernel``'s last: the
+    animation's) in ``work/args.pkl``."""
     jax = _setup()
     import equinox as eqx
     import numpy as np
 
-    from cassi_fit import cli, frames, synth
+    from cassi_fit import cli, synth
     from cassi_fit._exported import Exported
     from cassi_fit.calibrate import calibrate_subject
     from cassi_fit.dataset import Dataset
@@ -74,15 +66,13 @@ def capture(work: Path, recording: Path | None) -> None:
     call = Exported.__call__
 
     def keep(self, *args, **kwargs):
-        calls.setdefault(self.name, (args, kwargs))
+        if self.name == "cassi_fit.frames._geometry_kernel":
+            calls[self.name] = (args, kwargs)  # the last: animate's, every frame measured
+        else:
+            calls.setdefault(self.name, (args, kwargs))
         return call(self, *args, **kwargs)
 
-    def keep_geometry(*args, **kwargs):
-        calls.setdefault("cassi_fit.frames._geometry_kernel", (args, kwargs))
-        return geometry(*args, **kwargs)
-
     Exported.__call__ = keep
-    geometry, frames._geometry_kernel = frames._geometry_kernel, keep_geometry
     root = synth.generate_corpus(work / "corpus", n_subjects=1, seed=0,
                                  tasks=("tp106", synth.SENTENCE_TASK))
     ds = Dataset(root)
@@ -119,8 +109,7 @@ def call(work: Path, only: str) -> None:
         if only not in ("all", name):
             continue
         module, attr = name.rsplit(".", 1)
-        kernel = (_geometry_kernel() if attr == "_geometry_kernel"
-                  else getattr(importlib.import_module(module), attr))
+        kernel = getattr(importlib.import_module(module), attr)
         start = time.perf_counter()
         jax.block_until_ready(kernel(*args, **kwargs))
         first = time.perf_counter() - start
@@ -221,8 +210,7 @@ def main(argv=None) -> int:
             best.append(min(times[mode][name][0] for times in rounds))
         run = min(times[mode][name][1] for times in rounds for mode in MODES)
         short = name.removeprefix("cassi_fit.")
-        rows.append((f"`{short}`" + (" (not yet wrapped)" if "frames" in name else ""),
-                     *best, run))
+        rows.append((f"`{short}`", *best, run))
     total = [sum(r[k] for r in rows) for k in (1, 2, 3, 4)]
     rows.append(("all of them", *total))
     source = args.recording.name if args.recording else "synthetic S01 sentence"

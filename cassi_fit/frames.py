@@ -33,6 +33,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Shaped
 
 from . import rigid
+from ._exported import exported
 from .options import COLLISION_MODES, check_choice
 from .pellets import LL, PELLET_NAMES, T1, T4, UL
 
@@ -206,10 +207,12 @@ def frame_params(
     return _batched_params(inputs, scaled, theta, translation)
 
 
-@eqx.filter_jit
+@exported
 def _geometry_kernel(model, params, style, collisions, report):
     """Compiled once per (model topology, frame count, the static options); ``style``:
-    the ``deform.deform`` keywords as a tuple of pairs (hashable)."""
+    the ``deform.deform`` keywords as a tuple of pairs (hashable). Exported
+    (:mod:`cassi_fit._exported`): with the penetration depths measured its trace takes
+    longer than its XLA executable's load from the compilation cache, in every process."""
     from . import collide
     from .deform import deform, model_pellets
 

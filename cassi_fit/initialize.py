@@ -167,7 +167,7 @@ def _scale(model, pellets: Float[np.ndarray, "8 2"], source: str, first: int) ->
     from .deform import model_pellets
 
     d = float(np.linalg.norm(pellets[MNI] - pellets[MNM]))
-    sites = np.asarray(model_pellets(model, model.vertices))
+    sites = model_pellets(model, np.asarray(model.vertices))  # numpy: nothing compiled
     if not d > 0.0:
         raise DegenerateGeometryError(
             f"{source}: MNI and MNM coincide on the first valid line ({first + 1})"
@@ -180,7 +180,7 @@ def _rest_pellets(model, conformation, spec):
     shape, by the batched geometry at its smallest frame bucket (``frame_bucket(1)``): one
     compilation serves every recording, whatever its length (the same in every row)."""
     size = frame_bucket(1)
-    batch = jax.tree.map(lambda x: jnp.broadcast_to(x, (size, *jnp.shape(x))), conformation)
+    batch = jax.tree.map(lambda x: _rows(x, size), conformation)
     vertices, sites = batch_geometry(model, batch, **spec.deform_style)
     return vertices[0], sites[0]
 
@@ -232,6 +232,21 @@ def _tongue_sensor_sites(model, vertices, track, tracked, scale, roles) -> tuple
     return tuple(sites), points, note
 
 
+def _rows(x, size: int) -> jax.Array:
+    """``x`` repeated as ``size`` rows (a leading axis); a concrete array in numpy, which
+    compiles nothing (``jnp.broadcast_to`` compiles a copy per shape)."""
+    if isinstance(x, jax.core.Tracer):
+        return jnp.broadcast_to(x, (size, *jnp.shape(x)))
+    return jax.device_put(np.broadcast_to(np.asarray(x), (size, *np.shape(x))).copy())
+
+
+def _first_row(x) -> jax.Array:
+    """The first row of ``x`` (in numpy when concrete: nothing compiled)."""
+    if isinstance(x, jax.core.Tracer):
+        return x[0]
+    return jax.device_put(np.asarray(x)[0].copy())
+
+
 def _lips_at_rest(rest, offset) -> jax.Array:
     """``rest`` with the UL and LL sites raised by ``offset`` (upper, lower) model mm: the
     lips' vertical rest where the lip pellets sit (a calibration's ``lip_rest_offset``)."""
@@ -256,8 +271,12 @@ def _initial_jaw(rest, reference, tracked) -> tuple:
     first line's scaled jaw pellets ``reference (2, 2)``: the closed form with both; with
     one jaw sensor, the translation of its site onto it (theta 0)."""
     if "MNI" in tracked and "MNM" in tracked:
-        motion = closed_form_frames(rest[jnp.array([MNI, MNM])], reference[None])
-        return motion.theta[0], motion.translation[0]
+        if isinstance(rest, jax.core.Tracer) or isinstance(reference, jax.core.Tracer):
+            motion = closed_form_frames(rest[jnp.array([MNI, MNM])], reference[None])
+        else:  # the inputs picked out in numpy: only the closed form is compiled
+            motion = closed_form_frames(np.asarray(rest)[[MNI, MNM]],
+                                        np.asarray(reference)[None])
+        return _first_row(motion.theta), _first_row(motion.translation)
     k = MNI if "MNI" in tracked else MNM
     return jnp.zeros((), reference.dtype), reference[k - MNI] - rest[k]
 
@@ -357,5 +376,5 @@ def initialize(
     first_params = frame_params(
         state, np.broadcast_to(scale * pellets, (size, 8, 2)), np.zeros(size), np.zeros((size, 2))
     )
-    first_params = jax.tree.map(lambda x: x[0], first_params)
+    first_params = jax.tree.map(_first_row, first_params)
     return eqx.tree_at(lambda s: s.initial_params, state, first_params)

@@ -43,12 +43,12 @@ mm above the hard palate's oral sheet and the velum's thickness behind its oral 
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
+from ._exported import exported
 from .errors import DegenerateGeometryError
 from .face_model import FaceModel
 from .pharynx import concrete_points, replace_region, slab_faces
@@ -242,13 +242,16 @@ def model_arch(model: FaceModel) -> Float[Array, "k 3"] | None:
     index = model.collision.get("upper_lingual_cervical") if model.collision else None
     if index is None or len(index) != 2 * N_STATIONS:
         return None
-    return jnp.asarray(model.vertices)[np.asarray(index)]
+    if isinstance(model.vertices, jax.core.Tracer):
+        return model.vertices[np.asarray(index)]
+    return jax.device_put(np.asarray(model.vertices)[np.asarray(index)])  # no compilation
 
 
-@eqx.filter_jit
+@exported
 def _palate_vertices(outline, arch, wall, **shape):
     """``build_palate``'s vertices, compiled once per shape (op by op, its few hundred
-    small operations cost seconds of dispatch and compilation per subject)."""
+    small operations cost seconds of dispatch and compilation per subject) and exported
+    (:mod:`cassi_fit._exported`: a warm process loads it instead of tracing it again)."""
     return build_palate(outline, arch=arch, wall=wall, **shape)[0]
 
 

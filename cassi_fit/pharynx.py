@@ -29,10 +29,12 @@ column runs strictly downward, so the wall is a height field ``x = w(y, z)`` (wh
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
+from ._exported import exported
 from .errors import DegenerateGeometryError
 from .face_model import FaceModel
 
@@ -175,14 +177,18 @@ def model_wall_midline(model: FaceModel) -> Float[Array, "h 2"] | None:
     """The model's wall midline ``(N_HEIGHT, 2)`` (x, y) top to bottom, or None."""
     if not has_pharynx(model):
         return None
-    sheet = front_sheet(model, jnp.asarray(model.vertices))
-    return sheet[:, N_ACROSS // 2, :2]
+    if isinstance(model.vertices, jax.core.Tracer):
+        return front_sheet(model, model.vertices)[:, N_ACROSS // 2, :2]
+    # concrete: picked out in numpy (the same numbers; jnp would compile each indexing)
+    sheet = front_sheet(model, np.asarray(model.vertices))
+    return jax.device_put(np.ascontiguousarray(sheet[:, N_ACROSS // 2, :2]))
 
 
-@eqx.filter_jit
+@exported
 def _pharynx_vertices(points):
     """``build_pharynx``'s vertices, compiled once per shape (op by op, its many small
-    operations cost a second or more of dispatch and compilation per subject)."""
+    operations cost a second or more of dispatch and compilation per subject) and
+    exported (:mod:`cassi_fit._exported`: a warm process loads it instead of tracing)."""
     return build_pharynx(points)[0]
 
 
@@ -212,5 +218,10 @@ def replace_region(
         raise DegenerateGeometryError(
             f"the model's {region} region has {len(index)} vertices, {builder} makes "
             f"{verts.shape[0]}{why}")
-    new = jnp.asarray(model.vertices).at[index].set(verts.astype(model.vertices.dtype))
+    if isinstance(model.vertices, jax.core.Tracer) or isinstance(verts, jax.core.Tracer):
+        new = jnp.asarray(model.vertices).at[index].set(verts.astype(model.vertices.dtype))
+    else:  # concrete: copied in numpy (the same numbers; jnp compiles each step)
+        new = np.array(model.vertices)
+        new[index] = np.asarray(verts).astype(new.dtype)
+        new = jax.device_put(new)
     return eqx.tree_at(lambda m: m.vertices, model, new)

@@ -194,6 +194,41 @@ def test_importing_render_imports_no_opengl_and_the_choice_comes_first():
     assert done.stdout.split() == ["egl", "egl"]
 
 
+_PREPARED = """
+import hashlib, os, sys, time
+import cassi_fit.render as render
+from cassi_fit.face_model import load_model
+if sys.argv[1] == "prepared":
+    render.prepare_gl()
+    render.prepare_gl()  # once per process
+    time.sleep(0.05)  # the thread under way while this one works
+model = load_model()
+with render.Renderer(model, size=(96, 72)) as renderer:
+    image = renderer.render(model.vertices, caption="x")
+print(render.ensure_headless_gl(), hashlib.sha256(image.tobytes()).hexdigest())
+"""
+
+
+def test_prepare_gl_readies_the_same_renderer_in_the_background():
+    """prepare_gl (what cassi animate calls before fitting and animating) chooses the
+    platform and imports pyrender and OpenGL in a background thread, in a Renderer's
+    order (_draw's error-checking switch after OpenGL: EGL's functions need the checker
+    class): a Renderer made after it draws the same bytes as one made without."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("DISPLAY", "WAYLAND_DISPLAY", "PYOPENGL_PLATFORM")}  # fmt: skip
+    out = []
+    for how in ("prepared", "plain"):
+        done = subprocess.run([sys.executable, "-c", _PREPARED, how], capture_output=True,
+                              text=True, env=env)
+        assert done.returncode == 0, done.stderr
+        out.append(done.stdout.split())
+    assert out[0] == out[1] and out[0][0] == "egl"
+
+
 def test_egl_really_works_here():
     assert render.probe_gl_platform("egl") is None
     assert render.ensure_headless_gl() in render.HEADLESS_PLATFORMS

@@ -132,6 +132,10 @@ def run(args) -> int:
     from cassi_fit._io import check_outputs  # before any work: no input, no clash, no overwrite
 
     check_outputs([out, csv_out], overwrite=args.force)
+    if out.suffix.lower() == ".png" or (args.jobs in (None, 1) and not args.scheduler):
+        from cassi_fit.render import prepare_gl  # drawn here: OpenGL readied meanwhile
+
+        prepare_gl()
     run = run_args(recording, acoustic_only_folder(recording, args))
     state, animation = run.state, run.animation
     from cassi_fit.reports import penetration_summary, tongue_volume_summary, write_penetration_csv

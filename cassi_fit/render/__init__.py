@@ -49,6 +49,7 @@ from ._gl import HEADLESS_PLATFORMS as HEADLESS_PLATFORMS
 from ._gl import choose_gl_platform as choose_gl_platform
 from ._gl import egl_device as egl_device
 from ._gl import ensure_headless_gl as ensure_headless_gl
+from ._gl import prepare_gl as prepare_gl
 from ._gl import probe_gl_platform as probe_gl_platform
 from ._images import add_caption as add_caption
 from ._images import save_png as save_png
@@ -91,6 +92,7 @@ __all__ = [
     "egl_device",
     "midsagittal_figure",
     "ensure_headless_gl",
+    "prepare_gl",
     "hair_share",
     "probe_gl_platform",
     "save_png",

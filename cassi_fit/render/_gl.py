@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import threading
 from collections.abc import Callable, Mapping
 
 from ..errors import RenderingUnavailableError
@@ -24,6 +25,7 @@ HEADLESS_PLATFORMS = ("egl", "osmesa")
 
 _PLATFORM: str | None = None  # the answer of ensure_headless_gl, cached per process
 _DEVICE: dict | None = None  # the EGL device the probe chose: {"device", "file", "renderer"}
+_WARM_UP: threading.Thread | None = None  # prepare_gl's thread, if one was started
 
 # Probes run in a fresh interpreter (PyOpenGL fixes its platform at first import). They
 # create a context the way pyrender will (EGL: the first device's platform display) but
@@ -230,6 +232,9 @@ def ensure_headless_gl() -> str:
     platform works.
     """
     global _PLATFORM
+    warm_up = _WARM_UP
+    if warm_up is not None and warm_up is not threading.current_thread():
+        warm_up.join()  # prepare_gl's choice (or its failure, made again here to be said)
     if _PLATFORM is None:
         platform = choose_gl_platform()
         if (platform == "egl" and _DEVICE is None and os.environ.get("CASSI_EGL_DEVICE")
@@ -244,3 +249,32 @@ def ensure_headless_gl() -> str:
             os.environ["EGL_DEVICE_ID"] = str(_DEVICE["device"])  # read by pyrender
         _PLATFORM = platform
     return _PLATFORM
+
+
+def prepare_gl() -> None:
+    """Start choosing the OpenGL platform (:func:`ensure_headless_gl`: a probe in a
+    subprocess) and importing pyrender, OpenGL and :mod:`cassi_fit.render._draw` (about
+    a second, in the order a Renderer imports them) in a background thread, so that a :class:`~cassi_fit.render.Renderer` made
+    later in this process finds them done: a command that will draw calls it before its
+    other work (fitting, animating), which mostly runs outside Python's lock (XLA) and
+    leaves the time free. Nothing else changes: the same choice, the same modules; a
+    failure here is left for the Renderer's own call to raise (its
+    :func:`ensure_headless_gl` waits for this thread first). Once per process; no-op
+    when the platform is chosen already."""
+    global _WARM_UP
+    if _WARM_UP is not None or _PLATFORM is not None:
+        return
+
+    def work() -> None:
+        try:
+            ensure_headless_gl()
+            # in Renderer._build_scene's order: pyrender (and OpenGL with its error
+            # checking) first, then _draw, which turns the checking off for what follows
+            import pyrender  # noqa: F401
+
+            from . import _draw  # noqa: F401
+        except Exception:  # noqa: BLE001 -- said by the Renderer's own ensure_headless_gl
+            pass
+
+    _WARM_UP = threading.Thread(target=work, name="cassi-prepare-gl", daemon=True)
+    _WARM_UP.start()
