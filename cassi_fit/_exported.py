@@ -142,10 +142,17 @@ class _Entry:
         import jax
 
         self.call = jax.jit(exported.call)
+        self.device = jax.devices()[0]
         self.leaves, self.treedef = jax.tree.flatten(skeleton)
 
     def __call__(self, arrays):
-        outs = self.call(*arrays)
+        import jax
+
+        # every input committed to the one device: jit compiles a computation again for
+        # each mix of committed arrays (a kernel's own outputs, fed back: the calibration's
+        # next stage) and uncommitted ones (made by jnp), although it is the same
+        # computation; that was a second 18 s compilation of the calibration's solver
+        outs = self.call(*jax.device_put(list(arrays), self.device))
         return self.treedef.unflatten(
             [outs[leaf.index] if isinstance(leaf, _Slot) else leaf for leaf in self.leaves])
 
