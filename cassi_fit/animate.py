@@ -25,13 +25,14 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from .dataset import Recording
 from .errors import MissingDataError
 from .frames import batch_geometry, frame_bucket, frame_params, pad_frames, unpad
 from .gaps import bad_values, frame_status, repair
-from .pellets import JAW_INDEX, PELLET_NAMES
+from .pellets import JAW_INDEX, PELLET_NAMES, T1
 
 
 class Animation(eqx.Module):
@@ -40,7 +41,9 @@ class Animation(eqx.Module):
     times ``(m,)`` s; frame_index ``(m,)`` data-line indices; params: a ``FaceParams``
     whose leaves carry a leading ``(m,)`` axis; vertices ``(m, V, 3)`` mm;
     pellets_measured ``(m, 8, 2)`` mm, scaled by ``p / d`` and repaired; pellets_model
-    ``(m, 8, 2)`` mm, where the model puts its pellet sites; repaired ``(m, 8)`` bool;
+    ``(m, 8, 2)`` mm, where the model puts its pellet sites (an articulograph's tongue
+    sensors: the tongue's midline where they sit on it, ``SubjectState.tongue_sites``,
+    so each is drawn and compared beside its own sensor); repaired ``(m, 8)`` bool;
     mistracked ``(m, 8)`` bool; mistrack_reasons ``(m, 8)`` int, the detector's reasons
     (``mistracks.Reason`` bits, 0 where not mistracked); frame_status ``(m,)`` int
     (``status.Status`` values);
@@ -78,6 +81,22 @@ class Animation(eqx.Module):
     def frame_step_s(self) -> float:
         """Seconds between two frames of the animation: ``stride * line_step_s``."""
         return self.stride * self.line_step_s
+
+
+def _sensor_points(state, vertices, sites):
+    """``sites (m, 8, 2)`` with the tongue rows T1..T4 moved, for an articulograph's
+    tongue sensors, to the posed tongue's midline where each sensor sits
+    (``state.tongue_sites``); unchanged for XRMB's pellets and CASSI mode."""
+    arcs = getattr(state, "tongue_sites", None)
+    if arcs is None:
+        return sites
+    from .deform import tongue_points_at
+
+    have = [k for k, x in enumerate(arcs) if x is not None]
+    rows = np.asarray(sites).copy()
+    rows[:, [T1 + k for k in have]] = tongue_points_at(
+        state.model, vertices, [arcs[k] for k in have])
+    return jnp.asarray(rows, jnp.asarray(sites).dtype)
 
 
 def _jaw_sensors(state, spec) -> tuple[str, ...]:
@@ -145,6 +164,7 @@ def animate(state: eqx.Module, recording: Recording, **changes: object) -> Anima
     out = batch_geometry(state.model, params, collisions=spec.collisions, report=report,
                          **spec.deform_style)
     vertices, sites, params = unpad((out[0], out[1], params), m)
+    sites = _sensor_points(state, vertices, sites)
     before, after = ({k: np.asarray(v)[:m] for k, v in d.items()} for d in out[2:]) if report \
         else ({}, {})
     tracked = np.array([name in state.tracked_pellets for name in PELLET_NAMES])

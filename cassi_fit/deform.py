@@ -156,6 +156,24 @@ def tongue_midline(model: FaceModel) -> tuple[Int[np.ndarray, " n"], Int[np.ndar
     return idx, start + station * ring
 
 
+def tongue_points_at(model: FaceModel, vertices: Float[np.ndarray, "*m V 3"],
+                     arc_s: Float[np.ndarray, " k"]) -> Float[np.ndarray, "*m k 2"]:
+    """The tongue's upper midline ``(*m, k, 2)`` mm (x, y) at the arc lengths ``arc_s``
+    (model mm from the tip along the midline, ``fields["tongue_s"]``), in the posed
+    ``vertices`` ``(V, 3)`` or ``(m, V, 3)``: linear between the midline's vertices,
+    the end vertex's beyond either end. Where an articulograph's tongue sensors sit
+    (``SubjectState.tongue_sites``), in every frame as at rest. Numpy, concrete arrays."""
+    s = np.asarray(model.fields["tongue_s"], np.float64)
+    top = np.unique(tongue_midline(model)[1])
+    top = top[np.argsort(s[top])]
+    curve_s = s[top]
+    arc_s = np.clip(np.asarray(arc_s, np.float64), curve_s[0], curve_s[-1])
+    j = np.clip(np.searchsorted(curve_s, arc_s, side="right"), 1, curve_s.size - 1)
+    u = (arc_s - curve_s[j - 1]) / (curve_s[j] - curve_s[j - 1])
+    curve = np.asarray(np.asarray(vertices)[..., top, :2], np.float64)
+    return (1.0 - u)[:, None] * curve[..., j - 1, :] + u[:, None] * curve[..., j, :]
+
+
 def tongue(
     model: FaceModel, v: Float[Array, "V 3"], p: FaceParams, anchor: str = "follow",
     shape: str = "thick", jaw_weights: str = "cassi",

@@ -193,7 +193,7 @@ def _tongue_sensor_sites(model, vertices, track, tracked, scale, roles) -> tuple
     ``note``: one line saying so. The frontmost sensor is taken at its role's site; each
     next one lies its median distance (over the frames tracking both, times ``scale``)
     farther along: the chord, a little less than the arc between them."""
-    from .deform import tongue_midline
+    from .deform import tongue_points_at
 
     names = ("T1", "T2", "T3", "T4")
     have = [k for k, r in enumerate(names) if r in tracked]
@@ -201,9 +201,6 @@ def _tongue_sensor_sites(model, vertices, track, tracked, scale, roles) -> tuple
         return None, None, None
     s = np.asarray(model.fields["tongue_s"], np.float64)
     site_s = np.array([s[model.landmarks[r]] for r in names])
-    top = np.unique(tongue_midline(model)[1])
-    top = top[np.argsort(s[top])]
-    curve_s, curve = s[top], np.asarray(vertices, np.float64)[top, :2]
     pos = np.asarray(track.positions, np.float64)[:, T1:T4 + 1]
     ok = np.asarray(track.valid)[:, T1:T4 + 1].all(-1)
     sites = [None] * 4
@@ -213,8 +210,7 @@ def _tongue_sensor_sites(model, vertices, track, tracked, scale, roles) -> tuple
         sites[b] = sites[a] + scale * float(np.median(np.linalg.norm(
             pos[both, b] - pos[both, a], axis=1)))
     points = np.full((4, 2), np.nan)
-    for k in have:
-        points[k] = [np.interp(sites[k], curve_s, curve[:, i]) for i in range(2)]
+    points[have] = tongue_points_at(model, vertices, [sites[k] for k in have])
     sensor = [roles.get(names[k]) or names[k] for k in have]
     label = [f"{name} ({names[k]})" for name, k in zip(sensor, have, strict=True)]
     where = ", ".join(f"{sites[k]:.1f}" for k in have)

@@ -83,7 +83,8 @@ def _back_sensor_read_as_t3(rec):
 def _t3_site_error(run, truth):
     """Median distance (mm) from the model's T3 site to the hidden true T3 sensor."""
     idx = run.animation.frame_index
-    model_t3 = np.asarray(run.animation.pellets_model)[:, T3] / run.state.scale
+    t3 = run.state.model.landmarks["T3"]
+    model_t3 = np.asarray(run.animation.vertices)[:, t3, :2] / run.state.scale
     err = np.linalg.norm(model_t3 - truth[idx], axis=1)
     return float(np.nanmedian(err))
 
@@ -105,6 +106,24 @@ def test_a_back_sensor_behind_the_t3_site_drives_the_tongue_where_it_sits(mview)
     assert as_pellets.state.tongue_sites is None
     assert _t3_site_error(as_pellets, truth) > 9.0
     assert _t3_site_error(run, truth) < 4.0
+
+
+def test_the_model_point_beside_each_tongue_sensor_is_where_it_sits(mview):
+    """The model's point shown and compared beside the back sensor (``pellets_model``,
+    the overlay's and the viewer's) is the tongue where that sensor sits, not the T3 site
+    its role names, which lies a site in front of it."""
+    rec, _ = _back_sensor_read_as_t3(mview)
+    run = run_recording(rec, stride=STRIDE)
+    anim = run.animation
+    measured = np.asarray(anim.pellets_measured)[:, T3]
+    beside = np.linalg.norm(np.asarray(anim.pellets_model)[:, T3] - measured, axis=1)
+    t3_site = np.asarray(anim.vertices)[:, run.state.model.landmarks["T3"], :2]
+    site_gap = np.linalg.norm(t3_site - measured, axis=1)
+    assert np.nanmedian(beside) < 2.0 and np.nanmedian(site_gap) > 8.0
+    # the tip sensor, taken at its own site, keeps the site
+    np.testing.assert_allclose(
+        np.asarray(anim.pellets_model)[:, T1],
+        np.asarray(anim.vertices)[:, run.state.model.landmarks["T1"], :2], atol=1e-4)
 
 
 def test_cassi_mode_keeps_the_papers_tongue_sites(mview):
