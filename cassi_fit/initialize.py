@@ -228,6 +228,23 @@ def _tongue_sensor_sites(model, vertices, track, tracked, scale, roles) -> tuple
     return tuple(sites), points, note
 
 
+def _tongue_at_sensors(model, spec, recording, rest_vertices, rest, tracked, scale):
+    """``(rest, tongue_sites, tongue_note)``: for an articulograph recording outside
+    CASSI mode, its tongue sensors placed on the model's tongue
+    (:func:`_tongue_sensor_sites`) and the rest sites' T1..T4 rows moved there; else
+    ``rest`` unchanged and None, None (XRMB's pellets are the model's sites)."""
+    if spec.mode == "cassi" or getattr(recording, "sensors", None) is None:
+        return rest, None, None
+    sites, points, note = _tongue_sensor_sites(model, rest_vertices, recording.track,
+                                               tracked, scale, dict(recording.sensors.roles))
+    if sites is not None:
+        have = np.array([x is not None for x in sites])
+        rest = rest.at[T1:T4 + 1].set(jnp.where(
+            jnp.asarray(have)[:, None], jnp.asarray(np.nan_to_num(points), rest.dtype),
+            rest[T1:T4 + 1]))
+    return rest, sites, note
+
+
 def _rows(x, size: int) -> jax.Array:
     """``x`` repeated as ``size`` rows (a leading axis); a concrete array in numpy, which
     compiles nothing (``jnp.broadcast_to`` compiles a copy per shape)."""
@@ -352,16 +369,8 @@ def initialize(
         # an articulograph's lip sensors: the same rest, from this recording's first line
         lip_rest = _first_line_lips(model, spec, rest, initial_jaw, scale * pellets)
         rest = _lips_at_rest(rest, lip_rest)
-    tongue_sites = tongue_note = None
-    if spec.mode != "cassi" and getattr(recording, "sensors", None) is not None:
-        # an articulograph's tongue sensors: driven where they sit on the tongue
-        tongue_sites, points, tongue_note = _tongue_sensor_sites(
-            model, rest_vertices, track, tracked, scale, dict(recording.sensors.roles))
-        if tongue_sites is not None:
-            have = np.array([x is not None for x in tongue_sites])
-            rest = rest.at[T1:T4 + 1].set(jnp.where(
-                jnp.asarray(have)[:, None], jnp.asarray(np.nan_to_num(points), rest.dtype),
-                rest[T1:T4 + 1]))
+    rest, tongue_sites, tongue_note = _tongue_at_sensors(
+        model, spec, recording, rest_vertices, rest, tracked, scale)
     state = SubjectState(
         model=model, scale=scale, first_frame=first, reference_jaw=reference,
         initial_jaw=initial_jaw, conformation=conformation,
