@@ -156,6 +156,13 @@ def tongue_midline(model: FaceModel) -> tuple[Int[np.ndarray, " n"], Int[np.ndar
     return idx, start + station * ring
 
 
+def tongue_site_arcs(model: FaceModel) -> Float[np.ndarray, " 4"]:
+    """The arc lengths ``(4,)`` mm of the tongue sites T1..T4 from the tip along the
+    upper midline (``fields["tongue_s"]`` at their landmarks), float64 numpy."""
+    s = np.asarray(model.fields["tongue_s"], np.float64)
+    return np.array([s[model.landmarks[k]] for k in ("T1", "T2", "T3", "T4")])
+
+
 def tongue_points_at(model: FaceModel, vertices: Float[np.ndarray, "*m V 3"],
                      arc_s: Float[np.ndarray, " k"]) -> Float[np.ndarray, "*m k 2"]:
     """The tongue's upper midline ``(*m, k, 2)`` mm (x, y) at the arc lengths ``arc_s``

@@ -41,7 +41,6 @@ from .pellets import LL, PELLET_NAMES, T1, T4, UL
 # so that recordings of similar length (and different strides) share compiled functions.
 _FRAME_BUCKET = 64
 _COLLISION_BATCH = 32
-_TONGUE_SITES = ("T1", "T2", "T3", "T4")
 
 
 def frame_bucket(m: int) -> int:
@@ -83,17 +82,27 @@ def tongue_fill(tracked: Bool[np.ndarray, " 4"],
     site_s = np.asarray(site_s, float)
     w = np.zeros((4, 4))
     have = np.flatnonzero(tracked)
-    if have.size == 0:
-        return w
-    for k in range(4):
-        before, after = have[have <= k], have[have >= k]
+    if have.size:
+        w[:, have] = _along_the_tongue(site_s, site_s[have])
+    return w
+
+
+def _along_the_tongue(site_s: Float[np.ndarray, " 4"],
+                      sensor_s: Float[np.ndarray, " n"]) -> Float[np.ndarray, "4 n"]:
+    """``(4, n)``: each site's displacement from ``n`` sensors at the arc lengths
+    ``sensor_s`` (increasing), linear in arc length between the two around it, the
+    nearest one's beyond the first or last; a sensor at a site gives it its own."""
+    fill = np.zeros((site_s.size, sensor_s.size))
+    for k in range(site_s.size):
+        before = np.flatnonzero(sensor_s <= site_s[k])
+        after = np.flatnonzero(sensor_s >= site_s[k])
         if before.size and after.size and before[-1] != after[0]:
             i, j = before[-1], after[0]
-            u = (site_s[k] - site_s[i]) / (site_s[j] - site_s[i])
-            w[k, i], w[k, j] = 1.0 - u, u
+            u = (site_s[k] - sensor_s[i]) / (sensor_s[j] - sensor_s[i])
+            fill[k, i], fill[k, j] = 1.0 - u, u
         else:
-            w[k, (before[-1] if before.size else after[0])] = 1.0
-    return w
+            fill[k, before[-1] if before.size else after[0]] = 1.0
+    return fill
 
 
 def tongue_drive(tracked: Bool[np.ndarray, " 4"], site_s: Float[np.ndarray, " 4"],
@@ -122,16 +131,7 @@ def tongue_drive(tracked: Bool[np.ndarray, " 4"], site_s: Float[np.ndarray, " 4"
         return w
     sensor_s = np.asarray(sensor_s, float)[have]
     site_s = np.asarray(site_s, float)
-    fill = np.zeros((4, have.size))
-    for k in range(4):
-        before = np.flatnonzero(sensor_s <= site_s[k])
-        after = np.flatnonzero(sensor_s >= site_s[k])
-        if before.size and after.size and before[-1] != after[0]:
-            i, j = before[-1], after[0]
-            u = (site_s[k] - sensor_s[i]) / (sensor_s[j] - sensor_s[i])
-            fill[k, i], fill[k, j] = 1.0 - u, u
-        else:
-            fill[k, before[-1] if before.size else after[0]] = 1.0
+    fill = _along_the_tongue(site_s, sensor_s)
     basis = np.zeros((have.size, 4))  # the field at the sensors per unit site displacement
     for k in range(4):
         unit = np.zeros((4, 2))
@@ -148,8 +148,9 @@ def _frame_inputs(state: eqx.Module) -> dict:
     model, spec = state.model, state.spec
     tracked = np.array([name in state.tracked_pellets for name in PELLET_NAMES])
     weights = model.jaw_weights[spec.jaw_weights]
-    s = np.asarray(model.fields["tongue_s"])
-    site_s = np.array([s[model.landmarks[k]] for k in _TONGUE_SITES])
+    from .deform import tongue_site_arcs
+
+    site_s = tongue_site_arcs(model)
     sensor_s = getattr(state, "tongue_sites", None)
     if sensor_s is None:  # XRMB's pellets (and CASSI mode): the sensors at the sites
         fill = tongue_fill(tracked[T1 : T4 + 1], site_s)

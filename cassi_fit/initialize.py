@@ -193,14 +193,13 @@ def _tongue_sensor_sites(model, vertices, track, tracked, scale, roles) -> tuple
     ``note``: one line saying so. The frontmost sensor is taken at its role's site; each
     next one lies its median distance (over the frames tracking both, times ``scale``)
     farther along: the chord, a little less than the arc between them."""
-    from .deform import tongue_points_at
+    from .deform import tongue_points_at, tongue_site_arcs
 
     names = ("T1", "T2", "T3", "T4")
     have = [k for k, r in enumerate(names) if r in tracked]
     if not have:
         return None, None, None
-    s = np.asarray(model.fields["tongue_s"], np.float64)
-    site_s = np.array([s[model.landmarks[r]] for r in names])
+    site_s = tongue_site_arcs(model)
     pos = np.asarray(track.positions, np.float64)[:, T1:T4 + 1]
     ok = np.asarray(track.valid)[:, T1:T4 + 1].all(-1)
     sites = [None] * 4
