@@ -8,7 +8,7 @@ import warnings
 
 import numpy as np
 import pytest
-from real_data import EMU_MO1, missing, real_data
+from real_data import EMU_MO1, load_mo1, missing, real_data
 
 from cassi_fit.dataset import load_recording
 from cassi_fit.ema.synthetic import write_ema_corpus
@@ -74,9 +74,6 @@ def test_cassi_mode_keeps_the_papers_lip_sites(mview):
 def test_the_real_ips_speakers_lips_no_longer_cross():
     # before: the lips crossed by 21 mm (95th percentile over the sentence); the lower-lip
     # sensor sits about 23 mm above the model's lower-lip site on the first line
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        rec = load_recording(real_data(EMU_MO1) / "dfgspp_mo1_prosody_0024_bndl.json")
-    run = run_recording(rec, stride=STRIDE)
+    run = run_recording(load_mo1(), stride=STRIDE)
     assert run.state.lip_rest[1] > 15.0
     assert _lips_crossing(run) < 1.0

@@ -12,7 +12,7 @@ import warnings
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from real_data import EMU_MO1, missing, real_data
+from real_data import EMU_MO1, load_mo1, missing, real_data
 
 from cassi_fit.dataset import load_recording
 from cassi_fit.ema.synthetic import write_ema_corpus
@@ -147,10 +147,7 @@ def test_one_tongue_sensor_says_its_place_cannot_be_measured(mview):
 def test_the_real_ips_speakers_back_sensor_no_longer_shuts_the_pharynx():
     # before: tb drove the T3 site, about 14 mm in front of where it lies; the tongue went
     # through the (template's) pharyngeal wall by 14.3 mm at the 95th percentile
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        rec = load_recording(real_data(EMU_MO1) / "dfgspp_mo1_prosody_0024_bndl.json")
-    run = run_recording(rec, stride=STRIDE)
+    run = run_recording(load_mo1(), stride=STRIDE)
     site_s = _site_s(run.state.model)
     assert run.state.tongue_sites[2] > site_s[2] + 8.0  # tb: near T4, not at T3
     assert abs(run.state.tongue_sites[2] - site_s[3]) < 4.0
