@@ -36,19 +36,13 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from shared_data import EMU_MO1, XRMB_JW11, real_data  # noqa: E402
 
 BOOTSTRAP = 2000
 LEVEL = 95
 FORMANTS = ("F1", "F2", "F3")
 METHODS = ("pellets", "calibrated, held out")
 BASELINES = ("uniform tube", "tongue at rest")
-
-
-def _default(*names: str) -> Path | None:
-    for p in (ROOT.parent / "shared" / "data" / names[0], Path("/work/shared/data") / names[0]):
-        if p.is_dir():
-            return p
-    return None
 
 
 def _without_mnm(recording):
@@ -187,8 +181,8 @@ def main(argv=None) -> int:
     from cassi_fit.tables import markdown_text, write_table
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--jw11", type=Path, default=_default("xrmb_jw11"))
-    ap.add_argument("--emu", type=Path, default=_default("emu_ips_mo1"))
+    ap.add_argument("--jw11", type=Path, default=real_data(XRMB_JW11))
+    ap.add_argument("--emu", type=Path, default=real_data(EMU_MO1))
     ap.add_argument("--docs", type=Path, default=ROOT / "docs" / "generated")
     ap.add_argument("--force", action="store_true")
     args = ap.parse_args(argv)

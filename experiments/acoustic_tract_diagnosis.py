@@ -36,6 +36,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from shared_data import EMU_MO1, XRMB_JW11, real_data  # noqa: E402
 
 FRAMES = 60  # JW11 frames analysed (an even subsample of the scored ones)
 PHARYNX_SCALES = (1.0, 0.5, 0.25, 0.12, 0.06)
@@ -177,8 +178,8 @@ def main(argv=None) -> int:
     from cassi_fit.tables import markdown_text
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--jw11", type=Path, default=ref._default("xrmb_jw11"))
-    ap.add_argument("--emu", type=Path, default=ref._default("emu_ips_mo1"))
+    ap.add_argument("--jw11", type=Path, default=real_data(XRMB_JW11))
+    ap.add_argument("--emu", type=Path, default=real_data(EMU_MO1))
     ap.add_argument("--docs", type=Path, default=ROOT / "docs" / "generated")
     ap.add_argument("--force", action="store_true")
     args = ap.parse_args(argv)

@@ -46,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 import subject_rows as sf
+from shared_data import XRMB_JW11, real_data
 
 #: Step budgets at which a stalled stage is shown (the calibration's is 100).
 TRACE_STEPS = (5, 10, 20, 50, 100, 200, 400)
@@ -55,8 +56,7 @@ OUTPUTS = ("calibration_jaw_stage.csv", "calibration_stall.csv", "calibration_lo
 DOC_TABLES = ("calibration_limits.md", "calibration_schema.md")
 JAW_FREE = ("jaw_theta", "log_jaw_scale")
 #: The real recordings' folder used when present (``--real``).
-REAL = next((p for p in (Path(__file__).resolve().parents[k] / "shared/data/xrmb_jw11"
-                         for k in (2, 3)) if p.is_dir()), None)
+REAL = real_data(XRMB_JW11)
 JAW_HEADERS = {"scale": "p/d", "asked_x": "asked x", "once_converged": "once: converged",
                "once_u": "once: u", "once_x_scale": "once: x scale",
                "once_cost_mm2": "once: cost mm^2", "now_converged": "now: converged",

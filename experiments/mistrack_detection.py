@@ -39,10 +39,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from shared_data import JW11_TASK5, XRMB_JW11, real_file
 
-ROOT = Path(__file__).resolve().parents[1]
 SEED = 0
-REAL_DIRS = [p / "shared" / "data" / "xrmb_jw11" for p in ROOT.parents]
 SUBJECTS = 3
 TASKS = ("tp011", "tp020", "tp040", "tp069")
 MARKER_MM = (9.999, 9.999)
@@ -56,12 +55,10 @@ DOCS_NAME = "mistrack_detection.md"
 MAKE_COMMAND = "python experiments/mistrack_detection.py --docs docs/generated --force"
 
 
-def _find_real(candidates) -> Path | None:
-    for folder in candidates:
-        path = Path(folder) / "jw11_tp005.txy"
-        if path.is_file():
-            return path
-    return None
+def _find_real(folder) -> Path | None:
+    """JW11 task 5 in ``folder`` (``--real``), else where ``shared_data`` finds it; None if absent."""
+    path = Path(folder) / JW11_TASK5 if folder else real_file(XRMB_JW11, JW11_TASK5)
+    return path if path is not None and path.is_file() else None
 
 
 # ------------------------------------------------------------------ injections
@@ -349,7 +346,7 @@ def main(argv: list[str] | None = None) -> int:
     synthetic_rows.append(own_row)
     fa_rows = [{"data": f"synthetic, {len(tracks)} recordings", **false_alarms(tracks, detect)},
                {"data": "synthetic with the generator's jumps, not counting them", **own_fa}]
-    real_path = _find_real([args.real] if args.real else REAL_DIRS)
+    real_path = _find_real(args.real)
     real_rows = None
     if real_path is not None:
         real = read_txy(real_path)

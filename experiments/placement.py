@@ -41,9 +41,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from shared_data import EMU_MO1, JW11_TASK5, MO1_BUNDLE, XRMB_JW11, real_data
 
-ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared" / "data"
 COMMAND = "python experiments/placement.py --docs docs/generated"
 
 
@@ -193,14 +192,14 @@ def main(argv=None) -> int:
     parser.add_argument("--speakers", type=int, default=12)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--motions", type=int, default=5)
-    parser.add_argument("--xrmb", default=str(SHARED / "xrmb_jw11"))
-    parser.add_argument("--emu", default=str(SHARED / "emu_ips_mo1" /
-                                             "dfgspp_mo1_prosody_0024_bndl.json"))
+    xrmb, emu = real_data(XRMB_JW11), real_data(EMU_MO1)
+    parser.add_argument("--xrmb", default=str(xrmb or f"../shared/data/{XRMB_JW11}"))
+    parser.add_argument("--emu", default=str((emu or Path(f"../shared/data/{EMU_MO1}")) / MO1_BUNDLE))
     args = parser.parse_args(argv)
     rows = lab_like_rows(args.speakers, args.seed)
     told = lab_like_rows(args.speakers, args.seed, told=True)
     notes = []
-    if (Path(args.xrmb) / "jw11_tp005.txy").is_file():
+    if (Path(args.xrmb) / JW11_TASK5).is_file():
         rows += xrmb_rows(Path(args.xrmb), args.motions)
     else:
         notes.append(f"(the real XRMB recording was not found at {args.xrmb})")

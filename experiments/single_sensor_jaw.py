@@ -37,11 +37,10 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from shared_data import XRMB_JW11, real_data
 
 #: shared/data/xrmb_jw11 in the first folder above the checkout that has it
-REAL_DEFAULT = next((p / "shared" / "data" / "xrmb_jw11" for p in Path(__file__).resolve().parents
-                     if (p / "shared" / "data" / "xrmb_jw11").is_dir()),
-                    Path("../shared/data/xrmb_jw11"))
+REAL_DEFAULT = real_data(XRMB_JW11) or Path("../shared/data/xrmb_jw11")
 TASKS = ("tp011", "tp020", "tp040")  # VCV, words, a sentence: speech
 DURATION_S = 5.0  # one length for every synthetic recording: the fits compile once
 BLOCK_FRAMES = 73  # 0.5 s: neighbouring frames' errors are correlated

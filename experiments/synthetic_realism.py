@@ -34,12 +34,10 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from shared_data import JW11_TASK5, XRMB_JW11, real_file
 
 from cassi_fit.txy import FRAME_STEP_US
 
-ROOT = Path(__file__).resolve().parents[1]
-# the real recording in a "shared" folder beside the checkout or above it
-REALS = [p / "shared" / "data" / "xrmb_jw11" / "jw11_tp005.txy" for p in ROOT.parents]
 TASK = "tp005"
 N_FRAMES = 730  # as the real file
 SEED = 20
@@ -49,10 +47,8 @@ DT = FRAME_STEP_US * 1e-6  # XRMB's frame step, as the real file
 
 
 def real_path() -> Path | None:
-    for path in REALS:
-        if path.is_file():
-            return path
-    return None
+    """The real JW11 task 5 (``shared_data``), or None when it is not on this machine."""
+    return real_file(XRMB_JW11, JW11_TASK5)
 
 
 def _speed_p99(xy: np.ndarray) -> float:

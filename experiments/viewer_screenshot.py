@@ -15,14 +15,15 @@ import argparse
 import tempfile
 from pathlib import Path
 
+from shared_data import JW11_TASK5, XRMB_JW11, real_file
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def default_recording() -> Path:
-    for base in (*ROOT.parents, Path("/work")):  # ../shared beside the checkout, or above
-        candidate = base / "shared/data/xrmb_jw11/jw11_tp005.txy"
-        if candidate.is_file():
-            return candidate
+    real = real_file(XRMB_JW11, JW11_TASK5)  # ../shared beside the checkout, or above
+    if real is not None:
+        return real
     from cassi_fit import synth
 
     return synth.ensure_default_corpus() / "S01" / "TP040.TXY"

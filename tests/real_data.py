@@ -1,25 +1,21 @@
-"""Where the tests find the real recordings (read-only, never copied into the project):
-``shared/data/NAME`` in a folder above the checkout (``../shared/data`` for a checkout
-beside it), or ``$CASSI_REAL_DATA/NAME``. Tests that need one skip with :func:`missing`'s
-line when it is not on the machine."""
+"""Where the tests find the real recordings: the experiments' one rule
+(``experiments/shared_data.py``: ``$CASSI_REAL_DATA/NAME``, else ``shared/data/NAME`` in a
+folder above the checkout), so that a test and the script whose table it checks look at
+the same recording. Tests that need one skip with :func:`missing`'s line when it is not on
+the machine."""
 
 from __future__ import annotations
 
-import os
+import importlib.util
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-XRMB_JW11 = "xrmb_jw11"  # the real XRMB recording (speaker JW11, task 5 among others)
-EMU_MO1 = "emu_ips_mo1"  # the real IPS Munich EMA recording as an EMU-SDMS bundle
-MO1_BUNDLE = "dfgspp_mo1_prosody_0024_bndl.json"  # its one bundle (speaker mo1)
-
-
-def real_data(name: str) -> Path | None:
-    """The folder of the real recording ``name`` (:data:`XRMB_JW11`, :data:`EMU_MO1`), or None."""
-    candidates = [Path(os.environ["CASSI_REAL_DATA"]) / name] if os.environ.get(
-        "CASSI_REAL_DATA") else []
-    candidates += [parent / "shared" / "data" / name for parent in ROOT.parents]
-    return next((p for p in candidates if p.is_dir()), None)
+# the one rule, shared with the experiments (experiments/shared_data.py)
+_spec = importlib.util.spec_from_file_location("shared_data", ROOT / "experiments" / "shared_data.py")
+_shared = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_shared)
+XRMB_JW11, EMU_MO1, MO1_BUNDLE = _shared.XRMB_JW11, _shared.EMU_MO1, _shared.MO1_BUNDLE
+real_data = _shared.real_data
 
 
 def missing(name: str) -> str:
