@@ -15,7 +15,9 @@ speaker (the referee's recordings, read as ``acoustic_referee.py`` reads them).
 2. **What moves JW11's formants**: ``d log F / d log alpha`` per area-rule region
    (``jax.jacfwd`` of the formants in each region's scale, the sections' regions held),
    the mean over the scored frames: the regions whose width the formants depend on.
-3. **EMU mo1 by vowel quality** (IPS Munich, one sentence, no palate or wall trace): the
+3. **EMU mo1 by vowel quality** (IPS Munich, one sentence, no palate or wall trace: the
+   palate from its tongue sensors' upper envelope, ``palate.envelope_palate``, said in a
+   line below the table; the default wall): the
    median signed F1-F3 errors per quality, front vowels first, the share of frames
    whose narrowest pharyngeal section is at most ``CLOSED_MM2`` (a pharynx pressed shut),
    and the model's lip opening (the upper lip's lowest midsagittal point above the lower
@@ -207,8 +209,9 @@ def main(argv=None) -> int:
         print("JW11 done", flush=True)
     if args.emu:
         run, result = ref.run_emu(args.emu)
-        text += ["## EMU mo1 (IPS Munich, one jaw sensor, default palate and wall): by vowel "
-                 "quality", "", markdown_text(emu_rows(result), digits=1), "",
+        text += ["## EMU mo1 (IPS Munich, one jaw sensor, palate from the tongue sensors, "
+                 "default wall): by vowel quality", "", markdown_text(emu_rows(result), digits=1),
+                 "", f"The {run.state.palate_note}.", "",
                  f"Its upper-lip sensor lies {_lip_sensors(run):.1f} mm above its lower-lip "
                  "sensor (median over the recording); the model's lips are fitted to XRMB's "
                  "UL and LL pellet sites.", ""]
