@@ -24,7 +24,8 @@ speaker (the referee's recordings, read as ``acoustic_referee.py`` reads them).
    lip's highest: negative where the lips cross) and incisor opening (mm, medians).
    JW11's /a/ has both given in a line below table 1 for comparison, with its wall's
    distance behind the template's; a line below table 3 gives mo1's upper-lip sensor's
-   height above its lower-lip sensor, and the one below table 1 JW11's UL above its LL.
+   height above its lower-lip sensor and the model's lip opening in its bilabial closures
+   /p b m/ (where the lips touch), and the one below table 1 JW11's UL above its LL.
 """
 
 from __future__ import annotations
@@ -155,6 +156,20 @@ def _openings(result) -> str:
             f"{np.median(jaw) / result.scale:.1f} mm apart.")
 
 
+def _bilabials(result) -> str:
+    """The model's lip opening in the recording's bilabial closures /p b m/ (where the lips
+    touch), in words: a check on the lips' rest that no formant enters."""
+    v, g = np.asarray(result.vertices), result.geometry
+    lips = (v[:, np.asarray(g.upper[1:]), 1].min(1) - v[:, np.asarray(g.lower[1:]), 1].max(1))
+    m = np.isin(np.asarray([str(s) for s in result.labels]), ("p", "b", "m"))
+    if not m.any():
+        return "No bilabial closure /p b m/ is labelled."
+    mm = lips[m] / result.scale
+    return (f"In its bilabial closures /p b m/ ({int(m.sum())} frames), where the lips touch, "
+            f"the model's lips are {np.median(mm):.1f} mm apart (median; least "
+            f"{np.min(mm):.1f} mm).")
+
+
 def _lip_sensors(run) -> float:
     """The recording's upper-lip sensor above its lower-lip sensor (mm, median over the
     frames where both are tracked, the recording's own frame)."""
@@ -214,7 +229,7 @@ def main(argv=None) -> int:
                  "", f"The {run.state.palate_note}.", "",
                  f"Its upper-lip sensor lies {_lip_sensors(run):.1f} mm above its lower-lip "
                  "sensor (median over the recording); the model's lips are fitted to XRMB's "
-                 "UL and LL pellet sites.", ""]
+                 "UL and LL pellet sites. " + _bilabials(result), ""]
     args.docs.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(text))
     print(out)
