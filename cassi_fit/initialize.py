@@ -18,7 +18,9 @@ Paper section 2; :func:`initialize`:
 4. the pharyngeal wall from the scaled PHA.DAT (``pharynx.with_pharynx``; the model's
    default wall if absent), then the palate from the scaled PAL.DAT (``palate.with_palate``,
    joined to the model's upper teeth, its velum in front of the wall; the model's own
-   centreline if absent);
+   centreline if absent, except for an articulograph recording outside CASSI mode: the
+   default centreline's heights scaled to its tongue sensors' upper envelope,
+   ``palate.envelope_palate``, said by ``cassi animate``);
 5. the jaw's shape from the scaled Headmeasures gonion and gnathion against the model's
    gonion and gnathion, by the same closed form (``conformation.jaw_shape``);
 6. beyond the paper (its future work): face and mouth width from Headmeasures, lip
@@ -87,7 +89,9 @@ class SubjectState(eqx.Module):
     tongue's tip along its upper midline) at which its T1..T4 sensors sit (None for a
     role no sensor plays), their ``rest_pellets`` rows the rest tongue's points there;
     else None (the sensors are the model's sites, as XRMB's pellets); tongue_note: the
-    line saying where they were placed and what could not be measured.
+    line saying where they were placed and what could not be measured. palate_note: the
+    line saying the palate was estimated from the tongue sensors' upper envelope (step 4),
+    else None.
     """
 
     model: eqx.Module
@@ -105,6 +109,7 @@ class SubjectState(eqx.Module):
     lip_rest: tuple | None = eqx.field(static=True, default=None)
     tongue_sites: tuple | None = eqx.field(static=True, default=None)
     tongue_note: str | None = eqx.field(static=True, default=None)
+    palate_note: str | None = eqx.field(static=True, default=None)
 
     @property
     def calibration_problems(self) -> tuple[str, ...]:
@@ -129,6 +134,8 @@ class SubjectState(eqx.Module):
                     "microbeam pellets the model's sites stand for)",)
         if self.tongue_note is not None:
             out += (self.tongue_note,)
+        if self.palate_note is not None:
+            out += (self.palate_note,)
         return out
 
     @property
@@ -293,19 +300,27 @@ def _initial_jaw(rest, reference, tracked) -> tuple:
     return jnp.zeros((), reference.dtype), reference[k - MNI] - rest[k]
 
 
-def _subject_model(model, recording, scale):
-    """The face model with the subject's pharyngeal wall and palate (steps 4)."""
-    from .palate import DEFAULT_OUTLINE, with_palate
+def _subject_model(model, recording, scale, spec):
+    """``(model, palate_note)``: the face model with the subject's pharyngeal wall and
+    palate (step 4); for an articulograph recording without a palate trace outside CASSI
+    mode, the palate from its tongue sensors' upper envelope and the line saying so
+    (``palate.envelope_palate``), else None."""
+    from .palate import DEFAULT_OUTLINE, envelope_palate, with_palate
     from .pharynx import has_pharynx, with_pharynx
 
     pharynx = getattr(recording, "pharynx", None)
     if pharynx is not None and has_pharynx(model):
         model = with_pharynx(model, scale * np.asarray(pharynx, np.float64))
     if recording.palate is not None:
-        model = with_palate(model, scale * np.asarray(recording.palate, np.float64))
-    elif pharynx is not None and has_pharynx(model):  # the velum in front of this wall
+        return with_palate(model, scale * np.asarray(recording.palate, np.float64)), None
+    sensors = getattr(recording, "sensors", None)
+    found = None if spec.mode == "cassi" or sensors is None else envelope_palate(
+        recording.track, dict(sensors.roles), scale)
+    if found is not None:
+        return with_palate(model, found[0]), found[1]
+    if pharynx is not None and has_pharynx(model):  # the velum in front of this wall
         model = with_palate(model, DEFAULT_OUTLINE)
-    return model
+    return model, None
 
 
 def initialize(
@@ -349,7 +364,7 @@ def initialize(
         scale = float(fitted.scale)
     else:  # one jaw sensor: no p / d; the data are in mm (module docstring, step 2)
         scale = _scale(model, pellets, source, first) if both else 1.0
-    model = _subject_model(model, recording, scale)
+    model, palate_note = _subject_model(model, recording, scale, spec)
     if fitted is not None:
         conformation = fitted.face_params(jnp.asarray(model.vertices).dtype)
     else:
@@ -375,7 +390,7 @@ def initialize(
         initial_jaw=initial_jaw, conformation=conformation,
         rest_pellets=rest, initial_params=conformation, tracked_pellets=tracked,
         source=source, spec=spec, calibration=calibration, lip_rest=lip_rest,
-        tongue_sites=tongue_sites, tongue_note=tongue_note,
+        tongue_sites=tongue_sites, tongue_note=tongue_note, palate_note=palate_note,
     )  # fmt: skip
     first_params = frame_params(
         state, np.broadcast_to(scale * pellets, (size, 8, 2)), np.zeros(size), np.zeros((size, 2))

@@ -33,6 +33,22 @@ Maxillofac Res 2017;8(3):e4), and in speech the velum rises against the wall for
 oral sound; a subject whose velum would reach the wall gets one that hangs down along it,
 a narrow port open.
 
+**A palate from the tongue's upper envelope** (:func:`envelope_palate`). An articulograph
+recording rarely comes with a palate trace (EMA labs trace one with a sensor, but not every
+corpus ships it), and the default centreline, placed in a frame estimated without a
+reference sensor, need not be the speaker's: the real IPS speaker mo1's tongue sensors
+never come within 6.5 mm of it, even in /d n l k/ closures and the tongue at rest before
+speaking, so the model's close vowels had no palatal constriction (docs/ACOUSTICS.md). A
+tongue sensor never passes above the palate, and the tongue reaches the palate's midline in
+the closures of /t d n l k g/ and, for most speakers, at rest: the sensors' highest
+positions over the recording bound the palate from below and touch it. The estimate is the
+default centreline with its heights above the occlusal plane scaled by one factor, the least
+that leaves every tracked tongue sensor on or below it (``max y / h(x)`` over the sensor
+positions within the palate's extent along x, ``h`` the default's height there): speakers'
+hard palates differ mostly in how high the dome rises, a shape the few sensors could not
+trace point by point. No constant is fitted to the sound. XRMB's ``PAL.DAT`` is always
+preferred; CASSI mode keeps the default (the paper's choice).
+
 The mesh has a fixed vertex and face count whatever the outline's point count. Vertex
 layout: ``[oral sheet (N_ALONG, N_ACROSS), nasal sheet (N_ALONG, N_ACROSS)]`` flattened
 row-major, rows front to back (``N_HARD`` hard-palate rows, then ``N_VELUM`` velum rows),
@@ -268,3 +284,46 @@ def with_palate(
                              model_arch(model), model_wall_midline(model), **shape)
     return replace_region(model, "palate", verts, "build_palate",
                           ": the model was not built with cassi_fit.palate")
+
+
+def envelope_factor(points: Float[np.ndarray, "n 2"],
+                    outline: Float[np.ndarray, "k 2"] = DEFAULT_OUTLINE) -> tuple[float, int] | None:
+    """``(factor, index)``: the least factor by which ``outline``'s heights (model mm, front
+    to back) are scaled so that no point of ``points (n, 2)`` (model mm, NaN rows ignored)
+    within the outline's extent along x lies above it, and the index of the point that then
+    touches it (module docstring, *a palate from the tongue's upper envelope*); None when no
+    point lies under the outline or the outline is not above the occlusal plane there."""
+    outline = np.asarray(outline, np.float64)
+    xs = np.minimum.accumulate(outline[:, 0])  # front to back, x non-increasing
+    p = np.asarray(points, np.float64).reshape(-1, 2)
+    under = np.isfinite(p).all(1) & (p[:, 0] <= xs[0]) & (p[:, 0] >= xs[-1])
+    h = np.interp(-p[:, 0], -xs, outline[:, 1])
+    under &= h > 0
+    if not under.any():
+        return None
+    ratio = np.where(under, p[:, 1] / np.where(under, h, 1.0), -np.inf)
+    k = int(np.argmax(ratio))
+    return float(ratio[k]), k
+
+
+def envelope_palate(track, roles: dict, scale: float) -> tuple[np.ndarray, str] | None:
+    """``(outline (k, 2) model mm, note)``: the palate of a recording without a palate trace
+    from its tongue sensors' upper envelope (:func:`envelope_factor` on the default
+    centreline; ``track`` a :class:`~cassi_fit.txy.PelletTrack` in subject mm, ``scale``
+    model mm per subject mm, ``roles`` the sensor name of each pellet role for the note),
+    or None without a tracked tongue sensor under the palate."""
+    from .pellets import PELLET_NAMES, T1, T4
+
+    pos = scale * np.asarray(track.positions, np.float64)[:, T1:T4 + 1]
+    valid = np.asarray(track.valid)[:, T1:T4 + 1]
+    pos = np.where((valid.all(-1) if valid.ndim == 3 else valid)[..., None], pos, np.nan)
+    found = envelope_factor(pos.reshape(-1, 2))
+    if found is None:
+        return None
+    factor, k = found
+    frame, role = divmod(k, T4 - T1 + 1)
+    name = roles.get(PELLET_NAMES[T1 + role]) or PELLET_NAMES[T1 + role]
+    note = ("palate estimated from the tongue sensors' upper envelope: no palate trace (the "
+            f"default palate's heights x{factor:.2f}, the least that no tongue sensor passes "
+            f"above; {name} touches it at {float(track.times[frame]):.2f} s)")
+    return DEFAULT_OUTLINE * np.array([1.0, factor]), note

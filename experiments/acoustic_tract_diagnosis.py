@@ -15,14 +15,17 @@ speaker (the referee's recordings, read as ``acoustic_referee.py`` reads them).
 2. **What moves JW11's formants**: ``d log F / d log alpha`` per area-rule region
    (``jax.jacfwd`` of the formants in each region's scale, the sections' regions held),
    the mean over the scored frames: the regions whose width the formants depend on.
-3. **EMU mo1 by vowel quality** (IPS Munich, one sentence, no palate or wall trace): the
+3. **EMU mo1 by vowel quality** (IPS Munich, one sentence, no palate or wall trace: the
+   palate from its tongue sensors' upper envelope, ``palate.envelope_palate``, said in a
+   line below the table; the default wall): the
    median signed F1-F3 errors per quality, front vowels first, the share of frames
    whose narrowest pharyngeal section is at most ``CLOSED_MM2`` (a pharynx pressed shut),
    and the model's lip opening (the upper lip's lowest midsagittal point above the lower
    lip's highest: negative where the lips cross) and incisor opening (mm, medians).
    JW11's /a/ has both given in a line below table 1 for comparison, with its wall's
    distance behind the template's; a line below table 3 gives mo1's upper-lip sensor's
-   height above its lower-lip sensor, and the one below table 1 JW11's UL above its LL.
+   height above its lower-lip sensor and the model's lip opening in its bilabial closures
+   /p b m/ (where the lips touch), and the one below table 1 JW11's UL above its LL.
 """
 
 from __future__ import annotations
@@ -154,6 +157,20 @@ def _openings(result) -> str:
             f"{np.median(jaw) / result.scale:.1f} mm apart.")
 
 
+def _bilabials(result) -> str:
+    """The model's lip opening in the recording's bilabial closures /p b m/ (where the lips
+    touch), in words: a check on the lips' rest that no formant enters."""
+    v, g = np.asarray(result.vertices), result.geometry
+    lips = (v[:, np.asarray(g.upper[1:]), 1].min(1) - v[:, np.asarray(g.lower[1:]), 1].max(1))
+    m = np.isin(np.asarray([str(s) for s in result.labels]), ("p", "b", "m"))
+    if not m.any():
+        return "No bilabial closure /p b m/ is labelled."
+    mm = lips[m] / result.scale
+    return (f"In its bilabial closures /p b m/ ({int(m.sum())} frames), where the lips touch, "
+            f"the model's lips are {np.median(mm):.1f} mm apart (median; least "
+            f"{np.min(mm):.1f} mm).")
+
+
 def _lip_sensors(run) -> float:
     """The recording's upper-lip sensor above its lower-lip sensor (mm, median over the
     frames where both are tracked, the recording's own frame)."""
@@ -208,11 +225,12 @@ def main(argv=None) -> int:
         print("JW11 done", flush=True)
     if args.emu:
         run, result = ref.run_emu(args.emu)
-        text += ["## EMU mo1 (IPS Munich, one jaw sensor, default palate and wall): by vowel "
-                 "quality", "", markdown_text(emu_rows(result), digits=1), "",
+        text += ["## EMU mo1 (IPS Munich, one jaw sensor, palate from the tongue sensors, "
+                 "default wall): by vowel quality", "", markdown_text(emu_rows(result), digits=1),
+                 "", f"The {run.state.palate_note}.", "",
                  f"Its upper-lip sensor lies {_lip_sensors(run):.1f} mm above its lower-lip "
                  "sensor (median over the recording); the model's lips are fitted to XRMB's "
-                 "UL and LL pellet sites.", ""]
+                 "UL and LL pellet sites. " + _bilabials(result), ""]
     args.docs.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(text))
     print(out)
