@@ -311,12 +311,15 @@ def envelope_palate(track, roles: dict, scale: float) -> tuple[np.ndarray, str] 
     from its tongue sensors' upper envelope (:func:`envelope_factor` on the default
     centreline; ``track`` a :class:`~cassi_fit.txy.PelletTrack` in subject mm, ``scale``
     model mm per subject mm, ``roles`` the sensor name of each pellet role for the note),
-    or None without a tracked tongue sensor under the palate."""
+    or None without a tracked tongue sensor under the palate. Untracked and mistracked
+    values (``gaps.bad_values``) are not used."""
+    from .gaps import bad_values
     from .pellets import PELLET_NAMES, T1, T4
 
     pos = scale * np.asarray(track.positions, np.float64)[:, T1:T4 + 1]
-    valid = np.asarray(track.valid)[:, T1:T4 + 1]
-    pos = np.where((valid.all(-1) if valid.ndim == 3 else valid)[..., None], pos, np.nan)
+    untracked, mistracked = bad_values(track)  # a spike must not lift the palate
+    good = ~(untracked | mistracked)[:, T1:T4 + 1]
+    pos = np.where(good[..., None], pos, np.nan)
     found = envelope_factor(pos.reshape(-1, 2))
     if found is None:
         return None

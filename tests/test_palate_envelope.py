@@ -88,6 +88,17 @@ def test_the_palate_rests_on_the_tongue_sensors_upper_envelope(mview):
     assert np.median(off(state)) <= np.median(off(default))
 
 
+def test_a_mistracked_spike_does_not_lift_the_palate(mview):
+    rec = dataclasses.replace(mview, palate=None)
+    clean = run_recording(rec, stages=("initialize",)).state
+    positions = np.array(rec.track.positions, np.float64)
+    positions[200, T1 + 1, 1] += 25.0  # one line's T2 flies 25 mm up, into the skull
+    spiked = dataclasses.replace(rec, track=dataclasses.replace(rec.track, positions=positions))
+    state = run_recording(spiked, stages=("initialize",)).state
+    assert state.palate_note == clean.palate_note
+    np.testing.assert_array_equal(_midline(state), _midline(clean))
+
+
 @pytest.mark.skipif(real_data(EMU_MO1) is None, reason=missing(EMU_MO1))
 def test_the_real_ips_speakers_palate_comes_down_to_his_tongue():
     # before: the default palate, 6.5 mm above the highest tongue sensor (tm at rest), 7.8
