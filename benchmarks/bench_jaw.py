@@ -225,7 +225,7 @@ def _jax_solve(solver, n_steps=False):
     def one(reference, current, y0):
         if n_steps:  # the same solve, asked for its step count (optimistix solvers only)
             rtol, atol = solver.tolerances(y0.dtype)
-            inner = solver._kinds[1](rtol=rtol, atol=atol)
+            inner = solver.kinds()[1](rtol=rtol, atol=atol)
             sol = optx.least_squares(scaled_rigid_residuals, inner, scale(y0, reference),
                                      (reference, current), max_steps=solver.max_steps,
                                      throw=False)

@@ -10,6 +10,18 @@ serialized with ``jax.export``; a later process deserializes it and calls it, un
 The results are those of ``eqx.filter_jit`` to the bit (the same computation, compiled by
 the same XLA).
 
+An entry holds the compiled executable too (``jax.experimental.serialize_executable``), so
+a warm process neither traces nor lowers the kernel, nor hashes its module for JAX's cache:
+it loads the machine code (``jax.jit(exported.call)`` lowered the exported module again in
+every process, 0.3 s a kernel). Executables are keyed by this machine's processor too (its
+instruction set flags); an entry whose executable cannot be loaded here is called through
+its exported computation instead. A computation that calls LAPACK (``jnp.linalg`` on the
+CPU) readies JAX's LAPACK kernels before its executable is loaded, as lowering it would
+(without that the loaded executable would call uninitialized kernels). An executable that
+JAX's compilation cache answered with is not stored (see :func:`_compile`): after a change
+of the code that leaves a kernel's computation as it was, that kernel is lowered again in
+every process until the compilation cache folder is emptied.
+
 An entry is keyed by the function's qualified name, a digest of the cassi_fit package's
 source files (any change of the code invalidates every entry), the versions of JAX and of
 the libraries the kernels trace through, the platform, the JAX settings that change a
@@ -63,7 +75,7 @@ SUBFOLDER = "exported"
 #: The file name ending of an entry.
 SUFFIX = ".exported"
 #: Changes when an entry's content changes form.
-_FORMAT = 1
+_FORMAT = 2
 #: The libraries whose code a kernel's tracing runs through (their versions are keyed).
 _TRACED_LIBRARIES = ("jax", "jaxlib", "equinox", "optimistix", "lineax", "jaxopt")
 #: The JAX settings that change what a trace makes, or whether it fails (keyed).
@@ -119,7 +131,24 @@ def _fingerprint() -> bytes:
         except metadata.PackageNotFoundError:
             version = "-"
         h.update(f"{name} {version}\n".encode())
+    h.update(_processor().encode())
     return h.digest()
+
+
+def _processor() -> str:
+    """This machine's processor as its executables depend on it: the architecture and the
+    instruction set flags (Linux's ``/proc/cpuinfo``; elsewhere the platform's name)."""
+    import platform
+
+    text = f"{platform.machine()} {platform.processor()}"
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith(("flags", "Features", "isa")):
+                    return f"{text} {line.split(':', 1)[-1].strip()}"
+    except OSError:
+        pass
+    return text
 
 
 class _Slot:
@@ -136,12 +165,14 @@ class _Slot:
 
 
 class _Entry:
-    """One exported computation, ready to call: ``(arrays) -> outputs``."""
+    """One exported computation, ready to call: ``(arrays) -> outputs``. ``call`` is its
+    compiled executable (loaded, or compiled by this process), else ``jax.jit`` of the
+    exported computation."""
 
-    def __init__(self, exported, skeleton):
+    def __init__(self, call, skeleton):
         import jax
 
-        self.call = jax.jit(exported.call)
+        self.call = call
         self.device = jax.devices()[0]
         self.leaves, self.treedef = jax.tree.flatten(skeleton)
 
@@ -155,6 +186,56 @@ class _Entry:
         outs = self.call(*jax.device_put(list(arrays), self.device))
         return self.treedef.unflatten(
             [outs[leaf.index] if isinstance(leaf, _Slot) else leaf for leaf in self.leaves])
+
+
+def _compile(exported, avals):
+    """``(compiled, serialized executable or None)``: the exported computation compiled for
+    the one device. JAX's compilation cache may answer for the compiling; an executable
+    it loaded is not stored (XLA's CPU client serializes such an executable without its
+    machine code: loaded again, it fails to find its functions), so that entry is called
+    through its exported computation."""
+    import jax
+
+    specs = [jax.ShapeDtypeStruct(s, d, weak_type=w) for s, d, w in avals]
+    hits = []
+
+    def listen(event, **kwargs):
+        if event == "/jax/compilation_cache/cache_hits":
+            hits.append(event)
+
+    jax.monitoring.register_event_listener(listen)
+    try:
+        compiled = jax.jit(exported.call).lower(*specs).compile()
+    finally:
+        jax.monitoring.unregister_event_listener(listen)
+    if hits:
+        return compiled, None
+    try:
+        from jax.experimental import serialize_executable
+
+        return compiled, serialize_executable.serialize(compiled)
+    except Exception:  # a backend that cannot serialize executables: the exported form
+        return compiled, None
+
+
+def _calls_lapack(exported) -> bool:
+    """Whether the computation calls JAX's LAPACK kernels (custom calls ``lapack_...``)."""
+    return "lapack_" in exported.mlir_module()
+
+
+def _load(executable, lapack: bool):
+    """The stored executable loaded on this process's one device, or None."""
+    import jax
+    from jax.experimental import serialize_executable
+
+    if lapack:  # as lowering a LAPACK call does: its kernels' BLAS/LAPACK functions found
+        from jax._src.lax.linalg import initialize_lapack
+
+        initialize_lapack()
+    payload, in_tree, out_tree = executable
+    device = jax.devices()[0]
+    return serialize_executable.deserialize_and_load(
+        payload, in_tree, out_tree, backend=device.client, execution_devices=[device])
 
 
 class Exported:
@@ -212,11 +293,12 @@ class Exported:
             return entry
         try:
             exported, skeleton = self._trace(in_tree, avals, static)
+            compiled, executable = _compile(exported, avals)
         except Exception:  # eqx.filter_jit then traces it (and raises what it raises)
             return None
         self.traces += 1
-        _write(path, digest, exported, skeleton)
-        return _Entry(exported, skeleton)
+        _write(path, digest, exported, skeleton, executable)
+        return _Entry(compiled, skeleton)
 
     def _digest(self, in_tree, avals, static) -> str:
         import jax
@@ -271,10 +353,20 @@ def _read(path: Path, digest: str) -> _Entry | None:
 
     try:
         with open(path, "rb") as fh:
-            form, stored, skeleton, blob = pickle.load(fh)
+            form, stored, skeleton, blob, executable, lapack = pickle.load(fh)
         if form != _FORMAT or stored != digest:
             return None
-        entry = _Entry(export.deserialize(bytearray(blob)), skeleton)
+        call = None
+        if executable is not None:
+            try:
+                call = _load(executable, lapack)
+            except Exception:  # not loadable here: the exported computation, compiled
+                call = None
+        if call is None:
+            import jax
+
+            call = jax.jit(export.deserialize(bytearray(blob)).call)
+        entry = _Entry(call, skeleton)
     except Exception:  # a broken entry is traced again and replaced
         return None
     try:
@@ -284,13 +376,14 @@ def _read(path: Path, digest: str) -> _Entry | None:
     return entry
 
 
-def _write(path: Path, digest: str, exported, skeleton) -> None:
+def _write(path: Path, digest: str, exported, skeleton, executable) -> None:
     """Store an entry (whole or not at all); a folder that cannot be written is left."""
     from ._io import atomic_write
     from .errors import CassiError
 
     try:
-        content = pickle.dumps((_FORMAT, digest, skeleton, exported.serialize()), protocol=4)
+        content = pickle.dumps((_FORMAT, digest, skeleton, exported.serialize(), executable,
+                                _calls_lapack(exported)), protocol=4)
     except Exception:  # an output that does not pickle, a computation JAX cannot serialize
         return
     try:

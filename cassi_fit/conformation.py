@@ -30,6 +30,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from . import rigid
+from ._exported import exported
 from .dataset import Recording
 from .deform import FaceParams, default_params
 from .face_model import FaceModel
@@ -48,7 +49,6 @@ def with_values(params: FaceParams, values: dict) -> FaceParams:
                        tuple(values[k] for k in names))
 
 
-@jax.jit
 def lips_ahead(
     rest_jaw: Float[Array, "2 2"], tip: Float[Array, " 2"], pellets: Float[Array, "8 2"], s: float | Float[Array, ""]
 ) -> tuple[Float[Array, ""], Float[Array, ""]]:
@@ -57,7 +57,14 @@ def lips_ahead(
     ahead of the lower incisor tip along the jaw line (MNM -> MNI). ``pellets (8, 2)``
     subject mm, ``s`` the scale; the lower tip is the model's (``tip (2,)``), placed on
     the line's jaw pellets by the paper's closed form (Eqs 1-3, 6-7) from the model's jaw
-    sites ``rest_jaw (2, 2)`` [MNI, MNM]."""
+    sites ``rest_jaw (2, 2)`` [MNI, MNM]. Exported (:mod:`cassi_fit._exported`): a new
+    process loads it; ``s`` is passed as an array (a number as ``jax.jit`` takes it: weakly
+    typed), never as a constant of the computation."""
+    return _lips_ahead(rest_jaw, tip, pellets, jnp.asarray(s))
+
+
+@exported
+def _lips_ahead(rest_jaw, tip, pellets, s):
     dtype = pellets.dtype
     motion = closed_form(rest_jaw.astype(dtype), s * pellets[jnp.array([MNI, MNM])])
     tip_here = rigid.apply(motion.theta, motion.translation, tip.astype(dtype))

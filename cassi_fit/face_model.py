@@ -16,6 +16,8 @@ import csv
 import dataclasses
 import hashlib
 import importlib.resources
+import io
+import warnings
 from pathlib import Path
 
 import equinox as eqx
@@ -171,30 +173,47 @@ def default_model_dir() -> Path:
     return root
 
 
-def _read_table(path: Path, columns) -> np.ndarray:
-    """A CSV with a header naming at least ``columns``; returns float rows (n, len(columns))."""
+def _read_table(path: Path, columns, optional=()) -> tuple[np.ndarray, list[str]]:
+    """A CSV with a header naming at least ``columns``, read once: ``(rows, found)``, the
+    float rows (n, len(columns) + len(found)) of ``columns`` followed by the ``optional``
+    columns the header names (``found``, in the order of ``optional``)."""
     if not path.exists():
         raise MissingDataError(f"{path}: model file not found")
     register_input(path)
     with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.reader(fh)
-        header = [h.strip() for h in next(reader, [])]
-        missing = [c for c in columns if c not in header]
-        if missing:
-            raise DataFormatError(path, 1, f"header lacks column(s) {', '.join(missing)}")
-        pick = [header.index(c) for c in columns]
-        rows = []
-        for line, row in enumerate(reader, start=2):
-            if not row or all(not c.strip() for c in row):
-                continue
-            try:
-                values = [float(row[k]) for k in pick]
-            except (ValueError, IndexError):
-                raise DataFormatError(
-                    path, line, f"expected {len(header)} numbers, got {row!r}") from None
-            if not np.all(np.isfinite(values)):
-                raise DataFormatError(path, line, "non-finite value")
-            rows.append(values)
+        text = fh.read()
+    header = [h.strip() for h in next(csv.reader([text.partition("\n")[0]]), [])]
+    missing = [c for c in columns if c not in header]
+    if missing:
+        raise DataFormatError(path, 1, f"header lacks column(s) {', '.join(missing)}")
+    found = [c for c in optional if c in header]
+    pick = [header.index(c) for c in (*columns, *found)]
+    try:  # numpy's parser (C): the same doubles as float() on the same text
+        with warnings.catch_warnings():  # no rows: said below, with the file's name
+            warnings.simplefilter("ignore")
+            rows = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1, usecols=pick,
+                              ndmin=2, comments=None, dtype=float)
+        if len(rows) and np.all(np.isfinite(rows)):
+            return rows, found
+    except ValueError:
+        pass
+    return _read_rows(path, text, header, pick), found  # row by row: what is wrong where
+
+
+def _read_rows(path: Path, text: str, header: list[str], pick: list[int]) -> np.ndarray:
+    """The columns ``pick`` of a CSV's rows parsed one by one, each error with its line."""
+    rows = []
+    for line, row in enumerate(csv.reader(io.StringIO(text, newline="")), start=1):
+        if line == 1 or not row or all(not c.strip() for c in row):
+            continue
+        try:
+            values = [float(row[k]) for k in pick]
+        except (ValueError, IndexError):
+            raise DataFormatError(
+                path, line, f"expected {len(header)} numbers, got {row!r}") from None
+        if not np.all(np.isfinite(values)):
+            raise DataFormatError(path, line, "non-finite value")
+        rows.append(values)
     if not rows:
         raise DataFormatError(path, None, "no data rows")
     return np.array(rows)
@@ -212,13 +231,10 @@ def load_model(path: str | Path | None = None) -> FaceModel:
     folder = Path(path) if path is not None else default_model_dir()
     vpath, fpath, mpath = folder / "vertices.csv", folder / "faces.csv", folder / "model.json"
     required = ("x", "y", "z", "w_cassi", "w_parke")
-    table = _read_table(vpath, required)
-    with open(vpath, encoding="utf-8") as fh:
-        header = [h.strip() for h in fh.readline().split(",")]
-    extra = [f for f in FIELDS if f in header]
-    fields_table = _read_table(vpath, extra) if extra else np.zeros((len(table), 0))
+    table, extra = _read_table(vpath, required, optional=FIELDS)
+    fields_table = table[:, len(required):]
     n = len(table)
-    ftable = _read_table(fpath, ("a", "b", "c", "material"))
+    ftable, _ = _read_table(fpath, ("a", "b", "c", "material"))
     faces = _check_index(fpath, "a face", ftable[:, :3].astype(np.int64), n)
     material = ftable[:, 3].astype(np.int64)
     if material.min() < 0 or material.max() >= len(MATERIALS):

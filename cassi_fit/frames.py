@@ -189,7 +189,7 @@ def _frame_params_of(inputs: dict, scaled, motion_since_first):
     )
 
 
-@jax.jit
+@exported  # a new process loads it instead of tracing it (cassi_fit._exported)
 def _batched_params(inputs, scaled, theta, translation):
     return jax.vmap(lambda s, a, t: _frame_params_of(inputs, s, (a, t)))(scaled, theta, translation)
 

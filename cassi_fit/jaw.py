@@ -17,8 +17,9 @@ Three closed forms live here, all written for one frame (``jax.vmap`` them over 
   exact reference for the per-frame fit in :mod:`cassi_fit.jaw_fit`.
 
 Compiled once, for every caller: :func:`closed_form_frames` and :func:`procrustes_frames`
-(one reference, ``n`` frames; module-level ``jax.jit``, so a shape compiles once per
-process). One frame is ``current[None]``.
+(one reference, ``n`` frames; module-level kernels, :func:`cassi_fit._exported.exported`:
+a shape is traced once per process, and a new process loads it instead of tracing it).
+One frame is ``current[None]``.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import numpy as np
 from jax import Array
 from jaxtyping import Float
 
+from ._exported import exported
 from .status import Status
 
 
@@ -225,8 +227,14 @@ def procrustes(reference: Float[Array, "2 2"], current: Float[Array, "2 2"]) -> 
     return _finish(theta, c, s, t, ok, finite)
 
 
-_closed_form_frames = jax.jit(jax.vmap(closed_form, in_axes=(None, 0)))
-_procrustes_frames = jax.jit(jax.vmap(procrustes, in_axes=(None, 0)))
+@exported
+def _closed_form_frames(reference, current):
+    return jax.vmap(closed_form, in_axes=(None, 0))(reference, current)
+
+
+@exported
+def _procrustes_frames(reference, current):
+    return jax.vmap(procrustes, in_axes=(None, 0))(reference, current)
 
 
 def closed_form_frames(reference: Float[Array, "2 2"], current: Float[Array, "n 2 2"]) -> JawMotion:

@@ -17,14 +17,14 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, NamedTuple
 
-from .animate import Animation, animate
 from .errors import InvalidChoiceError
-from .initialize import SubjectState, initialize
 from .run_spec import RunSpec, run_spec
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the stages' modules are imported by the stages run (cassi jaw: no model)
+    from .animate import Animation
     from .dataset import Recording
     from .face_model import FaceModel
+    from .initialize import SubjectState
     from .jaw_fit import JawFit
 
 
@@ -94,8 +94,12 @@ def run_recording(
     state = animation = jaw = None
     with jax.enable_x64(True) if spec.x64 else contextlib.nullcontext():
         if "initialize" in stages:
+            from .initialize import initialize
+
             state = initialize(recording, model, spec=spec)
         if "animate" in stages:
+            from .animate import animate
+
             animation = animate(state, recording)
         if "jaw" in stages:
             jaw = fit_recording_jaw(recording, spec)

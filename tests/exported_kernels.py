@@ -4,6 +4,7 @@ None), outputs with a static leaf, and a LAPACK call (a custom call JAX does not
 to keep stable). ``TRACES`` grows by one each time its Python runs (a trace).
 
     python tests/exported_kernels.py OUT.npz   # call it once, save outputs and counts
+                                               # (traces, kernel.traces, loads, executables)
 """
 
 from __future__ import annotations
@@ -51,4 +52,6 @@ def flat_outputs(out) -> dict[str, np.ndarray]:
 if __name__ == "__main__":
     jax.config.update("jax_enable_x64", True)
     out = flat_outputs(kernel(*inputs()))
-    np.savez(sys.argv[1], **out, counts=np.array([len(TRACES), kernel.traces, kernel.loads]))
+    executables = sum(isinstance(e.call, jax.stages.Compiled) for e in kernel._entries.values())
+    np.savez(sys.argv[1], **out,
+             counts=np.array([len(TRACES), kernel.traces, kernel.loads, executables]))

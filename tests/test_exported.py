@@ -66,16 +66,40 @@ def _child(out, environ):
 
 
 def test_a_new_process_loads_the_kernel_without_tracing(tmp_path):
-    environ = {EXPORT_CACHE_ENV: str(tmp_path / "exported")}
+    # a compilation cache of its own, empty: the first process compiles the kernel itself
+    # and stores its executable (one JAX's cache answered with is not stored)
+    environ = {EXPORT_CACHE_ENV: str(tmp_path / "exported"),
+               "JAX_COMPILATION_CACHE_DIR": str(tmp_path / "jax")}
     first = _child(tmp_path / "first.npz", environ)
     second = _child(tmp_path / "second.npz", environ)
-    assert list(first["counts"]) == [1, 1, 0]  # traced once (its Python ran once), stored
-    assert list(second["counts"]) == [0, 0, 1]  # loaded: the kernel's Python never ran
+    assert list(first["counts"]) == [1, 1, 0, 1]  # traced once (its Python ran once), stored
+    # loaded, its executable too: the kernel's Python never ran, nothing was lowered
+    assert list(second["counts"]) == [0, 0, 1, 1]
+    again = _child(tmp_path / "again.npz", {**environ,
+                                              "JAX_COMPILATION_CACHE_DIR": str(tmp_path / "j2")})
+    assert list(again["counts"]) == [0, 0, 1, 1]  # the executable needs no compilation cache
     off = _child(tmp_path / "off.npz", {EXPORT_CACHE_ENV: "off"})
-    assert list(off["counts"]) == [1, 0, 0]  # eqx.filter_jit's own trace
+    assert list(off["counts"]) == [1, 0, 0, 0]  # eqx.filter_jit's own trace
     for name in ("a", "b", "trace"):
         np.testing.assert_array_equal(second[name], first[name])
+        np.testing.assert_array_equal(again[name], first[name])
         np.testing.assert_array_equal(off[name], first[name])
+
+
+def test_an_executable_from_the_compilation_cache_is_not_stored(tmp_path):
+    """XLA's CPU client serializes an executable loaded from JAX's compilation cache
+    without its machine code; such an entry is called through its exported computation."""
+    cache = {"JAX_COMPILATION_CACHE_DIR": str(tmp_path / "jax"),
+             "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0"}
+    # the kernel's computation compiled into the cache (the entry beside it elsewhere)
+    _child(tmp_path / "fill.npz", {**cache, EXPORT_CACHE_ENV: str(tmp_path / "elsewhere")})
+    environ = {**cache, EXPORT_CACHE_ENV: str(tmp_path / "exported")}
+    first = _child(tmp_path / "first.npz", environ)  # traced again, compiled from the cache
+    second = _child(tmp_path / "second.npz", environ)
+    assert list(first["counts"]) == [1, 1, 0, 1]  # this process's compiled kernel
+    assert list(second["counts"]) == [0, 0, 1, 0]  # loaded, lowered, compiled from the cache
+    for name in ("a", "b", "trace"):
+        np.testing.assert_array_equal(second[name], first[name])
 
 
 def test_a_broken_entry_is_traced_again_and_replaced(folder):

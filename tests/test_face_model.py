@@ -80,6 +80,22 @@ def test_missing_and_malformed_files_raise_toolkit_errors(tmp_path):
         load_model(tmp_path)
 
 
+def test_a_model_table_is_read_once_with_each_error_at_its_line(tmp_path):
+    from cassi_fit.face_model import _read_table
+
+    path = tmp_path / "t.csv"
+    path.write_text("a, b,c\n1,2,3\n\n4.5,5e-1, 6\n")  # a blank line is skipped
+    rows, found = _read_table(path, ("c", "a"), optional=("x", "b"))
+    assert found == ["b"]
+    np.testing.assert_array_equal(rows, [[3, 1, 2], [6, 4.5, 0.5]])
+    for text, where in (("a,b,c\n1,2,3\n1,2,inf\n", "t.csv:3"),
+                        ("a,b,c\n1,2,3\n\n1,2\n", "t.csv:4"),
+                        ("a,b,c\n", "no data rows"), ("a,b\n1,2\n", "lacks column")):
+        path.write_text(text)
+        with pytest.raises(DataFormatError, match=where):
+            _read_table(path, ("a", "c"))
+
+
 def test_topology_is_hashable_by_content_and_frozen():
     import dataclasses
 

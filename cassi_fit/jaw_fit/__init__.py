@@ -50,6 +50,7 @@ by the tests to start far from the answer. Uncertainty: ``s^2 (J^T J)^-1`` with 
 pooled over the recording's usable frames.
 
 Modules: ``_solvers`` (the interface, optimistix's solvers, the structured solver),
+``_optimistix_adapter`` (optimistix's solver classes, imported when a solver is traced),
 ``_jaxopt_adapter``, ``_solve`` (aliases and the generic solve step), ``_residuals``,
 ``_linalg`` (block-tridiagonal algebra), ``_kernels`` (the compiled kernels), ``_priors``
 (pivot priors, couplings), ``_methods`` (the method objects), ``_fit`` (``fit_jaw``,

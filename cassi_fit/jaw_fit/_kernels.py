@@ -118,18 +118,18 @@ def smooth_pivot_kernel(config, reference, current, weight, smoothness, knots0, 
     return spline(knots, n, spacing), unit_cov, result, knots
 
 
-@jax.jit
-@jax.vmap
+@exported
 def pivot_with_covariance(params, covariance):
-    """The fixed point of ``params = (theta, tx, ty)`` and its (2, 2) covariance."""
+    """Per frame: the fixed point of ``params = (theta, tx, ty)`` and its (2, 2)
+    covariance."""
 
-    def fixed_point(y):
-        return rigid.pivot((y[0], y[1:]))[0]
+    def one(y, cov):
+        point, defined = rigid.pivot((y[0], y[1:]))
+        jac = jax.jacfwd(lambda z: rigid.pivot((z[0], z[1:]))[0])(y)
+        return point, defined, jnp.where(defined, jac @ cov @ jac.T,
+                                         jnp.diag(jnp.full(2, jnp.inf)))
 
-    point, defined = rigid.pivot((params[0], params[1:]))
-    jac = jax.jacfwd(fixed_point)(params)
-    cov = jnp.where(defined, jac @ covariance @ jac.T, jnp.diag(jnp.full(2, jnp.inf)))
-    return point, defined, cov
+    return jax.vmap(one)(params, covariance)
 
 
 def unit_covariance_about(theta, pivot, reference):
@@ -165,4 +165,7 @@ def about_pivot_params(reference, current, path):
     return jax.vmap(one)(current, path)
 
 
-translation_about = jax.jit(jax.vmap(lambda theta, q: rigid.from_pivot(theta, q)[1]))
+@exported
+def translation_about(theta, pivot):
+    """Per frame: the translation of the rotation by ``theta`` (n,) about ``pivot`` (n, 2)."""
+    return jax.vmap(lambda th, q: rigid.from_pivot(th, q)[1])(theta, pivot)

@@ -18,7 +18,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, Float, Int
 
 from ..status import SolverResult
@@ -39,6 +38,8 @@ def result_code(value: int | SolverResult) -> Int[Array, ""]:
 
 def from_optimistix(result: Any) -> Int[Array, ""]:
     """optimistix's ``RESULTS`` (lineax's included) -> a :class:`SolverResult` code."""
+    import optimistix as optx
+
     R = optx.RESULTS
     code = result_code(SolverResult.SINGULAR)  # singular, breakdown, stagnation, conlim
     for item, ours in ((R.nonfinite_input, SolverResult.NON_FINITE),
@@ -49,41 +50,6 @@ def from_optimistix(result: Any) -> Int[Array, ""]:
                        (R.successful, SolverResult.SUCCESSFUL)):
         code = jnp.where(result == item, result_code(ours), code)
     return code
-
-
-class _GradientStop:
-    """Mixin for optimistix's Gauss-Newton family; see :meth:`terminate`."""
-
-    def terminate(self, fn, y, args, options, state, tags):
-        """optimistix's Cauchy test (small step in ``y`` and in the residuals), or first-order
-        optimality ``|J^T r|_inf <= atol (1 + |r|)`` at the last accepted point.
-
-        The Cauchy test is only evaluated after an *accepted* step. At the minimum the
-        predicted reduction is ~1e-30 and the actual one is rounding noise, so a trust-region
-        solver rejects about half of its steps there; in a vmapped fit the batch then runs
-        until the unluckiest frame gets an acceptance. The gradient test (MINPACK's ``gtol``)
-        stops as soon as the last accepted point is stationary. Only for problems whose
-        parameters are scaled so that ``J^T J`` is of order 1 (the per-frame fit: exactly
-        ``2 I``), where a gradient below ``atol`` means a parameter error below ``atol``.
-        """
-        done, result = super().terminate(fn, y, args, options, state, tags)
-        info = state.f_info
-        grad = info.jac.transpose().mv(info.residual)
-        norm = jnp.sqrt(jnp.sum(info.residual**2))
-        stationary = (~state.first_step) & (jnp.max(jnp.abs(grad)) <= self.atol * (1.0 + norm))
-        return done | stationary, result
-
-
-class _StoppingLM(_GradientStop, optx.LevenbergMarquardt):
-    pass
-
-
-class _StoppingGN(_GradientStop, optx.GaussNewton):
-    pass
-
-
-class _StoppingDogleg(_GradientStop, optx.Dogleg):
-    pass
 
 
 class Solver(eqx.Module):
@@ -118,15 +84,26 @@ class Solver(eqx.Module):
 
 
 class _Optimistix(Solver):
-    _kinds: ClassVar[tuple[type, type]]
+    #: The optimistix solver's class name (``_optimistix_adapter.kinds``).
+    _kind: ClassVar[str]
+
+    def kinds(self) -> tuple[type, type]:
+        """optimistix's solver class and the one that also stops at a stationary point
+        (``gradient_stop``): optimistix is imported here, when a solver is traced, not
+        with the toolkit (a warm process loads the compiled fits without it)."""
+        from ._optimistix_adapter import kinds
+
+        return kinds(self._kind)
 
     def run(self, residuals: Callable[..., Float[Array, " m"]], params0: Float[Array, " p"],
             args: Any, gradient_stop: bool = False
             ) -> tuple[Float[Array, " p"], Int[Array, ""]]:
         """optimistix's ``least_squares`` (``throw=False``); its ``RESULTS`` mapped by
         :func:`from_optimistix`."""
+        import optimistix as optx
+
         rtol, atol = self.tolerances(params0.dtype)
-        solver = self._kinds[int(bool(gradient_stop))](rtol=rtol, atol=atol)
+        solver = self.kinds()[int(bool(gradient_stop))](rtol=rtol, atol=atol)
         sol = optx.least_squares(residuals, solver, params0, args, max_steps=self.max_steps,
                                  throw=False)
         return sol.value, from_optimistix(sol.result)
@@ -136,7 +113,7 @@ class LevenbergMarquardt(_Optimistix):
     """optimistix's Levenberg-Marquardt (alias ``"optimistix-lm"``; the default)."""
 
     name: ClassVar[str] = "optimistix-lm"
-    _kinds: ClassVar[tuple[type, type]] = (optx.LevenbergMarquardt, _StoppingLM)
+    _kind: ClassVar[str] = "LevenbergMarquardt"
 
 
 class GaussNewton(_Optimistix):
@@ -144,14 +121,14 @@ class GaussNewton(_Optimistix):
 
     name: ClassVar[str] = "optimistix-gn"
     damped: ClassVar[bool] = False
-    _kinds: ClassVar[tuple[type, type]] = (optx.GaussNewton, _StoppingGN)
+    _kind: ClassVar[str] = "GaussNewton"
 
 
 class Dogleg(_Optimistix):
     """optimistix's Dogleg trust region (alias ``"optimistix-dogleg"``)."""
 
     name: ClassVar[str] = "optimistix-dogleg"
-    _kinds: ClassVar[tuple[type, type]] = (optx.Dogleg, _StoppingDogleg)
+    _kind: ClassVar[str] = "Dogleg"
 
 
 # ---------------------------------------------- structured (block-tridiagonal) solver
