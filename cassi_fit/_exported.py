@@ -193,7 +193,8 @@ def _compile(exported, avals):
     the one device. JAX's compilation cache may answer for the compiling; an executable
     it loaded is not stored (XLA's CPU client serializes such an executable without its
     machine code: loaded again, it fails to find its functions), so that entry is called
-    through its exported computation."""
+    through its exported computation; so is one whose executable another process could not
+    load (:func:`_executable_is_portable`)."""
     import jax
 
     specs = [jax.ShapeDtypeStruct(s, d, weak_type=w) for s, d, w in avals]
@@ -208,7 +209,7 @@ def _compile(exported, avals):
         compiled = jax.jit(exported.call).lower(*specs).compile()
     finally:
         jax.monitoring.unregister_event_listener(listen)
-    if hits:
+    if hits or not _executable_is_portable(exported):
         return compiled, None
     try:
         from jax.experimental import serialize_executable
@@ -218,9 +219,26 @@ def _compile(exported, avals):
         return compiled, None
 
 
+def _custom_calls(exported) -> set[str]:
+    """The targets of the computation's custom calls (``lapack_dgetrf_ffi``, ...)."""
+    import re
+
+    text = exported.mlir_module()
+    return set(re.findall(r'custom_call @(\w+)', text)) | set(
+        re.findall(r'call_target_name = "([^"]+)"', text))
+
+
 def _calls_lapack(exported) -> bool:
     """Whether the computation calls JAX's LAPACK kernels (custom calls ``lapack_...``)."""
-    return "lapack_" in exported.mlir_module()
+    return any(t.startswith("lapack_") for t in _custom_calls(exported))
+
+
+def _executable_is_portable(exported) -> bool:
+    """Whether a stored executable of the computation can be loaded by another process: its
+    custom calls are LAPACK's alone, whose kernels :func:`_load` readies. Any other (a host
+    callback holds a pointer into the process that compiled it; an FFT's kernels are
+    registered elsewhere) keeps the exported computation only."""
+    return all(t.startswith("lapack_") for t in _custom_calls(exported))
 
 
 def _load(executable, lapack: bool):

@@ -102,6 +102,29 @@ def test_an_executable_from_the_compilation_cache_is_not_stored(tmp_path):
         np.testing.assert_array_equal(second[name], first[name])
 
 
+def test_only_an_executable_another_process_can_load_is_stored(monkeypatch):
+    """LAPACK's custom calls are readied before an executable is loaded; any other custom
+    call keeps the entry to its exported computation (called, never loaded as machine code)."""
+    import jax
+    import jax.numpy as jnp
+    from jax import export
+
+    from cassi_fit import _exported
+
+    spec = jax.ShapeDtypeStruct((3, 3), jnp.float64)
+    inverse = export.export(jax.jit(jnp.linalg.inv), disabled_checks=[
+        export.DisabledSafetyCheck.custom_call("ALL")])(spec)
+    avals = [((3, 3), jnp.float64, False)]
+    assert any(t.startswith("lapack_") for t in _exported._custom_calls(inverse))
+    assert _exported._executable_is_portable(inverse)
+    with jax.enable_x64(True):
+        monkeypatch.setattr(_exported, "_custom_calls", lambda e: {"lapack_dgetrf_ffi", "other"})
+        compiled, executable = _exported._compile(inverse, avals)
+        assert executable is None
+        a = jnp.asarray(np.eye(3) * 2.0)
+        np.testing.assert_array_equal(compiled(a), np.eye(3) / 2.0)
+
+
 def test_a_broken_entry_is_traced_again_and_replaced(folder):
     args = ek.inputs()
     out = Exported(ek.kernel.fn)(*args)
