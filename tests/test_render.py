@@ -194,6 +194,39 @@ def test_importing_render_imports_no_opengl_and_the_choice_comes_first():
     assert done.stdout.split() == ["egl", "egl"]
 
 
+_ARRAYS_ONLY = """
+import sys
+import numpy as np
+from types import SimpleNamespace
+import cassi_fit.render as render
+import trimesh
+ball = trimesh.creation.icosphere(subdivisions=2)
+model = SimpleNamespace(vertices=np.asarray(ball.vertices) * 50, faces=np.asarray(ball.faces),
+                        face_material=np.zeros(len(ball.faces), int))
+with render.Renderer(model, size=(64, 48)) as renderer:
+    image = renderer.render(model.vertices)
+assert image.shape == (48, 64, 3)
+assert not [m for m in sys.modules if m.split(".")[0] in ("jax", "equinox")], "JAX imported"
+"""
+
+
+def test_a_renderer_of_plain_arrays_imports_no_jax():
+    """A drawing worker (render.FramePool) is sent the model's arrays: its Renderer must
+    not import JAX (the face model's module), over a second of each worker's start-up.
+    The renderer's copy of the material names is face_model's."""
+    import os
+    import subprocess
+    import sys
+
+    from cassi_fit.face_model import MATERIALS
+    from cassi_fit.render._pieces import _MATERIALS
+
+    assert _MATERIALS == MATERIALS
+    done = subprocess.run([sys.executable, "-c", _ARRAYS_ONLY], capture_output=True,
+                          text=True, env={**os.environ, "JAX_PLATFORMS": "cpu"})
+    assert done.returncode == 0, done.stderr
+
+
 _PREPARED = """
 import hashlib, os, sys, time
 import cassi_fit.render as render

@@ -18,7 +18,7 @@ from jaxtyping import Float, Integer
 from ..errors import CassiError
 
 # The face model's material order (cassi_fit.face_model.MATERIALS); repeated here so that
-# rendering does not import JAX.
+# rendering does not import JAX (tests/test_render.py holds the two equal).
 _MATERIALS = ("skin", "lips", "eye", "teeth", "tongue", "palate", "pharynx")
 
 # sRGB colours. The paper draws the palate as the darkest object.
@@ -358,10 +358,9 @@ def _with_mouth_wall(faces, face_material, materials, regions):
 
 def _model_arrays(model):
     """(rest (V,3) float64, faces (F,3) int64, face_material (F,), material names)."""
-    try:
-        from ..face_model import MATERIALS as materials
-    except ImportError:
-        materials = _MATERIALS
+    # the copy, not face_model's: importing face_model imports JAX (over a second of a
+    # drawing worker's start-up, which has only arrays); a test holds the two equal
+    materials = _MATERIALS
     rest = np.asarray(model.vertices, dtype=np.float64)
     faces = np.asarray(model.faces, dtype=np.int64)
     face_material = np.asarray(model.face_material, dtype=np.int64)
