@@ -59,7 +59,10 @@ _SHOWN = {
     # the mouth's walls close the view through the open mouth; the inside view, which
     # removes the near half of the skin, would see them edge on as stray lines
     "front": set(_MATERIALS) | {_MOUTH_WALL},
-    "side": set(_MATERIALS) | {_MOUTH_WALL},
+    # not drawn from the side: palate, pharynx and the mouth's walls lie wholly within
+    # the head, behind the cheeks and the neck (the lip gap, seen edge on, shows at most
+    # teeth and tongue); not one pixel of JW11's 298 video frames changed without them
+    "side": set(_MATERIALS) - {"palate", "pharynx"},
     "inside": set(_MATERIALS) - {"eye"},  # an eyeball floating in the cut head distracts
     "top": {"teeth", "tongue", "palate"},
     "midsagittal": set(),  # drawn in 2D by _section, not by OpenGL
