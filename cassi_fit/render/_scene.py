@@ -387,6 +387,13 @@ class Renderer:
         """The pieces the mesh is drawn in (material, side, views, culling), for checking."""
         return tuple(p.info() for p in self._pieces)
 
+    def drawn(self) -> tuple[int, int]:
+        """(draw calls, triangles) of the mesh in one grid frame (markers not counted)."""
+        self._set_layout("grid")
+        counts = [len(p.faces) * sum(v in self._placements for v in p.views)
+                  for p in self._pieces]
+        return sum(c > 0 for c in counts), sum(counts)
+
     def render(
         self,
         vertices: Float[Any, "v 3"],
