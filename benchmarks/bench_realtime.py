@@ -142,15 +142,21 @@ def phases_wall(recording: Path, out: Path, cache: Path) -> dict[str, float]:
     return times
 
 
-def _floor(renderer, vertices, index) -> float:
-    """Seconds of the bare OpenGL pass (``render_gl``) of the frames ``index``, after a
-    warm-up."""
-    for k in index[:5]:
-        renderer.render_gl(vertices[k])
-    start = time.perf_counter()
-    for k in index:
-        renderer.render_gl(vertices[k])
-    return time.perf_counter() - start
+def _floors(renderers, vertices, index, chunk: int = 10) -> list[float]:
+    """Seconds of the bare OpenGL pass (``render_gl``) of the frames ``index`` by each of
+    ``renderers``, after a warm-up; in turns of ``chunk`` frames, so that a change in the
+    machine's load during the run weighs on each alike."""
+    for renderer in renderers:
+        for k in index[:5]:
+            renderer.render_gl(vertices[k])
+    seconds = [0.0] * len(renderers)
+    for at in range(0, len(index), chunk):
+        for i, renderer in enumerate(renderers):
+            start = time.perf_counter()
+            for k in index[at:at + chunk]:
+                renderer.render_gl(vertices[k])
+            seconds[i] += time.perf_counter() - start
+    return seconds
 
 
 @contextlib.contextmanager
@@ -185,12 +191,13 @@ def in_process(recording: Path, jobs: int) -> dict:
     options = {"subject": run.recording.subject, "task": run.recording.task,
                "frames": schedule}
     out = {"frames": float(len(schedule.index))}
-    with _previous_scene(), Renderer(run.state.model, **setup) as renderer:
-        out["floor_before"] = _floor(renderer, vertices, schedule.index)
-        out["drawn_before"] = renderer.drawn()
     with Renderer(run.state.model, **setup) as renderer:
-        out["floor"] = _floor(renderer, vertices, schedule.index)
-        out["drawn"] = renderer.drawn()
+        with _previous_scene():
+            before = Renderer(run.state.model, **setup)
+        with before:
+            out["floor"], out["floor_before"] = _floors([renderer, before], vertices,
+                                                        schedule.index)
+            out["drawn"], out["drawn_before"] = renderer.drawn(), before.drawn()
         start = time.perf_counter()
         for _ in rv.animation_frames(run.animation, renderer, progress=False, **options):
             pass
