@@ -194,6 +194,39 @@ def test_importing_render_imports_no_opengl_and_the_choice_comes_first():
     assert done.stdout.split() == ["egl", "egl"]
 
 
+_ARRAYS_ONLY = """
+import sys
+import numpy as np
+from types import SimpleNamespace
+import cassi_fit.render as render
+import trimesh
+ball = trimesh.creation.icosphere(subdivisions=2)
+model = SimpleNamespace(vertices=np.asarray(ball.vertices) * 50, faces=np.asarray(ball.faces),
+                        face_material=np.zeros(len(ball.faces), int))
+with render.Renderer(model, size=(64, 48)) as renderer:
+    image = renderer.render(model.vertices)
+assert image.shape == (48, 64, 3)
+assert not [m for m in sys.modules if m.split(".")[0] in ("jax", "equinox")], "JAX imported"
+"""
+
+
+def test_a_renderer_of_plain_arrays_imports_no_jax():
+    """A drawing worker (render.FramePool) is sent the model's arrays: its Renderer must
+    not import JAX (the face model's module), over a second of each worker's start-up.
+    The renderer's copy of the material names is face_model's."""
+    import os
+    import subprocess
+    import sys
+
+    from cassi_fit.face_model import MATERIALS
+    from cassi_fit.render._pieces import _MATERIALS
+
+    assert _MATERIALS == MATERIALS
+    done = subprocess.run([sys.executable, "-c", _ARRAYS_ONLY], capture_output=True,
+                          text=True, env={**os.environ, "JAX_PLATFORMS": "cpu"})
+    assert done.returncode == 0, done.stderr
+
+
 _PREPARED = """
 import hashlib, os, sys, time
 import cassi_fit.render as render
@@ -547,18 +580,18 @@ def test_a_model_without_hair_is_drawn_as_before(model, views):
         np.testing.assert_array_equal(img[name], views[name])
 
 
-def test_mouth_walls_are_drawn_in_front_and_side_views_only(model, views):
+def test_mouth_walls_are_drawn_in_the_front_view_only(model, views):
     """A model's ``mouth_wall`` region (the walls that close the open mouth) is drawn in the
-    front and side views, in the walls' colour, and not in the inside view, which would
-    see the walls edge on as stray lines, nor in the top view. Here the stand-in's tongue
-    plays the walls."""
+    front view, in the walls' colour, and not in the inside view, which would see the
+    walls edge on as stray lines, nor in the top view, nor from the side, where the cheeks
+    hide them. Here the stand-in's tongue plays the walls."""
     tongue = np.unique(model.faces[model.face_material == 4])
     walled = SimpleNamespace(**vars(model), regions={"mouth_wall": tongue})
     colours = {**TEST_COLOURS, "mouth_wall": TEST_COLOURS["tongue"]}
     with render.Renderer(walled, size=SIZE, colours=colours) as r:
         pieces = [p for p in r.pieces if p.material == "mouth_wall"]
         img = r.render_views(model.vertices)
-    assert pieces and all(set(p.views) <= {"front", "side"} for p in pieces)
+    assert pieces and all(p.views == ("front",) for p in pieces)
     assert all(p.cull is None for p in pieces)  # open sheets: no winding to cull by
     assert green(views["inside"]).sum() > 100 and green(img["inside"]).sum() == 0
     assert green(img["top"]).sum() == 0

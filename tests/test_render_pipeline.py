@@ -131,3 +131,16 @@ def test_the_egl_device_is_chosen_by_cassi_egl_device(monkeypatch):
     monkeypatch.setenv("CASSI_EGL_DEVICE", "software")
     assert _gl.probe_gl_platform("egl") is None
     assert not _gl.egl_device()["file"]
+
+
+def test_the_side_view_leaves_out_what_the_head_hides(run, renderer):
+    """Palate, pharynx and the mouth's walls, within the head behind the cheeks, are not
+    drawn from the side (issue 30 item 4); ``drawn`` counts a grid frame's draw calls and
+    triangles, one call per piece whatever its views."""
+    hidden = {"palate", "pharynx", "mouth_wall"}
+    assert not [p for p in renderer.pieces if p.material in hidden and "side" in p.views]
+    assert any(p.material == "palate" and "front" in p.views for p in renderer.pieces)
+    calls, triangles = renderer.drawn()
+    assert calls == len(renderer.pieces)
+    faces = run[1].model.faces
+    assert len(faces) < triangles < 4 * len(faces)

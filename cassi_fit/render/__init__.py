@@ -27,7 +27,10 @@ Speed (llvmpipe, the software OpenGL of headless machines, is the target):
   Python for every draw), 4x multisampling and depth read-back are replaced by a light
   two-sided shader, a plain framebuffer and an RGB read into a kept buffer.
 - Back faces are culled wherever no view can show them (materials with a clear winding,
-  away from the cut).
+  away from the cut); parts a view cannot show are not drawn in it (palate, pharynx and
+  the mouth's walls from the side); a material's two sides drawn alike are one piece (one
+  draw, one upload), and blending, culling and material uniforms are set only when they
+  change.
 
 The package, by concern: ``_gl`` chooses the OpenGL platform (probes in subprocesses;
 EGL when there is no display, on a GPU if there is one (``CASSI_EGL_DEVICE``) else

@@ -9,6 +9,7 @@ platform at first import).
 
 from __future__ import annotations
 
+import ctypes
 import itertools
 
 import numpy as np
@@ -22,6 +23,10 @@ OpenGL.ERROR_CHECKING = False
 
 import pyrender  # noqa: E402
 from OpenGL import GL as gl  # noqa: E402
+from OpenGL.raw.GL.VERSION.GL_1_5 import glBufferSubData as _buffer_sub_data  # noqa: E402
+from OpenGL.raw.GL.VERSION.GL_3_1 import (  # noqa: E402
+    glDrawElementsInstanced as _draw_elements_instanced,
+)
 from pyrender.shader_program import ShaderProgram  # noqa: E402
 
 from ..errors import RenderingUnavailableError  # noqa: E402
@@ -152,7 +157,7 @@ class ColourOnlyRenderer(pyrender.Renderer):
         # two renderers of one model (worker processes) draw the same bytes
         nodes = [n for n in scene.mesh_nodes if n.mesh.is_visible]
         nodes.sort(key=lambda n: (n.mesh.is_transparent, getattr(n.mesh, "cassi_order", -1)))
-        bound = None
+        bound, state = None, {}
         for node in nodes:
             for primitive in node.mesh.primitives:
                 program = self._get_primitive_program(primitive, flags, 0)
@@ -162,7 +167,9 @@ class ColourOnlyRenderer(pyrender.Renderer):
                     _uniform(program, "P", projection)
                     _uniform(program, "M", np.eye(4))
                     bound = program
-                _draw_primitive(gl, program, primitive)
+                    state.pop("uniforms", None)  # the other program's values
+                _draw_primitive(gl, program, primitive, state)
+        gl.glBindVertexArray(0)
         if bound is not None:
             bound._unbind()
         gl.glFlush()
@@ -245,35 +252,43 @@ def _material_uniforms(material) -> tuple:
     )
 
 
-def _draw_primitive(gl, program, primitive):
-    """Material uniforms, blending and culling, then one instanced draw of ``primitive``."""
+def _draw_primitive(gl, program, primitive, state):
+    """Material uniforms, blending and culling, then one instanced draw of ``primitive``.
+
+    ``state``: what the previous draws of this frame set (a dict, empty at the start of
+    the frame); only what changes is set again (PyOpenGL's calls cost Python time)."""
     material = primitive.material
     uniforms = primitive.__dict__.get("cassi_uniforms")
     if uniforms is None:
         uniforms = primitive.cassi_uniforms = _material_uniforms(material)
-    base, emissive, roughness = uniforms
-    _uniform(program, "material.base_color_factor", base)
-    _uniform(program, "material.emissive_factor", emissive)
-    _uniform(program, "material.roughness_factor", roughness)
-    if material.alphaMode == "BLEND":
-        gl.glEnable(gl.GL_BLEND)
-        gl.glBlendFunc(gl.GL_SRC_ALPHA, gl.GL_ONE_MINUS_SRC_ALPHA)
-    else:
-        gl.glDisable(gl.GL_BLEND)
+    if state.get("uniforms") != uniforms:
+        base, emissive, roughness = uniforms
+        _uniform(program, "material.base_color_factor", base)
+        _uniform(program, "material.emissive_factor", emissive)
+        _uniform(program, "material.roughness_factor", roughness)
+        state["uniforms"] = uniforms
+    blend = material.alphaMode == "BLEND"
+    if state.get("blend") != blend:
+        if blend:
+            gl.glEnable(gl.GL_BLEND)
+            gl.glBlendFunc(gl.GL_SRC_ALPHA, gl.GL_ONE_MINUS_SRC_ALPHA)
+        else:
+            gl.glDisable(gl.GL_BLEND)
+        state["blend"] = blend
     # Double-sided where the inside can show (the cut, the mouth). Drawing the front faces
     # first and the back faces after costs the same with llvmpipe: rasterising
     # depth-rejected triangles costs as much as shading them; culling is what saves.
     cull = getattr(primitive, "cassi_cull", None)
-    if cull is None:
-        gl.glDisable(gl.GL_CULL_FACE)
-    else:
-        gl.glEnable(gl.GL_CULL_FACE)
-        gl.glCullFace(gl.GL_FRONT if cull == "front" else gl.GL_BACK)
-    primitive._bind()
-    gl.glDrawElementsInstanced(
-        gl.GL_TRIANGLES, primitive.indices.size, gl.GL_UNSIGNED_INT, None, len(primitive.poses)
-    )
-    primitive._unbind()
+    if state.get("cull", "unset") != cull:
+        if cull is None:
+            gl.glDisable(gl.GL_CULL_FACE)
+        else:
+            gl.glEnable(gl.GL_CULL_FACE)
+            gl.glCullFace(gl.GL_FRONT if cull == "front" else gl.GL_BACK)
+        state["cull"] = cull
+    gl.glBindVertexArray(primitive._vaid)
+    _draw_elements_instanced(gl.GL_TRIANGLES, primitive.indices.size, gl.GL_UNSIGNED_INT,
+                             None, len(primitive.poses))
 
 
 def _framebuffer(gl, dims, samples):
@@ -316,7 +331,9 @@ def write_vertices(primitive: pyrender.Primitive, buffer: np.ndarray) -> None:
     extra columns) into ``primitive``: in place in its GL buffer once it has one."""
     if primitive._in_context():
         gl.glBindBuffer(gl.GL_ARRAY_BUFFER, primitive._buffers[0])
-        gl.glBufferSubData(gl.GL_ARRAY_BUFFER, 0, buffer.nbytes, buffer)
+        # the raw call: PyOpenGL's wrapper converts the array again on every call
+        assert buffer.flags.c_contiguous and buffer.dtype == np.float32
+        _buffer_sub_data(gl.GL_ARRAY_BUFFER, 0, buffer.nbytes, ctypes.c_void_p(buffer.ctypes.data))
     else:
         primitive.positions = buffer[:, :3].copy()
         primitive.normals = buffer[:, 3:6].copy()

@@ -18,7 +18,7 @@ from jaxtyping import Float, Integer
 from ..errors import CassiError
 
 # The face model's material order (cassi_fit.face_model.MATERIALS); repeated here so that
-# rendering does not import JAX.
+# rendering does not import JAX (tests/test_render.py holds the two equal).
 _MATERIALS = ("skin", "lips", "eye", "teeth", "tongue", "palate", "pharynx")
 
 # sRGB colours. The paper draws the palate as the darkest object.
@@ -59,7 +59,10 @@ _SHOWN = {
     # the mouth's walls close the view through the open mouth; the inside view, which
     # removes the near half of the skin, would see them edge on as stray lines
     "front": set(_MATERIALS) | {_MOUTH_WALL},
-    "side": set(_MATERIALS) | {_MOUTH_WALL},
+    # not drawn from the side: palate, pharynx and the mouth's walls lie wholly within
+    # the head, behind the cheeks and the neck (the lip gap, seen edge on, shows at most
+    # teeth and tongue); not one pixel of JW11's 298 video frames changed without them
+    "side": set(_MATERIALS) - {"palate", "pharynx"},
     "inside": set(_MATERIALS) - {"eye"},  # an eyeball floating in the cut head distracts
     "top": {"teeth", "tongue", "palate"},
     "midsagittal": set(),  # drawn in 2D by _section, not by OpenGL
@@ -86,11 +89,12 @@ _MARGIN_MM = 10.0  # free space around each view's rest bounds, for the motion
 class PieceInfo(NamedTuple):
     """What one drawn piece is (:attr:`Renderer.pieces <cassi_fit.render.Renderer.pieces>`):
     a material's triangles on one side of z = 0 (``near``: the inside view's camera
-    side), see-through (``glass``) or not, the views that draw it, and the on-screen face
-    culled (``"front"``/``"back"``) or None (drawn double-sided)."""
+    side; None: both sides, drawn alike), see-through (``glass``) or not, the views that
+    draw it, and the on-screen face culled (``"front"``/``"back"``) or None (drawn
+    double-sided)."""
 
     material: str
-    near: bool
+    near: bool | None
     glass: bool
     views: tuple[str, ...]
     cull: str | None
@@ -102,28 +106,29 @@ def _linear(srgb) -> tuple[float, ...]:
 
 
 def _vertex_normals(vertices: np.ndarray, faces: np.ndarray, incidence) -> np.ndarray:
-    """Area-weighted unit vertex normals, (V,3) float32.
+    """Area-weighted unit vertex normals, (V,3) float32, computed in float32 (twice as
+    fast as in float64; they differ by under 1e-6, what the vertex buffer keeps anyway).
 
-    ``incidence`` is the sparse (V,F) vertex-face matrix. A vertex whose summed normal is
-    zero (only zero-area triangles) gets (0, 0, 0): the shader then lights it with ambient
-    light only, instead of dividing by zero.
+    ``incidence`` is the sparse (V,F) vertex-face matrix (:func:`_incidence`). A vertex
+    whose summed normal is zero (only zero-area triangles) gets (0, 0, 0): the shader then
+    lights it with ambient light only, instead of dividing by zero.
     """
-    a, b, c = (vertices[faces[:, k]] for k in range(3))
-    summed = incidence @ np.cross(b - a, c - a)
-    length = np.linalg.norm(summed, axis=1, keepdims=True)
+    p = np.asarray(vertices, np.float32)[faces.T.ravel()].reshape(3, len(faces), 3)
+    summed = incidence @ np.cross(p[1] - p[0], p[2] - p[0])
+    length = np.sqrt(np.einsum("ij,ij->i", summed, summed))[:, None]
     out = np.zeros_like(summed)
     np.divide(summed, length, out=out, where=length > 0)
-    return out.astype(np.float32)
+    return out
 
 
 def _incidence(faces: np.ndarray, n_vertices: int):
-    """Sparse (V,F) matrix with a 1 where a vertex belongs to a face."""
+    """Sparse (V,F) float32 matrix with a 1 where a vertex belongs to a face."""
     import scipy.sparse
 
     rows = faces.ravel()
     cols = np.repeat(np.arange(len(faces)), 3)
     return scipy.sparse.csr_matrix(
-        (np.ones(len(rows)), (rows, cols)), shape=(n_vertices, len(faces))
+        (np.ones(len(rows), np.float32), (rows, cols)), shape=(n_vertices, len(faces))
     )
 
 
@@ -271,6 +276,8 @@ def _split_pieces(vertices, faces, face_material, materials, views, skin, cull,
     With ``cull``, a material with a clear winding hides its back faces wherever they
     cannot be seen, the far half of a cut material in the inside view (whose inside shows)
     being its own double-sided piece: back faces cost as much to rasterise as visible ones.
+    The two sides of a material drawn alike (same views, culling, see-through) are then one
+    piece (``near`` None), its far triangles first: one draw and one upload instead of two.
     """
     toward_camera = np.asarray(_VIEW_AXES["inside"][2], float)
     near_side = vertices[faces].mean(axis=1) @ toward_camera > 0
@@ -279,39 +286,67 @@ def _split_pieces(vertices, faces, face_material, materials, views, skin, cull,
     hair = _hair_factors(len(vertices), fields)
     pieces = []
     for m, name in enumerate(materials):
-        # (the mouth's walls are open sheets: their signed volume says nothing of which
-        # side faces out, so they are drawn double-sided)
-        clear = cull and name != _MOUTH_WALL
-        winding = triangle_winding(vertices, faces[face_material == m]) if clear else 0
-        face = _cull_face(winding)
-        opened = name in _CUT and (skin == "cut" or name in _GLASS)  # inside shows at the cut
-        for near in (False, True):
-            for glass in (False, True):
-                mask = (face_material == m) & (near_side == near)
-                shown = _piece_views(name, near, glass, views, skin)
-                if not mask.any() or not shown:
-                    continue
-                index, local = np.unique(faces[mask], return_inverse=True)
-                colour = iris if m == eye else (hair if name == "skin" else None)
+        specs = _material_specs(vertices, faces, face_material, m, name, near_side, views,
+                                skin, cull)
+        colour = iris if m == eye else (hair if name == "skin" else None)
+        for (near, glass, views_, face, heights), face_ids in _merge_sides(specs):
+            index, local = np.unique(faces[face_ids], return_inverse=True)
+            if heights is not None:
+                static = np.ones((len(index), 4))
+            else:
                 static = colour[index] if colour is not None else np.zeros((len(index), 0))
-                args = (name, near, glass, index, local.reshape(-1, 3), static)
-                if name in _HEIGHT_COLOURED and "top" in shown:  # its own, recoloured piece
-                    height = _Piece(name, near, glass, index, local.reshape(-1, 3),
-                                    np.ones((len(index), 4)), ("top",), cull=face)  # fmt: skip
-                    height.heights = _height_range(vertices[faces[face_material == m]])
-                    pieces.append(height)
-                    shown = tuple(v for v in shown if v != "top")
-                    if not shown:
-                        continue
-                if face is None or glass:
-                    pieces.append(_Piece(*args, shown))
-                    continue
-                if opened and not near and "inside" in shown:
-                    pieces.append(_Piece(*args, ("inside",)))
-                    shown = tuple(v for v in shown if v != "inside")
-                if shown:
-                    pieces.append(_Piece(*args, shown, cull=face))
+            piece = _Piece(name, near, glass, index, local.reshape(-1, 3), static, views_,
+                           cull=face)
+            piece.heights = heights
+            pieces.append(piece)
     return pieces
+
+
+def _material_specs(vertices, faces, face_material, m, name, near_side, views, skin, cull):
+    """One material's pieces before merging: ``[((near, glass, views, cull, heights),
+    face ids)]`` in drawing order (see :func:`_split_pieces`)."""
+    # (the mouth's walls are open sheets: their signed volume says nothing of which
+    # side faces out, so they are drawn double-sided)
+    clear = cull and name != _MOUTH_WALL
+    winding = triangle_winding(vertices, faces[face_material == m]) if clear else 0
+    face = _cull_face(winding)
+    opened = name in _CUT and (skin == "cut" or name in _GLASS)  # inside shows at the cut
+    out = []
+    for near in (False, True):
+        for glass in (False, True):
+            ids = np.flatnonzero((face_material == m) & (near_side == near))
+            shown = _piece_views(name, near, glass, views, skin)
+            if not len(ids) or not shown:
+                continue
+            if name in _HEIGHT_COLOURED and "top" in shown:  # its own, recoloured piece
+                heights = _height_range(vertices[faces[face_material == m]])
+                out.append(((near, glass, ("top",), face, heights), ids))
+                shown = tuple(v for v in shown if v != "top")
+                if not shown:
+                    continue
+            if face is None or glass:
+                out.append(((near, glass, shown, None, None), ids))
+                continue
+            if opened and not near and "inside" in shown:
+                out.append(((near, glass, ("inside",), None, None), ids))
+                shown = tuple(v for v in shown if v != "inside")
+            if shown:
+                out.append(((near, glass, shown, face, None), ids))
+    return out
+
+
+def _merge_sides(specs):
+    """``specs`` (:func:`_material_specs`) with the far and near pieces that are drawn
+    alike made one (``near`` None; the far triangles first, as they were drawn before)."""
+    merged: dict = {}
+    for (near, *rest), ids in specs:
+        key = (rest[0], rest[1], rest[2], rest[3] is not None)
+        if key in merged:
+            (_, *kept), first = merged[key]
+            merged[key] = ((None, *kept), np.concatenate([first, ids]))
+        else:
+            merged[key] = ((near, *rest), ids)
+    return list(merged.values())
 
 
 def _with_mouth_wall(faces, face_material, materials, regions):
@@ -326,10 +361,9 @@ def _with_mouth_wall(faces, face_material, materials, regions):
 
 def _model_arrays(model):
     """(rest (V,3) float64, faces (F,3) int64, face_material (F,), material names)."""
-    try:
-        from ..face_model import MATERIALS as materials
-    except ImportError:
-        materials = _MATERIALS
+    # the copy, not face_model's: importing face_model imports JAX (over a second of a
+    # drawing worker's start-up, which has only arrays); a test holds the two equal
+    materials = _MATERIALS
     rest = np.asarray(model.vertices, dtype=np.float64)
     faces = np.asarray(model.faces, dtype=np.int64)
     face_material = np.asarray(model.face_material, dtype=np.int64)

@@ -160,6 +160,7 @@ class Renderer:
         self._n_vertices = len(rest)
         self._faces = faces
         self._incidence = _incidence(faces, len(rest))
+        self._posed = np.zeros((len(rest), 6), np.float32)
         drawn, drawn_materials = _with_mouth_wall(
             faces, face_material, materials, getattr(model, "regions", None)
         )
@@ -298,11 +299,12 @@ class Renderer:
         """Write one frame's positions and normals into every piece's vertex buffer."""
         from . import _draw
 
-        normals = _vertex_normals(vertices, self._faces, self._incidence)
+        posed = self._posed  # (V, 6) float32: positions, normals; one gather per piece
+        posed[:, :3] = vertices
+        posed[:, 3:] = _vertex_normals(vertices, self._faces, self._incidence)
         self._gl._platform.make_current()
         for piece in self._pieces:
-            piece.buffer[:, :3] = vertices[piece.vertex_index]
-            piece.buffer[:, 3:6] = normals[piece.vertex_index]
+            piece.buffer[:, :6] = posed[piece.vertex_index]
             if piece.heights is not None:
                 base = self._colours.get(piece.material, (0.7,) * 3)
                 piece.buffer[:, 6:] = height_colours(piece.buffer[:, 1], piece.heights, base)
@@ -384,6 +386,13 @@ class Renderer:
     def pieces(self) -> tuple[PieceInfo, ...]:
         """The pieces the mesh is drawn in (material, side, views, culling), for checking."""
         return tuple(p.info() for p in self._pieces)
+
+    def drawn(self) -> tuple[int, int]:
+        """(draw calls, triangles) of the mesh in one grid frame (markers not counted)."""
+        self._set_layout("grid")
+        counts = [len(p.faces) * sum(v in self._placements for v in p.views)
+                  for p in self._pieces]
+        return sum(c > 0 for c in counts), sum(counts)
 
     def render(
         self,
