@@ -124,12 +124,29 @@ def _first_line(recording):
     return first, pellets
 
 
+#: A subject's recordings are padded to a multiple of this many rows (copies of the first,
+#: weighing nothing: ``rows`` 0), so that subjects with up to as many recordings share one
+#: compiled solver (16-18 s a compilation on two cores) instead of one per count.
+RECORDING_BUCKET = 4
+
+
+def recording_bucket(r: int) -> int:
+    """The rows ``r`` recordings are padded to: the next multiple of :data:`RECORDING_BUCKET`."""
+    return RECORDING_BUCKET * max(math.ceil(r / RECORDING_BUCKET), 1)
+
+
 def _data(model, pellets, head):
-    """The arrays the residuals depend on (a pytree; subject mm unless named)."""
+    """The arrays the residuals depend on (a pytree; subject mm unless named), the
+    recordings' rows padded to :func:`recording_bucket` with copies of the first that
+    weigh nothing (``rows`` 1 for a recording, 0 for padding; the lips' masks 0 there)."""
     p = np.asarray(pellets)  # (R, 8, 2) subject mm, NaN where never tracked
+    r = len(p)
+    p = np.concatenate([p, np.repeat(p[:1], recording_bucket(r) - r, axis=0)])
+    rows = (np.arange(len(p)) < r).astype(float)
     return {
-        "mask_ul": np.isfinite(p[:, UL, 0]).astype(float),
-        "mask_ll": np.isfinite(p[:, LL]).all(-1).astype(float),
+        "rows": rows,
+        "mask_ul": rows * np.isfinite(p[:, UL, 0]),
+        "mask_ll": rows * np.isfinite(p[:, LL]).all(-1),
         "pellets": np.nan_to_num(p),
         "d": np.linalg.norm(p[:, MNI] - p[:, MNM], axis=-1),
         # the skin over the bony Headmeasures points, as the model's landmarks are skin
@@ -254,7 +271,8 @@ def _prepare(recordings, model):
     dtype = jnp.asarray(model.vertices).dtype
     data = jax.tree.map(lambda a: jnp.asarray(a, dtype), _data(model, pellets, head))
     sites = np.asarray(model.vertices)[[model.landmarks["MNI"], model.landmarks["MNM"]], :2]
-    s0 = float(np.linalg.norm(sites[0] - sites[1])) / float(np.median(np.asarray(data["d"])))
+    d = np.asarray(data["d"])[:len(recordings)]  # the recordings' rows, not the padding
+    s0 = float(np.linalg.norm(sites[0] - sites[1])) / float(np.median(d))
     x = eqx.tree_at(lambda u: u.log_scale, Unknowns.zeros(dtype), jnp.asarray(math.log(s0), dtype))
     return data, measured, x, lines
 
@@ -308,15 +326,21 @@ def calibrate_subject(
     return result
 
 
+#: The residual groups with one row per recording (padded rows dropped in the summary).
+_PER_RECORDING = ("upper_lip", "lower_lip", "jaw_pellets")
+
+
 def _summarise(problem, x, method, collisions, unconverged, recordings, lines):
     s = float(np.exp(x.log_scale))
     v, groups, model_t, obs, lips_depth, params, lip_rest = summary_arrays(
         problem.model, problem.data, problem.measured, x)
-    groups = {k: np.asarray(g) for k, g in groups.items()}
+    r = len(recordings)  # the recordings' rows; the padding's are dropped
+    groups = {k: np.asarray(g)[:r] if k in _PER_RECORDING else np.asarray(g)
+              for k, g in groups.items()}
     upper, lower = (float(t) / s for t in model_t)
-    obs_u, obs_l = (np.asarray(t) / s for t in obs)
-    obs_u = np.where(np.asarray(problem.data["mask_ul"]) > 0, obs_u, np.nan)
-    obs_l = np.where(np.asarray(problem.data["mask_ll"]) > 0, obs_l, np.nan)
+    obs_u, obs_l = (np.asarray(t)[:r] / s for t in obs)
+    obs_u = np.where(np.asarray(problem.data["mask_ul"])[:r] > 0, obs_u, np.nan)
+    obs_l = np.where(np.asarray(problem.data["mask_ll"])[:r] > 0, obs_l, np.nan)
 
     def rms(a):
         a = np.asarray(a, float).ravel()
@@ -362,7 +386,7 @@ def _summarise(problem, x, method, collisions, unconverged, recordings, lines):
         converged=not unconverged,
         bounds_hit=bounds_hit(x) if problem.measured else (),
         unconverged=unconverged,
-        lower_lip_bias=lower_lip_bias(problem.model, np.asarray(problem.data["pellets"]), s),
+        lower_lip_bias=lower_lip_bias(problem.model, np.asarray(problem.data["pellets"])[:r], s),
     )
 
 

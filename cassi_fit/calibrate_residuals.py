@@ -123,7 +123,7 @@ class Problem:
         return upper, lower
 
     def lip_thickness_observed(self, s):
-        """Per recording (R,) (upper, lower) in model mm at scale ``s``: the lip pellets
+        """Per recording row (R, padding included) (upper, lower) in model mm at scale ``s``: the lip pellets
         ahead of the incisor tips on the first valid line (the lower tip = the model's,
         placed on that line's jaw pellets by the paper's closed form)."""
         v = self.model.vertices
@@ -167,7 +167,8 @@ class Problem:
         groups = {
             "upper_lip": data["mask_ul"] * (upper - obs_u),
             "lower_lip": data["mask_ll"] * (lower - obs_l),
-            "jaw_pellets": jnp.linalg.norm(v[i["MNI"], :2] - v[i["MNM"], :2]) - s * data["d"],
+            "jaw_pellets": data["rows"] * (
+                jnp.linalg.norm(v[i["MNI"], :2] - v[i["MNM"], :2]) - s * data["d"]),
         }
         if self.measured:
             ours = jnp.stack([v[i["gonion"], :2], v[i["gnathion"], :2]])

@@ -205,6 +205,26 @@ def test_the_lip_estimate_is_each_first_line_and_their_least_squares_compromise(
     assert cal.residuals["upper_lip"] == pytest.approx(observed.std(), abs=0.01)
 
 
+def test_fewer_recordings_are_padded_to_the_solver_of_the_others(separate, corpus, monkeypatch):
+    # one compiled solver serves a subject of 1 to RECORDING_BUCKET recordings: the padding
+    # rows weigh nothing, and no summary carries them
+    shapes, kernel = [], calibrate.stage_kernel
+
+    def spy(model, data, *args):
+        shapes.append(np.shape(data["pellets"]))
+        return kernel(model, data, *args)
+
+    monkeypatch.setattr(calibrate, "stage_kernel", spy)
+    with jax.enable_x64(True):
+        one = calibrate.calibrate_subject(_recordings(corpus, "S01")[:1])
+    assert shapes and set(shapes) == {(calibrate.RECORDING_BUCKET, 8, 2)}
+    assert len(one.observed["upper_lip_thickness"]) == len(one.first_lines) == 1
+    assert one.residuals["upper_lip"] == pytest.approx(0.0, abs=1e-3)  # one line: met
+    assert one.upper_lip_thickness == pytest.approx(one.observed["upper_lip_thickness"][0],
+                                                    abs=1e-3)
+    assert [calibrate.recording_bucket(r) for r in (1, 4, 5, 9)] == [4, 4, 8, 12]
+
+
 def _lip_in_the_teeth(rec):
     positions = np.array(rec.track.positions)
     positions[:, 0, 0] = -4.0  # the UL pellet behind the incisor tip: the lip in the teeth
@@ -260,7 +280,7 @@ def test_a_jaw_beyond_its_bound_is_held_there_and_the_fit_converges(corpus, monk
     assert not stalled.converged and stalled.unconverged == ("jaw_shape",)
     # the same face either way: the stall was at the bound, only the verdict differs
     assert cal.params["jaw_shape_scale"] == pytest.approx(stalled.params["jaw_shape_scale"],
-                                                          abs=1e-6)
+                                                          abs=1e-3)
     assert [str(w.message) for w in caught] == stalled.problems()
     assert len(stalled.problems()) == 2 and "not converge (stage jaw_shape)" in stalled.problems()[0]
 
