@@ -111,8 +111,8 @@ def lips_touching(model, vertices, rest, lip_rest, track, scale: float,
                 "wrongly" if n is None else f"{n} lines labelled /p b m/")
     note = (f"the lips taken to touch where their sensors are nearest ({distance:.1f} mm "
             f"apart or less on {CLOSED_PERCENTILE:g} % of the lines, first at {when:.2f} s; "
-            f"{labelled}): the model's lips {close:+.1f} mm more closed than with the "
-            f"first valid line at rest (upper {up_share * close:+.1f}, lower "
+            f"{labelled}): the model's lips brought {close:+.1f} mm nearer together than "
+            f"with the first valid line at rest (the upper {up_share * close:+.1f}, the lower "
             f"{(1.0 - up_share) * close:+.1f} mm, by the sensors' ranges of motion "
             f"{r_up:.1f} and {r_low:.1f} mm); the sensors taken {offset[0]:+.1f} mm (upper) "
             f"and {offset[1]:+.1f} mm (lower) above the model's lip sites")
