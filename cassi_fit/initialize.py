@@ -31,7 +31,9 @@ Paper section 2; :func:`initialize`:
    articulograph recording without a fitted calibration the lips are at rest where its
    first valid line has them (the report's and the calibration's assumption: the sensors'
    heights above the sites on that line, ``SubjectState.lip_rest``, said by ``cassi
-   animate``), instead of being pushed into each other or apart by the placement.
+   animate``), instead of being pushed into each other or apart by the placement; with
+   the run's ``lip_closure`` (not the default) they touch instead where the lip sensors
+   are nearest (``lips.lips_touching``).
    Likewise its tongue sensors are glued where the lab chose, not at XRMB's T1..T4 sites
    (IPS Munich's back sensor lies near the model's T4 site, not T3's): for an
    articulograph recording (not in CASSI mode) each tongue sensor is placed along the
@@ -91,7 +93,8 @@ class SubjectState(eqx.Module):
     else None (the sensors are the model's sites, as XRMB's pellets); tongue_note: the
     line saying where they were placed and what could not be measured. palate_note: the
     line saying the palate was estimated from the tongue sensors' upper envelope (step 4),
-    else None.
+    else None. lip_note: the line saying ``lip_rest`` was set where the lip sensors are
+    nearest, the lips touching there (``lips.lips_touching``), else None.
     """
 
     model: eqx.Module
@@ -110,6 +113,7 @@ class SubjectState(eqx.Module):
     tongue_sites: tuple | None = eqx.field(static=True, default=None)
     tongue_note: str | None = eqx.field(static=True, default=None)
     palate_note: str | None = eqx.field(static=True, default=None)
+    lip_note: str | None = eqx.field(static=True, default=None)
 
     @property
     def calibration_problems(self) -> tuple[str, ...]:
@@ -126,7 +130,9 @@ class SubjectState(eqx.Module):
         lip sensors' rest was taken from the first valid line (:attr:`lip_rest`)."""
         cal = self.calibration
         out = tuple(cal.caveats()) if isinstance(cal, Calibration) else ()
-        if self.lip_rest is not None:
+        if self.lip_note is not None:
+            out += (self.lip_note,)
+        elif self.lip_rest is not None:
             out += (f"the lip sensors sit {self.lip_rest[0]:+.1f} mm (upper) and "
                     f"{self.lip_rest[1]:+.1f} mm (lower) above the model's lip sites on the "
                     f"first valid line ({self.first_frame + 1}), taken as the lips at rest "
@@ -285,6 +291,17 @@ def _first_line_lips(model, spec, rest, initial_jaw, scaled) -> tuple[float, flo
     return (up if np.isfinite(up) else 0.0, low if np.isfinite(low) else 0.0)
 
 
+def _lips_touching(model, vertices, rest, lip_rest, recording, scale) -> tuple:
+    """``(lip_rest, lip_note)``: the first line's ``lip_rest`` moved so that the model's
+    lips touch where the lip sensors are nearest (``lips.lips_touching``); unchanged and
+    None when the recording has no such distance."""
+    from .lips import lips_touching
+
+    found = lips_touching(model, vertices, rest, lip_rest, recording.track, scale,
+                          getattr(recording, "labels", ()))
+    return found if found is not None else (lip_rest, None)
+
+
 def _initial_jaw(rest, reference, tracked) -> tuple:
     """Step 3: ``(theta, t)`` from the model's jaw sites ``rest[[MNI, MNM]]`` onto the
     first line's scaled jaw pellets ``reference (2, 2)``: the closed form with both; with
@@ -376,12 +393,15 @@ def initialize(
     rest_vertices, rest = _rest_pellets(model, conformation, spec)
     reference = jnp.asarray(scale * pellets[[MNI, MNM]])  # NaN for a jaw pellet not tracked
     initial_jaw = _initial_jaw(rest, reference, tracked)
-    lip_rest = None
+    lip_rest, lip_note = None, None
     if fitted is not None:  # the lips' vertical rest where the first valid lines have them
         rest = _lips_at_rest(rest, fitted.lip_rest_offset)
     elif calibration is None and getattr(recording, "sensors", None) is not None:
         # an articulograph's lip sensors: the same rest, from this recording's first line
         lip_rest = _first_line_lips(model, spec, rest, initial_jaw, scale * pellets)
+        if spec.lip_closure:  # not the default: docs/ACOUSTICS.md, the lips touching
+            lip_rest, lip_note = _lips_touching(model, rest_vertices, rest, lip_rest,
+                                                recording, scale)
         rest = _lips_at_rest(rest, lip_rest)
     rest, tongue_sites, tongue_note = _tongue_at_sensors(
         model, spec, recording, rest_vertices, rest, tracked, scale)
@@ -391,6 +411,7 @@ def initialize(
         rest_pellets=rest, initial_params=conformation, tracked_pellets=tracked,
         source=source, spec=spec, calibration=calibration, lip_rest=lip_rest,
         tongue_sites=tongue_sites, tongue_note=tongue_note, palate_note=palate_note,
+        lip_note=lip_note,
     )  # fmt: skip
     first_params = frame_params(
         state, np.broadcast_to(scale * pellets, (size, 8, 2)), np.zeros(size), np.zeros((size, 2))

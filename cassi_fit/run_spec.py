@@ -111,7 +111,11 @@ class RunSpec:
     recording tracks) or the jaw sensors to use (``("MNI",)``: the other is left out, as
     if absent); x64: compute in float64 for this run only (``jax.enable_x64`` around the
     runner's stages, never process-wide; ``cassi jaw``: its pivots to a micrometre are
-    quotients by ``sin(theta / 2)``).
+    quotients by ``sin(theta / 2)``); lip_closure: for an articulograph recording without
+    a fitted calibration, the model's lips touching where its lip sensors are nearest
+    (``lips.lips_touching``) instead of at rest on its first valid line: off by default, as
+    on the one real recording it was tried on it did not improve the formants overall
+    (docs/ACOUSTICS.md).
     """
 
     mode: str = "improved"
@@ -126,6 +130,7 @@ class RunSpec:
     gap_policy: str = "hold"
     jaw_sensors: Any = None
     x64: bool = False
+    lip_closure: bool = False
 
     def __post_init__(self):
         check_choice("mode", self.mode, MODES)
@@ -141,6 +146,7 @@ class RunSpec:
         object.__setattr__(self, "stride", int(stride))
         object.__setattr__(self, "lip_rounding", bool(self.lip_rounding))
         object.__setattr__(self, "x64", bool(self.x64))
+        object.__setattr__(self, "lip_closure", bool(self.lip_closure))
         object.__setattr__(self, "jaw", _jaw_method(self.jaw))
         if self.jaw_sensors is not None:
             from .jaw_fit import check_sensors, jaw_sensor_set

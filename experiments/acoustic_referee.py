@@ -165,15 +165,15 @@ def run_jw11(folder: Path, one_jaw: bool):
     return run, recording_acoustics(run)
 
 
-def run_emu(folder: Path):
+def run_emu(folder: Path, **changes):
     """The EMU bundle read as every command reads it (``dataset.load_recording``: the IPS
     Munich sensor map, the occlusal frame estimated from the recording, the sound and the
-    ``Segment`` labels inside the bundle)."""
+    ``Segment`` labels inside the bundle); ``changes``: fields of the run's spec."""
     from cassi_fit.acoustics import recording_acoustics
     from cassi_fit.dataset import load_recording
     from cassi_fit.pipeline import run_recording
 
-    run = run_recording(load_recording(next(folder.glob("*_bndl.json"))))
+    run = run_recording(load_recording(next(folder.glob("*_bndl.json"))), **changes)
     return run, recording_acoustics(run)
 
 

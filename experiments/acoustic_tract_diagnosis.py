@@ -26,6 +26,13 @@ speaker (the referee's recordings, read as ``acoustic_referee.py`` reads them).
    distance behind the template's; a line below table 3 gives mo1's upper-lip sensor's
    height above its lower-lip sensor and the model's lip opening in its bilabial closures
    /p b m/ (where the lips touch), and the one below table 1 JW11's UL above its LL.
+4. **EMU mo1 with its lips touching where their sensors are nearest** (the run's
+   ``lip_closure``, ``lips.lips_touching``; not the default): table 3's columns, the
+   line saying what was estimated and the model's lip opening in /p b m/ again.
+5. **What the lips touching does to the referee's figures**: for mo1 with the lips at rest
+   on the first valid line (the default) and touching, the median over vowel segments of
+   |error| with its bootstrap interval, for the sensors alone and calibrated held out
+   (``acoustic_referee.py``'s method, its ``pellets`` and ``calibrated, held out``).
 """
 
 from __future__ import annotations
@@ -146,6 +153,24 @@ def emu_rows(result) -> list[dict]:
     return rows
 
 
+def lip_closure_rows(default, closed) -> list[dict]:
+    """Table 5 (module docstring): ``default`` and ``closed`` mo1's acoustics results."""
+    import acoustic_referee as ref
+
+    from cassi_fit import acoustic_fit
+
+    rows = []
+    for lips, result in (("at rest on the first valid line (default)", default),
+                         ("touching where their sensors are nearest", closed)):
+        held, _ = acoustic_fit.leave_one_quality_out(result)
+        conds = {"pellets": result.model[:, :3], "calibrated, held out": held}
+        for r in ref.summary_rows("mo1", ref.segment_rows("mo1", result, conds), 0.0):
+            rows.append({"lips": lips, "compared": r["compared"], "segments": r["segments"],
+                         **{f"{q} median |error|": r[f"{q} median |error|"]
+                            for q in ref.FORMANTS}})
+    return rows
+
+
 def _openings(result) -> str:
     """JW11's lip and incisor openings over its scored frames, in words."""
     v, g = np.asarray(result.vertices)[result.scored], result.geometry
@@ -231,6 +256,14 @@ def main(argv=None) -> int:
                  f"Its upper-lip sensor lies {_lip_sensors(run):.1f} mm above its lower-lip "
                  "sensor (median over the recording); the model's lips are fitted to XRMB's "
                  "UL and LL pellet sites. " + _bilabials(result), ""]
+        closed_run, closed = ref.run_emu(args.emu, lip_closure=True)
+        text += ["## EMU mo1 with its lips touching where their sensors are nearest "
+                 "(`lip_closure`, not the default): by vowel quality", "",
+                 markdown_text(emu_rows(closed), digits=1), "",
+                 f"With `lip_closure`: {closed_run.state.lip_note}. " + _bilabials(closed),
+                 "",
+                 "## EMU mo1: the referee's figures with the lips at rest and touching", "",
+                 markdown_text(lip_closure_rows(result, closed)), ""]
     args.docs.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(text))
     print(out)
