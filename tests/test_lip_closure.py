@@ -118,3 +118,14 @@ def test_xrmb_keeps_the_papers_lip_sites():
         rec = load_recording(next(real_data(XRMB_JW11).glob("*.txy")))
     state = run_recording(rec, stages=("initialize",), lip_closure=True).state
     assert state.lip_note is None and state.lip_rest is None
+
+
+def test_the_command_line_turns_it_on():
+    import argparse
+
+    from cassi_fit._cli._options import add_model_arguments, spec_from_args
+
+    parser = argparse.ArgumentParser()
+    add_model_arguments(parser)
+    assert spec_from_args(parser.parse_args(["--lip-closure"])).lip_closure
+    assert not spec_from_args(parser.parse_args([])).lip_closure

@@ -214,6 +214,14 @@ def add_shape_arguments(parser: argparse.ArgumentParser) -> None:
         "project (every frame, the tongue is pushed out of the teeth and the palate and "
         "the lips out of the teeth); penetration depths are measured either way",
     )
+    parser.add_argument(
+        "--lip-closure",
+        action="store_true",
+        default=None,
+        help="an articulograph recording without a calibration: the model's lips touch "
+        "where the lip sensors are nearest (lips sealed in /p b m/) instead of resting where "
+        "the first valid line has them; not the default (docs/ACOUSTICS.md)",
+    )
 
 
 def chosen_mode(args: argparse.Namespace) -> str | None:
@@ -237,7 +245,8 @@ def spec_from_args(args: argparse.Namespace):
                     jaw=args.jaw, stride=args.stride, jaw_weights=args.jaw_weights,
                     tongue_anchor=args.tongue_anchor, gap_policy=args.gap,
                     collisions=args.collisions, tongue_shape=args.tongue_shape,
-                    jaw_sensors=getattr(args, "jaw_sensors", None))
+                    jaw_sensors=getattr(args, "jaw_sensors", None),
+                    lip_closure=getattr(args, "lip_closure", None))
 
 
 def run_args(recording, args):
