@@ -66,7 +66,9 @@ def capture(work: Path, recording: Path | None) -> None:
     call = Exported.__call__
 
     def keep(self, *args, **kwargs):
-        if self.name == "cassi_fit.frames._geometry_kernel":
+        if any(isinstance(a, jax.core.Tracer) for a in jax.tree.leaves((args, kwargs))):
+            pass  # called inside another kernel's trace: not a call a process makes
+        elif self.name == "cassi_fit.frames._geometry_kernel":
             calls[self.name] = (args, kwargs)  # the last: animate's, every frame measured
         else:
             calls.setdefault(self.name, (args, kwargs))
