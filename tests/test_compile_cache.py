@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from cassi_fit import synth
+from cassi_fit._exported import EXPORT_CACHE_ENV
 from cassi_fit.corpus import _process
 from cassi_fit.corpus._process import (
     CompileCacheWarning,
@@ -126,7 +127,9 @@ def recording(tmp_path_factory):
 
 
 def _start(recording, out: Path, cache: Path, *more: str) -> subprocess.Popen:
-    env = {**os.environ, "CASSI_COMPILE_CACHE": str(cache)}
+    # the exported kernels off: a warm process would load their compiled executables and
+    # ask the compilation cache for nothing (tests/test_exported.py tests that path)
+    env = {**os.environ, "CASSI_COMPILE_CACHE": str(cache), EXPORT_CACHE_ENV: "off"}
     proc = subprocess.Popen(
         [sys.executable, "-c", _COUNTING, "jaw", str(recording), "--csv", str(out),
          "--method", "closed-form", *more],
