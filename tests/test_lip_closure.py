@@ -10,11 +10,11 @@ import warnings
 
 import numpy as np
 import pytest
+import zoo
 from real_data import EMU_MO1, XRMB_JW11, load_mo1, missing, real_data
 
 from cassi_fit.area_function import tract_geometry
 from cassi_fit.dataset import load_recording
-from cassi_fit.ema.synthetic import write_ema_corpus
 from cassi_fit.labels import Labels
 from cassi_fit.lips import CLOSED_PERCENTILE, bilabial_lines, closing_distance
 from cassi_fit.pellets import LL, MNI, UL
@@ -24,11 +24,7 @@ from cassi_fit.pipeline import run_recording
 @pytest.fixture(scope="module")
 def mview(tmp_path_factory):
     """One synthetic mview recording (one jaw sensor, three tongue sensors), read back."""
-    root = write_ema_corpus(tmp_path_factory.mktemp("ema") / "c", format="mview", n_subjects=1,
-                            tasks="tp040", seed=3, sensors="mocha", audio=False)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return load_recording(next(p for p in root.rglob("*.mat") if "bite" not in p.name))
+    return zoo.synthetic_mview(tmp_path_factory)
 
 
 def _apart(rec) -> np.ndarray:

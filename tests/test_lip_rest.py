@@ -4,14 +4,12 @@ the recording's first valid line has them (``SubjectState.lip_rest``), so sensor
 nearer the lips' opening do not pull the model's lips through each other."""
 
 import dataclasses
-import warnings
 
 import numpy as np
 import pytest
+import zoo
 from real_data import EMU_MO1, load_mo1, missing, real_data
 
-from cassi_fit.dataset import load_recording
-from cassi_fit.ema.synthetic import write_ema_corpus
 from cassi_fit.pellets import LL, UL
 from cassi_fit.pipeline import run_recording
 from cassi_fit.txy import PelletTrack
@@ -22,11 +20,7 @@ STRIDE = 8  # every 8th line: enough frames to see the lips over the sentence
 @pytest.fixture(scope="module")
 def mview(tmp_path_factory):
     """One synthetic mview recording (one jaw sensor, three tongue sensors), read back."""
-    root = write_ema_corpus(tmp_path_factory.mktemp("ema") / "c", format="mview", n_subjects=1,
-                            tasks="tp040", seed=3, sensors="mocha", audio=False)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return load_recording(next(p for p in root.rglob("*.mat") if "bite" not in p.name))
+    return zoo.synthetic_mview(tmp_path_factory)
 
 
 def _glued_nearer_the_opening(rec, up=-5.0, low=+15.0):

@@ -7,15 +7,13 @@ point (``frames.tongue_drive``), instead of dragging the T3 site back onto a sen
 lies behind it."""
 
 import dataclasses
-import warnings
 
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import zoo
 from real_data import EMU_MO1, load_mo1, missing, real_data
 
-from cassi_fit.dataset import load_recording
-from cassi_fit.ema.synthetic import write_ema_corpus
 from cassi_fit.face_model import load_model
 from cassi_fit.frames import tongue_drive, tongue_fill
 from cassi_fit.pellets import MNM, T1, T3, T4
@@ -57,11 +55,7 @@ def test_the_tongue_passes_through_sensors_between_and_behind_the_sites(anchor):
 @pytest.fixture(scope="module")
 def mview(tmp_path_factory):
     """One synthetic mview recording (the X-ray microbeam set of sensors), read back."""
-    root = write_ema_corpus(tmp_path_factory.mktemp("ema") / "c", format="mview",
-                            n_subjects=1, tasks="tp040", seed=3, audio=False)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return load_recording(next(p for p in root.rglob("*.mat") if "bite" not in p.name))
+    return zoo.synthetic_mview(tmp_path_factory, sensors=None)
 
 
 def _back_sensor_read_as_t3(rec):

@@ -92,3 +92,21 @@ def small_corpus(tmp_path_factory, n_subjects: int = 2, tasks=SMALL_CORPUS_TASKS
         out = tmp_path_factory.mktemp("synthetic_corpus")
         _CORPORA[key] = synth.generate_corpus(out, n_subjects=n_subjects, seed=seed, tasks=tasks)
     return _CORPORA[key]
+
+
+def synthetic_mview(tmp_path_factory, sensors: str | None = "mocha"):
+    """One synthetic mview recording (task tp040, seed 3, no sound), read back with the
+    reader's warnings silenced: ``sensors="mocha"`` one jaw sensor and three tongue
+    sensors, ``None`` the X-ray microbeam set. An articulograph recording without a palate
+    trace or a calibration."""
+    import warnings
+
+    from cassi_fit.dataset import load_recording
+    from cassi_fit.ema.synthetic import write_ema_corpus
+
+    more = {} if sensors is None else {"sensors": sensors}
+    root = write_ema_corpus(tmp_path_factory.mktemp("ema") / "c", format="mview", n_subjects=1,
+                            tasks="tp040", seed=3, audio=False, **more)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return load_recording(next(p for p in root.rglob("*.mat") if "bite" not in p.name))
