@@ -164,6 +164,16 @@ def tract_geometry(model: FaceModel) -> TractGeometry:
                                base_weight=weight, base_shift_x=shift)
 
 
+def lip_opening(geometry: TractGeometry, vertices) -> np.ndarray:
+    """The lips' opening (model mm) of ``vertices (..., V, 3)``: the upper lip's lowest
+    midsagittal point above the lower lip's highest (negative: the lips cross), per frame
+    (numpy; the midsagittal lip points after the incisor tips, ``geometry.upper[1:]`` and
+    ``geometry.lower[1:]``)."""
+    v = np.asarray(vertices)
+    upper, lower = np.asarray(geometry.upper[1:]), np.asarray(geometry.lower[1:])
+    return v[..., upper, 1].min(-1) - v[..., lower, 1].max(-1)
+
+
 def _line_x(points: np.ndarray, y: float) -> float:
     """The x at height ``y`` of the straight line through a wall's last two points."""
     (x0, y0), (x1, y1) = np.asarray(points, np.float64)[-2:]

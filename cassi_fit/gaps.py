@@ -30,6 +30,13 @@ def bad_values(track: PelletTrack) -> tuple[Bool[np.ndarray, "n 8"], Bool[np.nda
     return untracked, mistracked
 
 
+def usable_values(track: PelletTrack) -> Bool[np.ndarray, "n 8"]:
+    """``(n, 8)`` bool: the values tracked and not flagged by the mistrack detector
+    (:func:`bad_values`), the ones an estimate from the whole recording may use."""
+    untracked, mistracked = bad_values(track)
+    return ~(untracked | mistracked)
+
+
 def repair(
     positions: Float[np.ndarray, "n 8 2"], bad: Bool[np.ndarray, "n 8"], policy: str = "hold"
 ) -> Float[np.ndarray, "n 8 2"]:

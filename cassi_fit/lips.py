@@ -14,7 +14,7 @@ recording says where the lips touch: two lip sensors are nearest each other vert
 the bilabial closures (and pauses with the lips shut), where the lips meet. The
 *closing distance* is the low percentile :data:`CLOSED_PERCENTILE` of the upper sensor's
 height above the lower one over the lines tracking both, mistracked values left out
-(``gaps.bad_values``); the model's lips are placed so that they touch at it, their
+(``gaps.usable_values``); the model's lips are placed so that they touch at it, their
 opening at a line being the sensors' distance there less the closing distance (below it
 the model's lips press together, ``collide.lips_apart``). The closing is split between
 the lips in proportion to each sensor's vertical range of motion over the recording
@@ -54,11 +54,10 @@ def closing_distance(track) -> tuple[float, float, tuple[float, float]] | None:
     at or below it, and each sensor's vertical range of motion (its heights between that
     percentile and its complement), in ``track``'s (subject) mm; None when fewer than two
     lines track both lips."""
-    from .gaps import bad_values
+    from .gaps import usable_values
     from .pellets import LL, UL
 
-    untracked, mistracked = bad_values(track)
-    good = ~(untracked | mistracked)
+    good = usable_values(track)
     both = good[:, UL] & good[:, LL]
     if both.sum() < 2:
         return None
@@ -93,15 +92,15 @@ def lips_touching(model, vertices, rest, lip_rest, track, scale: float,
     valid line's ``lip_rest`` and the model at rest (``vertices (V, 3)``, its sites
     ``rest (8, 2)`` without a lip offset; ``scale`` model mm per subject mm); the note says
     so in one line. None when the recording has no closing distance."""
-    from .area_function import tract_geometry
+    from .area_function import lip_opening, tract_geometry
     from .pellets import LL, UL
 
     found = closing_distance(track)
     if found is None:
         return None
     distance, when, (r_up, r_low) = found
-    g, v, rest = tract_geometry(model), np.asarray(vertices), np.asarray(rest)
-    opening = v[list(g.upper[1:]), 1].min() - v[list(g.lower[1:]), 1].max()
+    rest = np.asarray(rest)
+    opening = float(lip_opening(tract_geometry(model), vertices))
     touching = float(rest[UL, 1] - rest[LL, 1] - opening)  # the sites' distance, lips touching
     close = scale * distance - (lip_rest[0] - lip_rest[1]) - touching
     up_share = r_up / (r_up + r_low) if r_up + r_low > 0 else 0.5

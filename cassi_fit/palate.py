@@ -312,13 +312,12 @@ def envelope_palate(track, roles: dict, scale: float) -> tuple[np.ndarray, str] 
     centreline; ``track`` a :class:`~cassi_fit.txy.PelletTrack` in subject mm, ``scale``
     model mm per subject mm, ``roles`` the sensor name of each pellet role for the note),
     or None without a tracked tongue sensor under the palate. Untracked and mistracked
-    values (``gaps.bad_values``) are not used."""
-    from .gaps import bad_values
+    values (``gaps.usable_values``) are not used."""
+    from .gaps import usable_values
     from .pellets import PELLET_NAMES, T1, T4
 
     pos = scale * np.asarray(track.positions, np.float64)[:, T1:T4 + 1]
-    untracked, mistracked = bad_values(track)  # a spike must not lift the palate
-    good = ~(untracked | mistracked)[:, T1:T4 + 1]
+    good = usable_values(track)[:, T1:T4 + 1]  # a spike must not lift the palate
     pos = np.where(good[..., None], pos, np.nan)
     found = envelope_factor(pos.reshape(-1, 2))
     if found is None:

@@ -128,6 +128,7 @@ def _elasticities(geometry, v, result) -> list[dict]:
 def emu_rows(result) -> list[dict]:
     """Table 3 (module docstring)."""
     from cassi_fit.acoustic_fit import vowel_quality
+    from cassi_fit.area_function import lip_opening
 
     quality = np.array([vowel_quality(str(s)) for s in result.labels])
     narrow, _ = _pharynx_stats(result.areas, np.asarray(_regions(result)))
@@ -136,7 +137,7 @@ def emu_rows(result) -> list[dict]:
     g = result.geometry
     # the lips' opening (mm): the upper lip's lowest midsagittal point above the lower lip's
     # highest (negative: the lips cross); the jaw's: the lower incisor below the upper
-    lips = (v[:, np.asarray(g.upper[1:]), 1].min(1) - v[:, np.asarray(g.lower[1:]), 1].max(1))
+    lips = lip_opening(g, v)
     jaw = v[:, g.upper[0], 1] - v[:, g.lower[0], 1]
     rows = []
     qualities = sorted(set(quality[result.scored]), key=lambda q: (q not in FRONT, q))
@@ -173,8 +174,10 @@ def lip_closure_rows(default, closed) -> list[dict]:
 
 def _openings(result) -> str:
     """JW11's lip and incisor openings over its scored frames, in words."""
+    from cassi_fit.area_function import lip_opening
+
     v, g = np.asarray(result.vertices)[result.scored], result.geometry
-    lips = v[:, np.asarray(g.upper[1:]), 1].min(1) - v[:, np.asarray(g.lower[1:]), 1].max(1)
+    lips = lip_opening(g, v)
     jaw = v[:, g.upper[0], 1] - v[:, g.lower[0], 1]
     return (f"JW11's wall lies {-float(g.base_shift_x):.1f} mm behind the template's at the "
             "hyoid end's height (the tongue base's carry, model mm). JW11's /a/ (scored frames, "
@@ -185,8 +188,10 @@ def _openings(result) -> str:
 def _bilabials(result) -> str:
     """The model's lip opening in the recording's bilabial closures /p b m/ (where the lips
     touch), in words: a check on the lips' rest that no formant enters."""
+    from cassi_fit.area_function import lip_opening
+
     v, g = np.asarray(result.vertices), result.geometry
-    lips = (v[:, np.asarray(g.upper[1:]), 1].min(1) - v[:, np.asarray(g.lower[1:]), 1].max(1))
+    lips = lip_opening(g, v)
     m = np.isin(np.asarray([str(s) for s in result.labels]), ("p", "b", "m"))
     if not m.any():
         return "No bilabial closure /p b m/ is labelled."

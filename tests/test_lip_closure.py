@@ -13,7 +13,7 @@ import pytest
 import zoo
 from real_data import EMU_MO1, XRMB_JW11, load_mo1, missing, real_data
 
-from cassi_fit.area_function import tract_geometry
+from cassi_fit.area_function import lip_opening, tract_geometry
 from cassi_fit.dataset import load_recording
 from cassi_fit.labels import Labels
 from cassi_fit.lips import CLOSED_PERCENTILE, bilabial_lines, closing_distance
@@ -47,8 +47,7 @@ def _jaw_hanging_lips_sealed(rec, drop=6.0, settle_s=0.3):
 def _model_opening(run) -> np.ndarray:
     """The model's lip opening per frame (mm): the upper lip's lowest midsagittal point
     above the lower lip's highest (as ``experiments/acoustic_tract_diagnosis.py``)."""
-    g, v = tract_geometry(run.state.model), np.asarray(run.animation.vertices)
-    return v[:, list(g.upper[1:]), 1].min(1) - v[:, list(g.lower[1:]), 1].max(1)
+    return lip_opening(tract_geometry(run.state.model), run.animation.vertices)
 
 
 def test_the_closing_distance_is_a_low_percentile_of_the_tracked_lines(mview):
