@@ -263,12 +263,14 @@ def acoustic_only_folder(recording, args):
     the pellets' model keeps its defaults, said in one line, and the folder serves the
     vocal tract alone (``cassi acoustics``, ``cassi animate --views ...,tract``). Returns
     the options for the face's run (a copy; ``args`` kept)."""
-    from cassi_fit.acoustic_fit import acoustic_calibration_path
-    from cassi_fit.calibration import calibration_path
-
     folder = getattr(args, "calibration", None)
     if not folder or not Path(folder).is_dir():
         return args
+    # Imported only for a folder: the acoustic fit's module (optimistix with it) costs
+    # a run without a calibration over a second.
+    from cassi_fit.acoustic_fit import acoustic_calibration_path
+    from cassi_fit.calibration import calibration_path
+
     if (acoustic_calibration_path(folder, recording.subject).is_file()
             and not calibration_path(folder, recording.subject).is_file()):
         print(f"{folder}: no calibration of {recording.subject}'s face, only its vocal "
