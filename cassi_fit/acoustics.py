@@ -141,6 +141,19 @@ class Acoustics:
         return rows
 
 
+def recording_sound(recording) -> tuple[Float[np.ndarray, " n"], float]:
+    """``(samples, rate_hz)`` of the recording's sound (a ``.wav`` beside the file or the
+    sound inside it); ``MissingDataError`` naming the recording if it has none."""
+    from .errors import MissingDataError
+
+    sound = recording.sound
+    if sound is None:
+        raise MissingDataError(f"{recording.subject}/{recording.task}: no sound (a .wav "
+                               "beside the file or inside it): the formants cannot be measured")
+    with sound.wav_file() as wav:
+        return read_wav(wav)
+
+
 def recording_acoustics(
     run: RecordingRun, *, samples: Float[np.ndarray, " n"] | None = None,
     rate_hz: float | None = None, labels: Labels | None = None, ceiling_hz: float = CEILING_HZ["male"], tract: af.TractParams | None = None,
@@ -149,17 +162,11 @@ def recording_acoustics(
     the recording's ``.wav`` unless ``samples`` and ``rate_hz`` are given; the labels are
     those beside the pellet file unless ``labels`` (a :class:`~cassi_fit.labels.Labels`) is
     given. ``MissingDataError`` if there is no sound."""
-    from .errors import MissingDataError
     from .labels import recording_labels
 
     rec, anim = run.recording, run.animation
     if samples is None:
-        sound = rec.sound
-        if sound is None:
-            raise MissingDataError(f"{rec.subject}/{rec.task}: no sound (a .wav beside the "
-                                   "file or inside it): the formants cannot be measured")
-        with sound.wav_file() as wav:
-            samples, rate_hz = read_wav(wav)
+        samples, rate_hz = recording_sound(rec)
     if labels is None:  # beside the file or inside it (mview, EMU levels)
         labels = recording_labels(rec)
     times = np.asarray(anim.times, np.float64)

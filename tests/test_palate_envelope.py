@@ -115,3 +115,29 @@ def test_a_palate_trace_is_kept():
     pal = np.asarray(tract_geometry(state.model).palate)[:N_HARD]
     trace = state.scale * np.asarray(rec.palate, float)
     assert np.median(np.abs(pal[:, 1] - _height(trace, pal[:, 0]))) < 0.5
+
+
+def test_cassi_acoustics_says_the_palate_was_estimated(mview, tmp_path, capsys):
+    import shutil
+    import wave
+
+    from cassi_fit import cli
+
+    folder = tmp_path / "corpus"
+    shutil.copytree(mview.path.parent.parent, folder)
+    (folder / mview.path.parent.name / "PAL.DAT").unlink()  # a lab without a palate trace
+    path = folder / mview.path.parent.name / mview.path.name
+    # without a sound nothing can be measured: said before the model is run
+    assert cli.main(["acoustics", str(path)]) != 0
+    out, err = capsys.readouterr()
+    assert "no sound" in err and "calibration:" not in out
+    seconds = float(mview.track.times[-1]) + 0.05
+    with wave.open(str(path.with_suffix(".wav")), "wb") as w:
+        w.setnchannels(1)
+        w.setsampwidth(2)
+        w.setframerate(16000)
+        t = np.arange(int(seconds * 16000)) / 16000
+        w.writeframes((3000 * np.sin(2 * np.pi * 150 * t)).astype("<i2").tobytes())
+    assert cli.main(["acoustics", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "calibration: palate estimated from the tongue sensors' upper envelope" in out

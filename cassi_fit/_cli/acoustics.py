@@ -40,19 +40,22 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from cassi_fit.acoustics import plot_acoustics, recording_acoustics
-    from cassi_fit.errors import CassiError, OutputExistsError
-    from cassi_fit.formant_track import read_wav
+    from cassi_fit.acoustics import plot_acoustics, recording_acoustics, recording_sound
+    from cassi_fit.errors import OutputExistsError
     from cassi_fit.tables import markdown_text, write_table
 
     for out in (args.csv, args.plot):
         if out and Path(out).exists() and not args.force:
             raise OutputExistsError(f"{out}: exists (use --force to replace it)")
     recording = load_recording_args(args.recording, args)
+    samples, rate = recording_sound(recording)  # none: said before the model is run
     face_args = acoustic_only_folder(recording, args)
     run_ = run_args(recording, face_args)
+    for line in run_.state.calibration_caveats:  # what the model took without knowing it
+        print(f"calibration: {line}")  # (a palate estimated, the lips' rest), as animate says
     tract = _calibrated_tract(recording, getattr(args, "calibration", None))
-    result = recording_acoustics(run_, ceiling_hz=args.ceiling, tract=tract)
+    result = recording_acoustics(run_, samples=samples, rate_hz=rate, ceiling_hz=args.ceiling,
+                                 tract=tract)
     segments = result.segment_rows()
     print(markdown_text(segments, digits=3) if segments else "no vowel segments labelled")
     print(f"{100 * result.share_scored:.0f} % of the vowels' frames scored")
@@ -63,12 +66,6 @@ def run(args) -> int:
             write_table(segments, seg_path, overwrite=args.force, digits=3)
         print(f"wrote {args.csv}")
     if args.plot:
-        sound = recording.sound
-        if sound is None:
-            raise CassiError(f"{recording.path}: no sound (a .wav beside it or inside it) "
-                             "for the spectrogram of --plot")
-        with sound.wav_file() as wav:
-            samples, rate = read_wav(wav)
         plot_acoustics(result, samples, rate, args.plot)
         print(f"wrote {args.plot}")
     return 0
