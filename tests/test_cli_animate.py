@@ -318,6 +318,7 @@ def test_demo_writes_everything_and_reruns(corpus, tmp_path, capsys, monkeypatch
         (["animate", "{txy}", "--fps", "0"], "--fps"),
         (["animate", "a", "b"], "DATASET SUBJECT TASK"),
         (["animate", "{root}", "NOBODY", "tp040"], "NOBODY"),
+        (["acoustics", "{root}"], "recordings: name one as DATASET SUBJECT TASK"),
         (["export", "{txy}", "--out", "x.stl"], ".stl"),
         (["animate", "{txy}", "--out", "{existing}"], "exists"),
         (["animate", "{txy}", "--mode", "cassi", "--collisions", "project"], "collision"),

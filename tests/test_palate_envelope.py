@@ -138,6 +138,8 @@ def test_cassi_acoustics_says_the_palate_was_estimated(mview, tmp_path, capsys):
         w.setframerate(16000)
         t = np.arange(int(seconds * 16000)) / 16000
         w.writeframes((3000 * np.sin(2 * np.pi * 150 * t)).astype("<i2").tobytes())
-    assert cli.main(["acoustics", str(path)]) == 0
-    out = capsys.readouterr().out
+    # the dataset folder of this one recording stands for it, said in one line
+    assert cli.main(["acoustics", str(folder)]) == 0
+    out, err = capsys.readouterr()
+    assert f"{folder}: a dataset of one recording: S01 tp040" in err
     assert "calibration: palate estimated from the tongue sensors' upper envelope" in out

@@ -35,7 +35,8 @@ def add_recording_argument(parser: argparse.ArgumentParser) -> None:
         help="a pellet file (.txy) or an articulograph file (EST Track .ema, Carstens .pos, "
         "NDI Wave .tsv, mview .mat, a .npy/.npz/.csv array, an EMU bundle folder or "
         "_bndl.json; docs/EMA.md), or three words DATASET SUBJECT TASK: a dataset folder "
-        "(per-subject folders, flat files or an emuDB) and the subject and task in it",
+        "(per-subject folders, flat files or an emuDB) and the subject and task in it; a "
+        "dataset folder alone stands for its recording when it holds one",
     )
     add_source_arguments(parser)
 
@@ -81,7 +82,12 @@ def load_recording_args(words, args: argparse.Namespace | None = None):
         path = Path(words[0])
         if not os.path.lexists(path):  # anything else load_recording names (a pipe, ...)
             raise CassiError(f"{path}: no such recording file")
-        return load_recording(path, **options)  # a pipe, device or folder: one line saying which
+        if path.is_dir():
+            from cassi_fit.ema.emu import is_bundle_folder
+
+            if not is_bundle_folder(path):  # a dataset folder: its one recording
+                return _only_recording(path, options)
+        return load_recording(path, **options)  # a pipe or device: one line saying which
     if len(words) == 3:
         from cassi_fit.dataset import Dataset
 
@@ -90,6 +96,23 @@ def load_recording_args(words, args: argparse.Namespace | None = None):
             raise CassiError(f"{root}: no such dataset folder")
         return Dataset(root, sensor_map=options.get("sensor_map")).load(words[1], words[2])
     raise CassiError(f"RECORDING is a pellet file or DATASET SUBJECT TASK, got {len(words)} words")
+
+
+def _only_recording(root: Path, options: dict):
+    """The one recording of the dataset folder ``root``, said in one line on stderr; a
+    folder with several is refused in one line naming how to choose (or with none)."""
+    from cassi_fit.dataset import Dataset
+    from cassi_fit.errors import CassiError
+
+    dataset = Dataset(root, sensor_map=options.get("sensor_map"))
+    pairs = [(s, t) for s in dataset.subjects() for t in dataset.tasks(s)]
+    if len(pairs) != 1:
+        example = f" (e.g. {root} {pairs[0][0]} {pairs[0][1]})" if pairs else ""
+        raise CassiError(f"{root}: a dataset folder with {len(pairs)} recordings: name one "
+                         f"as DATASET SUBJECT TASK{example}")
+    (subject, task), = pairs
+    print(f"{root}: a dataset of one recording: {subject} {task}", file=sys.stderr)
+    return dataset.load(subject, task)
 
 
 def dataset_args(root, args: argparse.Namespace):
