@@ -51,7 +51,8 @@ speaker (the referee's recordings, read as ``acoustic_referee.py`` reads them).
    vowel quality of mo1 and for JW11's /a/, the median signed F1-F3 errors, the root's
    shift forward and the pharynx's mean area; then the referee's median |error| over
    segments for each variant (sensors alone; for mo1 also calibrated held out where the
-   variant is a geometry the calibration can take).
+   variant is a geometry the calibration can take), and each variant minus the root
+   before, paired by segment, with the referee's bootstrap interval.
 """
 
 from __future__ import annotations
@@ -337,15 +338,38 @@ def variant_referee_rows(name: str, variants: dict, held_out: dict) -> list[dict
     {variant: (m, 3) Hz} where computed."""
     import acoustic_referee as ref
 
-    rows = []
+    rows, per_segment = [], {}
     for variant, r in variants.items():
         conds = {"pellets": r.model[:, :3]}
         if held_out.get(variant) is not None:
             conds["calibrated, held out"] = held_out[variant]
-        for row in ref.summary_rows(name, ref.segment_rows(name, r, conds), 0.0):
+        seg = ref.segment_rows(name, r, conds)
+        per_segment[variant] = seg
+        for row in ref.summary_rows(name, seg, 0.0):
             rows.append({"recording": name, "variant": variant, "compared": row["compared"],
                          "segments": row["segments"],
                          **{f"{q} median |error|": row[f"{q} median |error|"] for q in ref.FORMANTS}})
+    # each variant minus the root before, paired by segment (the referee's bootstrap)
+    base = per_segment.get("root before")
+    for variant, seg in per_segment.items():
+        if base is None or variant == "root before":
+            continue
+        for cond in ("pellets", "calibrated, held out"):
+            a = [r for r in seg if r["condition"] == cond]
+            b = [r for r in base if r["condition"] == cond]
+            if not a or len(a) != len(b):
+                continue
+            idx = ref._rng(name, variant, cond).integers(0, len(a), size=(ref.BOOTSTRAP, len(a)))
+            row = {"recording": name, "variant": f"{variant} - root before", "compared": cond,
+                   "segments": len(a)}
+            for q in ref.FORMANTS:
+                d = np.array([abs(x[f"{q}_error"]) - abs(y[f"{q}_error"]) for x, y in zip(a, b, strict=True)])
+                boot = np.nanmedian(d[idx], axis=1)
+                lo, hi = np.nanpercentile(boot, [(100 - ref.LEVEL) / 2, 100 - (100 - ref.LEVEL) / 2])
+                verdict = "better" if hi < 0 else "worse" if lo > 0 else "tie"
+                row[f"{q} median |error|"] = (f"{100 * np.nanmedian(d):+.1f} % [{100 * lo:+.1f}, "
+                                              f"{100 * hi:+.1f}] {verdict}")
+            rows.append(row)
     return rows
 
 

@@ -74,9 +74,9 @@ def test_tongue_base_is_carried_to_the_subjects_wall(setup):
     carries the tongue's hyoid end 20 mm back with it, T4 and everything in front of it
     (where the pellets put the tongue) not at all, and the stretch between by the share
     its arc length gives; the template's own wall carries nothing."""
-    from cassi_fit.pharynx import DEFAULT_WALL, with_pharynx
-
     import dataclasses
+
+    from cassi_fit.pharynx import DEFAULT_WALL, with_pharynx
 
     model, geometry, frames, _ = setup
     assert float(geometry.base_shift_x) == 0.0
