@@ -34,6 +34,23 @@ arc length to nothing at T4 (the linear fall of CASSI's fixed tongue anchor,
 ``PHA.DAT`` has the template's wall and is not moved. The posed mesh is not changed: the
 face's renderer still draws the template's base.
 
+**The tongue root** (the same stretch below T4, the tongue's free surface facing the
+pharynx) keeps the tongue's midsagittal area. The tongue is a muscular hydrostat: its
+volume is constant (Kier & Smith 1985, Zool. J. Linn. Soc. 83:307-324), so tissue the
+pellets show going up in front must come from somewhere, and in cineradiographic tongue
+shapes it comes from the root: the root advances as the front of the tongue rises (/i/)
+and retracts toward the pharyngeal wall as the dorsum lowers (/a/), the "front raising"
+factor of Harshman, Ladefoged & Goldstein (1977, JASA 62:693-707). The model's posed
+tongue keeps its volume by its width (``tongue.keep_volume``), which widens or narrows it
+evenly and leaves the root where the pellets' displacement spreads it. Here, for the
+airway, the midsagittal section (the polygon of the tongue's upper midline, base carried,
+and its lower midline, the floor and the genial/hyoid attachment) is kept at its rest
+area instead: the base's points move in x by one shift (:func:`root_shift`) times
+``base_weight`` (0 at T4, 1 at the hyoid end, as the carry), the shift that makes the
+area the rest's (exact in one step: the shoelace area is linear in x). Nothing is fitted:
+the rest area is the subject's model at rest (``TractGeometry.rest_midsagittal_mm2``;
+None turns it off). The posed mesh is not changed.
+
 **Cross-distances to areas**: the front wall is resampled at ``N_SECTIONS`` points equally
 spaced in arc length; each point's cross-distance ``d`` is its distance to the nearest
 segment of the back wall (unsigned; a tongue through the palate gives a small area, not a
@@ -117,6 +134,8 @@ class TractGeometry(eqx.Module):
     back_region: Int[np.ndarray, " s"] | None = None
     base_weight: Float[np.ndarray, " t"] | None = None
     base_shift_x: Float[np.ndarray, ""] | None = None
+    tongue_bottoms: tuple[int, ...] = eqx.field(static=True, default=())
+    rest_midsagittal_mm2: Float[np.ndarray, ""] | None = None
 
 
 def _lip_points(model: FaceModel, region: str, upper: bool) -> np.ndarray:
@@ -159,9 +178,63 @@ def tract_geometry(model: FaceModel) -> TractGeometry:
                              np.asarray(vertices[tops[-1], 1], np.float64),
                              np.asarray(palate[-1, 1], np.float64))
     weight, shift = _base_transfer(model, tops, wall)
-    return dataclasses.replace(geometry,
-                               back_region=np.asarray(_wall_regions(geometry), np.int32),
-                               base_weight=weight, base_shift_x=shift)
+    geometry = dataclasses.replace(geometry,
+                                   back_region=np.asarray(_wall_regions(geometry), np.int32),
+                                   base_weight=weight, base_shift_x=shift,
+                                   tongue_bottoms=as_ints(_tongue_bottoms(model, tops)))
+    area = midsagittal_area(geometry, jnp.asarray(vertices))
+    return dataclasses.replace(geometry, rest_midsagittal_mm2=np.asarray(area, np.float64))
+
+
+def _tongue_bottoms(model: FaceModel, tops: np.ndarray) -> np.ndarray:
+    """The lower-midline vertex (ring vertex ``R / 2``, the attached side: the floor of the
+    mouth and the genial/hyoid attachment) of each station whose upper-midline vertex is
+    ``tops`` (tip -> hyoid end), ``deform.tongue_midline``'s layout."""
+    ring = (model.landmarks["T2"] - model.landmarks["T1"]) // 4
+    return np.asarray(tops) + ring // 2
+
+
+def _carried_tongue(geometry: TractGeometry, vertices):
+    """The tongue's upper midline ``(t, 2)``, hyoid end -> tip, with the base carried to the
+    subject's wall (module docstring, *the tongue base*)."""
+    g = geometry
+    tongue = vertices[np.asarray(g.tongue_tops[::-1]), :2]
+    if g.base_weight is not None:
+        carry = jnp.asarray(g.base_weight[::-1], tongue.dtype) * jnp.asarray(g.base_shift_x, tongue.dtype)
+        tongue = tongue.at[:, 0].add(carry)
+    return tongue
+
+
+def _midsagittal_area(upper, lower):
+    """The area (mm^2) of the tongue's midsagittal section: the polygon of its upper midline
+    ``upper`` (hyoid end -> tip) and its lower midline ``lower`` (tip -> hyoid end), by the
+    shoelace formula (linear in the points' x at fixed y)."""
+    p = jnp.concatenate([upper, lower])
+    x, y = p[:, 0], p[:, 1]
+    return 0.5 * jnp.abs(jnp.sum(x * jnp.roll(y, -1) - jnp.roll(x, -1) * y))
+
+
+def midsagittal_area(geometry: TractGeometry, vertices) -> Float[Array, ""]:
+    """The area (mm^2) of the tongue's midsagittal section in ``vertices (V, 3)`` (one
+    frame), its base carried to the subject's wall and its root not moved."""
+    return _midsagittal_area(_carried_tongue(geometry, vertices),
+                             vertices[np.asarray(geometry.tongue_bottoms), :2])
+
+
+def root_shift(geometry: TractGeometry, vertices):
+    """How far (mm, +x forward) the tongue root moves so that the tongue's midsagittal
+    section keeps its rest area (module docstring, *the tongue root*): 0 without
+    ``rest_midsagittal_mm2``. The base's points move by this times ``base_weight`` (0 at T4,
+    1 at the hyoid end); the shoelace area is linear in them, so one step is exact."""
+    g = geometry
+    if g.rest_midsagittal_mm2 is None or g.base_weight is None:
+        return jnp.zeros((), vertices.dtype)
+    upper = _carried_tongue(g, vertices)
+    lower = vertices[np.asarray(g.tongue_bottoms), :2]
+    area = _midsagittal_area(upper, lower)  # midsagittal_area, its parts kept for the step
+    w = jnp.asarray(g.base_weight[::-1], vertices.dtype)  # hyoid end -> tip, as upper
+    moved = _midsagittal_area(upper.at[:, 0].add(w), lower)  # the area's change per mm forward
+    return (jnp.asarray(g.rest_midsagittal_mm2, vertices.dtype) - area) / (moved - area)
 
 
 def lip_opening(geometry: TractGeometry, vertices) -> np.ndarray:
@@ -220,10 +293,10 @@ def _walls(geometry: TractGeometry, vertices, params: TractParams):
     """The front wall ``(k, 2)`` and the back wall's segments ``a -> b`` (their regions:
     :func:`_wall_regions`, in the same order)."""
     g = geometry
-    tongue = vertices[np.asarray(g.tongue_tops[::-1]), :2]  # hyoid end -> tip
-    if g.base_weight is not None:  # the base carried to the subject's wall
-        carry = jnp.asarray(g.base_weight[::-1], tongue.dtype) * jnp.asarray(g.base_shift_x, tongue.dtype)
-        tongue = tongue.at[:, 0].add(carry)
+    tongue = _carried_tongue(g, vertices)  # hyoid end -> tip
+    if g.rest_midsagittal_mm2 is not None:  # the root keeps the section's rest area
+        tongue = tongue.at[:, 0].add(jnp.asarray(g.base_weight[::-1], tongue.dtype)
+                                     * root_shift(g, vertices))
     hyoid = tongue[0]
     w = g.wall
     down = (w[-1] - w[-2]) / jnp.linalg.norm(w[-1] - w[-2])

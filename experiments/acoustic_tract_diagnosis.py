@@ -33,6 +33,26 @@ speaker (the referee's recordings, read as ``acoustic_referee.py`` reads them).
    on the first valid line (the default) and touching, the median over vowel segments of
    |error| with its bootstrap interval, for the sensors alone and calibrated held out
    (``acoustic_referee.py``'s method, its ``pellets`` and ``calibrated, held out``).
+6. **The model's vowels beside Story (2008)'s MRI area functions** (``tube.STORY_2008``,
+   one male speaker): mo1's /i:/ and /u:/ and JW11's /a/, the model's median area function
+   over the quality's scored frames (per section: a summary, not one frame) with the
+   tongue root as the pellets leave it and as it keeps the midsagittal area (the default),
+   and Story's stretched to the model's length, as mean areas over six stretches by their
+   distance from the glottis (``STRETCHES``, fractions of the tract's length: about the
+   epilarynx, the hypopharynx, the pharynx, the oropharynx behind the velum, the palatal
+   stretch and the front cavity with the lips); then F1-F3 (Hz) of the measured (median),
+   Story's tract, the model's and the model's with each stretch replaced by Story's: which
+   stretch's areas hold the error.
+7. **Variants** (every variant tried, none chosen by these figures): the tongue root as the
+   pellets leave it (before), keeping the rest midsagittal area (the default), keeping the
+   recording's median midsagittal area (a per-speaker reference from the sensors over all
+   frames), and Soquet's larynx rule confined to ``EPILARYNX_MM`` above the glottis (the
+   epilaryngeal tube; above it the low-pharynx rule) with the root before and now: per
+   vowel quality of mo1 and for JW11's /a/, the median signed F1-F3 errors, the root's
+   shift forward and the pharynx's mean area; then the referee's median |error| over
+   segments for each variant (sensors alone; for mo1 also calibrated held out where the
+   variant is a geometry the calibration can take), and each variant minus the root
+   before, paired by segment, with the referee's bootstrap interval.
 """
 
 from __future__ import annotations
@@ -53,6 +73,15 @@ PHARYNX_SCALES = (1.0, 0.5, 0.25, 0.12, 0.06)
 CLOSED_MM2 = 20.0
 FRONT = ("i", "e", "E", "aI")  # German front (and fronting) vowel qualities of mo1
 PHARYNX = (1, 2, 3)  # area_function.REGIONS: low, mid, upper (oro-) pharynx
+#: Table 6's stretches of the tract (fractions of its length from the glottis): about the
+#: epilarynx, the hypopharynx, the pharynx, the oropharynx behind the velum, the palatal
+#: stretch and the front cavity with the lips (of a 169 mm tract: 0-20, 20-44, 44-74,
+#: 74-98, 98-135 and 135-169 mm, where Story's /i/ has them)
+STRETCHES = (("epilarynx", 0.0, 0.12), ("hypopharynx", 0.12, 0.26), ("pharynx", 0.26, 0.44),
+             ("oropharynx", 0.44, 0.58), ("palatal", 0.58, 0.80), ("front and lips", 0.80, 1.0))
+#: Soquet et al.'s larynx rule within this far of the glottis in table 7's larynx variant:
+#: the epilaryngeal tube, about 2 cm in adult men (Story's /i/: its narrow first 15-20 mm)
+EPILARYNX_MM = 20.0
 
 
 def _pick(n_total: int, n: int) -> np.ndarray:
@@ -85,16 +114,19 @@ def jw11_rows(result) -> tuple[list[dict], list[dict]]:
     idx = idx[_pick(len(idx), FRAMES)]
     v, meas = np.asarray(result.vertices)[idx], result.measured.frequency[idx, :3]
     g = result.geometry
-    template = dataclasses.replace(g, base_weight=None, base_shift_x=None)
+    before = dataclasses.replace(g, rest_midsagittal_mm2=None)
+    template = dataclasses.replace(before, base_weight=None, base_shift_x=None)
     rows = []
-    for name, geom in (("tongue base as the template placed it", template),
-                       ("tongue base carried to JW11's wall", g)):
+    for name, root, geom in (
+            ("tongue base as the template placed it", "before", template),
+            ("tongue base carried to JW11's wall", "before", before),
+            ("tongue base carried to JW11's wall", "keeps the midsagittal area", g)):
         for ps in PHARYNX_SCALES if geom is g else (1.0,):
             tract = eqx.tree_at(lambda t: t.pharynx_scale, result.tract, ps * result.tract.pharynx_scale)
             areas, regions, f = _tract(geom, v, tract, result.scale)
             narrow, mean = _pharynx_stats(areas, regions)
             err = np.nanmedian(f / meas - 1.0, axis=0)
-            rows.append({"tongue base": name, "pharynx areas x": ps,
+            rows.append({"tongue base": name, "tongue root": root, "pharynx areas x": ps,
                          "narrowest pharynx mm^2": float(np.median(narrow)),
                          "mean pharynx mm^2": float(np.median(mean)),
                          **{f"F{q + 1} signed error %": 100 * float(err[q]) for q in range(3)}})
@@ -139,6 +171,7 @@ def emu_rows(result) -> list[dict]:
     # highest (negative: the lips cross); the jaw's: the lower incisor below the upper
     lips = lip_opening(g, v)
     jaw = v[:, g.upper[0], 1] - v[:, g.lower[0], 1]
+    shift = _root_shift_mm(result)
     rows = []
     qualities = sorted(set(quality[result.scored]), key=lambda q: (q not in FRONT, q))
     for q in qualities:
@@ -149,13 +182,15 @@ def emu_rows(result) -> list[dict]:
                      "model F2 Hz": float(np.median(result.model[m, 1])),
                      **{f"F{k + 1} signed error %": 100 * float(med[k]) for k in range(3)},
                      f"pharynx <= {CLOSED_MM2:.0f} mm^2": float(np.mean(narrow[m] <= CLOSED_MM2)),
+                     "root forward mm": float(np.median(shift[m])),
                      "lip opening mm": float(np.median(lips[m] / result.scale)),
                      "incisors apart mm": float(np.median(jaw[m] / result.scale))})
     return rows
 
 
-def lip_closure_rows(default, closed) -> list[dict]:
-    """Table 5 (module docstring): ``default`` and ``closed`` mo1's acoustics results."""
+def lip_closure_rows(default, closed, default_held) -> list[dict]:
+    """Table 5 (module docstring): ``default`` and ``closed`` mo1's acoustics results;
+    ``default_held`` the default's held-out formants."""
     import acoustic_referee as ref
 
     from cassi_fit import acoustic_fit
@@ -163,7 +198,7 @@ def lip_closure_rows(default, closed) -> list[dict]:
     rows = []
     for lips, result in (("at rest on the first valid line (default)", default),
                          ("touching where their sensors are nearest", closed)):
-        held, _ = acoustic_fit.leave_one_quality_out(result)
+        held = default_held if result is default else acoustic_fit.leave_one_quality_out(result)[0]
         conds = {"pellets": result.model[:, :3], "calibrated, held out": held}
         for r in ref.summary_rows("mo1", ref.segment_rows("mo1", result, conds), 0.0):
             rows.append({"lips": lips, "compared": r["compared"], "segments": r["segments"],
@@ -210,6 +245,183 @@ def _lip_sensors(run) -> float:
     return float(np.median(p[both, 0, 1] - p[both, 1, 1]))
 
 
+def _variant_geometries(result) -> dict:
+    """Table 7's geometry variants of a result's subject (module docstring)."""
+    import jax
+    import jax.numpy as jnp
+
+    from cassi_fit import area_function as af
+
+    g = result.geometry
+    v = jnp.asarray(result.vertices)
+    median = float(np.median(np.asarray(jax.vmap(lambda x: af.midsagittal_area(g, x))(v))))
+    return {"root before": dataclasses.replace(g, rest_midsagittal_mm2=None),
+            "root keeps the rest area (default)": g,
+            "root keeps the recording's median area": dataclasses.replace(
+                g, rest_midsagittal_mm2=np.asarray(median, np.float64))}
+
+
+def _epilarynx_areas(areas, lengths, regions):
+    """Soquet et al.'s larynx rule kept within ``EPILARYNX_MM`` of the glottis; the larynx
+    sections above it take the low-pharynx rule at their distance (table 7's variant)."""
+    from cassi_fit import area_function as af
+
+    areas, lengths, regions = (np.asarray(x) for x in (areas, lengths, regions))
+    x = np.cumsum(lengths, -1) - lengths / 2
+    a0, b0, a1, b1 = af.ALPHA[0], af.BETA[0], af.ALPHA[1], af.BETA[1]
+    d_cm = (areas / 100.0 / a0) ** (1.0 / b0)  # the larynx rule inverted: the distance
+    above = (regions == 0) & (x > EPILARYNX_MM) & (areas > af.MIN_AREA_MM2)
+    return np.where(above, 100.0 * a1 * d_cm ** b1, areas)
+
+
+def _with_geometry(result, geometry):
+    """``result`` with the model's formants, areas and lengths of another geometry."""
+    import jax.numpy as jnp
+
+    from cassi_fit.acoustics import model_formants
+
+    f, bw, a, ln = model_formants(geometry, jnp.asarray(result.vertices), result.tract, result.scale)
+    return dataclasses.replace(result, model=f, model_bandwidth=bw, areas=a, lengths=ln,
+                               geometry=geometry)
+
+
+def _with_epilarynx(result):
+    from cassi_fit import tube
+
+    a = _epilarynx_areas(result.areas, result.lengths, _regions(result))
+    f = np.asarray(tube.formants_batch(a, result.lengths).frequency)
+    return dataclasses.replace(result, model=f, areas=a)
+
+
+def variant_results(result) -> dict:
+    """Table 7's variants of one recording's result (module docstring)."""
+    out = {name: _with_geometry(result, g) for name, g in _variant_geometries(result).items()}
+    out[f"larynx rule within {EPILARYNX_MM:.0f} mm of the glottis, root before"] = _with_epilarynx(
+        out["root before"])
+    out[f"larynx rule within {EPILARYNX_MM:.0f} mm of the glottis, root keeps the rest area"] = (
+        _with_epilarynx(out["root keeps the rest area (default)"]))
+    return out
+
+
+def _root_shift_mm(result):
+    import jax
+    import jax.numpy as jnp
+
+    from cassi_fit import area_function as af
+
+    g = result.geometry
+    return np.asarray(jax.vmap(lambda v: af.root_shift(g, v))(jnp.asarray(result.vertices))) / result.scale
+
+
+def variant_quality_rows(name: str, variants: dict) -> list[dict]:
+    """Table 7 (module docstring): per variant and vowel quality."""
+    from cassi_fit.acoustic_fit import vowel_quality
+
+    rows = []
+    for variant, r in variants.items():
+        quality = np.array([vowel_quality(str(s)) for s in r.labels])
+        shift = _root_shift_mm(r)
+        _, mean = _pharynx_stats(np.asarray(r.areas), np.asarray(_regions(r)))
+        err = r.relative_error
+        for q in sorted(set(quality[r.scored]), key=lambda q: (q not in FRONT, q)):
+            m = r.scored & (quality == q)
+            med = np.nanmedian(err[m], axis=0)
+            rows.append({"recording": name, "variant": variant, "quality": q, "frames": int(m.sum()),
+                         "root forward mm": float(np.median(shift[m])),
+                         "mean pharynx mm^2": float(np.median(mean[m])),
+                         **{f"F{k + 1} signed error %": 100 * float(med[k]) for k in range(3)}})
+    return rows
+
+
+def variant_referee_rows(name: str, variants: dict, held_out: dict) -> list[dict]:
+    """Table 8 (module docstring): the referee's figures per variant; ``held_out``
+    {variant: (m, 3) Hz} where computed."""
+    import acoustic_referee as ref
+
+    rows, per_segment = [], {}
+    for variant, r in variants.items():
+        conds = {"pellets": r.model[:, :3]}
+        if held_out.get(variant) is not None:
+            conds["calibrated, held out"] = held_out[variant]
+        seg = ref.segment_rows(name, r, conds)
+        per_segment[variant] = seg
+        for row in ref.summary_rows(name, seg, 0.0):
+            rows.append({"recording": name, "variant": variant, "compared": row["compared"],
+                         "segments": row["segments"],
+                         **{f"{q} median |error|": row[f"{q} median |error|"] for q in ref.FORMANTS}})
+    # each variant minus the root before, paired by segment (the referee's bootstrap)
+    base = per_segment.get("root before")
+    for variant, seg in per_segment.items():
+        if base is None or variant == "root before":
+            continue
+        for cond in ("pellets", "calibrated, held out"):
+            a = [r for r in seg if r["condition"] == cond]
+            b = [r for r in base if r["condition"] == cond]
+            if not a or len(a) != len(b):
+                continue
+            idx = ref._rng(name, variant, cond).integers(0, len(a), size=(ref.BOOTSTRAP, len(a)))
+            row = {"recording": name, "variant": f"{variant} - root before", "compared": cond,
+                   "segments": len(a)}
+            for q in ref.FORMANTS:
+                d = np.array([abs(x[f"{q}_error"]) - abs(y[f"{q}_error"]) for x, y in zip(a, b, strict=True)])
+                boot = np.nanmedian(d[idx], axis=1)
+                lo, hi = np.nanpercentile(boot, [(100 - ref.LEVEL) / 2, 100 - (100 - ref.LEVEL) / 2])
+                verdict = "better" if hi < 0 else "worse" if lo > 0 else "tie"
+                row[f"{q} median |error|"] = (f"{100 * np.nanmedian(d):+.1f} % [{100 * lo:+.1f}, "
+                                              f"{100 * hi:+.1f}] {verdict}")
+            rows.append(row)
+    return rows
+
+
+def _median_tract(r, m):
+    a = np.median(np.asarray(r.areas)[m], 0)
+    ln = np.median(np.asarray(r.lengths)[m], 0)
+    return a, ln
+
+
+def story_rows(cases) -> tuple[list[dict], list[dict]]:
+    """Table 6 (module docstring). ``cases``: ``(name, story vowel, before result, now
+    result, frame mask)``."""
+    import jax.numpy as jnp
+
+    from cassi_fit import tube
+
+    def formants(a, ln):
+        return np.asarray(tube.formants(jnp.asarray(a, float), jnp.asarray(ln, float)).frequency)[:3]
+
+    areas_rows, formant_rows = [], []
+    for name, vowel, before, now, m in cases:
+        step_cm, cm2 = tube.STORY_2008[vowel]
+        story = np.asarray(cm2) * 100.0
+        xs = (np.arange(len(story)) + 0.5) * step_cm * 10.0
+        a0, l0 = _median_tract(before, m)
+        a1, l1 = _median_tract(now, m)
+        total = float(l1.sum())
+        x = np.cumsum(l1) - l1 / 2
+        s1 = np.interp(x / total * len(story) * step_cm * 10.0, xs, story)  # stretched
+        x0 = np.cumsum(l0) - l0 / 2
+        for stretch, lo, hi in STRETCHES:
+            sel1 = (x >= lo * total) & (x < hi * total)
+            sel0 = (x0 >= lo * l0.sum()) & (x0 < hi * l0.sum())
+            areas_rows.append({"vowel": name, "stretch": stretch,
+                               "from-to mm": f"{lo * total:.0f}-{hi * total:.0f}",
+                               "model root before mm^2": float(a0[sel0].mean()),
+                               "model now mm^2": float(a1[sel1].mean()),
+                               "Story (2008) mm^2": float(s1[sel1].mean())})
+        meas = np.median(now.measured.frequency[m, :3], 0)
+        tracts = [("measured (Praat, median)", meas),
+                  (f"Story's /{vowel}/ ({len(story) * step_cm * 10:.0f} mm)",
+                   formants(story, np.full(len(story), step_cm * 10.0))),
+                  ("model, root before", formants(a0, l0)), ("model now", formants(a1, l1))]
+        for stretch, lo, hi in STRETCHES:
+            sel = (x >= lo * total) & (x < hi * total)
+            tracts.append((f"model now with Story's {stretch}", formants(np.where(sel, s1, a1), l1)))
+        for tract, f in tracts:
+            formant_rows.append({"vowel": name, "tract": tract,
+                                 **{f"F{k + 1} Hz": float(f[k]) for k in range(3)}})
+    return areas_rows, formant_rows
+
+
 def _regions(result):
     import jax.numpy as jnp
 
@@ -243,8 +455,16 @@ def main(argv=None) -> int:
             "Written by `experiments/acoustic_tract_diagnosis.py` (docstring: the method). One "
             "recording of one speaker per table: no figure generalises to other speakers. "
             "Signed error = model / measured - 1 (Praat's Burg formants).", ""]
+    from cassi_fit import acoustic_fit
+    from cassi_fit.acoustic_fit import vowel_quality
+
+    story_cases, variant_rows, variant_ref = [], [], []
     if args.jw11:
         run, result = ref.run_jw11(args.jw11, False)
+        jw_variants = variant_results(result)
+        variant_rows += variant_quality_rows("JW11", jw_variants)
+        variant_ref += variant_referee_rows("JW11", jw_variants, {})
+        story_cases.append(("JW11 /a/", "a", jw_variants["root before"], result, result.scored))
         pharynx, elastic = jw11_rows(result)
         text += ["## JW11 (XRMB, two jaw pellets, nine /a/): the pharynx", "",
                  markdown_text(pharynx, digits=2), "",
@@ -255,6 +475,17 @@ def main(argv=None) -> int:
         print("JW11 done", flush=True)
     if args.emu:
         run, result = ref.run_emu(args.emu)
+        emu_variants = variant_results(result)
+        held = {}
+        for name in ("root before", "root keeps the rest area (default)",
+                     "root keeps the recording's median area"):
+            held[name] = acoustic_fit.leave_one_quality_out(emu_variants[name])[0]
+        variant_rows += variant_quality_rows("mo1", emu_variants)
+        variant_ref += variant_referee_rows("mo1", emu_variants, held)
+        quality = np.array([vowel_quality(str(s)) for s in result.labels])
+        for q in ("i", "u"):
+            story_cases.append((f"mo1 /{q}:/", q, emu_variants["root before"], result,
+                                result.scored & (quality == q)))
         text += ["## EMU mo1 (IPS Munich, one jaw sensor, palate from the tongue sensors, "
                  "default wall): by vowel quality", "", markdown_text(emu_rows(result), digits=1),
                  "", f"The {run.state.palate_note}.", "",
@@ -268,7 +499,17 @@ def main(argv=None) -> int:
                  f"With `lip_closure`: {closed_run.state.lip_note}. " + _bilabials(closed),
                  "",
                  "## EMU mo1: the referee's figures with the lips at rest and touching", "",
-                 markdown_text(lip_closure_rows(result, closed)), ""]
+                 markdown_text(lip_closure_rows(result, closed,
+                                               held["root keeps the rest area (default)"])), ""]
+    if story_cases:
+        areas_rows, formant_rows = story_rows(story_cases)
+        text += ["## The model's vowels beside Story (2008)'s MRI area functions: mean areas",
+                 "", markdown_text(areas_rows, digits=0), "",
+                 "## The same: F1-F3 of each tract, and of the model's with one stretch of "
+                 "Story's", "", markdown_text(formant_rows, digits=0), "",
+                 "## Variants tried: by vowel quality (none chosen by these figures)", "",
+                 markdown_text(variant_rows, digits=1), "",
+                 "## Variants tried: the referee's figures", "", markdown_text(variant_ref), ""]
     args.docs.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(text))
     print(out)

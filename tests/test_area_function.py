@@ -74,11 +74,15 @@ def test_tongue_base_is_carried_to_the_subjects_wall(setup):
     carries the tongue's hyoid end 20 mm back with it, T4 and everything in front of it
     (where the pellets put the tongue) not at all, and the stretch between by the share
     its arc length gives; the template's own wall carries nothing."""
+    import dataclasses
+
     from cassi_fit.pharynx import DEFAULT_WALL, with_pharynx
 
     model, geometry, frames, _ = setup
     assert float(geometry.base_shift_x) == 0.0
     deeper = af.tract_geometry(with_pharynx(model, DEFAULT_WALL + np.array([-20.0, 0.0])))
+    # the carry alone (the root's area rule, tested below, moves the base again)
+    geometry, deeper = (dataclasses.replace(g, rest_midsagittal_mm2=None) for g in (geometry, deeper))
     np.testing.assert_allclose(float(deeper.base_shift_x), -20.0, atol=1e-3)
     tract = af.default_tract()
     front0 = np.asarray(af._walls(geometry, frames[1], tract)[0])
@@ -92,3 +96,38 @@ def test_tongue_base_is_carried_to_the_subjects_wall(setup):
     assert np.all(np.diff(moved[:t4 + 1, 0]) > 0)  # less and less carried toward T4
     # the glottis keeps its place in front of the (moved) wall
     np.testing.assert_allclose(front1[0, 0] - front0[0, 0], -20.0, atol=1e-3)
+
+
+def test_tongue_root_keeps_the_midsagittal_area(setup):
+    """The root (the base below T4, which no pellet sees) moves forward or back so that the
+    tongue's midsagittal section keeps its rest area: nothing at rest; forward when the
+    pellets raise the front of the tongue (an /i/), back when they lower the dorsum (the
+    jaw held); the shifted section has the rest area; T4 and the tongue in front of
+    it stay where the pellets put them; differentiable."""
+    import dataclasses
+
+    model, geometry, frames, _ = setup
+    rest = jnp.asarray(model.vertices)
+    assert abs(float(af.root_shift(geometry, rest))) < 1e-3
+    p0 = default_params(model)
+    front_up = eqx.tree_at(lambda p: p.tongue, p0, p0.tongue + jnp.array([[0, 6], [0, 8], [0, 4], [0, 0]], float))
+    raised = deform(model, front_up)
+    lowered = deform(model, eqx.tree_at(lambda p: p.tongue, p0, p0.tongue + jnp.array([[0.0, -8.0]] * 4)))
+    forward, back = float(af.root_shift(geometry, raised)), float(af.root_shift(geometry, lowered))
+    assert forward > 1.0 and back < -1.0
+    tract = af.default_tract()
+    off = dataclasses.replace(geometry, rest_midsagittal_mm2=None)
+    for v, shift in ((raised, forward), (lowered, back), (frames[1], None)):
+        moved = np.asarray(af._walls(geometry, v, tract)[0]) - np.asarray(af._walls(off, v, tract)[0])
+        tongue = moved[1:1 + len(geometry.tongue_tops)]  # hyoid end -> tip
+        if shift is not None:
+            np.testing.assert_allclose(tongue[0, 0], shift, rtol=1e-4)
+        t4 = list(geometry.tongue_tops[::-1]).index(model.landmarks["T4"])
+        np.testing.assert_allclose(tongue[t4:], 0.0, atol=1e-9)
+        np.testing.assert_allclose(tongue[:, 1], 0.0, atol=1e-9)
+        upper = np.asarray(af._walls(geometry, v, tract)[0])[1:1 + len(geometry.tongue_tops)]
+        lower = np.asarray(v)[np.asarray(geometry.tongue_bottoms), :2]
+        np.testing.assert_allclose(float(af._midsagittal_area(jnp.asarray(upper), jnp.asarray(lower))),
+                                   float(geometry.rest_midsagittal_mm2), rtol=1e-4)
+    g = jax.grad(lambda v: af.root_shift(geometry, v))(raised)
+    assert np.all(np.isfinite(np.asarray(g))) and float(jnp.abs(g).sum()) > 0

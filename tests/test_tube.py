@@ -14,24 +14,9 @@ N = 44  # every tract of this module (Story's): one compilation
 # lossless tube's peaks are poles, not maxima a Newton step can refine)
 NEARLY_LOSSLESS = tube.Losses(viscous=True, thermal=False, wall=False, radiation=False)
 
-# Story (2008, JASA 123:327-335), the 2002 male area functions (cm^2, glottis first) and
-# their section lengths (cm)
-STORY = {
-    "i": (0.384, [0.51, 0.59, 0.62, 0.72, 1.24, 2.30, 3.30, 3.59, 3.22, 2.86, 3.00, 3.61, 4.39,
-                  4.95, 5.17, 5.16, 5.18, 5.26, 5.20, 5.02, 4.71, 4.13, 3.43, 2.83, 2.32, 1.83,
-                  1.46, 1.23, 1.08, 0.94, 0.80, 0.67, 0.55, 0.46, 0.40, 0.36, 0.35, 0.35, 0.38,
-                  0.51, 0.74, 0.92, 0.96, 0.91]),
-    "a": (0.388, [0.56, 0.62, 0.66, 0.78, 0.97, 1.16, 1.12, 0.82, 0.55, 0.45, 0.37, 0.29, 0.21,
-                  0.15, 0.16, 0.25, 0.34, 0.43, 0.54, 0.61, 0.67, 0.98, 1.76, 2.75, 3.52, 4.08,
-                  4.74, 5.61, 6.60, 7.61, 8.48, 9.06, 9.29, 9.26, 9.06, 8.64, 7.91, 6.98, 6.02,
-                  5.13, 4.55, 4.52, 4.71, 4.72]),
-    "u": (0.445, [0.54, 0.61, 0.66, 0.75, 1.13, 1.99, 2.83, 2.90, 2.52, 2.40, 2.83, 3.56, 3.99,
-                  3.89, 3.50, 3.04, 2.64, 2.44, 2.31, 2.07, 1.80, 1.52, 1.14, 0.74, 0.42, 0.22,
-                  0.14, 0.20, 0.47, 0.89, 1.15, 1.42, 2.17, 3.04, 3.69, 4.70, 5.74, 5.41, 3.82,
-                  2.34, 1.35, 0.65, 0.29, 0.16]),
-}
-# Peterson & Barney (1952, JASA 24:175-184), men's averages F1, F2, F3 (Hz)
-PETERSON_BARNEY = {"i": (270, 2290, 3010), "a": (730, 1090, 2440), "u": (300, 870, 2240)}
+# Story (2008)'s MRI vowels and Peterson & Barney's men's means: the module's published data
+STORY = tube.STORY_2008
+PETERSON_BARNEY = tube.PETERSON_BARNEY_MEN
 
 
 @pytest.fixture(scope="module")
