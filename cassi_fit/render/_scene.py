@@ -444,15 +444,15 @@ class Renderer:
         tract: Mapping[str, Any] | None = None,
     ) -> UInt8[np.ndarray, "h w 3"]:
         """The second of :meth:`render`'s steps, on :meth:`render_gl`'s ``(image,
-        frame)``: the 2D views (midsagittal, tract) drawn into their cells (in place) and
-        the caption.
+        frame)``: the 2D views (midsagittal, tract) drawn into their cells and the caption
+        into its band, in place (``image`` is returned).
         numpy and Pillow only, no OpenGL: it may run in another thread while the next
         frame's OpenGL views are drawn (one thread at a time), and gives the same bytes
         as :meth:`render`."""
         self._draw_section(image, frame, markers, trails, time)
         if self._tract_box is not None:
             draw_tract(image, self._tract_box, tract)
-        return add_caption(image, caption) if caption else image
+        return add_caption(image, caption, in_place=True) if caption else image
 
     def set_traces(self, traces: Mapping[str, Float[Any, "n 2"] | None] | None) -> None:
         """Replace the midsagittal view's fixed traces (``{name: (n, 2) mm}``, model frame)."""
