@@ -160,6 +160,7 @@ class Renderer:
         self._n_vertices = len(rest)
         self._faces = faces
         self._incidence = _incidence(faces, len(rest))
+        self._corners = np.ascontiguousarray(faces.T).ravel()  # for _vertex_normals
         self._posed = np.zeros((len(rest), 6), np.float32)
         drawn, drawn_materials = _with_mouth_wall(
             faces, face_material, materials, getattr(model, "regions", None)
@@ -301,10 +302,14 @@ class Renderer:
 
         posed = self._posed  # (V, 6) float32: positions, normals; one gather per piece
         posed[:, :3] = vertices
-        posed[:, 3:] = _vertex_normals(vertices, self._faces, self._incidence)
+        posed[:, 3:] = _vertex_normals(vertices, self._faces, self._incidence,
+                                        self._corners)
         self._gl._platform.make_current()
-        for piece in self._pieces:
-            piece.buffer[:, :6] = posed[piece.vertex_index]
+        for piece in self._pieces:  # (np.take: a third of a fancy index's time)
+            if piece.buffer.shape[1] == 6:
+                np.take(posed, piece.vertex_index, axis=0, out=piece.buffer, mode="clip")
+            else:
+                piece.buffer[:, :6] = np.take(posed, piece.vertex_index, axis=0, mode="clip")
             if piece.heights is not None:
                 base = self._colours.get(piece.material, (0.7,) * 3)
                 piece.buffer[:, 6:] = height_colours(piece.buffer[:, 1], piece.heights, base)
