@@ -233,8 +233,18 @@ def _uniform(program, name, value):
     loc = locations[name]
     if loc < 0:
         return
-    if isinstance(value, np.ndarray) and value.ndim == 2:
-        gl.glUniformMatrix4fv(loc, 1, gl.GL_TRUE, value.astype(np.float32))
+    # a program keeps its uniforms' values: set only what changed since the last frame
+    # (the camera's matrices never do, the materials' only between draws)
+    kept = program.__dict__.setdefault("_cassi_values", {})
+    matrix = isinstance(value, np.ndarray) and value.ndim == 2
+    if matrix:
+        value = value.astype(np.float32)
+    key = value.tobytes() if matrix else value
+    if kept.get(name) == key:
+        return
+    kept[name] = key
+    if matrix:
+        gl.glUniformMatrix4fv(loc, 1, gl.GL_TRUE, value)
     elif len(value) == 4:
         gl.glUniform4f(loc, *value)
     elif len(value) == 3:
