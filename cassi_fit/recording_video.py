@@ -185,11 +185,13 @@ def animation_frames(
     pellets left out); ``labels`` (``labels.Labels``): the label at each frame's time is
     captioned. A renderer with the ``midsagittal`` view gets, whatever ``markers`` says,
     the measured pellets with a trail of their last ``TRAIL_S`` seconds and the time.
-    ``helper_thread``: draw each frame's OpenGL views in this thread and its 2D
-    part (midsagittal view, caption) in a helper thread while the next frame's views are
-    drawn (the same bytes); it pays only where a core is free: on 2 cores OpenGL's own
-    threads and ffmpeg keep both busy and the helper thread was slower in
-    ``benchmarks/bench_animation.py``, so the default is one step.
+    One step (the default) is ``renderer.render_frames``: frame k + 1's OpenGL views
+    are drawn before frame k is read back and finished, so that llvmpipe's raster
+    threads draw while this thread works. ``helper_thread``: draw each frame's OpenGL
+    views in this thread and its 2D part (midsagittal view, caption) in a helper thread
+    while the next frame's views are drawn (the same bytes); it pays only where a core
+    is free: on 2 cores OpenGL's own threads and ffmpeg keep both busy and the helper
+    thread was slower in ``benchmarks/bench_animation.py``.
     The progress bar goes to stderr."""
     import sys
 
@@ -206,6 +208,9 @@ def animation_frames(
     work = tqdm(work, desc="rendering", unit="frame", file=sys.stderr, total=total,
                 disable=not progress, leave=False)
     if not (helper_thread and hasattr(renderer, "render_gl")):  # one step
+        if hasattr(renderer, "render_frames"):  # pipelined: the same bytes
+            yield from renderer.render_frames(work)
+            return
         for points, kwargs in work:
             yield renderer.render(points, **kwargs)
         return

@@ -53,6 +53,29 @@ def test_two_steps_give_the_same_frames_byte_for_byte(run, renderer):
     assert len({f.tobytes() for f in two}) == len(two)
 
 
+def test_pipelined_frames_are_each_frames_own_bytes(run, renderer):
+    """``Renderer.render_frames`` draws frame k + 1 into a second framebuffer before frame
+    k is read back: each frame is still ``render``'s own, byte for byte; a loop stopped
+    early, or failing on a bad frame, leaves the renderer drawing the right frames."""
+    _, _, animation = run
+    work = list(recording_video.frame_work(animation, section=True, markers=True,
+                                           subject="JWT", task="sentence",
+                                           indices=range(0, animation.n_frames, 7)))
+    whole = [renderer.render(points, **kwargs) for points, kwargs in work]
+    piped = list(renderer.render_frames(iter(work)))
+    assert len(piped) == len(whole) >= 4
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(piped, whole, strict=True))
+    stopped = renderer.render_frames(iter(work))
+    next(stopped)
+    stopped.close()  # frame 1 drawn, never read
+    assert renderer.render(*work[2][:1], **work[2][1]).tobytes() == whole[2].tobytes()
+    broken = [*work[:2], (np.zeros((3, 3)), {}), *work[2:]]
+    with pytest.raises(Exception, match="vertices"):
+        list(renderer.render_frames(iter(broken)))
+    assert [f.tobytes() for f in renderer.render_frames(iter(work[3:]))] == [
+        f.tobytes() for f in whole[3:]]
+
+
 def test_an_error_in_the_helper_thread_reaches_the_caller(run, renderer, monkeypatch):
     _, _, animation = run
     calls = []

@@ -14,7 +14,7 @@ margin, so a video does not jump.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from typing import Any, Protocol
 
 import numpy as np
@@ -458,6 +458,51 @@ class Renderer:
         if self._tract_box is not None:
             draw_tract(image, self._tract_box, tract)
         return add_caption(image, caption, in_place=True) if caption else image
+
+    def render_frames(
+        self, work: Iterable[tuple[Float[Any, "v 3"], Mapping[str, Any]]]
+    ) -> Iterator[UInt8[np.ndarray, "h w 3"]]:
+        """``render(vertices, **keywords)`` of each ``(vertices, keywords)`` of ``work``,
+        in order, the same bytes, pipelined: frame k + 1's OpenGL views are drawn (vertex
+        upload and processing, here) before frame k's pixels are read back and finished
+        (midsagittal view, caption), so that llvmpipe's raster threads draw frame k while
+        this thread works on its neighbours instead of waiting for them. Must run in the
+        thread that made the renderer; one frame is drawn ahead of the one yielded."""
+        from . import _draw
+
+        pending = None
+        try:
+            for vertices, kwargs in work:
+                frame = _as_frame(vertices, self._n_vertices)
+                self._set_layout("grid")
+                if not self._placements or not self._submit(_draw, frame, kwargs):
+                    if pending is not None:  # (only on the first frame: no framebuffers)
+                        yield self._finish_pending(_draw, *pending)
+                        pending = None
+                    yield self.render(vertices, **kwargs)
+                    continue
+                if pending is not None:
+                    yield self._finish_pending(_draw, *pending)
+                pending = (frame, kwargs)
+            if pending is not None:
+                frame_kwargs, pending = pending, None
+                yield self._finish_pending(_draw, *frame_kwargs)
+        finally:  # stopped early (or failed): frames drawn and not read are dropped
+            if self._gl is not None:
+                _draw.drop_frames(self._gl)
+
+    def _submit(self, _draw, frame, kwargs) -> bool:
+        """Upload and draw ``frame``'s OpenGL views without reading them back; False
+        (nothing drawn) where the platform cannot (see :func:`_draw.draw_frame`)."""
+        self._upload(frame)
+        self._set_markers(kwargs.get("markers"))
+        return _draw.draw_frame(self._gl, self._scene)
+
+    def _finish_pending(self, _draw, frame, kwargs) -> UInt8[np.ndarray, "h w 3"]:
+        image = _draw.read_frame(self._gl)
+        return self.finish_frame(image, frame, markers=kwargs.get("markers"),
+                                 caption=kwargs.get("caption"), trails=kwargs.get("trails"),
+                                 time=kwargs.get("time"), tract=kwargs.get("tract"))
 
     def set_traces(self, traces: Mapping[str, Float[Any, "n 2"] | None] | None) -> None:
         """Replace the midsagittal view's fixed traces (``{name: (n, 2) mm}``, model frame)."""
