@@ -349,6 +349,7 @@ def write_recording_video(
     fps: object = DEFAULT_FPS,
     jobs: int = 1,
     panels: Sequence[Any] | None = None,
+    pool: Any = None,
 ) -> Path:
     """The video of a ``pipeline.RecordingRun``: the one place that sets up the renderer
     for a recording (the model, its ``views`` (default all of ``options.VIEWS``, in a
@@ -361,10 +362,11 @@ def write_recording_video(
     checked against its length; a ``Labels``; or None/False for none). ``accept_mismatch``: keep
     sound or labels whose length does not fit the recording (with a warning) instead of
     the error. ``renderer``: reuse an open ``render.Renderer`` of the same model (its
-    traces are replaced). ``jobs``: frames drawn by that many worker processes
-    (``render.FramePool``, each its own OpenGL context; the same bytes) instead of one
-    renderer here. ``panels``: with the ``tract`` view among ``views``, the panel of every
-    animation frame (``acoustics.tract_panels(run)``; without them its cell says there is
+    traces are replaced). ``jobs``: frames drawn by that many processes, this one and
+    ``jobs - 1`` workers (``render.FramePool``, each its own OpenGL context; the same
+    bytes); ``pool``: such a pool started already (its workers' start-up done while the
+    recording was fitted), given this model and drawing the frames. ``panels``: with
+    the ``tract`` view among ``views``, the panel of every animation frame (``acoustics.tract_panels(run)``; without them its cell says there is
     no tract). Returns the path written."""
     from .options import VIEWS
     from .render import FramePool
@@ -393,6 +395,9 @@ def write_recording_video(
     # the sound as a .wav for the encoder (a temporary one for a sound held in memory)
     with sound.wav_file() if sound is not None else contextlib.nullcontext() as wav:
         options["audio"] = wav
+        if renderer is None and pool is not None:
+            pool.set_model(state.model, **setup)
+            return write_animation(path, run.animation, None, workers=pool, **options)
         if renderer is None and int(jobs) > 1:
             with FramePool(state.model, jobs=int(jobs), **setup) as pool:
                 return write_animation(path, run.animation, None, workers=pool, **options)

@@ -135,6 +135,25 @@ def test_worker_processes_draw_the_same_bytes_in_order(run, renderer):
         assert len({f.tobytes() for f in parallel}) == len(parallel)  # not one frame
         with pytest.raises(Exception, match="vertices"):
             list(pool.draw([(np.zeros((3, 3)), {})]))
+    # a pool started before the model is known (cassi animate --jobs N), its worker
+    # ready: the batches are shared between this process and the worker, in order
+    many = recording_video.VideoFrames(schedule.rate, schedule.index, schedule.times)
+    options = {**options, "frames": many}
+    serial = list(recording_video.animation_frames(animation, renderer, progress=False,
+                                                   **options))
+    with FramePool(jobs=2) as pool:
+        assert pool.views == ()
+        pool._starting.join()
+        pool._warm[0].result(timeout=120)  # the worker has imported what drawing needs
+        pool.set_model(state.model, **setup)
+        assert pool.views == tuple(renderer.views)
+        drawn = []
+        real = pool._pool.submit
+        pool._pool.submit = lambda *a: drawn.append(len(a[-1])) or real(*a)
+        work = recording_video.frame_work(animation, section=True, **options)
+        parallel = list(pool.draw(work))
+        assert drawn and sum(drawn) < len(serial)  # some batches the worker's, some here
+        assert [a.tobytes() for a in parallel] == [b.tobytes() for b in serial]
 
 
 def test_the_egl_device_is_chosen_by_cassi_egl_device(monkeypatch):
