@@ -21,9 +21,10 @@ views at 640x480, improved mode):
 - the phases of a warm 60 fps video in one fresh process (start-up, initialize, animate,
   video) and a bare ``python -c "import jax, ...; jnp.zeros(1)"`` beside them;
 - drawing the 60 fps frames whole (caption, midsagittal view) in this process against
-  ``--jobs`` worker processes (``render.FramePool``, their start-up included), and the
-  whole command with ``--jobs`` against one process. The serial runs use the default
-  llvmpipe threads (one per core), the parallel ones each worker's share.
+  ``--jobs`` drawing processes (``render.FramePool``: this one and ``--jobs`` - 1
+  workers, their start-up included), and the whole command with ``--jobs`` against one
+  process. This process uses the default llvmpipe threads (one per core), each worker
+  its share.
 
 The load average is printed: on a shared machine every wall time is longer, the ratios
 less so. With ``--docs DIR`` the table goes to ``DIR/bench_realtime.md``.
@@ -244,8 +245,9 @@ def table(m: dict, length: float, jobs: int) -> list[tuple[str, str, str, str, s
          f"previous / current scene {m['floor_before'] / m['floor']:.2f}", "", ""),
         ("drawing the 60 fps frames whole, one process", f"{m['serial']:.2f}",
          f"serial / floor {m['serial'] / m['floor']:.2f}", "", ""),
-        (f"the same, {jobs} worker processes (start-up included; LP_NUM_THREADS "
-         f"{int(m['threads'])} each)", f"{m['parallel']:.2f}", f"serial / parallel {draw_x:.2f}",
+        (f"the same, {jobs} drawing processes (this one and {jobs - 1} worker(s), start-up "
+         f"included; LP_NUM_THREADS {int(m['threads'])} each worker)", f"{m['parallel']:.2f}",
+         f"serial / parallel {draw_x:.2f}",
          f">= {PARALLEL_X}x", met(draw_x >= PARALLEL_X)),
         (f"`cassi animate` JW11, 60 fps, warm, --jobs {jobs}", f"{m['jobs']:.2f}",
          f"--jobs 1 / --jobs {jobs}: {cmd_x:.2f}", "", ""),

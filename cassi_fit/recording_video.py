@@ -185,11 +185,13 @@ def animation_frames(
     pellets left out); ``labels`` (``labels.Labels``): the label at each frame's time is
     captioned. A renderer with the ``midsagittal`` view gets, whatever ``markers`` says,
     the measured pellets with a trail of their last ``TRAIL_S`` seconds and the time.
-    ``helper_thread``: draw each frame's OpenGL views in this thread and its 2D
-    part (midsagittal view, caption) in a helper thread while the next frame's views are
-    drawn (the same bytes); it pays only where a core is free: on 2 cores OpenGL's own
-    threads and ffmpeg keep both busy and the helper thread was slower in
-    ``benchmarks/bench_animation.py``, so the default is one step.
+    One step (the default) is ``renderer.render_frames``: frame k + 1's OpenGL views
+    are drawn before frame k is read back and finished, so that llvmpipe's raster
+    threads draw while this thread works. ``helper_thread``: draw each frame's OpenGL
+    views in this thread and its 2D part (midsagittal view, caption) in a helper thread
+    while the next frame's views are drawn (the same bytes); it pays only where a core
+    is free: on 2 cores OpenGL's own threads and ffmpeg keep both busy and the helper
+    thread was slower in ``benchmarks/bench_animation.py``.
     The progress bar goes to stderr."""
     import sys
 
@@ -206,6 +208,9 @@ def animation_frames(
     work = tqdm(work, desc="rendering", unit="frame", file=sys.stderr, total=total,
                 disable=not progress, leave=False)
     if not (helper_thread and hasattr(renderer, "render_gl")):  # one step
+        if hasattr(renderer, "render_frames"):  # pipelined: the same bytes
+            yield from renderer.render_frames(work)
+            return
         for points, kwargs in work:
             yield renderer.render(points, **kwargs)
         return
@@ -344,6 +349,7 @@ def write_recording_video(
     fps: object = DEFAULT_FPS,
     jobs: int = 1,
     panels: Sequence[Any] | None = None,
+    pool: Any = None,
 ) -> Path:
     """The video of a ``pipeline.RecordingRun``: the one place that sets up the renderer
     for a recording (the model, its ``views`` (default all of ``options.VIEWS``, in a
@@ -356,10 +362,11 @@ def write_recording_video(
     checked against its length; a ``Labels``; or None/False for none). ``accept_mismatch``: keep
     sound or labels whose length does not fit the recording (with a warning) instead of
     the error. ``renderer``: reuse an open ``render.Renderer`` of the same model (its
-    traces are replaced). ``jobs``: frames drawn by that many worker processes
-    (``render.FramePool``, each its own OpenGL context; the same bytes) instead of one
-    renderer here. ``panels``: with the ``tract`` view among ``views``, the panel of every
-    animation frame (``acoustics.tract_panels(run)``; without them its cell says there is
+    traces are replaced). ``jobs``: frames drawn by that many processes, this one and
+    ``jobs - 1`` workers (``render.FramePool``, each its own OpenGL context; the same
+    bytes); ``pool``: such a pool started already (its workers' start-up done while the
+    recording was fitted), given this model and drawing the frames. ``panels``: with
+    the ``tract`` view among ``views``, the panel of every animation frame (``acoustics.tract_panels(run)``; without them its cell says there is
     no tract). Returns the path written."""
     from .options import VIEWS
     from .render import FramePool
@@ -388,6 +395,9 @@ def write_recording_video(
     # the sound as a .wav for the encoder (a temporary one for a sound held in memory)
     with sound.wav_file() if sound is not None else contextlib.nullcontext() as wav:
         options["audio"] = wav
+        if renderer is None and pool is not None:
+            pool.set_model(state.model, **setup)
+            return write_animation(path, run.animation, None, workers=pool, **options)
         if renderer is None and int(jobs) > 1:
             with FramePool(state.model, jobs=int(jobs), **setup) as pool:
                 return write_animation(path, run.animation, None, workers=pool, **options)

@@ -53,6 +53,29 @@ def test_two_steps_give_the_same_frames_byte_for_byte(run, renderer):
     assert len({f.tobytes() for f in two}) == len(two)
 
 
+def test_pipelined_frames_are_each_frames_own_bytes(run, renderer):
+    """``Renderer.render_frames`` draws frame k + 1 into a second framebuffer before frame
+    k is read back: each frame is still ``render``'s own, byte for byte; a loop stopped
+    early, or failing on a bad frame, leaves the renderer drawing the right frames."""
+    _, _, animation = run
+    work = list(recording_video.frame_work(animation, section=True, markers=True,
+                                           subject="JWT", task="sentence",
+                                           indices=range(0, animation.n_frames, 7)))
+    whole = [renderer.render(points, **kwargs) for points, kwargs in work]
+    piped = list(renderer.render_frames(iter(work)))
+    assert len(piped) == len(whole) >= 4
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(piped, whole, strict=True))
+    stopped = renderer.render_frames(iter(work))
+    next(stopped)
+    stopped.close()  # frame 1 drawn, never read
+    assert renderer.render(*work[2][:1], **work[2][1]).tobytes() == whole[2].tobytes()
+    broken = [*work[:2], (np.zeros((3, 3)), {}), *work[2:]]
+    with pytest.raises(Exception, match="vertices"):
+        list(renderer.render_frames(iter(broken)))
+    assert [f.tobytes() for f in renderer.render_frames(iter(work[3:]))] == [
+        f.tobytes() for f in whole[3:]]
+
+
 def test_an_error_in_the_helper_thread_reaches_the_caller(run, renderer, monkeypatch):
     _, _, animation = run
     calls = []
@@ -112,6 +135,25 @@ def test_worker_processes_draw_the_same_bytes_in_order(run, renderer):
         assert len({f.tobytes() for f in parallel}) == len(parallel)  # not one frame
         with pytest.raises(Exception, match="vertices"):
             list(pool.draw([(np.zeros((3, 3)), {})]))
+    # a pool started before the model is known (cassi animate --jobs N), its worker
+    # ready: the batches are shared between this process and the worker, in order
+    many = recording_video.VideoFrames(schedule.rate, schedule.index, schedule.times)
+    options = {**options, "frames": many}
+    serial = list(recording_video.animation_frames(animation, renderer, progress=False,
+                                                   **options))
+    with FramePool(jobs=2) as pool:
+        assert pool.views == ()
+        pool._starting.join()
+        pool._warm[0].result(timeout=120)  # the worker has imported what drawing needs
+        pool.set_model(state.model, **setup)
+        assert pool.views == tuple(renderer.views)
+        drawn = []
+        real = pool._pool.submit
+        pool._pool.submit = lambda *a: drawn.append(len(a[-1])) or real(*a)
+        work = recording_video.frame_work(animation, section=True, **options)
+        parallel = list(pool.draw(work))
+        assert drawn and sum(drawn) < len(serial)  # some batches the worker's, some here
+        assert [a.tobytes() for a in parallel] == [b.tobytes() for b in serial]
 
 
 def test_the_egl_device_is_chosen_by_cassi_egl_device(monkeypatch):
@@ -144,3 +186,28 @@ def test_the_side_view_leaves_out_what_the_head_hides(run, renderer):
     assert calls == len(renderer.pieces)
     faces = run[1].model.faces
     assert len(faces) < triangles < 4 * len(faces)
+
+
+_DEFERRED = """
+import sys
+from cassi_fit.render import _pool
+_pool._defer_trimesh()
+import pyrender
+assert "scipy.spatial" not in sys.modules and "trimesh.base" not in sys.modules
+import trimesh
+sphere = trimesh.creation.icosphere(subdivisions=1)  # read from: the real one now
+assert len(sphere.faces) == 80 and sys.modules["trimesh"].__file__.endswith("__init__.py")
+assert pyrender.Mesh.from_trimesh(sphere).primitives
+"""
+
+
+def test_a_drawing_worker_imports_trimesh_when_it_is_read_from():
+    """A worker defers pyrender's import of trimesh (half its start-up): the package is
+    a placeholder until read from, then the real one."""
+    import os
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", _DEFERRED], capture_output=True, text=True,
+                          env={**os.environ, "PYOPENGL_PLATFORM": "egl"})
+    assert done.returncode == 0, done.stderr

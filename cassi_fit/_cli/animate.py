@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from pathlib import Path
 
@@ -132,15 +133,18 @@ def run(args) -> int:
     from cassi_fit._io import check_outputs  # before any work: no input, no clash, no overwrite
 
     check_outputs([out, csv_out], overwrite=args.force)
-    if out.suffix.lower() == ".png" or (args.jobs in (None, 1) and not args.scheduler):
-        from cassi_fit.render import prepare_gl  # drawn here: OpenGL readied meanwhile
+    still = out.suffix.lower() == ".png"
+    jobs = 1 if still else drawing_jobs(args)
+    from cassi_fit.render import FramePool, prepare_gl
 
-        prepare_gl()
-    run = run_args(recording, acoustic_only_folder(recording, args))
+    prepare_gl()  # drawn here (too): OpenGL readied while the face is fitted and moved
+    # --jobs N: the drawing workers start now, importing what they need meanwhile
+    with FramePool(jobs=jobs) if jobs > 1 else contextlib.nullcontext() as pool:
+        run = run_args(recording, acoustic_only_folder(recording, args))
+        written = write_output(out, run, size, views, args, pool=pool)
     state, animation = run.state, run.animation
     from cassi_fit.reports import penetration_summary, tongue_volume_summary, write_penetration_csv
 
-    written = write_output(out, run, size, views, args)
     print(f"wrote {written} ({animation.n_frames} frames, stride {animation.stride})")
     for line in state.calibration_problems:  # said once on reading, kept beside the output
         print(f"calibration problem: {line}")
@@ -153,8 +157,9 @@ def run(args) -> int:
     return 0
 
 
-def write_output(out: Path, run, size, views, args) -> Path:
-    """The run's still (``.png``, frame ``--frame``) or video (``recording_video.write_recording_video``)."""
+def write_output(out: Path, run, size, views, args, pool=None) -> Path:
+    """The run's still (``.png``, frame ``--frame``) or video (``recording_video.write_recording_video``;
+    ``pool``: a started ``render.FramePool`` drawing it, for ``--jobs N``)."""
     from cassi_fit import recording_video as video
     from cassi_fit.errors import CassiError
 
@@ -182,7 +187,7 @@ def write_output(out: Path, run, size, views, args) -> Path:
                                        audio=not args.no_audio, progress=not args.quiet,
                                        accept_mismatch=args.accept_mismatch,
                                        overwrite=args.force, fps=args.fps,
-                                       jobs=drawing_jobs(args), panels=panels)
+                                       jobs=drawing_jobs(args), panels=panels, pool=pool)
 
 
 def drawing_jobs(args) -> int:

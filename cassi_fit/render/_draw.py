@@ -144,9 +144,22 @@ class ColourOnlyRenderer(pyrender.Renderer):
     def render(self, scene, flags, seg_node_map=None):
         """pyrender's render loop, lean: one program, cached uniform locations, no
         per-draw lighting or sorting (opaque pieces first, then see-through ones)."""
+        self.draw_frame(scene, flags)
+        return self.read_frame(), None
+
+    def draw_frame(self, scene, flags) -> None:
+        """:meth:`render`'s drawing, into a framebuffer of its own, flushed: llvmpipe's
+        raster threads draw it while the caller goes on; :meth:`read_frame` reads it.
+        With one frame waiting to be read, the next is drawn into the second
+        framebuffer, so that drawing frame k + 1 need not wait for frame k's pixels."""
+        pending = self.__dict__.setdefault("_cassi_pending", [])
+        if len(pending) > 1:
+            raise RuntimeError("draw_frame: two frames wait to be read already")
         if scene.meshes != self._meshes:
             self._update_context(scene, flags)
         self._configure_forward_pass_viewport(flags)
+        target = self._main_targets()[1 if pending and pending[0] == 0 else 0]
+        gl.glBindFramebuffer(gl.GL_DRAW_FRAMEBUFFER, target[0])
         gl.glClearColor(*scene.bg_color)
         gl.glClear(gl.GL_COLOR_BUFFER_BIT | gl.GL_DEPTH_BUFFER_BIT)
         for k in range(4):
@@ -173,7 +186,27 @@ class ColourOnlyRenderer(pyrender.Renderer):
         if bound is not None:
             bound._unbind()
         gl.glFlush()
-        return self._read_main_framebuffer(scene, flags)
+        pending.append(0 if target[0] == self._main_fb_ms else 1)
+
+    def read_frame(self) -> np.ndarray:
+        """The oldest frame :meth:`draw_frame` drew and nobody read yet: a new (H, W, 3)
+        uint8 image, top row first."""
+        pending = self.__dict__.get("_cassi_pending")
+        if not pending:
+            raise RuntimeError("read_frame: no frame drawn")
+        return self._read_main_framebuffer(self._main_targets()[pending.pop(0)])
+
+    def _main_targets(self) -> tuple[tuple[int, int], tuple[int, int]]:
+        """The two framebuffers frames are drawn into, as (drawn, resolved) pairs (the
+        same framebuffer twice without multisampling): pyrender's main one, and a
+        second made on first use."""
+        spare = self.__dict__.get("_cassi_spare")
+        if spare is None:
+            dims = self._main_fb_dims
+            spare = _framebuffer(gl, dims, 0)
+            spare_ms = _framebuffer(gl, dims, self.samples) if self.samples else spare
+            spare = self._cassi_spare = (spare_ms, spare)
+        return ((self._main_fb_ms, self._main_fb), (spare[0][0], spare[1][0]))
 
     def _configure_main_framebuffer(self):
         dims = (self.viewport_width, self.viewport_height)
@@ -191,6 +224,11 @@ class ColourOnlyRenderer(pyrender.Renderer):
     def _delete_main_framebuffer(self):
         fbs = {self._main_fb, self._main_fb_ms} - {None}
         rbs = {self._main_cb, self._main_db, self._main_cb_ms, self._main_db_ms} - {None}
+        spare, self._cassi_spare, self._cassi_pending = (
+            self.__dict__.get("_cassi_spare"), None, [])
+        for fb, colour, depth in set(spare or ()):
+            fbs.add(fb)
+            rbs |= {colour, depth}
         if fbs:
             gl.glDeleteFramebuffers(len(fbs), list(fbs))
         if rbs:
@@ -199,16 +237,17 @@ class ColourOnlyRenderer(pyrender.Renderer):
         self._main_fb_ms = self._main_cb_ms = self._main_db_ms = None
         self._main_fb_dims = (None, None)
 
-    def _read_main_framebuffer(self, scene, flags):
+    def _read_main_framebuffer(self, target):
+        drawn, resolved = target
         width, height = self._main_fb_dims
-        if self._main_fb_ms != self._main_fb:
-            gl.glBindFramebuffer(gl.GL_READ_FRAMEBUFFER, self._main_fb_ms)
-            gl.glBindFramebuffer(gl.GL_DRAW_FRAMEBUFFER, self._main_fb)
+        if drawn != resolved:
+            gl.glBindFramebuffer(gl.GL_READ_FRAMEBUFFER, drawn)
+            gl.glBindFramebuffer(gl.GL_DRAW_FRAMEBUFFER, resolved)
             gl.glBlitFramebuffer(
                 0, 0, width, height, 0, 0, width, height,
                 gl.GL_COLOR_BUFFER_BIT, gl.GL_LINEAR,
             )  # fmt: skip
-        gl.glBindFramebuffer(gl.GL_READ_FRAMEBUFFER, self._main_fb)
+        gl.glBindFramebuffer(gl.GL_READ_FRAMEBUFFER, resolved)
         # RGB straight into a kept buffer: dropping alpha in numpy costs 1.4 ms a frame.
         buffer = self.__dict__.get("_cassi_pixels")
         if buffer is None or buffer.shape != (height, width, 3):
@@ -219,7 +258,7 @@ class ColourOnlyRenderer(pyrender.Renderer):
         if error != gl.GL_NO_ERROR:
             raise RenderingUnavailableError(f"OpenGL error {int(error):#x} while drawing a "
                                             "frame")
-        return buffer[::-1].copy(), None
+        return buffer[::-1].copy()
 
 
 def _uniform(program, name, value):
@@ -233,8 +272,18 @@ def _uniform(program, name, value):
     loc = locations[name]
     if loc < 0:
         return
-    if isinstance(value, np.ndarray) and value.ndim == 2:
-        gl.glUniformMatrix4fv(loc, 1, gl.GL_TRUE, value.astype(np.float32))
+    # a program keeps its uniforms' values: set only what changed since the last frame
+    # (the camera's matrices never do, the materials' only between draws)
+    kept = program.__dict__.setdefault("_cassi_values", {})
+    matrix = isinstance(value, np.ndarray) and value.ndim == 2
+    if matrix:
+        value = value.astype(np.float32)
+    key = value.tobytes() if matrix else value
+    if kept.get(name) == key:
+        return
+    kept[name] = key
+    if matrix:
+        gl.glUniformMatrix4fv(loc, 1, gl.GL_TRUE, value)
     elif len(value) == 4:
         gl.glUniform4f(loc, *value)
     elif len(value) == 3:
@@ -337,6 +386,33 @@ def write_vertices(primitive: pyrender.Primitive, buffer: np.ndarray) -> None:
     else:
         primitive.positions = buffer[:, :3].copy()
         primitive.normals = buffer[:, 3:6].copy()
+
+
+def draw_frame(offscreen: pyrender.OffscreenRenderer, scene: pyrender.Scene) -> bool:
+    """The first half of ``offscreen.render(scene)``: the frame drawn and flushed, not read
+    (:func:`read_frame`); False, nothing drawn, where the platform has no framebuffers
+    (OSMesa: call ``offscreen.render``)."""
+    platform = offscreen._platform
+    if not platform.supports_framebuffers():
+        return False
+    platform.make_current()
+    renderer = offscreen._renderer
+    renderer.viewport_width = offscreen.viewport_width
+    renderer.viewport_height = offscreen.viewport_height
+    renderer.point_size = offscreen.point_size
+    renderer.draw_frame(scene, pyrender.RenderFlags.OFFSCREEN)
+    return True
+
+
+def read_frame(offscreen: pyrender.OffscreenRenderer) -> np.ndarray:
+    """The oldest frame :func:`draw_frame` drew and nobody read yet, (H, W, 3) uint8."""
+    offscreen._platform.make_current()
+    return offscreen._renderer.read_frame()
+
+
+def drop_frames(offscreen: pyrender.OffscreenRenderer) -> None:
+    """Forget the frames :func:`draw_frame` drew and nobody read (a stopped video)."""
+    offscreen._renderer.__dict__["_cassi_pending"] = []
 
 
 def release(offscreen: pyrender.OffscreenRenderer) -> None:

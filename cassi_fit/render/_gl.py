@@ -26,6 +26,7 @@ HEADLESS_PLATFORMS = ("egl", "osmesa")
 _PLATFORM: str | None = None  # the answer of ensure_headless_gl, cached per process
 _DEVICE: dict | None = None  # the EGL device the probe chose: {"device", "file", "renderer"}
 _WARM_UP: threading.Thread | None = None  # prepare_gl's thread, if one was started
+_CHOSEN = threading.Event()  # set by prepare_gl's thread once the platform is chosen (or not)
 
 # Probes run in a fresh interpreter (PyOpenGL fixes its platform at first import). They
 # create a context the way pyrender will (EGL: the first device's platform display) but
@@ -223,18 +224,24 @@ def egl_device() -> dict | None:
     return None if _DEVICE is None else dict(_DEVICE)
 
 
-def ensure_headless_gl() -> str:
+def ensure_headless_gl(*, imports: bool = True) -> str:
     """Choose the OpenGL platform for offscreen rendering (:func:`choose_gl_platform`),
     once per process; returns its name.
 
     A headless choice is written into ``PYOPENGL_PLATFORM`` before pyrender or OpenGL
     are imported here. Raises :class:`RenderingUnavailableError` (one line) if no
-    platform works.
+    platform works. ``imports=False``: where :func:`prepare_gl` runs, wait for its
+    choice only, not for its imports (a caller that only hands the choice on, to
+    drawing processes).
     """
     global _PLATFORM
     warm_up = _WARM_UP
     if warm_up is not None and warm_up is not threading.current_thread():
-        warm_up.join()  # prepare_gl's choice (or its failure, made again here to be said)
+        # prepare_gl's choice (or its failure, made again here to be said)
+        while not imports and warm_up.is_alive() and not _CHOSEN.wait(0.05):
+            pass
+        if imports or not _CHOSEN.is_set():
+            warm_up.join()
     if _PLATFORM is None:
         platform = choose_gl_platform()
         if (platform == "egl" and _DEVICE is None and os.environ.get("CASSI_EGL_DEVICE")
@@ -267,7 +274,10 @@ def prepare_gl() -> None:
 
     def work() -> None:
         try:
-            ensure_headless_gl()
+            try:
+                ensure_headless_gl()
+            finally:
+                _CHOSEN.set()
             # in Renderer._build_scene's order: pyrender (and OpenGL with its error
             # checking) first, then _draw, which turns the checking off for what follows
             import pyrender  # noqa: F401

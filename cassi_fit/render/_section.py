@@ -279,19 +279,24 @@ class Section:
         lo, hi = p.min(axis=0) - _WINDOW_MARGIN_MM, p.max(axis=0) + _WINDOW_MARGIN_MM
         return lo - (0.0, _JAW_DROP_MM), hi
 
-    def contours(self, vertices: Float[Any, "v 3"]) -> dict[str, list]:
+    def contours(self, vertices: Float[Any, "v 3"], transform=None) -> dict[str, list]:
         """``{material: [(points (n, 2) mm, closed)]}`` of one posed frame, plus ``"jaw"``:
-        the schematic lower jaw moved with the lower teeth (if the model allows it)."""
+        the schematic lower jaw moved with the lower teeth (if the model allows it).
+        ``transform``: a function of (n, 2) points applied to every point (to pixels),
+        once for all the section's points."""
         v = np.asarray(vertices, dtype=np.float64)
         edges, chains = self._topology(v[self._near, 2] > Z_EPS)
         za, zb = v[edges[:, 0], 2], v[edges[:, 1], 2]
         t = np.clip((Z_EPS - za) / np.where(zb != za, zb - za, 1.0), 0.0, 1.0)
         nodes = v[edges[:, 0], :2] + t[:, None] * (v[edges[:, 1], :2] - v[edges[:, 0], :2])
+        if transform is not None:
+            nodes = transform(nodes)
         out = {name: [(nodes[index], closed) for index, closed in lines]
                for name, lines in chains.items()}  # fmt: skip
         if self._jaw is not None:
             r, t = _procrustes_2d(self.rest[self._lower, :2], v[self._lower, :2])
-            out["jaw"] = [(line @ r.T + t, False) for line in self._jaw]
+            out["jaw"] = [(line @ r.T + t if transform is None else transform(line @ r.T + t),
+                           False) for line in self._jaw]
         return out
 
     def _topology(self, side: np.ndarray):
@@ -353,10 +358,15 @@ class Section:
         scale = min(w / (hi[0] - lo[0]), h / (hi[1] - lo[1]))
         mid = (lo + hi) / 2
 
+        factor, offset = np.array([scale, -scale]), np.array([w / 2, h / 2])
+
+        def to_px(p: np.ndarray) -> np.ndarray:
+            """Model mm (..., 2) float64 -> pixels (..., 2)."""
+            return (p - mid) * factor + offset
+
         def px(points) -> list[float]:
             """Model mm (n, 2+) -> the flat pixel list [x0, y0, x1, y1, ...] PIL takes."""
-            p = np.asarray(points, dtype=np.float64)[:, :2]
-            return ((p - mid) * (scale, -scale) + (w / 2, h / 2)).ravel().tolist()
+            return to_px(np.asarray(points, dtype=np.float64)[:, :2]).ravel().tolist()
 
         line = max(1, round(min(w, h) / 180))
         key = (w, h, id(self._window))
@@ -370,30 +380,31 @@ class Section:
             self._base = (key, base)
         pil = self._base[1].copy()
         draw = ImageDraw.Draw(pil)
-        self._draw_contours(draw, px, line, vertices, colours)
-        self._draw_points(draw, px, line, markers or {}, trails or {})
+        self._draw_contours(draw, to_px, line, vertices, colours)
+        self._draw_points(draw, to_px, px, line, markers or {}, trails or {})
         if time is not None:
             draw.text((4 * line, 3 * line), f"t = {float(time):.3f} s", fill=(40, 40, 40),
                       font=_font(max(10, h // 18)))  # fmt: skip
         image[top:bottom, left:right] = np.asarray(pil)
 
-    def _draw_contours(self, draw, px, line: int, vertices, colours: Mapping[str, Any]) -> None:
+    def _draw_contours(self, draw, to_px, line: int, vertices,
+                       colours: Mapping[str, Any]) -> None:
         """The parts' outlines in the plane (filled where closed), the jaw's dashed."""
-        contours = self.contours(vertices)
+        contours = self.contours(vertices, transform=to_px)  # in pixels
         jaw = contours.pop("jaw", ())
         for points, _ in jaw:
-            _dashed(draw, px(points), _rgb(_JAW_COLOUR), line, dash=max(4, 5 * line))
+            _dashed(draw, points, _rgb(_JAW_COLOUR), line, dash=max(4, 5 * line))
         for name, lines in contours.items():
             ink, fill = _inks(name, tuple(colours.get(name, (0.6, 0.6, 0.6))))
             for points, closed in lines:
-                xy = px(points)
+                xy = points.ravel().tolist()
                 if closed and fill is not None and len(xy) >= 6:
                     draw.polygon(xy, fill=fill)
-                draw.line(xy + (xy[:2] if closed else []), fill=ink, width=2 * line,
-                          joint="curve" if line > 1 else None)  # fmt: skip
+                _line(draw, xy + (xy[:2] if closed else []), ink, 2 * line,
+                      joint="curve" if line > 1 else None)
 
     @staticmethod
-    def _draw_points(draw, px, line: int, markers: Mapping[str, Any],
+    def _draw_points(draw, to_px, px, line: int, markers: Mapping[str, Any],
                      trails: Mapping[str, Any]) -> None:
         """Each label's trail (faded) and its points: the model's sites as rings, under
         the data's filled dots."""
@@ -406,11 +417,12 @@ class Section:
             if trail.ndim == 3 and trail.shape[0] >= 2:
                 faded = _rgb(tuple(0.45 * c + 0.55 * b / 255 for c, b in zip(colour, _BACKGROUND,
                                                                                  strict=True)))
+                paths = to_px(trail[:, :, :2])  # (T, k, 2) pixels
+                finite = np.all(np.isfinite(trail[:, :, :2]), axis=2)
                 for k in range(trail.shape[1]):
-                    path = trail[:, k, :2]
-                    path = path[np.all(np.isfinite(path), axis=1)]
+                    path = paths[finite[:, k], k]
                     if len(path) >= 2:
-                        draw.line(px(path), fill=faded, width=2 * line)
+                        _line(draw, path.ravel().tolist(), faded, 2 * line)
             points = markers.get(label)
             if points is None and trail.ndim == 3 and len(trail):
                 points = trail[-1]
@@ -439,9 +451,23 @@ def _rgb(colour) -> tuple[int, int, int]:
     return tuple(int(round(255 * min(max(float(c), 0.0), 1.0))) for c in colour)
 
 
-def _dashed(draw, xy: list, fill, width: int, dash: float) -> None:
+def _line(draw, xy: list, fill, width: int, joint: str | None = None) -> None:
+    """``draw.line(xy, fill, width, joint)``, the same pixels; without a joint straight to
+    Pillow's core with the colour's ink looked up once (a frame draws a hundred lines)."""
+    if joint is not None:
+        draw.line(xy, fill=fill, width=width, joint=joint)
+        return
+    inks = draw.__dict__.setdefault("_cassi_inks", {})
+    ink = inks.get(fill)
+    if ink is None:
+        ink = inks[fill] = draw._getink(fill)[0]
+    if width != 0:
+        draw.draw.draw_lines(xy, ink, width)
+
+
+def _dashed(draw, xy, fill, width: int, dash: float) -> None:
     """A dashed polyline: ``dash`` pixels drawn, ``dash`` skipped, along the path (each
-    dash straight from its start to its end)."""
+    dash straight from its start to its end). ``xy``: (n, 2) pixels or the flat list."""
     p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     if len(p) < 2:
         return
@@ -449,7 +475,7 @@ def _dashed(draw, xy: list, fill, width: int, dash: float) -> None:
     marks = np.arange(0.0, s[-1], dash)
     q = np.stack([np.interp(marks, s, p[:, 0]), np.interp(marks, s, p[:, 1])], axis=1).tolist()
     for a, b in zip(q[::2], q[1::2], strict=False):
-        draw.line((*a, *b), fill=fill, width=width)
+        _line(draw, (*a, *b), fill, width)
 
 
 def midsagittal_figure(
