@@ -186,28 +186,3 @@ def test_the_side_view_leaves_out_what_the_head_hides(run, renderer):
     assert calls == len(renderer.pieces)
     faces = run[1].model.faces
     assert len(faces) < triangles < 4 * len(faces)
-
-
-_DEFERRED = """
-import sys
-from cassi_fit.render import _pool
-_pool._defer_trimesh()
-import pyrender
-assert "scipy.spatial" not in sys.modules and "trimesh.base" not in sys.modules
-import trimesh
-sphere = trimesh.creation.icosphere(subdivisions=1)  # read from: the real one now
-assert len(sphere.faces) == 80 and sys.modules["trimesh"].__file__.endswith("__init__.py")
-assert pyrender.Mesh.from_trimesh(sphere).primitives
-"""
-
-
-def test_a_drawing_worker_imports_trimesh_when_it_is_read_from():
-    """A worker defers pyrender's import of trimesh (half its start-up): the package is
-    a placeholder until read from, then the real one."""
-    import os
-    import subprocess
-    import sys
-
-    done = subprocess.run([sys.executable, "-c", _DEFERRED], capture_output=True, text=True,
-                          env={**os.environ, "PYOPENGL_PLATFORM": "egl"})
-    assert done.returncode == 0, done.stderr

@@ -8,8 +8,8 @@ asked for, so a video is encoded exactly as the serial loop would encode it, byt
 byte (each frame depends only on its vertices and keywords, not on the frames drawn
 before it).
 
-A worker's start-up (a fresh interpreter importing pyrender, OpenGL, Pillow: 0.9 s of
-CPU, trimesh deferred, :func:`_defer_trimesh`; 1.6 s with it) is hidden twice over: the workers are started, and import, when the pool
+A worker's start-up (a fresh interpreter importing pyrender, OpenGL, Pillow; over a
+second of CPU) is hidden twice over: the workers are started, and import, when the pool
 is made, before the model is known (``FramePool(jobs=N)``, then :meth:`FramePool.set_model`;
 ``cassi animate --jobs N`` makes its pool before fitting and animating), and this
 process draws the first batches itself until a worker is ready, then goes on drawing
@@ -75,44 +75,11 @@ def model_arrays(model: Any) -> SimpleNamespace:
 
 def _start(threads: int) -> None:
     """A worker's start: its share of the cores for llvmpipe (read when Mesa makes the
-    context), Ctrl-C left to the parent (which stops the pool), trimesh deferred."""
+    context), Ctrl-C left to the parent (which stops the pool)."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.environ["LP_NUM_THREADS"] = str(threads)
-    _defer_trimesh()
-
-
-def _defer_trimesh() -> None:
-    """pyrender imports trimesh (and scipy.spatial with it: 0.5 s of a worker's 1.2 s of
-    imports) but draws the toolkit's scene without it. In a drawing worker, whose only
-    work is drawing, ``trimesh`` is a placeholder package until something reads from it
-    (the markers' icosphere, ``trimesh.creation``), which then imports the real one: its
-    submodules pyrender loaded meanwhile (``trimesh.transformations``) are the real
-    files, and are loaded again with it."""
-    import importlib
-    import importlib.util
-    import sys
-    import types
-
-    if "trimesh" in sys.modules:
-        return
-    spec = importlib.util.find_spec("trimesh")
-    if spec is None or not spec.submodule_search_locations:
-        return
-    placeholder = types.ModuleType("trimesh", "trimesh, imported when first read from")
-    placeholder.__path__ = list(spec.submodule_search_locations)  # its submodules load
-
-    def real(name: str):
-        module = sys.modules.get("trimesh")
-        if module is placeholder:
-            for loaded in [k for k in sys.modules if k.split(".")[0] == "trimesh"]:
-                del sys.modules[loaded]
-            module = importlib.import_module("trimesh")
-        return getattr(module, name)
-
-    placeholder.__getattr__ = real
-    sys.modules["trimesh"] = placeholder
 
 
 def _warm_up() -> int:
