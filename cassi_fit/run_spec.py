@@ -79,9 +79,11 @@ def _jaw_method(jaw: Any) -> Any:
 
 
 def _calibration(value: Any) -> Any:
+    if value is None:  # (before the import: cassi jaw never needs the calibration module)
+        return value
     from .calibration import Calibration
 
-    if value is None or isinstance(value, (Calibration, CalibrationFiles)):
+    if isinstance(value, (Calibration, CalibrationFiles)):
         return value
     if isinstance(value, Mapping):
         if not all(isinstance(v, Calibration) for v in value.values()):
