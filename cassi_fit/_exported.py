@@ -137,18 +137,19 @@ def _fingerprint() -> bytes:
 
 def _processor() -> str:
     """This machine's processor as its executables depend on it: the architecture and the
-    instruction set flags (Linux's ``/proc/cpuinfo``; elsewhere the platform's name)."""
+    instruction set flags (Linux's ``/proc/cpuinfo``; elsewhere the platform's name).
+    ``platform.processor()`` runs ``uname -p`` in a new process on Linux (milliseconds of
+    every command that loads a kernel): it is asked only where there are no flags."""
     import platform
 
-    text = f"{platform.machine()} {platform.processor()}"
     try:
         with open("/proc/cpuinfo") as fh:
             for line in fh:
                 if line.startswith(("flags", "Features", "isa")):
-                    return f"{text} {line.split(':', 1)[-1].strip()}"
+                    return f"{platform.machine()} {line.split(':', 1)[-1].strip()}"
     except OSError:
         pass
-    return text
+    return f"{platform.machine()} {platform.processor()}"
 
 
 class _Slot:
@@ -241,15 +242,68 @@ def _executable_is_portable(exported) -> bool:
     return all(t.startswith("lapack_") for t in _custom_calls(exported))
 
 
+#: The modules whose C functions JAX's LAPACK kernels call (jaxlib imports them by name).
+_LAPACK_MODULES = ("scipy.linalg.cython_blas", "scipy.linalg.cython_lapack")
+
+
+def _lapack_modules() -> None:
+    """Import SciPy's BLAS and LAPACK function tables (:data:`_LAPACK_MODULES`) without
+    the ``scipy.linalg`` package around them, for :func:`_initialize_lapack`.
+
+    jaxlib finds its LAPACK kernels' functions by importing these two compiled modules
+    (their ``__pyx_capi__``), and importing a submodule runs its package first:
+    ``scipy.linalg``'s Python API (and, through ``scipy._lib``, ``numpy.f2py``), 0.2-0.4 s
+    of a warm ``cassi jaw`` that uses none of it. The two modules import nothing of
+    ``scipy.linalg``, so they are loaded from their files under their own names; a later
+    ``import scipy.linalg`` runs the package as ever and finds them in ``sys.modules``.
+    Anything unexpected (no SciPy file found, the package already imported) leaves the
+    ordinary import to jaxlib."""
+    import importlib.machinery
+    import importlib.util
+    import sys
+
+    if "scipy.linalg" in sys.modules or all(m in sys.modules for m in _LAPACK_MODULES):
+        return
+    scipy = importlib.util.find_spec("scipy")
+    if scipy is None or not scipy.submodule_search_locations:
+        return
+    folders = [os.path.join(p, "linalg") for p in scipy.submodule_search_locations]
+    specs = [importlib.machinery.PathFinder.find_spec(name, folders)
+             for name in _LAPACK_MODULES]
+    if any(s is None or not isinstance(s.loader, importlib.machinery.ExtensionFileLoader)
+           for s in specs):
+        return
+    for name, spec in zip(_LAPACK_MODULES, specs, strict=True):
+        if name in sys.modules:
+            continue
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        try:
+            spec.loader.exec_module(module)
+        except BaseException:
+            del sys.modules[name]
+            raise
+
+
+def _initialize_lapack() -> None:
+    """Ready JAX's LAPACK kernels as lowering a LAPACK call does (jaxlib's
+    ``initialize_lapack``), SciPy's function tables found by :func:`_lapack_modules`."""
+    from jax._src.lax.linalg import initialize_lapack
+
+    try:
+        _lapack_modules()
+    except Exception:  # jaxlib's own import then (and the error, if any, is its)
+        pass
+    initialize_lapack()
+
+
 def _load(executable, lapack: bool):
     """The stored executable loaded on this process's one device, or None."""
     import jax
     from jax.experimental import serialize_executable
 
     if lapack:  # as lowering a LAPACK call does: its kernels' BLAS/LAPACK functions found
-        from jax._src.lax.linalg import initialize_lapack
-
-        initialize_lapack()
+        _initialize_lapack()
     payload, in_tree, out_tree = executable
     device = jax.devices()[0]
     return serialize_executable.deserialize_and_load(

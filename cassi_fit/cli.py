@@ -45,7 +45,9 @@ SUBCOMMANDS = (
 )
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The ``cassi`` parser with every subcommand, or with the subcommand ``only`` alone
+    (:func:`_parse`: the command given; its module is the only one imported)."""
     parser = argparse.ArgumentParser(
         prog="cassi",
         description=(
@@ -69,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--no-compile-cache", action="store_true", help=_NO_CACHE_HELP)
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in SUBCOMMANDS:
+    for name in SUBCOMMANDS if only is None else (only,):
         try:
             module = importlib.import_module(f"cassi_fit._cli.{name}")
         except ModuleNotFoundError as exc:  # a subcommand not (yet) installed
@@ -145,7 +147,7 @@ def _parse(argv: list[str] | None) -> argparse.Namespace | None:
     # The command (not the library) picks the CPU, before anything imports JAX, so that
     # JAX does not probe for accelerators; a platform the user set wins.
     os.environ.setdefault("JAX_PLATFORMS", "cpu")
-    parser = build_parser()
+    parser = build_parser(_command_named(sys.argv[1:] if argv is None else argv))
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
@@ -155,6 +157,23 @@ def _parse(argv: list[str] | None) -> argparse.Namespace | None:
 
         use_compile_cache(None if args.no_compile_cache else default_compile_cache())
     return args
+
+
+def _command_named(argv: list[str]) -> str | None:
+    """The subcommand ``argv`` names: its first word, after none but the program's own
+    ``--debug`` and ``--no-compile-cache`` (or what argparse takes for them); None for
+    anything else (no command, not a subcommand, ``--help`` or an unknown option before
+    it: the whole parser then answers as ever)."""
+    for word in argv:
+        if not word.startswith("-"):
+            return word if word in SUBCOMMANDS else None
+        if not (len(word) > 2 and any(o.startswith(word) for o in _OWN_OPTIONS)):
+            return None
+    return None
+
+
+#: The program's options that may come before the command (argparse also takes prefixes).
+_OWN_OPTIONS = ("--debug", "--no-compile-cache")
 
 
 def _silence_stdout() -> None:

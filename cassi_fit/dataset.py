@@ -44,22 +44,22 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from jaxtyping import Float
 
 from ._io import special_kind
-from .ema import RawEma, SensorMap, SensorReport, ema_to_track, read_ema
-from .ema import emu as _emu
-from .ema.arrays import raw_from_array
-from .ema.detect import detect_format
-from .ema.sensor_map import PROPOSED
-from .ema.sensor_map import sensor_map as _sensor_map
 from .errors import DataFormatError, MissingDataError
 from .headmeasures import DEFAULT_HEAD_MEASURES, HeadMeasures, read_headmeasures
 from .outlines import outlines_problem, read_outline
-from .sound import Sound
 from .txy import PelletTrack, read_txy
+
+# The articulograph side (cassi_fit.ema: every format's reader, sensor maps, head
+# correction) and the sound are imported where they are used: a pellet file needs none.
+if TYPE_CHECKING:
+    from .ema import RawEma, SensorMap, SensorReport
+    from .sound import Sound
 
 PELLET_SUFFIX = ".txy"
 #: Articulograph files a :class:`Dataset` discovers (by suffix; read by content).
@@ -75,7 +75,7 @@ LOOKED_FOR = ("pellet files (.txy) or articulograph recordings (.ema, .pos, .tsv
 _MAX_NAMES = 12  # names listed in a message before "..."
 
 #: What a sensor map can be given as (:func:`cassi_fit.ema.sensor_map.sensor_map`).
-SensorMapLike = SensorMap | str | os.PathLike | None
+SensorMapLike = "SensorMap | str | os.PathLike | None"
 
 
 class DefaultHeadMeasuresWarning(UserWarning):
@@ -129,6 +129,8 @@ class Recording:
         """The recording's sound: the ``.wav`` beside its file (``audio``), else the sound
         stored inside the file (``file_sound``), else None."""
         if self.audio is not None:
+            from .sound import Sound
+
             return Sound.from_file(self.audio)
         return self.file_sound
 
@@ -257,6 +259,13 @@ def _find(folders: list[Path], names: list[str]) -> Path | None:
 _WARNED: set[tuple[str, str]] = set()
 
 
+def _emu():
+    """:mod:`cassi_fit.ema.emu` (imported on first use)."""
+    from .ema import emu
+
+    return emu
+
+
 def _head_measures(subject: str, folders: list[Path]) -> tuple[HeadMeasures, bool]:
     """The subject's measures from the first ``Headmeasures.txt`` that lists it."""
     seen = []
@@ -339,6 +348,9 @@ def _is_bite(path: Path) -> bool:
 def _sensor_map_for(path: Path, given: SensorMapLike) -> SensorMap:
     """The map given, else ``<stem>.sensors.toml``, ``sensors.toml`` beside or one folder
     up, else the built-in names."""
+    from .ema.sensor_map import PROPOSED
+    from .ema.sensor_map import sensor_map as _sensor_map
+
     if given is not None and str(given) != PROPOSED:
         return _sensor_map(given)
     found = (_find([path.parent], [f"{path.stem.lower()}.{SENSOR_MAP_NAME}", SENSOR_MAP_NAME])
@@ -355,8 +367,8 @@ def _bite_for(path: Path, given: str | os.PathLike | None) -> Path | None:
         return None
     found = sorted(p for p in _listing(path.parent).values()
                    if _is_bite(p) and p.suffix.lower() == path.suffix.lower())
-    if _emu.is_bundle_folder(path):  # a bite-plane bundle of the session
-        found = sorted(p for p in path.parent.iterdir() if _emu.is_bundle_folder(p)
+    if _emu().is_bundle_folder(path):  # a bite-plane bundle of the session
+        found = sorted(p for p in path.parent.iterdir() if _emu().is_bundle_folder(p)
                        and _is_bite(p))
     if len(found) > 1:
         raise DataFormatError(path.parent, None, f"{len(found)} bite-plane recordings "
@@ -367,10 +379,12 @@ def _bite_for(path: Path, given: str | os.PathLike | None) -> Path | None:
 def _ema_track(path: Path, *, fmt: str | None = None, sensor_map: SensorMapLike = None,
                layout=None, rate: float | None = None, bite_plane=None, session=None
                ) -> tuple[PelletTrack, SensorReport, RawEma]:
+    from .ema import ema_to_track, read_ema
+
     raw = read_ema(path, format=fmt, layout=layout, rate=rate)
     smap = _sensor_map_for(path, sensor_map)
     if smap.name == "auto" and sensor_map is None:
-        smap = _emu.sensor_map_for(raw) or smap  # the IPS Munich set has a built-in map
+        smap = _emu().sensor_map_for(raw) or smap  # the IPS Munich set has a built-in map
     bite_path = _bite_for(path, bite_plane)
     if bite_path is None:
         placed = None
@@ -417,9 +431,15 @@ def load_recording(path: str | os.PathLike, *, sensor_map: SensorMapLike = None,
     with a :class:`SpecialFileWarning`.
     """
     path = Path(path)
-    if not _emu.is_bundle_folder(path):
+    pellet_file = path.suffix.lower() == PELLET_SUFFIX  # (never an EMU ``*_bndl`` folder)
+    if pellet_file or not _emu().is_bundle_folder(path):
         _regular(path)
-    fmt = "xrmb" if path.suffix.lower() == PELLET_SUFFIX else detect_format(path)
+    if pellet_file:
+        fmt = "xrmb"
+    else:
+        from .ema.detect import detect_format
+
+        fmt = detect_format(path)
     folder = path.parent.resolve()
     _warn_special(folder, stacklevel=2)  # the subject's files are looked for here
     names = _listing(folder)
@@ -431,8 +451,8 @@ def load_recording(path: str | os.PathLike, *, sensor_map: SensorMapLike = None,
                "bite_plane": bite_plane}
         subject, task = _split_ema_stem(path.stem, folder.name, subject_folder=False)
         if fmt == "emu":
-            subject, task = _emu.recording_names(path, folder)
-            if _emu.session_of(path) is not None:  # a database: the session folder
+            subject, task = _emu().recording_names(path, folder)
+            if _emu().session_of(path) is not None:  # a database: the session folder
                 return _assemble(path, subject, task, own=folder,
                                  shared=[folder.parent], ema=ema)
     if subject is None or subject == folder.name.upper():
@@ -466,6 +486,10 @@ def recording_from_array(
     from the anatomy (the report says so). Head measures, palate and pharynx are the
     defaults (``head_is_default``).
     """
+    from .ema import ema_to_track
+    from .ema.arrays import raw_from_array
+    from .ema.sensor_map import sensor_map as _sensor_map
+
     raw: RawEma = raw_from_array(ema, layout=layout, rate=rate, units=units,
                                  mean_mm=mean_mm, sd_mm=sd_mm)
     track, report = ema_to_track(raw, _sensor_map(sensor_map))
@@ -507,15 +531,15 @@ class Dataset:
         self._scan_folder(self.root, subject_folder=False)
         self._scan_emu(self.root)
         for sub in (p for p in entries if p.is_dir()):
-            if not sub.name.startswith(".") and not sub.name.endswith(_emu.SESSION_SUFFIX):
+            if not sub.name.startswith(".") and not sub.name.endswith(_emu().SESSION_SUFFIX):
                 self._scan_folder(sub, subject_folder=True)
                 self._scan_emu(sub)
 
     def _scan_emu(self, folder: Path) -> None:
         """The bundles of an emuDB at ``folder`` (one holding a ``*_DBconfig.json``)."""
-        if _emu.find_dbconfig(folder) is None:
+        if _emu().find_dbconfig(folder) is None:
             return
-        for session, bundle, path in _emu.database_bundles(folder):
+        for session, bundle, path in _emu().database_bundles(folder):
             if not _is_bite(path):
                 self._add((session.upper(), bundle.lower()), path, path.parent)
 
@@ -529,8 +553,8 @@ class Dataset:
             path = names[lower]
             if lower.endswith(PELLET_SUFFIX):
                 subject, task = _split_stem(path.stem, folder.name, names, subject_folder)
-            elif lower.endswith(_emu.BUNDLE_SUFFIX + ".json"):
-                subject, task = _emu.recording_names(path, folder)
+            elif lower.endswith(_emu().BUNDLE_SUFFIX + ".json"):
+                subject, task = _emu().recording_names(path, folder)
             elif path.suffix.lower() in EMA_SUFFIXES and not _is_bite(path):
                 subject, task = _split_ema_stem(path.stem, folder.name, subject_folder)
             else:
@@ -624,14 +648,16 @@ class Dataset:
         detected by content, as :func:`load_recording` does (a pellet file named ``.ema``
         is read as the pellet file it is)."""
         path = self.pellet_path(subject, task)
-        if not _emu.is_bundle_folder(path):
+        if not _emu().is_bundle_folder(path):
             _regular(path)
         subject, task = self._subject(subject), str(task).lower()
         own = self._index[(subject, task)][1]
         # a root that is itself a subject folder: look one folder up, as load_recording does
         shared = [self.root, self.root.parent] if own == self.root else [self.root]
-        if _emu.is_bundle_folder(path):
+        if _emu().is_bundle_folder(path):
             shared = [path.parent.parent, self.root]
+        from .ema.detect import detect_format
+
         xrmb = path.suffix.lower() == PELLET_SUFFIX or detect_format(path) == "xrmb"
         ema = None if xrmb else {"sensor_map": self.sensor_map,
                                  "session": partial(self._session_frame, subject)}

@@ -13,17 +13,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 from ._io import atomic_write
-from .corpus import (
-    CorpusItem,
-    CorpusResult,
-    TaskResult,
-    dataset_items,
-    refuse_existing,
-    replaces,
-    require_items,
-    run_corpus,
-    write_table,
-)
 from .status import Status, fitted
 from .tables import csv_text
 
@@ -31,6 +20,7 @@ if TYPE_CHECKING:
     import numpy as np
     from jaxtyping import Float
 
+    from .corpus import CorpusItem, CorpusResult, TaskResult
     from .dataset import Dataset
     from .jaw_fit import JawFit
     from .labels import Labels
@@ -194,7 +184,7 @@ def jaw_task(item: CorpusItem, out_dir: str, *, spec: RunSpec, labels: bool = Tr
     ``TASK.segments.csv`` with labels) and the summary row (:func:`jaw_summary_row`; with
     one jaw sensor, the other's prediction error where the file has it). Any recording
     the toolkit reads (``corpus.load_item``)."""
-    from .corpus import load_item
+    from .corpus import TaskResult, load_item
     from .pellets import JAW_PELLETS, pellet_index
     from .pipeline import JAW, run_recording
 
@@ -243,6 +233,16 @@ def jaw_corpus(
     :func:`cassi_fit.corpus.run_corpus` (``jobs``, ``scheduler``, ``executor``,
     ``resume``, ``overwrite``, ``progress``, ``compilation_cache``). Returns a
     ``corpus.CorpusResult`` (``value`` None)."""
+    from .corpus import (
+        CorpusResult,
+        dataset_items,
+        refuse_existing,
+        replaces,
+        require_items,
+        run_corpus,
+        write_table,
+    )
+
     spec = jaw_spec(spec, **changes)
     run_options = dict(run_options or {})
     table = jaw_corpus_path(out_dir)

@@ -79,17 +79,23 @@ def _jaw_method(jaw: Any) -> Any:
 
 
 def _calibration(value: Any) -> Any:
+    # None and the names first: the calibration module is imported only for what may be a
+    # fitted calibration (cassi jaw, and this module's presets, never need it)
+    if value is None or isinstance(value, CalibrationFiles):
+        return value
+    if isinstance(value, str):
+        if value in CONFORMATIONS:
+            return None if value == "measures" else value
+        return CalibrationFiles(Path(value))
     from .calibration import Calibration
 
-    if value is None or isinstance(value, (Calibration, CalibrationFiles)):
+    if isinstance(value, Calibration):
         return value
     if isinstance(value, Mapping):
         if not all(isinstance(v, Calibration) for v in value.values()):
             raise InvalidChoiceError("a calibration mapping must map subjects to Calibration")
         return {str(k).upper(): v for k, v in value.items()}
-    if isinstance(value, str) and value in CONFORMATIONS:
-        return None if value == "measures" else value
-    if isinstance(value, (str, os.PathLike)):
+    if isinstance(value, os.PathLike):
         return CalibrationFiles(Path(value))
     raise InvalidChoiceError(
         f"calibration must be None, one of {', '.join(CONFORMATIONS)}, a Calibration or a "

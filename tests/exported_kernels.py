@@ -54,4 +54,5 @@ if __name__ == "__main__":
     out = flat_outputs(kernel(*inputs()))
     executables = sum(isinstance(e.call, jax.stages.Compiled) for e in kernel._entries.values())
     np.savez(sys.argv[1], **out,
-             counts=np.array([len(TRACES), kernel.traces, kernel.loads, executables]))
+             counts=np.array([len(TRACES), kernel.traces, kernel.loads, executables]),
+             scipy_linalg=np.array("scipy.linalg" in sys.modules))

@@ -159,9 +159,23 @@ def _public_definitions(module: str) -> list[tuple[str, str]]:
     return [(module, name) for name in _definitions(tree) if not name.startswith("_")]
 
 
+def _top_level_statements(tree: ast.Module) -> list[ast.stmt]:
+    """The module's statements, those of its ``if TYPE_CHECKING:`` blocks included."""
+    out = []
+    for node in tree.body:
+        if (isinstance(node, ast.If) and isinstance(node.test, ast.Name)
+                and node.test.id == "TYPE_CHECKING"):
+            out += node.body
+        else:
+            out.append(node)
+    return out
+
+
 def _home(module: str, name: str) -> tuple[str, str]:
-    """Follow ``from .x import name`` re-exports to the module that defines ``name``."""
-    for node in _module_tree(module).body:
+    """Follow ``from .x import name`` re-exports to the module that defines ``name`` (also
+    those of an ``if TYPE_CHECKING:`` block: a package whose names are imported on first
+    use, such as ``cassi_fit.corpus``, states them there)."""
+    for node in _top_level_statements(_module_tree(module)):
         if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module:
             # ``from .x import`` is relative to the package itself in an __init__, else to
             # the module's parent package

@@ -41,6 +41,29 @@ def test_every_subcommand_has_help(capsys):
         assert "usage: cassi" in capsys.readouterr().out
 
 
+def _help_of(parser, argv, capsys) -> str:
+    with pytest.raises(SystemExit) as exit_info:
+        parser.parse_args(argv)
+    assert exit_info.value.code == 0
+    return capsys.readouterr().out
+
+
+def test_the_command_parses_with_its_own_subcommand_alone(capsys):
+    """``cassi COMMAND ...`` builds the parser with that subcommand only (its module alone
+    imported): the same help and options as the whole parser's; anything else before the
+    command than ``--debug`` and ``--no-compile-cache`` (``--help`` first) gets the whole
+    parser."""
+    whole = cli.build_parser()
+    for name in whole._subparsers._group_actions[0].choices:
+        assert cli._command_named(["--debug", name, "x"]) == name
+        assert (_help_of(cli.build_parser(name), [name, "--help"], capsys)
+                == _help_of(whole, [name, "--help"], capsys))
+    for argv in ([], ["--help", "jaw"], ["-h"], ["nothing"], ["--debug=1", "jaw"], ["--", "jaw"],
+                 ["-", "jaw"], ["--verbose", "jaw"]):
+        assert cli._command_named(argv) is None, argv
+    assert cli._command_named(["--deb", "--no-compile", "jaw"]) == "jaw"  # argparse's prefixes
+
+
 def test_toolkit_error_is_one_line(failing_command, capsys):
     failing_command["exc"] = DataFormatError("S01/TP005.TXY", 12, "expected 17 fields, found 16")
     assert cli.main(["boom"]) == 2

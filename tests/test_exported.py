@@ -78,6 +78,8 @@ def test_a_new_process_loads_the_kernel_without_tracing(tmp_path):
     again = _child(tmp_path / "again.npz", {**environ,
                                               "JAX_COMPILATION_CACHE_DIR": str(tmp_path / "j2")})
     assert list(again["counts"]) == [0, 0, 1, 1]  # the executable needs no compilation cache
+    # its LAPACK calls readied from SciPy's two function tables, not the scipy.linalg package
+    assert not second["scipy_linalg"] and not again["scipy_linalg"]
     off = _child(tmp_path / "off.npz", {EXPORT_CACHE_ENV: "off"})
     assert list(off["counts"]) == [1, 0, 0, 0]  # eqx.filter_jit's own trace
     for name in ("a", "b", "trace"):
@@ -213,3 +215,28 @@ def test_the_jaw_kernels_give_filter_jits_results(folder):
         kernel = Exported(wrapped.fn)
         _same(kernel(*args), kernel.jitted(*args))
         assert kernel.traces == 1
+
+
+def test_lapack_is_readied_without_the_scipy_linalg_package():
+    """A loaded LAPACK kernel needs SciPy's two BLAS/LAPACK function tables, not the
+    ``scipy.linalg`` package (0.2-0.4 s): they are loaded alone, and the package imports
+    as ever afterwards, the tables in it."""
+    code = (
+        "import sys\n"
+        "import jax, numpy as np\n"
+        "jax.config.update('jax_enable_x64', True)\n"
+        "from cassi_fit import _exported\n"
+        "_exported._initialize_lapack()\n"
+        "assert 'scipy.linalg' not in sys.modules, 'scipy.linalg imported'\n"
+        "assert all(m in sys.modules for m in _exported._LAPACK_MODULES)\n"
+        "a = np.array([[4.0, 1.0], [1.0, 3.0]])\n"
+        "np.testing.assert_allclose(np.asarray(jax.numpy.linalg.inv(a)) @ a, np.eye(2), atol=1e-12)\n"
+        "import scipy.linalg\n"
+        "from scipy.linalg import cython_blas, cython_lapack\n"
+        "assert cython_blas is sys.modules['scipy.linalg.cython_blas']\n"
+        "np.testing.assert_allclose(scipy.linalg.inv(a) @ a, np.eye(2), atol=1e-12)\n"
+        "print('ok')\n")
+    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr[-2000:]

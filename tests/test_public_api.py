@@ -66,6 +66,29 @@ def test_all_lists_exactly_the_lazy_names_and_the_type_checking_imports():
     assert stated == {**cassi_fit._PUBLIC, **{m: m for m in cassi_fit._MODULES}}
 
 
+@pytest.mark.parametrize("package", ["corpus", "ema"])
+def test_a_lazy_subpackage_states_its_names_once_and_each_resolves(package):
+    """``cassi_fit.corpus`` and ``cassi_fit.ema`` import their names on first use (a
+    command needs one of their modules, not all): the lazy table, ``__all__`` and the
+    ``TYPE_CHECKING`` block agree, and each name is its home module's object."""
+    import importlib
+
+    module = importlib.import_module(f"cassi_fit.{package}")
+    tree = ast.parse((ROOT / "cassi_fit" / package / "__init__.py").read_text(encoding="utf-8"))
+    (block,) = [n for n in tree.body if isinstance(n, ast.If) and "TYPE_CHECKING" in ast.dump(n.test)]
+    stated = {}
+    for node in block.body:
+        assert isinstance(node, ast.ImportFrom), ast.dump(node)
+        for alias in node.names:
+            assert alias.asname in (None, alias.name), alias.name
+            stated[alias.name] = "." * node.level + node.module
+    assert stated == module._NAMES
+    assert sorted(module.__all__) == sorted(module._NAMES)
+    for name, home in module._NAMES.items():
+        source = importlib.import_module(home, module.__name__)
+        assert getattr(module, name) is getattr(source, name), name
+
+
 def test_modules_offered_by_name_are_modules():
     """A submodule name in ``__all__`` means the module, whatever was imported before."""
     import cassi_fit.animate  # noqa: F401  (binds the attribute the way the import system does)

@@ -42,42 +42,108 @@ connection to a Dask cluster (``_cluster``). Each command's task lives beside th
 (``cassi jaw DATASET``'s in ``jaw_corpus``);
 :func:`write_table` writes a corpus table as CSV, and as Parquet when pyarrow is importable
 (``cassi_fit.tables``).
+
+The package's names are imported on first use (:func:`__getattr__`): a command that needs
+one of its modules (``cassi`` sets up the compilation cache with ``_process`` before every
+computing command) does not import the executor, the cluster connection and the markers.
 """
 
-from ..tables import csv_text as csv_text
-from ._cluster import DEFAULT_TIMEOUT_S as DEFAULT_TIMEOUT_S
-from ._cluster import SchedulerError as SchedulerError
-from ._cluster import check_scheduler as check_scheduler
-from ._cluster import connect_scheduler as connect_scheduler
-from ._cluster import parse_scheduler_address as parse_scheduler_address
-from ._cluster import scheduler_timeout as scheduler_timeout
-from ._executor import WORKER_DIED as WORKER_DIED
-from ._executor import CorpusResult as CorpusResult
-from ._executor import CorpusRun as CorpusRun
-from ._executor import ItemResult as ItemResult
-from ._executor import JaxSettings as JaxSettings
-from ._executor import TaskResult as TaskResult
-from ._executor import default_jobs as default_jobs
-from ._executor import model_digest as model_digest
-from ._executor import process_pool as process_pool
-from ._executor import refuse_existing as refuse_existing
-from ._executor import replaces as replaces
-from ._executor import run_corpus as run_corpus
-from ._executor import run_item as run_item
-from ._executor import use_model as use_model
-from ._executor import worker_model as worker_model
-from ._executor import write_table as write_table
-from ._items import CorpusItem as CorpusItem
-from ._items import chosen_tasks as chosen_tasks
-from ._items import dataset_items as dataset_items
-from ._items import item_rng as item_rng
-from ._items import load_item as load_item
-from ._items import require_items as require_items
-from ._markers import MARKER_DIR as MARKER_DIR
-from ._markers import completed_row as completed_row
-from ._markers import marker_path as marker_path
-from ._markers import task_fingerprint as task_fingerprint
-from ._process import COMPILE_CACHE_ENV as COMPILE_CACHE_ENV
-from ._process import default_compile_cache as default_compile_cache
-from ._process import use_compile_cache as use_compile_cache
-from ._process import worker_thread_env as worker_thread_env
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..tables import csv_text as csv_text
+    from ._cluster import DEFAULT_TIMEOUT_S as DEFAULT_TIMEOUT_S
+    from ._cluster import SchedulerError as SchedulerError
+    from ._cluster import check_scheduler as check_scheduler
+    from ._cluster import connect_scheduler as connect_scheduler
+    from ._cluster import parse_scheduler_address as parse_scheduler_address
+    from ._cluster import scheduler_timeout as scheduler_timeout
+    from ._executor import WORKER_DIED as WORKER_DIED
+    from ._executor import CorpusResult as CorpusResult
+    from ._executor import CorpusRun as CorpusRun
+    from ._executor import ItemResult as ItemResult
+    from ._executor import JaxSettings as JaxSettings
+    from ._executor import TaskResult as TaskResult
+    from ._executor import default_jobs as default_jobs
+    from ._executor import model_digest as model_digest
+    from ._executor import process_pool as process_pool
+    from ._executor import refuse_existing as refuse_existing
+    from ._executor import replaces as replaces
+    from ._executor import run_corpus as run_corpus
+    from ._executor import run_item as run_item
+    from ._executor import use_model as use_model
+    from ._executor import worker_model as worker_model
+    from ._executor import write_table as write_table
+    from ._items import CorpusItem as CorpusItem
+    from ._items import chosen_tasks as chosen_tasks
+    from ._items import dataset_items as dataset_items
+    from ._items import item_rng as item_rng
+    from ._items import load_item as load_item
+    from ._items import require_items as require_items
+    from ._markers import MARKER_DIR as MARKER_DIR
+    from ._markers import completed_row as completed_row
+    from ._markers import marker_path as marker_path
+    from ._markers import task_fingerprint as task_fingerprint
+    from ._process import COMPILE_CACHE_ENV as COMPILE_CACHE_ENV
+    from ._process import default_compile_cache as default_compile_cache
+    from ._process import use_compile_cache as use_compile_cache
+    from ._process import worker_thread_env as worker_thread_env
+
+#: Each public name -> the module (relative to this package) it comes from.
+_NAMES = {
+    "csv_text": "..tables",
+    "DEFAULT_TIMEOUT_S": "._cluster",
+    "SchedulerError": "._cluster",
+    "check_scheduler": "._cluster",
+    "connect_scheduler": "._cluster",
+    "parse_scheduler_address": "._cluster",
+    "scheduler_timeout": "._cluster",
+    "WORKER_DIED": "._executor",
+    "CorpusResult": "._executor",
+    "CorpusRun": "._executor",
+    "ItemResult": "._executor",
+    "JaxSettings": "._executor",
+    "TaskResult": "._executor",
+    "default_jobs": "._executor",
+    "model_digest": "._executor",
+    "process_pool": "._executor",
+    "refuse_existing": "._executor",
+    "replaces": "._executor",
+    "run_corpus": "._executor",
+    "run_item": "._executor",
+    "use_model": "._executor",
+    "worker_model": "._executor",
+    "write_table": "._executor",
+    "CorpusItem": "._items",
+    "chosen_tasks": "._items",
+    "dataset_items": "._items",
+    "item_rng": "._items",
+    "load_item": "._items",
+    "require_items": "._items",
+    "MARKER_DIR": "._markers",
+    "completed_row": "._markers",
+    "marker_path": "._markers",
+    "task_fingerprint": "._markers",
+    "COMPILE_CACHE_ENV": "._process",
+    "default_compile_cache": "._process",
+    "use_compile_cache": "._process",
+    "worker_thread_env": "._process",
+}
+
+__all__ = sorted(_NAMES)
+
+
+def __getattr__(name: str) -> object:
+    module = _NAMES.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_NAMES))

@@ -12,13 +12,52 @@ finds the occlusal frame; :mod:`~cassi_fit.ema.track` makes the pipeline's
 writes the synthetic EMA corpus. The pipeline itself reads a
 :class:`~cassi_fit.dataset.Recording` (``cassi_fit.dataset.load_recording``). See
 docs/EMA.md.
+
+The package's names are imported on first use (:func:`__getattr__`): loading a pellet
+file (.txy, ``cassi_fit.dataset``) imports none of the readers.
 """
 
-from ._raw import RawEma
-from .detect import EMA_FORMATS, detect_format, read_ema
-from .report import SensorReport
-from .sensor_map import SensorMap, builtin_map, read_sensor_map
-from .track import ema_to_track
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ._raw import RawEma as RawEma
+    from .detect import EMA_FORMATS as EMA_FORMATS
+    from .detect import detect_format as detect_format
+    from .detect import read_ema as read_ema
+    from .report import SensorReport as SensorReport
+    from .sensor_map import SensorMap as SensorMap
+    from .sensor_map import builtin_map as builtin_map
+    from .sensor_map import read_sensor_map as read_sensor_map
+    from .track import ema_to_track as ema_to_track
+
+#: Each public name -> the module (relative to this package) it comes from.
+_NAMES = {
+    "RawEma": "._raw",
+    "EMA_FORMATS": ".detect",
+    "detect_format": ".detect",
+    "read_ema": ".detect",
+    "SensorReport": ".report",
+    "SensorMap": ".sensor_map",
+    "builtin_map": ".sensor_map",
+    "read_sensor_map": ".sensor_map",
+    "ema_to_track": ".track",
+}
 
 __all__ = ["EMA_FORMATS", "RawEma", "SensorMap", "SensorReport", "builtin_map",
            "detect_format", "ema_to_track", "read_ema", "read_sensor_map"]
+
+
+def __getattr__(name: str) -> object:
+    module = _NAMES.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_NAMES))

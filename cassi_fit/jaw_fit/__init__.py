@@ -55,8 +55,10 @@ Modules: ``_solvers`` (the interface, optimistix's solvers, the structured solve
 ``_linalg`` (block-tridiagonal algebra), ``_kernels`` (the compiled kernels), ``_priors``
 (pivot priors, couplings), ``_methods`` (the method objects), ``_fit`` (``fit_jaw``,
 ``JawFit``), ``_track`` (``jaw_from_track``, ``learn_jaw_coupling``), ``_diagnostics``.
-This file only re-exports.
+This file only re-exports (jaxopt's solvers on first use).
 """
+
+from typing import TYPE_CHECKING
 
 from ._diagnostics import (
     PLAUSIBLE_PIVOT_X_MM,
@@ -65,7 +67,6 @@ from ._diagnostics import (
     jaw_diagnostics,
 )
 from ._fit import JAW_FRAME_BUCKET, JAW_SENSORS, JawFit, fit_jaw, jaw_bucket, jaw_sensor_set
-from ._jaxopt_adapter import JaxoptGaussNewton, JaxoptLevenbergMarquardt
 from ._linalg import block_tridiagonal_inverse_blocks, block_tridiagonal_solve
 from ._methods import (
     DEFAULT_KNOT_SPACING,
@@ -99,6 +100,9 @@ from ._solve import jaw_solver, least_squares, solve
 from ._solvers import DEFAULT_MAX_STEPS, Dogleg, GaussNewton, LevenbergMarquardt, Solver
 from ._track import jaw_from_track, learn_jaw_coupling
 
+if TYPE_CHECKING:
+    from ._jaxopt_adapter import JaxoptGaussNewton, JaxoptLevenbergMarquardt
+
 __all__ = [
     "DEFAULT_COUPLINGS", "DEFAULT_KNOT_SPACING", "DEFAULT_MAX_STEPS", "JAW_FRAME_BUCKET", "JAW_SENSORS",
     "PIVOT_FROM_DATA", "PLAUSIBLE_PIVOT_X_MM", "PLAUSIBLE_PIVOT_Y_MM", "POPULATION_CONDYLE",
@@ -110,3 +114,14 @@ __all__ = [
     "learn_jaw_coupling", "least_squares", "rigid_residuals", "scaled_rigid_residuals", "smooth_pivot_residuals",
     "solve",
 ]
+
+#: jaxopt's solvers, imported when named (their equinox classes cost every fit's start).
+_JAXOPT = ("JaxoptGaussNewton", "JaxoptLevenbergMarquardt")
+
+
+def __getattr__(name: str) -> object:
+    if name in _JAXOPT:
+        from . import _jaxopt_adapter
+
+        return getattr(_jaxopt_adapter, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

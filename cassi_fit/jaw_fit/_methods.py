@@ -15,6 +15,7 @@ import abc
 from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Bool, Float
@@ -118,7 +119,7 @@ def _prior_text(prior, path, usable):
 
 def _pivot_estimate(reference, current, usable, path, unit_pivot_cov, result, n_extra, prior):
     params, unit_cov, res = (np.asarray(a) for a in about_pivot_params(
-        reference, current, jnp.asarray(path, jnp.asarray(reference).dtype)))
+        reference, current, np.asarray(path, _dtype_of(reference))))
     return Estimate(params, res, unit_cov, np.full(len(usable), int(result), np.int32),
                     int(usable.sum()) + n_extra, path, unit_pivot_cov,
                     _prior_text(prior, path, usable))
@@ -142,8 +143,19 @@ def _start_pivot(method, prior, reference, current, usable):
     return np.asarray((prior if prior.informative else POPULATION_CONDYLE).mean_mm)
 
 
+def _dtype_of(reference) -> np.dtype:
+    """``jnp.asarray(reference).dtype`` (JAX's dtype for it, float64 or float32) without
+    making the array: in a new process that is a compiled conversion (with the compilation
+    cache's look-up, milliseconds) for a dtype alone. The kernels' array arguments below
+    are numpy arrays of that dtype for the same reason: the exported kernel (or
+    ``eqx.filter_jit``) takes them as it took JAX's, the same values and types."""
+    if isinstance(reference, np.ndarray):
+        return jax.dtypes.canonicalize_dtype(reference.dtype)
+    return jnp.asarray(reference).dtype
+
+
 def _prior_arrays(prior, dtype, noise_mm=PRIOR_NOISE_MM):
-    return (jnp.asarray(prior.mean_mm, dtype), jnp.asarray(prior.weight(noise_mm), dtype))
+    return (np.asarray(prior.mean_mm, dtype), np.asarray(prior.weight(noise_mm), dtype))
 
 
 def effective_noise(reference: np.ndarray, current: np.ndarray, usable: np.ndarray,
@@ -153,7 +165,7 @@ def effective_noise(reference: np.ndarray, current: np.ndarray, usable: np.ndarr
     for their correlation ``rho`` between consecutive usable frames (an AR(1) series of
     ``n`` values holds about ``n (1 - rho) / (1 + rho)`` independent ones)."""
     _, _, res = about_pivot_params(reference, current,
-                                    jnp.asarray(path, jnp.asarray(reference).dtype))
+                                    np.asarray(path, _dtype_of(reference)))
     res = np.asarray(res)[usable]
     power = float(np.mean(res**2))
     if res.shape[0] < 3 or power == 0.0:
@@ -248,8 +260,8 @@ class FrameFit(JawMethod):
                                                                                 current))
             return Estimate(params, res, unit_cov, np.full(n, _OK, np.int32),
                             3 * int(usable.sum()))
-        start = None if self.start is None else jnp.asarray(
-            np.broadcast_to(self.start, (n, 3)), jnp.asarray(reference).dtype)
+        start = None if self.start is None else np.asarray(
+            np.broadcast_to(self.start, (n, 3)), _dtype_of(reference))
         params, res, result, unit_cov = (np.asarray(a) for a in frame_fit_kernel(
             _default_solver(self), reference, current, start))
         result = np.where(usable, result, _OK).astype(np.int32)
@@ -279,14 +291,14 @@ class FixedPivot(JawMethod):
     def _estimate(self, reference, current, usable, sensors):
         prior = _pivot_prior(self, reference.shape[0])
         pivot0 = _start_pivot(self, prior, reference, current, usable)
-        dtype = jnp.asarray(reference).dtype
+        dtype = _dtype_of(reference)
         n = current.shape[0]
 
         solver = _default_solver(self, PIVOT_MAX_STEPS)
 
         def solve_with(noise_mm, start):
             return fixed_pivot_kernel(
-                solver, reference, current, usable.astype(float), jnp.asarray(start, dtype),
+                solver, reference, current, usable.astype(float), np.asarray(start, dtype),
                 _prior_arrays(prior, dtype, noise_mm))
 
         pivot, result, jac = solve_with(PRIOR_NOISE_MM, pivot0)
@@ -354,7 +366,7 @@ class SmoothPivot(JawMethod):
         m = (n - 1) // spacing + 2
         prior = _pivot_prior(self, reference.shape[0])
         pivot0 = _start_pivot(self, prior, reference, current, usable)
-        dtype = jnp.asarray(reference).dtype
+        dtype = _dtype_of(reference)
         solver = _default_solver(self, PIVOT_MAX_STEPS)
         tol = solver.tolerances(dtype)[0]
         config = (bool(solver.damped), int(solver.max_steps), float(tol), spacing)
@@ -364,7 +376,7 @@ class SmoothPivot(JawMethod):
             # one prior, as the fixed pivot does (each knot's own would add up m-fold)
             return smooth_pivot_kernel(
                 config, reference, current, usable.astype(float),
-                jnp.asarray(float(self.smoothness), dtype), jnp.asarray(knots, dtype),
+                np.asarray(float(self.smoothness), dtype), np.asarray(knots, dtype),
                 _prior_arrays(prior, dtype, noise_mm / np.sqrt(m)))
 
         if prior.informative:

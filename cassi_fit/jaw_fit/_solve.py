@@ -17,7 +17,6 @@ from jaxtyping import Array, Bool, Float, Int
 from ..errors import InvalidChoiceError
 from ..options import SOLVERS, check_choice
 from ..status import SolverResult
-from . import _jaxopt_adapter
 from ._solvers import (
     DEFAULT_MAX_STEPS,
     Dogleg,
@@ -28,17 +27,24 @@ from ._solvers import (
     result_code,
 )
 
-_BY_NAME: dict[str, type[Solver]] = {
+#: The solver class of each alias; jaxopt's by name in ``_jaxopt_adapter``, imported when
+#: chosen (their equinox classes cost every process that fits a jaw).
+_BY_NAME: dict[str, type[Solver] | str] = {
     "optimistix-lm": LevenbergMarquardt, "optimistix-gn": GaussNewton,
-    "optimistix-dogleg": Dogleg, "jaxopt-lm": _jaxopt_adapter.JaxoptLevenbergMarquardt,
-    "jaxopt-gn": _jaxopt_adapter.JaxoptGaussNewton,
+    "optimistix-dogleg": Dogleg, "jaxopt-lm": "JaxoptLevenbergMarquardt",
+    "jaxopt-gn": "JaxoptGaussNewton",
 }
 
 
 def jaw_solver(name: str, *, max_steps: int = DEFAULT_MAX_STEPS) -> Solver:
     """The solver object for a command-line alias in :data:`cassi_fit.options.SOLVERS`."""
     check_choice("solver", name, SOLVERS)
-    return _BY_NAME[name](max_steps=max_steps)
+    cls = _BY_NAME[name]
+    if isinstance(cls, str):
+        from . import _jaxopt_adapter
+
+        cls = getattr(_jaxopt_adapter, cls)
+    return cls(max_steps=max_steps)
 
 
 def as_solver(solver: Solver | str) -> Solver:
