@@ -163,7 +163,8 @@ def test_animate_interrupted_while_rendering(wagging, tmp_path, name, sig, group
     terminal (the whole group: ffmpeg too) three frames into an MP4."""
     argv = ["animate", wagging, "--stride", "12", "--size", "160x120", "--out",
             tmp_path / name, "--quiet"]
-    status, err = _interrupt(tmp_path, "cassi_fit.render._scene.Renderer:render_gl", argv,
+    # frames are drawn pipelined (Renderer.render_frames): _submit draws each one
+    status, err = _interrupt(tmp_path, "cassi_fit.render._scene.Renderer:_submit", argv,
                              sig, after=4, group=group)
     assert status == 130, err
     assert _messages(err) == ["cassi: interrupted"]
