@@ -50,8 +50,9 @@ computing command) does not import the executor, the cluster connection and the 
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from cassi_fit._lazy import lazy_names
 
 if TYPE_CHECKING:
     from ..tables import csv_text as csv_text
@@ -136,14 +137,4 @@ _NAMES = {
 __all__ = sorted(_NAMES)
 
 
-def __getattr__(name: str) -> object:
-    module = _NAMES.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(module, __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_NAMES))
+__getattr__, __dir__ = lazy_names(__name__, _NAMES, globals())

@@ -19,8 +19,9 @@ file (.txy, ``cassi_fit.dataset``) imports none of the readers.
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from cassi_fit._lazy import lazy_names
 
 if TYPE_CHECKING:
     from ._raw import RawEma as RawEma
@@ -50,14 +51,4 @@ __all__ = ["EMA_FORMATS", "RawEma", "SensorMap", "SensorReport", "builtin_map",
            "detect_format", "ema_to_track", "read_ema", "read_sensor_map"]
 
 
-def __getattr__(name: str) -> object:
-    module = _NAMES.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(module, __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_NAMES))
+__getattr__, __dir__ = lazy_names(__name__, _NAMES, globals())
