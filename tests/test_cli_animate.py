@@ -161,12 +161,20 @@ def test_animate_to_png_draws_the_frame_asked_for(sentence, every_40th, tmp_path
 
 
 def test_animate_midsagittal_view_alone(sentence, tmp_path, capsys):
-    """``--views midsagittal``: the 2D section with the subject's traces, no OpenGL view."""
+    """``--views midsagittal``: the 2D section with the subject's traces, no OpenGL view;
+    given as a dataset folder holding this one recording (it stands for the recording)."""
+    import shutil
+
     _, recording = sentence
+    folder = shutil.copytree(recording.path.parent.parent, tmp_path / "one")
+    for path in (folder / recording.path.parent.name).iterdir():  # the other task's files
+        if path.name.lower().startswith(synth.JAW_WAGGING_TASK):
+            path.unlink()
     png = tmp_path / "section.png"
-    code, _, err = _run(capsys, "animate", recording.path, "--views", "midsagittal",
+    code, _, err = _run(capsys, "animate", folder, "--views", "midsagittal",
                         "--stride", 40, "--size", SIZE, "--out", png, "--frame", 2)
     assert code == 0, err
+    assert f"a dataset of one recording: {recording.subject} {recording.task}" in err
     image = iio.imread(png)[:100]  # above the caption
     assert image.shape[1] == 160
     drawn = np.abs(image.astype(int) - image[2, 2]).sum(axis=2) > 60
@@ -319,6 +327,9 @@ def test_demo_writes_everything_and_reruns(corpus, tmp_path, capsys, monkeypatch
         (["animate", "a", "b"], "DATASET SUBJECT TASK"),
         (["animate", "{root}", "NOBODY", "tp040"], "NOBODY"),
         (["acoustics", "{root}"], "recordings: name one as DATASET SUBJECT TASK"),
+        # a folder with a still or a video for --out is read as one recording
+        (["animate", "{root}", "--out", "x.png"], "recordings: name one as DATASET SUBJECT"),
+        (["animate", "{root}"], "give --out DIR"),
         (["export", "{txy}", "--out", "x.stl"], ".stl"),
         (["animate", "{txy}", "--out", "{existing}"], "exists"),
         (["animate", "{txy}", "--mode", "cassi", "--collisions", "project"], "collision"),

@@ -120,8 +120,9 @@ def run(args) -> int:
     from cassi_fit.errors import CassiError
     from cassi_fit.recording_video import parse_fps
 
-    if len(args.recording) == 1 and Path(args.recording[0]).is_dir():
-        return run_dataset(args)
+    if len(args.recording) == 1 and Path(args.recording[0]).is_dir() and not (
+            args.out and Path(args.out).suffix.lower() in ANIMATION_SUFFIXES):
+        return run_dataset(args)  # a folder with an image or video --out: its one recording
     size, views = parse_size(args.size), parse_views(args.views)
     parse_fps(args.fps)  # a bad --fps fails before any work
     out = Path(args.out) if args.out else None
@@ -210,7 +211,8 @@ def run_dataset(args) -> int:
     from cassi_fit.recording_video import animate_corpus
 
     if not args.out or Path(args.out).suffix.lower() in ANIMATION_SUFFIXES:
-        raise CassiError(f"{args.recording[0]}: a dataset folder; give --out DIR for its videos")
+        raise CassiError(f"{args.recording[0]}: a dataset folder; give --out DIR for its "
+                         "videos (or --out FILE.mp4/.png for a folder of one recording)")
     video_options = {"suffix": f".{args.format}", "size": parse_size(args.size),
                      "views": parse_views(args.views), "audio": not args.no_audio,
                      "markers": args.markers, "fps": args.fps}
