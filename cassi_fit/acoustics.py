@@ -249,8 +249,15 @@ def plot_acoustics(result: Acoustics, samples: Float[np.ndarray, " n"], rate_hz:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(11, 4.5))
-    ax.specgram(samples, NFFT=int(0.008 * rate_hz), Fs=rate_hz, noverlap=int(0.006 * rate_hz),
-                cmap="Greys", scale="dB")
+    # a broadband spectrogram as a phonetician reads one: pre-emphasised (a first difference,
+    # +6 dB/octave, so that F2-F3 show beside F1) and 50 dB of dynamic range below the
+    # loudest cell (Praat's default), silence white
+    x = np.asarray(samples, np.float64)
+    x = np.concatenate([x[:1], x[1:] - 0.97 * x[:-1]])
+    spec, _, _, image = ax.specgram(x, NFFT=int(0.008 * rate_hz), Fs=rate_hz,
+                                    noverlap=int(0.006 * rate_hz), cmap="Greys", scale="dB")
+    top = 10.0 * np.log10(max(float(np.max(spec)), 1e-30))
+    image.set_clim(top - 50.0, top)
     colours = ("tab:red", "tab:green", "tab:blue")
     for q in range(3):
         meas = np.where(result.measured.reliable, result.measured.frequency[:, q], np.nan)
