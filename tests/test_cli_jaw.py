@@ -215,6 +215,18 @@ def test_one_sensor_adds_the_hidden_sensors_prediction(pellet_file, tmp_path, ca
     assert f"{sensor} alone" in printed and "prior: pivot prior" in printed
 
 
+def test_one_sensor_says_what_it_cannot_estimate(pellet_file, tmp_path, capsys):
+    """With one jaw sensor (the default coupled rotation) there is no residual: the
+    printout says so in words, never ``nan`` (the real one-sensor EMU recording has no
+    second jaw sensor either, whose distance is then said as ``-/-``)."""
+    path, _ = pellet_file
+    assert cli.main(["jaw", str(path), "--jaw-sensors", "MNI",
+                     "--csv", str(tmp_path / "one.csv")]) == 0
+    printed = capsys.readouterr().out
+    assert "no noise estimate (a fit with one jaw sensor leaves no residual)" in printed
+    assert "nan" not in printed.lower()
+
+
 @pytest.mark.parametrize("method", ["closed-form", "frame-fit"])
 def test_two_sensor_methods_refuse_one_sensor_in_one_line(pellet_file, tmp_path, capsys,
                                                           method):

@@ -117,6 +117,18 @@ def test_real_ips_bundle_placed_by_its_builtin_map(ips):
     assert labels.tier == "Segment" and labels.labels[1] == "m"
 
 
+def test_real_ips_folder_jaw_table_in_words(ips, tmp_path, capsys):
+    """``cassi jaw FOLDER --csv``: the real database folder of one bundle stands for its
+    recording; with its one jaw sensor, what cannot be estimated is said, never ``nan``."""
+    from cassi_fit import cli
+
+    assert cli.main(["jaw", str(ips.parent), "--csv", str(tmp_path / "j.csv")]) == 0
+    captured = capsys.readouterr()
+    assert "a dataset of one recording" in captured.err
+    assert "no noise estimate" in captured.out and "distance -/- (one jaw sensor)" in captured.out
+    assert "nan" not in captured.out.lower()
+
+
 def test_real_ips_bundle_json_and_folder_agree(ips, tmp_path):
     """The same bundle as an emuDB on disk (written from the JSON's own bytes) reads the
     same as the JSON the webApp serves."""

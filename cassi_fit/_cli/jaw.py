@@ -6,6 +6,7 @@ beside the pellet file, a label column and ``OUT.segments.csv``. ``--jaw-sensors
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from cassi_fit.options import ALL_JAW_METHODS, JAW_SENSOR_SETS, SOLVERS
@@ -119,7 +120,9 @@ def print_diagnostics(rows) -> None:
         hidden = ("" if r.hidden_error_median_mm != r.hidden_error_median_mm else
                   f"  hidden sensor error {r.hidden_error_median_mm:.2f} median, "
                   f"{r.hidden_error_p95_mm:.2f} p95")
-        print(f"  {r.method:16s} distance {r.jaw_distance_sd_mm:.3f}/{r.jaw_distance_range_mm:.3f}"
+        distance = (f"{r.jaw_distance_sd_mm:.3f}/{r.jaw_distance_range_mm:.3f}"
+                    if math.isfinite(r.jaw_distance_sd_mm) else "-/- (one jaw sensor)")
+        print(f"  {r.method:16s} distance {distance}"
               f"  residual {r.residual_median_mm:.3f}  pivot IQR {r.pivot_iqr_x_mm:.1f}/"
               f"{r.pivot_iqr_y_mm:.1f}  plausible {100 * r.pivot_plausible_fraction:.0f} %"
               f"{hidden}")
@@ -128,14 +131,17 @@ def print_diagnostics(rows) -> None:
 def run(args) -> int:
     from cassi_fit.errors import CassiError
 
-    corpus_form = len(args.recording) == 1 and Path(args.recording[0]).is_dir()
+    # a folder with --csv: its one recording (refused in one line when it holds several)
+    corpus_form = (len(args.recording) == 1 and Path(args.recording[0]).is_dir()
+                   and not args.csv)
     if corpus_form:
-        if args.csv or args.compare_methods:
-            raise CassiError("a DATASET folder takes --out DIR (not --csv or "
-                             "--compare-methods); one recording takes --csv OUT.csv")
+        if args.compare_methods:
+            raise CassiError("a DATASET folder takes --out DIR (not --compare-methods); one "
+                             "recording takes --csv OUT.csv")
         if not args.out:
             raise CassiError(f"{args.recording[0]}: a dataset folder; give --out DIR for "
-                             "its tables (or DATASET SUBJECT TASK --csv OUT.csv)")
+                             "its tables (or --csv OUT.csv for a folder of one recording, "
+                             "DATASET SUBJECT TASK --csv OUT.csv for one of several)")
         return run_dataset(args)
     if args.out or not args.csv:
         raise CassiError("one recording takes --csv OUT.csv (--out DIR is for a DATASET "
@@ -225,10 +231,12 @@ def _print_fit(out: Path, track, fit) -> None:
     ok = int(fitted(fit.status).sum())
     mistracked = int((fit.status == Status.MISTRACKED).sum())
     sensors = fit.jaw_sensors
+    noise = (f"noise estimate {fit.noise_mm:.3f} mm" if math.isfinite(fit.noise_mm) else
+             "no noise estimate (a fit with one jaw sensor leaves no residual)")
     print(f"{out}: {track.n_frames} frames, {ok} fitted ({fit.method}"
           f"{'' if fit.solver == fit.method else ', ' + fit.solver}"
           f"{'' if len(sensors) == 2 else ', ' + sensors[0] + ' alone'}), "
-          f"{mistracked} mistracked, noise estimate {fit.noise_mm:.3f} mm"
+          f"{mistracked} mistracked, {noise}"
           f"{'' if fit.converged else ', NOT converged (' + fit.failure.label + ')'}")
     if fit.prior:
         print(f"prior: {fit.prior}")
