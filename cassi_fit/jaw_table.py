@@ -38,8 +38,9 @@ def jaw_frame_rows(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels |
                    mistracks: list[str] | None = None) -> tuple[list[dict], list[str]]:
     """One recording's jaw table as ``(rows, columns)``: one row per frame,
     :data:`JAW_FRAME_COLUMNS` (times s, theta deg, pivot and translation mm, rms residual
-    mm, the status word); with one jaw sensor and the other's reference known, the hidden
-    sensor's predicted position (``MNM_pred_x_mm``, ``MNM_pred_y_mm`` or ``MNI_...``, mm,
+    mm, the status word; the pivot blank where it is undefined (``pivot-undefined``, and in
+    frames whose own data were not used), the residual blank where nothing was fitted);
+    with one jaw sensor and the other's reference known, the hidden sensor's predicted position (``MNM_pred_x_mm``, ``MNM_pred_y_mm`` or ``MNI_...``, mm,
     in the pellet frame; blank in frames whose own data were not used: invalid-frame,
     mistracked, ...); a ``mistrack`` column when ``mistracks`` are given (one string
     per frame, ``MistrackReport.frame_labels``: which pellet the detector flagged and
@@ -57,10 +58,12 @@ def jaw_frame_rows(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels |
     current = labels.at(times) if labels is not None else None
     rows = []
     for k in range(len(times)):
+        pivot = fit.pivot[k] if fit.pivot_defined[k] else (None, None)
         row = {"time_s": float(times[k]), "theta_deg": float(theta_deg[k]),
-               "pivot_a_mm": float(fit.pivot[k, 0]), "pivot_b_mm": float(fit.pivot[k, 1]),
+               "pivot_a_mm": _number(pivot[0]), "pivot_b_mm": _number(pivot[1]),
                "tx_mm": float(fit.translation[k, 0]), "ty_mm": float(fit.translation[k, 1]),
-               "residual_mm": float(fit.residual[k]), "status": Status(int(fit.status[k])).label}
+               "residual_mm": float(fit.residual[k]) if predicted_here[k] else None,
+               "status": Status(int(fit.status[k])).label}
         if predicted is not None:  # blank where the frame's own data were not used
             row[pred_columns[0]], row[pred_columns[1]] = (
                 (float(v) for v in predicted[k]) if predicted_here[k] else (None, None))
@@ -70,6 +73,10 @@ def jaw_frame_rows(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels |
             row["label"] = str(current[k])
         rows.append(row)
     return rows, columns
+
+
+def _number(value) -> float | None:
+    return None if value is None else float(value)
 
 
 def jaw_frame_csv(times: Float[np.ndarray, " n"], fit: JawFit, labels: Labels | None = None,

@@ -55,8 +55,12 @@ def test_writes_one_row_per_frame(pellet_file, tmp_path, capsys):
     # the file is noise-free up to its 1 um rounding: the one fitted pivot is the true one
     # to a few um (0.02 mm is 20x the rounding, far below the 5-30 mm a wrong model gives)
     for row in rows[2:]:
+        if row["status"] != "ok":  # a frame whose data were not used: no pivot, no residual
+            assert row["pivot_a_mm"] == row["pivot_b_mm"] == row["residual_mm"] == ""
+            continue
         assert float(row["pivot_a_mm"]) == pytest.approx(PIVOT[0], abs=0.02)
         assert float(row["pivot_b_mm"]) == pytest.approx(PIVOT[1], abs=0.02)
+    assert rows[0]["pivot_a_mm"] == rows[0]["residual_mm"] == ""  # before the first valid line
     assert "60 frames" in capsys.readouterr().out
 
 
