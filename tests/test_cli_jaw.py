@@ -93,6 +93,7 @@ def test_writes_diagnostics_beside_the_csv(pellet_file, tmp_path, capsys):
     fixed = rows[0]
     assert float(fixed["pivot_iqr_x_mm"]) == 0.0 and float(fixed["pivot_plausible_fraction"]) == 1
     assert float(fixed["jaw_distance_sd_mm"]) < 0.01  # noise-free file: rigid up to 1 um rounding
+    assert fixed["hidden_error_median_mm"] == ""  # both sensors used: none hidden, blank
     printed = capsys.readouterr().out
     assert "plausible" in printed and "closed-form" in printed
 
