@@ -112,8 +112,8 @@ class Acoustics:
                    "reason": str(self.measured.reason[k]),
                    "vocal_tract_mm": float(self.lengths[k].sum())}
             for j in range(3):
-                row[f"F{j + 1}_model_hz"] = float(self.model[k, j])
-                row[f"F{j + 1}_measured_hz"] = float(self.measured.frequency[k, j])
+                row[f"F{j + 1}_model_hz"] = _cell(self.model[k, j])
+                row[f"F{j + 1}_measured_hz"] = _cell(self.measured.frequency[k, j])
             rows.append(row)
         return rows
 
@@ -130,15 +130,23 @@ class Acoustics:
                 s = np.arange(k, j)[self.scored[k:j]]
                 row = {"start_s": float(self.times[k]), "end_s": float(self.times[j - 1]),
                        "vowel": str(self.labels[k]), "frames": j - k, "scored": len(s)}
-                for q in range(3):
-                    row[f"F{q + 1}_model_hz"] = float(np.median(self.model[s, q])) if len(s) else np.nan
-                    row[f"F{q + 1}_measured_hz"] = (float(np.median(self.measured.frequency[s, q]))
-                                                    if len(s) else np.nan)
-                    row[f"F{q + 1}_error"] = (float(np.median(self.relative_error[s, q]))
-                                              if len(s) else np.nan)
+                for q in range(3):  # blank where no frame of the segment is scored
+                    row[f"F{q + 1}_model_hz"] = _median(self.model[s, q])
+                    row[f"F{q + 1}_measured_hz"] = _median(self.measured.frequency[s, q])
+                    row[f"F{q + 1}_error"] = _median(self.relative_error[s, q])
                 rows.append(row)
             k = j
         return rows
+
+
+def _cell(value) -> float | None:
+    """A table's cell: None (blank) for NaN (a frame the sound gives no formant for)."""
+    value = float(value)
+    return None if np.isnan(value) else value
+
+
+def _median(values) -> float | None:
+    return _cell(np.median(values)) if len(values) else None
 
 
 def recording_sound(recording) -> tuple[Float[np.ndarray, " n"], float]:

@@ -86,6 +86,11 @@ def test_cli_tables_figure_and_refusals(recording, tmp_path, capsys):
     assert "% of the vowels' frames scored" in text
     header = out.read_text().splitlines()[0].split(",")
     assert {"time_s", "label", "scored", "F1_model_hz", "F1_measured_hz"} <= set(header)
+    import csv
+
+    rows = list(csv.DictReader(out.read_text().splitlines()))
+    assert {r["reason"] for r in rows if r["scored"] == "false"} >= {"silence"}
+    assert "nan" not in out.read_text().lower()  # a formant Praat did not find: blank
     segments = out.with_suffix(".segments.csv").read_text().splitlines()
     assert len(segments) == 2 and segments[1].split(",")[2] == "a"
     # the synthetic vowel's resonances are measured (the model's are its own)
