@@ -19,7 +19,9 @@ views at 640x480, improved mode):
   draw calls and triangles a frame; and the same with the scene before parts hidden in a
   view were left out of it (issue 30 item 4), so that the cut's gain shows;
 - the phases of a warm 60 fps video in one fresh process (start-up, initialize, animate,
-  video) and a bare ``python -c "import jax, ...; jnp.zeros(1)"`` beside them;
+  video) and a bare ``python -c "import jax, ...; jnp.zeros(1)"`` beside them; and the
+  interpreter's exit after a warm ``cassi animate`` (after its last exit handler: none of
+  those phases, part of the command's time);
 - a MOCHA-TIMIT-like recording at 500 Hz (the toolkit's synthetic EMA corpus in EST
   ASCII, one jaw and three tongue sensors, with its sound; no real MOCHA file is at hand):
   ``cassi animate`` to MP4 at 60 fps with a warm cache, its real-time factor;
@@ -81,6 +83,35 @@ def animate_wall(recording: Path, out: Path, cache: Path, *extra: str) -> float:
         raise SystemExit(f"cassi animate {' '.join(extra)} failed: {done.stderr[-500:]}")
     print(f"  cassi animate {' '.join(extra) or '(defaults)'}: {wall:.2f} s", flush=True)
     return wall
+
+
+#: A child that runs ``cassi animate`` as ``python -m cassi_fit.cli`` does and says, on
+#: stderr, the time its last exit handler ran: what follows is the interpreter's own exit.
+_MARKED_EXIT = """import atexit, os, runpy, sys, time
+atexit.register(lambda: os.write(2, f"@@exit {time.time()!r}\\n".encode()))  # runs last
+sys.argv = ["cassi", *sys.argv[1:]]
+runpy.run_module("cassi_fit.cli", run_name="__main__")
+"""
+
+
+def exit_wall(recording: Path, out: Path, cache: Path) -> tuple[float, float]:
+    """``(whole, exit)`` wall seconds of a warm ``cassi animate`` in a fresh process: the
+    whole command, and its interpreter's exit (from the last exit handler to the end of
+    the process: module teardown, the last garbage collections, the libraries' own
+    clean-up), outside every phase of :func:`phases`."""
+    env = {**os.environ, "CASSI_COMPILE_CACHE": str(cache), "JAX_PLATFORMS": "cpu"}
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    argv = [sys.executable, "-c", _MARKED_EXIT, "animate", str(recording), "--out", str(out),
+            "--force", "--quiet"]
+    start = time.perf_counter()
+    done = subprocess.run(argv, env=env, capture_output=True, text=True)
+    end, wall = time.time(), time.perf_counter() - start
+    marks = [ln for ln in done.stderr.splitlines() if ln.startswith("@@exit ")]
+    if done.returncode != 0 or not marks:
+        raise SystemExit(f"cassi animate (exit marked) failed: {done.stderr[-500:]}")
+    seconds = end - float(marks[-1].split()[1])
+    print(f"  cassi animate: {wall:.2f} s, its interpreter's exit {seconds:.2f} s", flush=True)
+    return wall, seconds
 
 
 def mocha_like(folder: Path) -> Path:
@@ -285,6 +316,9 @@ def table(m: dict, length: float, jobs: int) -> list[tuple[str, str, str, str, s
          f">= {PARALLEL_X}x", met(draw_x >= PARALLEL_X)),
         (f"`cassi animate` JW11, 60 fps, warm, --jobs {jobs}", f"{m['jobs']:.2f}",
          f"--jobs 1 / --jobs {jobs}: {cmd_x:.2f}", "", ""),
+        ("the interpreter's exit after a warm 60 fps `cassi animate` (after its last exit "
+         "handler: module teardown, garbage collection)", f"{m['exit']:.2f}",
+         f"{m['exit'] / m['marked']:.0%} of that command's {m['marked']:.1f} s", "", ""),
         ("`python -c \"import jax, jax.numpy as jnp, cassi_fit; jnp.zeros(1)...\"`",
          f"{m['phases']['bare']:.2f}", "1 (a process's floor)", "", ""),
     ] + [(f"warm 60 fps video in one fresh process: {name}", f"{value:.2f}",
@@ -338,6 +372,7 @@ def main(argv=None) -> int:
         m["warm60"] = animate_wall(args.recording, out, cache)
         m["native"] = animate_wall(args.recording, out, cache, "--fps", "native")
         m["jobs"] = animate_wall(args.recording, out, cache, "--jobs", str(args.jobs))
+        m["marked"], m["exit"] = exit_wall(args.recording, out, cache)
         m["phases"] = phases_wall(args.recording, out, cache)
         mocha = mocha_like(work)
         animate_wall(mocha, out, cache)  # its shapes compiled once

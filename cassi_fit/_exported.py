@@ -18,9 +18,10 @@ instruction set flags); an entry whose executable cannot be loaded here is calle
 its exported computation instead. A computation that calls LAPACK (``jnp.linalg`` on the
 CPU) readies JAX's LAPACK kernels before its executable is loaded, as lowering it would
 (without that the loaded executable would call uninitialized kernels). An executable that
-JAX's compilation cache answered with is not stored (see :func:`_compile`): after a change
-of the code that leaves a kernel's computation as it was, that kernel is lowered again in
-every process until the compilation cache folder is emptied.
+JAX's compilation cache answered with cannot be stored, so a kernel's computation is
+compiled without that cache when its entry is made (see :func:`_compile`): after a change
+of the code that leaves the computation as it was, the first process compiles it once
+more, and the later ones load it (they lowered it again, each of them, before).
 
 An entry is keyed by the function's qualified name, a digest of the cassi_fit package's
 source files (any change of the code invalidates every entry), the versions of JAX and of
@@ -53,6 +54,7 @@ computation carries no derivative here.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import os
@@ -191,14 +193,18 @@ class _Entry:
 
 def _compile(exported, avals):
     """``(compiled, serialized executable or None)``: the exported computation compiled for
-    the one device. JAX's compilation cache may answer for the compiling; an executable
-    it loaded is not stored (XLA's CPU client serializes such an executable without its
-    machine code: loaded again, it fails to find its functions), so that entry is called
-    through its exported computation; so is one whose executable another process could not
-    load (:func:`_executable_is_portable`)."""
+    the one device. An executable JAX's compilation cache answered with cannot be stored
+    (XLA's CPU client serializes such an executable without its machine code: loaded
+    again, it fails to find its functions), and the cache holds the computation whenever
+    a change of the code left it as it was: so one that will be stored is compiled
+    without the cache (:func:`_without_compilation_cache`; once, after such a change),
+    and every later process loads it instead of lowering it again. An entry whose
+    executable another process could not load (:func:`_executable_is_portable`), or one
+    the cache answered for all the same, is called through its exported computation."""
     import jax
 
     specs = [jax.ShapeDtypeStruct(s, d, weak_type=w) for s, d, w in avals]
+    portable = _executable_is_portable(exported)
     hits = []
 
     def listen(event, **kwargs):
@@ -207,10 +213,11 @@ def _compile(exported, avals):
 
     jax.monitoring.register_event_listener(listen)
     try:
-        compiled = jax.jit(exported.call).lower(*specs).compile()
+        with _without_compilation_cache() if portable else contextlib.nullcontext():
+            compiled = jax.jit(exported.call).lower(*specs).compile()
     finally:
         jax.monitoring.unregister_event_listener(listen)
-    if hits or not _executable_is_portable(exported):
+    if hits or not portable:
         return compiled, None
     try:
         from jax.experimental import serialize_executable
@@ -218,6 +225,29 @@ def _compile(exported, avals):
         return compiled, serialize_executable.serialize(compiled)
     except Exception:  # a backend that cannot serialize executables: the exported form
         return compiled, None
+
+
+@contextlib.contextmanager
+def _without_compilation_cache():
+    """JAX's persistent compilation cache neither read nor written by the compilations
+    within (JAX's own switch, ``jax_enable_compilation_cache``, is read once a process).
+    JAX's internals: where they are not as expected, the cache stays on (and an executable
+    it answers with is not stored, :func:`_compile`)."""
+    import jax
+
+    try:
+        from jax._src import compilation_cache as cache
+
+        cache.is_cache_used(jax.devices()[0].client)  # settled now, restored after
+        before = cache._cache_checked, cache._cache_used
+    except Exception:
+        yield
+        return
+    cache._cache_checked, cache._cache_used = True, False
+    try:
+        yield
+    finally:
+        cache._cache_checked, cache._cache_used = before
 
 
 def _custom_calls(exported) -> set[str]:

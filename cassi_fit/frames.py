@@ -158,13 +158,16 @@ def _frame_inputs(state: eqx.Module) -> dict:
         fill = tongue_drive(tracked[T1 : T4 + 1], site_s,
                             np.array([np.nan if x is None else x for x in sensor_s]),
                             float(model.measures["tongue_anchor_s"]), spec.tongue_anchor)
+    # made in numpy and put on the device: jnp.asarray and indexing would each run (and
+    # load from the compilation cache) an XLA computation per shape in every process
+    dtype = jnp.asarray(state.rest_pellets).dtype
     return {
         "rest": state.rest_pellets,
-        "tracked": jnp.asarray(tracked),
-        "tongue_fill": jnp.asarray(fill, jnp.asarray(state.rest_pellets).dtype),
+        "tracked": jax.device_put(tracked),
+        "tongue_fill": jax.device_put(np.asarray(fill, dtype)),
         "initial_jaw": state.initial_jaw,
         "conformation": state.conformation,
-        "w_ll": jnp.asarray(weights)[model.landmarks["LL"]],
+        "w_ll": jax.device_put(np.asarray(weights)[model.landmarks["LL"]]),
     }
 
 

@@ -88,19 +88,23 @@ def test_a_new_process_loads_the_kernel_without_tracing(tmp_path):
         np.testing.assert_array_equal(off[name], first[name])
 
 
-def test_an_executable_from_the_compilation_cache_is_not_stored(tmp_path):
+def test_a_computation_the_compilation_cache_holds_is_stored_with_its_executable(tmp_path):
     """XLA's CPU client serializes an executable loaded from JAX's compilation cache
-    without its machine code; such an entry is called through its exported computation."""
+    without its machine code: a kernel whose computation the cache holds already (the
+    code changed elsewhere, every entry traced again) is compiled without the cache when
+    its entry is made, so that later processes load its executable instead of lowering
+    it again, each of them."""
     cache = {"JAX_COMPILATION_CACHE_DIR": str(tmp_path / "jax"),
              "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0"}
     # the kernel's computation compiled into the cache (the entry beside it elsewhere)
-    _child(tmp_path / "fill.npz", {**cache, EXPORT_CACHE_ENV: str(tmp_path / "elsewhere")})
+    fill = _child(tmp_path / "fill.npz", {**cache, EXPORT_CACHE_ENV: str(tmp_path / "elsewhere")})
     environ = {**cache, EXPORT_CACHE_ENV: str(tmp_path / "exported")}
-    first = _child(tmp_path / "first.npz", environ)  # traced again, compiled from the cache
+    first = _child(tmp_path / "first.npz", environ)  # traced again, compiled again
     second = _child(tmp_path / "second.npz", environ)
     assert list(first["counts"]) == [1, 1, 0, 1]  # this process's compiled kernel
-    assert list(second["counts"]) == [0, 0, 1, 0]  # loaded, lowered, compiled from the cache
+    assert list(second["counts"]) == [0, 0, 1, 1]  # loaded, its executable too
     for name in ("a", "b", "trace"):
+        np.testing.assert_array_equal(first[name], fill[name])
         np.testing.assert_array_equal(second[name], first[name])
 
 
