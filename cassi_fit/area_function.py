@@ -63,7 +63,8 @@ on the protrusion and the height that its factor loadings and standard deviation
 24.4 mm: ``LIP_WIDTH_PER_MM`` = 7.0 % per mm. The lips' sections' areas are multiplied by
 ``1 - LIP_WIDTH_PER_MM * protrusion`` (:func:`lip_protrusion`: the lips' forward
 displacement from the subject's rest, the mean of the upper lip's and of the lower lip's
-relative to the lower incisor, which carries it with the jaw, in the subject's mm; spread
+relative to the lower incisor, which carries it with the jaw, at their inner midsagittal
+points, which the conformation's lip thickness does not move; in the subject's mm; spread
 lips, behind their rest, widen), held at nothing (then at ``MIN_AREA_MM2``). The height
 dependence stays Soquet's (their rule already widens the opening as it opens); the model's
 rest (``TractGeometry.lip_rest_x``) has the published rule unchanged.
@@ -209,11 +210,12 @@ def tract_geometry(model: FaceModel) -> TractGeometry:
 
 
 def _lip_x(geometry: TractGeometry, vertices):
-    """``(2,)``: the upper lip's midsagittal points' mean x, and the lower lip's less the
-    lower incisor tip's (the jaw carries the lower lip), model mm."""
-    up, lo = np.asarray(geometry.upper[1:]), np.asarray(geometry.lower[1:])
+    """``(2,)``: the upper lip's inner midsagittal point's x, and the lower lip's less the
+    lower incisor tip's (the jaw carries the lower lip), model mm. The inner points move
+    with the lips' displacements in full and not with the lip thickness of the subject's
+    conformation (which moves the outer, vermilion points: no protrusion)."""
     x = jnp.asarray(vertices)[:, 0]
-    return jnp.stack([x[up].mean(), x[lo].mean() - x[geometry.lower[0]]])
+    return jnp.stack([x[geometry.upper[1]], x[geometry.lower[1]] - x[geometry.lower[0]]])
 
 
 def lip_protrusion(geometry: TractGeometry, vertices) -> Float[Array, ""]:

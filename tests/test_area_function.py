@@ -165,3 +165,15 @@ def test_lips_forward_narrow_their_opening(setup):
                                    np.asarray(af.area_function(off, v, tract)[0]), rtol=1e-6)
     g = jax.grad(lambda v: jnp.sum(af.area_function(geometry, v, tract)[0]))(v)
     assert np.all(np.isfinite(np.asarray(g)))
+
+
+def test_lip_thickness_is_no_protrusion(setup):
+    """A subject's thicker lips (the conformation's lip thickness moves the vermilion
+    forward) stand no further forward: their lips are not narrowed at rest."""
+    model, geometry, _, _ = setup
+    p0 = default_params(model)
+    thick = eqx.tree_at(lambda p: (p.upper_lip_thickness, p.lower_lip_thickness), p0,
+                        (p0.upper_lip_thickness + 3.0, p0.lower_lip_thickness + 3.0))
+    v = deform(model, thick)
+    assert float(jnp.abs(v - deform(model, p0)).max()) > 1.0  # the vermilion did move
+    assert abs(float(af.lip_protrusion(geometry, v))) < 1e-5
