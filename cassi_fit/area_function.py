@@ -58,16 +58,18 @@ speakers' lips as they were, not for lips rounded or spread. As the lips come fo
 articulation during speech", in Hardcastle & Marchal, *Speech Production and Speech
 Modelling*, Kluwer, 131-149; a factor analysis of one French speaker's lateral and frontal
 lip films: the jaw, the lips' protrusion, height and width), the regression of the width
-on the protrusion and the height that its factor loadings and standard deviations imply
-(R^2 0.78) falls 1.72 mm per mm of protrusion at a fixed height, of a mean width of
-24.4 mm: ``LIP_WIDTH_PER_MM`` = 7.0 % per mm. The lips' sections' areas are multiplied by
+on the protrusion and the height that its lip factor loadings and standard deviations
+imply (as its specification, ``pb1_spec.dat``, distributed with Maeda's VTCalcs, gives
+them; R^2 0.78) falls 1.72 mm per mm of protrusion at a fixed height, of that speaker's
+mean width of 24.4 mm: ``LIP_WIDTH_PER_MM`` = 7.0 % per mm. The lips' sections' areas are multiplied by
 ``1 - LIP_WIDTH_PER_MM * protrusion`` (:func:`lip_protrusion`: the lips' forward
 displacement from the subject's rest, the mean of the upper lip's and of the lower lip's
 relative to the lower incisor, which carries it with the jaw, at their inner midsagittal
 points, which the conformation's lip thickness does not move; in the subject's mm; spread
 lips, behind their rest, widen), held at nothing (then at ``MIN_AREA_MM2``). The height
 dependence stays Soquet's (their rule already widens the opening as it opens); the model's
-rest (``TractGeometry.lip_rest_x``) has the published rule unchanged.
+rest (``TractGeometry.lip_rest_x``; None turns the narrowing off) has the published rule
+unchanged.
 
 **Cross-distances to areas**: the front wall is resampled at ``N_SECTIONS`` points equally
 spaced in arc length; each point's cross-distance ``d`` is its distance to the nearest
