@@ -58,7 +58,8 @@ speaker (the referee's recordings, read as ``acoustic_referee.py`` reads them).
    lips' sections as the published labial rule gives them (before) and narrowed as the
    lips come forward (now), the columns of 7; then the referee's figures of both and now
    minus before, paired by segment (mo1 also calibrated held out). Tables 3, 4 and 7 give
-   the lips' protrusion (``lips forward mm``: ``area_function.lip_protrusion``, subject mm).
+   the lips' protrusion (``lips forward mm``: ``area_function.lip_protrusion``, subject mm;
+   0 in table 10's rows without the narrowing, which has no rest to measure it from).
 """
 
 from __future__ import annotations
