@@ -51,6 +51,26 @@ area the rest's (exact in one step: the shoelace area is linear in x). Nothing i
 the rest area is the subject's model at rest (``TractGeometry.rest_midsagittal_mm2``;
 None turns it off). The posed mesh is not changed.
 
+**The lips' width** (no midsagittal sensor sees it): the lips' sections take their area
+from the midsagittal opening by Soquet et al.'s labial rule (below), which holds for their
+speakers' lips as they were, not for lips rounded or spread. As the lips come forward
+(rounding) the opening narrows across: in Maeda's (1990) lip model (Maeda, "Compensatory
+articulation during speech", in Hardcastle & Marchal, *Speech Production and Speech
+Modelling*, Kluwer, 131-149; a factor analysis of one French speaker's lateral and frontal
+lip films: the jaw, the lips' protrusion, height and width), the regression of the width
+on the protrusion and the height that its lip factor loadings and standard deviations
+imply (as its specification, ``pb1_spec.dat``, distributed with Maeda's VTCalcs, gives
+them; R^2 0.78) falls 1.72 mm per mm of protrusion at a fixed height, of that speaker's
+mean width of 24.4 mm: ``LIP_WIDTH_PER_MM`` = 7.0 % per mm. The lips' sections' areas are multiplied by
+``1 - LIP_WIDTH_PER_MM * protrusion`` (:func:`lip_protrusion`: the lips' forward
+displacement from the subject's rest, the mean of the upper lip's and of the lower lip's
+relative to the lower incisor, which carries it with the jaw, at their inner midsagittal
+points, which the conformation's lip thickness does not move; in the subject's mm; spread
+lips, behind their rest, widen), held at nothing (then at ``MIN_AREA_MM2``). The height
+dependence stays Soquet's (their rule already widens the opening as it opens); the model's
+rest (``TractGeometry.lip_rest_x``; None turns the narrowing off) has the published rule
+unchanged.
+
 **Cross-distances to areas**: the front wall is resampled at ``N_SECTIONS`` points equally
 spaced in arc length; each point's cross-distance ``d`` is its distance to the nearest
 segment of the back wall (unsigned; a tongue through the palate gives a small area, not a
@@ -94,6 +114,9 @@ ALPHA = np.array([0.78, 1.86, 1.74, 1.99, 1.84, 1.82, 2.67, 2.42])
 BETA = np.array([0.7, 1.22, 1.23, 0.81, 0.93, 1.43, 1.48, 1.67])
 PHARYNX_REGIONS = np.array([0, 1, 1, 1, 0, 0, 0, 0], bool)
 LIP_REGIONS = np.array([0, 0, 0, 0, 0, 0, 0, 1], bool)
+#: The lip opening's width lost per mm of protrusion, relative (module docstring, *the
+#: lips' width*: Maeda 1990's lip model, 1.72 mm per mm of a mean width of 24.4 mm)
+LIP_WIDTH_PER_MM = 1.72 / 24.4
 
 
 class TractParams(eqx.Module):
@@ -136,6 +159,7 @@ class TractGeometry(eqx.Module):
     base_shift_x: Float[np.ndarray, ""] | None = None
     tongue_bottoms: tuple[int, ...] = eqx.field(static=True, default=())
     rest_midsagittal_mm2: Float[np.ndarray, ""] | None = None
+    lip_rest_x: Float[np.ndarray, " 2"] | None = None
 
 
 def _lip_points(model: FaceModel, region: str, upper: bool) -> np.ndarray:
@@ -183,7 +207,28 @@ def tract_geometry(model: FaceModel) -> TractGeometry:
                                    base_weight=weight, base_shift_x=shift,
                                    tongue_bottoms=as_ints(_tongue_bottoms(model, tops)))
     area = midsagittal_area(geometry, jnp.asarray(vertices))
-    return dataclasses.replace(geometry, rest_midsagittal_mm2=np.asarray(area, np.float64))
+    return dataclasses.replace(geometry, rest_midsagittal_mm2=np.asarray(area, np.float64),
+                               lip_rest_x=np.asarray(_lip_x(geometry, vertices), np.float64))
+
+
+def _lip_x(geometry: TractGeometry, vertices):
+    """``(2,)``: the upper lip's inner midsagittal point's x, and the lower lip's less the
+    lower incisor tip's (the jaw carries the lower lip), model mm. The inner points move
+    with the lips' displacements in full and not with the lip thickness of the subject's
+    conformation (which moves the outer, vermilion points: no protrusion)."""
+    x = jnp.asarray(vertices)[:, 0]
+    return jnp.stack([x[geometry.upper[1]], x[geometry.lower[1]] - x[geometry.lower[0]]])
+
+
+def lip_protrusion(geometry: TractGeometry, vertices) -> Float[Array, ""]:
+    """How far (model mm, + forward) the lips of ``vertices (V, 3)`` are forward of the
+    subject's rest: the mean of the upper lip's and of the lower lip's (relative to the
+    lower incisor) forward displacement (module docstring, *the lips' width*); 0 without
+    ``lip_rest_x``."""
+    if geometry.lip_rest_x is None:
+        return jnp.zeros((), vertices.dtype)
+    x = _lip_x(geometry, vertices)
+    return jnp.mean(x - jnp.asarray(geometry.lip_rest_x, x.dtype))
 
 
 def _tongue_bottoms(model: FaceModel, tops: np.ndarray) -> np.ndarray:
@@ -349,7 +394,8 @@ def area_function(
     d_cm = jnp.where(ok, jnp.sqrt(jnp.where(ok, d2, 1.0)), 0.0) / (10.0 * scale)
     alpha = jnp.asarray(ALPHA, d_cm.dtype)[region] * params.area_scale
     alpha = alpha * jnp.where(jnp.asarray(PHARYNX_REGIONS)[region], params.pharynx_scale, 1.0)
-    alpha = alpha * jnp.where(jnp.asarray(LIP_REGIONS)[region], params.lip_scale, 1.0)
+    rounding = jnp.maximum(1.0 - LIP_WIDTH_PER_MM * lip_protrusion(geometry, vertices) / scale, 0.0)
+    alpha = alpha * jnp.where(jnp.asarray(LIP_REGIONS)[region], params.lip_scale * rounding, 1.0)
     beta = jnp.asarray(BETA, d_cm.dtype)[region]
     pos = d_cm > 0
     area = jnp.where(pos, alpha * jnp.exp(beta * jnp.log(jnp.where(pos, d_cm, 1.0))), 0.0) * 100.0

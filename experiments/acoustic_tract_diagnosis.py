@@ -53,6 +53,13 @@ speaker (the referee's recordings, read as ``acoustic_referee.py`` reads them).
    segments for each variant (sensors alone; for mo1 also calibrated held out where the
    variant is a geometry the calibration can take), and each variant minus the root
    before, paired by segment, with the referee's bootstrap interval.
+8. **The lips' width narrowed by their protrusion** (``area_function``, *the lips' width*:
+   Maeda 1990's lip model, the default): JW11's /a/ and mo1 by vowel quality with the
+   lips' sections as the published labial rule gives them (before) and narrowed as the
+   lips come forward (now), the columns of 7; then the referee's figures of both and now
+   minus before, paired by segment (mo1 also calibrated held out). Tables 3, 4 and 7 give
+   the lips' protrusion (``lips forward mm``: ``area_function.lip_protrusion``, subject mm;
+   0 in table 10's rows without the narrowing, which has no rest to measure it from).
 """
 
 from __future__ import annotations
@@ -172,6 +179,7 @@ def emu_rows(result) -> list[dict]:
     lips = lip_opening(g, v)
     jaw = v[:, g.upper[0], 1] - v[:, g.lower[0], 1]
     shift = _root_shift_mm(result)
+    forward = _lips_forward_mm(result)
     rows = []
     qualities = sorted(set(quality[result.scored]), key=lambda q: (q not in FRONT, q))
     for q in qualities:
@@ -184,7 +192,8 @@ def emu_rows(result) -> list[dict]:
                      f"pharynx <= {CLOSED_MM2:.0f} mm^2": float(np.mean(narrow[m] <= CLOSED_MM2)),
                      "root forward mm": float(np.median(shift[m])),
                      "lip opening mm": float(np.median(lips[m] / result.scale)),
-                     "incisors apart mm": float(np.median(jaw[m] / result.scale))})
+                     "incisors apart mm": float(np.median(jaw[m] / result.scale)),
+                     "lips forward mm": float(np.median(forward[m]))})
     return rows
 
 
@@ -303,6 +312,18 @@ def variant_results(result) -> dict:
     return out
 
 
+def _lips_forward_mm(result):
+    """The lips' protrusion of every frame (subject mm; ``area_function.lip_protrusion``)."""
+    import jax
+    import jax.numpy as jnp
+
+    from cassi_fit import area_function as af
+
+    g = result.geometry
+    v = jnp.asarray(result.vertices)
+    return np.asarray(jax.vmap(lambda x: af.lip_protrusion(g, x))(v)) / result.scale
+
+
 def _root_shift_mm(result):
     import jax
     import jax.numpy as jnp
@@ -321,6 +342,7 @@ def variant_quality_rows(name: str, variants: dict) -> list[dict]:
     for variant, r in variants.items():
         quality = np.array([vowel_quality(str(s)) for s in r.labels])
         shift = _root_shift_mm(r)
+        forward = _lips_forward_mm(r)
         _, mean = _pharynx_stats(np.asarray(r.areas), np.asarray(_regions(r)))
         err = r.relative_error
         for q in sorted(set(quality[r.scored]), key=lambda q: (q not in FRONT, q)):
@@ -329,13 +351,15 @@ def variant_quality_rows(name: str, variants: dict) -> list[dict]:
             rows.append({"recording": name, "variant": variant, "quality": q, "frames": int(m.sum()),
                          "root forward mm": float(np.median(shift[m])),
                          "mean pharynx mm^2": float(np.median(mean[m])),
-                         **{f"F{k + 1} signed error %": 100 * float(med[k]) for k in range(3)}})
+                         **{f"F{k + 1} signed error %": 100 * float(med[k]) for k in range(3)},
+                         "lips forward mm": float(np.median(forward[m]))})
     return rows
 
 
-def variant_referee_rows(name: str, variants: dict, held_out: dict) -> list[dict]:
+def variant_referee_rows(name: str, variants: dict, held_out: dict,
+                         base_name: str = "root before") -> list[dict]:
     """Table 8 (module docstring): the referee's figures per variant; ``held_out``
-    {variant: (m, 3) Hz} where computed."""
+    {variant: (m, 3) Hz} where computed; each variant paired with ``base_name``'s."""
     import acoustic_referee as ref
 
     rows, per_segment = [], {}
@@ -349,10 +373,10 @@ def variant_referee_rows(name: str, variants: dict, held_out: dict) -> list[dict
             rows.append({"recording": name, "variant": variant, "compared": row["compared"],
                          "segments": row["segments"],
                          **{f"{q} median |error|": row[f"{q} median |error|"] for q in ref.FORMANTS}})
-    # each variant minus the root before, paired by segment (the referee's bootstrap)
-    base = per_segment.get("root before")
+    # each variant minus the baseline, paired by segment (the referee's bootstrap)
+    base = per_segment.get(base_name)
     for variant, seg in per_segment.items():
-        if base is None or variant == "root before":
+        if base is None or variant == base_name:
             continue
         for cond in ("pellets", "calibrated, held out"):
             a = [r for r in seg if r["condition"] == cond]
@@ -360,7 +384,7 @@ def variant_referee_rows(name: str, variants: dict, held_out: dict) -> list[dict
             if not a or len(a) != len(b):
                 continue
             idx = ref._rng(name, variant, cond).integers(0, len(a), size=(ref.BOOTSTRAP, len(a)))
-            row = {"recording": name, "variant": f"{variant} - root before", "compared": cond,
+            row = {"recording": name, "variant": f"{variant} - {base_name}", "compared": cond,
                    "segments": len(a)}
             for q in ref.FORMANTS:
                 d = np.array([abs(x[f"{q}_error"]) - abs(y[f"{q}_error"]) for x, y in zip(a, b, strict=True)])
@@ -431,9 +455,83 @@ def _regions(result):
                              result.scale)[2]
 
 
-def main(argv=None) -> int:
+#: Table 10's two tracts: the lips' width narrowed by their protrusion (the default) or not
+LIPS_NOW = "lips' width from their protrusion (default)"
+LIPS_BEFORE = "lips' width as at rest (before)"
+
+
+def lip_width_variants(result) -> dict:
+    """Table 10's variants of one recording's result: the default and the lips' sections
+    as the published labial rule gives them whatever the protrusion."""
+    before = dataclasses.replace(result.geometry, lip_rest_x=None)
+    return {LIPS_BEFORE: _with_geometry(result, before), LIPS_NOW: result}
+
+
+def _jw11_section(args, acc) -> list[str]:
     import acoustic_referee as ref
 
+    from cassi_fit.tables import markdown_text
+
+    run, result = ref.run_jw11(args.jw11, False)
+    jw_variants = variant_results(result)
+    acc["variant_rows"] += variant_quality_rows("JW11", jw_variants)
+    acc["variant_ref"] += variant_referee_rows("JW11", jw_variants, {})
+    lips = lip_width_variants(result)
+    acc["lip_rows"] += variant_quality_rows("JW11", lips)
+    acc["lip_ref"] += variant_referee_rows("JW11", lips, {}, LIPS_BEFORE)
+    acc["story_cases"].append(("JW11 /a/", "a", jw_variants["root before"], result, result.scored))
+    pharynx, elastic = jw11_rows(result)
+    print("JW11 done", flush=True)
+    return ["## JW11 (XRMB, two jaw pellets, nine /a/): the pharynx", "",
+            markdown_text(pharynx, digits=2), "",
+            _openings(result) + f" Its UL pellet lies {_lip_sensors(run):.1f} mm above "
+            "its LL pellet (median over the recording).", "",
+            "## JW11: what moves the formants (tongue base carried to JW11's wall)", "",
+            markdown_text(elastic, digits=3), ""]
+
+
+def _emu_section(args, acc) -> list[str]:
+    import acoustic_referee as ref
+
+    from cassi_fit import acoustic_fit
+    from cassi_fit.acoustic_fit import vowel_quality
+    from cassi_fit.tables import markdown_text
+
+    run, result = ref.run_emu(args.emu)
+    emu_variants = variant_results(result)
+    held = {}
+    for name in ("root before", "root keeps the rest area (default)",
+                 "root keeps the recording's median area"):
+        held[name] = acoustic_fit.leave_one_quality_out(emu_variants[name])[0]
+    acc["variant_rows"] += variant_quality_rows("mo1", emu_variants)
+    acc["variant_ref"] += variant_referee_rows("mo1", emu_variants, held)
+    lips = lip_width_variants(result)
+    lips_held = {LIPS_NOW: held["root keeps the rest area (default)"],
+                 LIPS_BEFORE: acoustic_fit.leave_one_quality_out(lips[LIPS_BEFORE])[0]}
+    acc["lip_rows"] += variant_quality_rows("mo1", lips)
+    acc["lip_ref"] += variant_referee_rows("mo1", lips, lips_held, LIPS_BEFORE)
+    quality = np.array([vowel_quality(str(s)) for s in result.labels])
+    for q in ("i", "u"):
+        acc["story_cases"].append((f"mo1 /{q}:/", q, emu_variants["root before"], result,
+                                   result.scored & (quality == q)))
+    text = ["## EMU mo1 (IPS Munich, one jaw sensor, palate from the tongue sensors, "
+            "default wall): by vowel quality", "", markdown_text(emu_rows(result), digits=1),
+            "", f"The {run.state.palate_note}.", "",
+            f"Its upper-lip sensor lies {_lip_sensors(run):.1f} mm above its lower-lip "
+            "sensor (median over the recording); the model's lips are fitted to XRMB's "
+            "UL and LL pellet sites. " + _bilabials(result), ""]
+    closed_run, closed = ref.run_emu(args.emu, lip_closure=True)
+    return text + [
+        "## EMU mo1 with its lips touching where their sensors are nearest "
+        "(`lip_closure`, not the default): by vowel quality", "",
+        markdown_text(emu_rows(closed), digits=1), "",
+        f"With `lip_closure`: {closed_run.state.lip_note}. " + _bilabials(closed), "",
+        "## EMU mo1: the referee's figures with the lips at rest and touching", "",
+        markdown_text(lip_closure_rows(result, closed,
+                                       held["root keeps the rest area (default)"])), ""]
+
+
+def main(argv=None) -> int:
     from cassi_fit.tables import markdown_text
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -455,61 +553,24 @@ def main(argv=None) -> int:
             "Written by `experiments/acoustic_tract_diagnosis.py` (docstring: the method). One "
             "recording of one speaker per table: no figure generalises to other speakers. "
             "Signed error = model / measured - 1 (Praat's Burg formants).", ""]
-    from cassi_fit import acoustic_fit
-    from cassi_fit.acoustic_fit import vowel_quality
-
-    story_cases, variant_rows, variant_ref = [], [], []
+    acc = {k: [] for k in ("story_cases", "variant_rows", "variant_ref", "lip_rows", "lip_ref")}
     if args.jw11:
-        run, result = ref.run_jw11(args.jw11, False)
-        jw_variants = variant_results(result)
-        variant_rows += variant_quality_rows("JW11", jw_variants)
-        variant_ref += variant_referee_rows("JW11", jw_variants, {})
-        story_cases.append(("JW11 /a/", "a", jw_variants["root before"], result, result.scored))
-        pharynx, elastic = jw11_rows(result)
-        text += ["## JW11 (XRMB, two jaw pellets, nine /a/): the pharynx", "",
-                 markdown_text(pharynx, digits=2), "",
-                 _openings(result) + f" Its UL pellet lies {_lip_sensors(run):.1f} mm above "
-                 "its LL pellet (median over the recording).", "",
-                 "## JW11: what moves the formants (tongue base carried to JW11's wall)", "",
-                 markdown_text(elastic, digits=3), ""]
-        print("JW11 done", flush=True)
+        text += _jw11_section(args, acc)
     if args.emu:
-        run, result = ref.run_emu(args.emu)
-        emu_variants = variant_results(result)
-        held = {}
-        for name in ("root before", "root keeps the rest area (default)",
-                     "root keeps the recording's median area"):
-            held[name] = acoustic_fit.leave_one_quality_out(emu_variants[name])[0]
-        variant_rows += variant_quality_rows("mo1", emu_variants)
-        variant_ref += variant_referee_rows("mo1", emu_variants, held)
-        quality = np.array([vowel_quality(str(s)) for s in result.labels])
-        for q in ("i", "u"):
-            story_cases.append((f"mo1 /{q}:/", q, emu_variants["root before"], result,
-                                result.scored & (quality == q)))
-        text += ["## EMU mo1 (IPS Munich, one jaw sensor, palate from the tongue sensors, "
-                 "default wall): by vowel quality", "", markdown_text(emu_rows(result), digits=1),
-                 "", f"The {run.state.palate_note}.", "",
-                 f"Its upper-lip sensor lies {_lip_sensors(run):.1f} mm above its lower-lip "
-                 "sensor (median over the recording); the model's lips are fitted to XRMB's "
-                 "UL and LL pellet sites. " + _bilabials(result), ""]
-        closed_run, closed = ref.run_emu(args.emu, lip_closure=True)
-        text += ["## EMU mo1 with its lips touching where their sensors are nearest "
-                 "(`lip_closure`, not the default): by vowel quality", "",
-                 markdown_text(emu_rows(closed), digits=1), "",
-                 f"With `lip_closure`: {closed_run.state.lip_note}. " + _bilabials(closed),
-                 "",
-                 "## EMU mo1: the referee's figures with the lips at rest and touching", "",
-                 markdown_text(lip_closure_rows(result, closed,
-                                               held["root keeps the rest area (default)"])), ""]
-    if story_cases:
-        areas_rows, formant_rows = story_rows(story_cases)
+        text += _emu_section(args, acc)
+    if acc["story_cases"]:
+        areas_rows, formant_rows = story_rows(acc["story_cases"])
         text += ["## The model's vowels beside Story (2008)'s MRI area functions: mean areas",
                  "", markdown_text(areas_rows, digits=0), "",
                  "## The same: F1-F3 of each tract, and of the model's with one stretch of "
                  "Story's", "", markdown_text(formant_rows, digits=0), "",
                  "## Variants tried: by vowel quality (none chosen by these figures)", "",
-                 markdown_text(variant_rows, digits=1), "",
-                 "## Variants tried: the referee's figures", "", markdown_text(variant_ref), ""]
+                 markdown_text(acc["variant_rows"], digits=1), "",
+                 "## Variants tried: the referee's figures", "",
+                 markdown_text(acc["variant_ref"]), "",
+                 "## The lips' width narrowed by their protrusion (Maeda 1990): by vowel "
+                 "quality and the referee's figures", "",
+                 markdown_text(acc["lip_rows"], digits=1), "", markdown_text(acc["lip_ref"]), ""]
     args.docs.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(text))
     print(out)

@@ -131,3 +131,49 @@ def test_tongue_root_keeps_the_midsagittal_area(setup):
                                    float(geometry.rest_midsagittal_mm2), rtol=1e-4)
     g = jax.grad(lambda v: af.root_shift(geometry, v))(raised)
     assert np.all(np.isfinite(np.asarray(g))) and float(jnp.abs(g).sum()) > 0
+
+
+def test_lips_forward_narrow_their_opening(setup):
+    """The lips' width (module docstring, *the lips' width*; Maeda 1990): lips brought
+    forward of their rest narrow the lips' sections by LIP_WIDTH_PER_MM per mm of
+    protrusion, lips drawn back widen them; at rest, and for every section that is not
+    the lips', nothing changes; the jaw alone protrudes nothing; differentiable."""
+    import dataclasses
+
+    model, geometry, frames, _ = setup
+    rest = jnp.asarray(model.vertices)
+    assert abs(float(af.lip_protrusion(geometry, rest))) < 1e-6
+    assert abs(float(af.lip_protrusion(geometry, frames[1]))) < 1e-4  # the jaw lowered
+    p0 = default_params(model)
+    tract = af.default_tract()
+    off = dataclasses.replace(geometry, lip_rest_x=None)
+    for mm in (4.0, -3.0):
+        moved = eqx.tree_at(lambda p: (p.upper_lip, p.lower_lip), p0,
+                            (p0.upper_lip + jnp.array([mm, 0.0]), p0.lower_lip + jnp.array([mm, 0.0])))
+        v = deform(model, moved)
+        np.testing.assert_allclose(float(af.lip_protrusion(geometry, v)), mm, atol=1e-4)
+        a1, _, region = (np.asarray(x) for x in af.area_function(geometry, v, tract))
+        a0 = np.asarray(af.area_function(off, v, tract)[0])
+        lips = region == 7
+        assert lips.any()
+        np.testing.assert_allclose(a1[lips], np.maximum(a0[lips] * (1 - af.LIP_WIDTH_PER_MM * mm),
+                                                        af.MIN_AREA_MM2), rtol=1e-6)
+        np.testing.assert_allclose(a1[~lips], a0[~lips], rtol=1e-12)
+        assert (a1[lips].sum() < a0[lips].sum()) == (mm > 0)
+    for v in (rest, frames[0]):
+        np.testing.assert_allclose(np.asarray(af.area_function(geometry, v, tract)[0]),
+                                   np.asarray(af.area_function(off, v, tract)[0]), rtol=1e-6)
+    g = jax.grad(lambda v: jnp.sum(af.area_function(geometry, v, tract)[0]))(v)
+    assert np.all(np.isfinite(np.asarray(g)))
+
+
+def test_lip_thickness_is_no_protrusion(setup):
+    """A subject's thicker lips (the conformation's lip thickness moves the vermilion
+    forward) stand no further forward: their lips are not narrowed at rest."""
+    model, geometry, _, _ = setup
+    p0 = default_params(model)
+    thick = eqx.tree_at(lambda p: (p.upper_lip_thickness, p.lower_lip_thickness), p0,
+                        (p0.upper_lip_thickness + 3.0, p0.lower_lip_thickness + 3.0))
+    v = deform(model, thick)
+    assert float(jnp.abs(v - deform(model, p0)).max()) > 1.0  # the vermilion did move
+    assert abs(float(af.lip_protrusion(geometry, v))) < 1e-5
