@@ -143,8 +143,11 @@ def test_evaluate_resume_takes_the_rows_from_the_markers(serial, corpus, tmp_pat
 
 def test_a_dataset_needs_out_and_an_earlier_run_needs_resume_or_force(serial, corpus,
                                                                      capsys):
+    # --csv is one recording's: a folder of several is refused, naming how to choose one
     assert _cassi("jaw", corpus, "--csv", "x.csv") == 2
-    assert "a DATASET folder takes --out DIR" in capsys.readouterr().err
+    assert "recordings: name one as DATASET SUBJECT TASK" in capsys.readouterr().err
+    assert _cassi("jaw", corpus) == 2
+    assert "give --out DIR for its tables" in capsys.readouterr().err
     assert _cassi("jaw", corpus, "--out", serial["jaw"], "--quiet") == 2
     assert "file exists" in capsys.readouterr().err
 
