@@ -52,23 +52,52 @@ import pytest  # noqa: E402
 def solvers_return_their_start(monkeypatch):
     """Every jaw solver's solve step replaced by one that returns its start and reports
     success (the least-squares step and the block-tridiagonal one), for the meta-tests that
-    show a far-start test fails without its solver; compiled kernels (which hold the real
-    solver) are dropped before and after, and no kernel is loaded exported (it would hold
-    the real solver) nor exported with the stub in it (``cassi_fit._exported``)."""
-    from cassi_fit._exported import EXPORT_CACHE_ENV
+    show a far-start test fails without its solver. Every exported kernel
+    (``cassi_fit._exported``; the jaw methods' kernels are) gets a fresh ``eqx.filter_jit``
+    for the test, so it is traced again with the stub in it, and its own compilations (which
+    hold the real solver) come back untouched afterwards: the process's other compiled
+    functions are kept, not dropped with ``jax.clear_caches()`` for every later test file
+    to trace again. The stub refuses to be traced anywhere else (a RuntimeError, not the
+    AssertionError the meta-tests expect), so no other compiled function can keep it. No
+    kernel is loaded exported (it would hold the real solver) nor exported with the stub
+    in it."""
+    import functools
+    import sys
+
+    import equinox as eqx
+
+    from cassi_fit._exported import EXPORT_CACHE_ENV, Exported
     from cassi_fit.jaw_fit import _solve, _solvers
     from cassi_fit.status import SolverResult
 
     success = np.int32(SolverResult.SUCCESSFUL)
+    depth = [0]  # inside a fresh kernel's trace
+
+    def fresh(fn):
+        @functools.wraps(fn)
+        def traced(*args, **kwargs):
+            depth[0] += 1
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                depth[0] -= 1
+        return eqx.filter_jit(traced)
+
+    def stub(result):
+        if not depth[0]:
+            raise RuntimeError("the stubbed solver traced outside a fresh exported kernel: "
+                               "a compiled function could keep it")
+        return result, success
+
     monkeypatch.setattr(_solve, "_minimise",
-                        lambda solver, residuals, params0, args, gradient_stop:
-                        (params0, success))
+                        lambda solver, residuals, params0, args, gradient_stop: stub(params0))
     monkeypatch.setattr(_solvers, "minimise_block_tridiagonal",
-                        lambda system, knots0, **kw: (knots0, success))
+                        lambda system, knots0, **kw: stub(knots0))
     monkeypatch.setenv(EXPORT_CACHE_ENV, "off")
-    jax.clear_caches()
-    try:
-        yield
-    finally:
-        monkeypatch.undo()
-        jax.clear_caches()
+    kernels = {id(k): k for name, module in list(sys.modules.items())
+               if name.startswith("cassi_fit") and module is not None
+               for k in vars(module).values() if isinstance(k, Exported)}
+    assert kernels  # the jaw methods' kernels at least
+    for kernel in kernels.values():
+        monkeypatch.setattr(kernel, "jitted", fresh(kernel.fn))
+    yield

@@ -3,6 +3,7 @@ reason, the pivot methods from far starts (failing against a stubbed solver), th
 rotation and its learning on exactly coupled data, the hidden sensor's prediction, and the
 real XRMB recording JW11 when it is present."""
 
+import sys
 from pathlib import Path
 
 import jax
@@ -264,6 +265,8 @@ def test_real_rows_of_the_generated_table_are_current():
     import importlib.util
 
     root = Path(__file__).resolve().parents[1]
+    if str(root / "experiments") not in sys.path:  # its own imports (shared_data), when this
+        sys.path.insert(0, str(root / "experiments"))  # file runs without the other files
     spec = importlib.util.spec_from_file_location(
         "single_sensor_jaw", root / "experiments" / "single_sensor_jaw.py")
     experiment = importlib.util.module_from_spec(spec)
