@@ -141,6 +141,7 @@ def test_lips_forward_narrow_their_opening(setup):
     import dataclasses
 
     model, geometry, frames, _ = setup
+    areas = eqx.filter_jit(af.area_function)  # compiled once a geometry, not run op by op
     rest = jnp.asarray(model.vertices)
     assert abs(float(af.lip_protrusion(geometry, rest))) < 1e-6
     assert abs(float(af.lip_protrusion(geometry, frames[1]))) < 1e-4  # the jaw lowered
@@ -152,8 +153,8 @@ def test_lips_forward_narrow_their_opening(setup):
                             (p0.upper_lip + jnp.array([mm, 0.0]), p0.lower_lip + jnp.array([mm, 0.0])))
         v = deform(model, moved)
         np.testing.assert_allclose(float(af.lip_protrusion(geometry, v)), mm, atol=1e-4)
-        a1, _, region = (np.asarray(x) for x in af.area_function(geometry, v, tract))
-        a0 = np.asarray(af.area_function(off, v, tract)[0])
+        a1, _, region = (np.asarray(x) for x in areas(geometry, v, tract))
+        a0 = np.asarray(areas(off, v, tract)[0])
         lips = region == 7
         assert lips.any()
         np.testing.assert_allclose(a1[lips], np.maximum(a0[lips] * (1 - af.LIP_WIDTH_PER_MM * mm),
@@ -161,9 +162,9 @@ def test_lips_forward_narrow_their_opening(setup):
         np.testing.assert_allclose(a1[~lips], a0[~lips], rtol=1e-12)
         assert (a1[lips].sum() < a0[lips].sum()) == (mm > 0)
     for v in (rest, frames[0]):
-        np.testing.assert_allclose(np.asarray(af.area_function(geometry, v, tract)[0]),
-                                   np.asarray(af.area_function(off, v, tract)[0]), rtol=1e-6)
-    g = jax.grad(lambda v: jnp.sum(af.area_function(geometry, v, tract)[0]))(v)
+        np.testing.assert_allclose(np.asarray(areas(geometry, v, tract)[0]),
+                                   np.asarray(areas(off, v, tract)[0]), rtol=1e-6)
+    g = jax.grad(lambda v: jnp.sum(areas(geometry, v, tract)[0]))(v)
     assert np.all(np.isfinite(np.asarray(g)))
 
 
