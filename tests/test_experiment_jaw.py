@@ -11,6 +11,7 @@ from pathlib import Path
 import nbformat
 import numpy as np
 import pytest
+from experiment_kernel import main_cell, setup_cell
 from nbclient import NotebookClient
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -28,27 +29,6 @@ QUOTED = ("Winner by chin point error (mm), median", "Winner by pivot error (mm)
           "Winner by angle error (deg), median")  # fmt: skip
 
 
-#: Run in the kernel after the notebook, before the small run: this process's JAX settings
-#: and warnings (tests/conftest.py, pyproject's filterwarnings; ``main`` itself turns float64
-#: on), so that the small run is held to what it would be held to here. The notebook's own
-#: cells run before it, as a reader's kernel runs them.
-KERNEL_SETUP = """\
-import sys, warnings
-import jax
-jax.config.update("jax_enable_x64", True)
-jax.config.update("jax_numpy_rank_promotion", "raise")
-warnings.filterwarnings("error", category=DeprecationWarning, module=r"cassi_fit.*")
-sys.path.insert(0, {experiments!r})
-import jaw_comparison
-"""
-
-#: The small run in the kernel: its exit status on the last line of its stdout.
-KERNEL_SMALL_RUN = """\
-status = jaw_comparison.main({argv!r})
-print("exit status", status)
-"""
-
-
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     """One kernel runs the notebook top to bottom, then ``main`` of the small run with
@@ -59,8 +39,8 @@ def runs(tmp_path_factory):
     argv = ["--small", "--out", str(out), "--docs", str(out / "docs")]
     nb = nbformat.read(ROOT / "notebooks" / "jaw_comparison.ipynb", as_version=4)
     notebook = list(nb.cells)
-    setup = nbformat.v4.new_code_cell(KERNEL_SETUP.format(experiments=str(ROOT / "experiments")))
-    small = nbformat.v4.new_code_cell(KERNEL_SMALL_RUN.format(argv=argv))
+    setup = setup_cell("jaw_comparison")  # this process's settings, then the experiment
+    small = main_cell("jaw_comparison", argv)
     nb.cells = [*notebook, setup, small]
     client = NotebookClient(nb, timeout=None, kernel_name="python3",
                             resources={"metadata": {"path": str(ROOT / "notebooks")}})

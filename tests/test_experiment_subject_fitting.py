@@ -15,6 +15,7 @@ from types import SimpleNamespace
 import nbformat
 import numpy as np
 import pytest
+from experiment_kernel import main_cell, setup_cell
 from nbclient import NotebookClient
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -206,26 +207,6 @@ def test_main_refuses_existing_outputs_before_any_work(tmp_path, capsys):
     assert not (tmp_path / "new").exists()
 
 
-#: Run first in the kernel: this process's JAX settings and warnings (tests/conftest.py,
-#: pyproject's filterwarnings), so that the runs in the kernel are held to what they would be
-#: held to here.
-KERNEL_SETUP = """\
-import sys, warnings
-import jax
-jax.config.update("jax_enable_x64", True)
-jax.config.update("jax_numpy_rank_promotion", "raise")
-warnings.filterwarnings("error", category=DeprecationWarning, module=r"cassi_fit.*")
-sys.path.insert(0, {experiments!r})
-import subject_fitting
-"""
-
-#: A run of the experiment in the kernel: its stdout, then its exit status on the last line.
-KERNEL_MAIN = """\
-status = subject_fitting.main({argv!r})
-print("exit status", status)
-"""
-
-
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     """One kernel runs the notebook top to bottom, then ``main`` of the small run (``--small
@@ -242,8 +223,8 @@ def runs(tmp_path_factory):
                         "--stride", str(subject_rows.SMALL.stride)]}
     nb = nbformat.read(NOTEBOOK, as_version=4)
     notebook = list(nb.cells)
-    setup = nbformat.v4.new_code_cell(KERNEL_SETUP.format(experiments=str(ROOT / "experiments")))
-    mains = {k: nbformat.v4.new_code_cell(KERNEL_MAIN.format(argv=a)) for k, a in argv.items()}
+    setup = setup_cell("subject_fitting")  # this process's settings, then the experiment
+    mains = {k: main_cell("subject_fitting", a) for k, a in argv.items()}
     nb.cells = [setup, *notebook, *mains.values()]
     client = NotebookClient(nb, timeout=None, kernel_name="python3",
                             resources={"metadata": {"path": str(ROOT / "notebooks")}})
