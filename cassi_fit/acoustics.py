@@ -26,6 +26,7 @@ from jaxtyping import Bool, Float
 from . import area_function as af
 from . import tube
 from .formant_track import CEILING_HZ, FormantTrack, measure_formants, read_wav
+from .tables import blank_if_nan
 
 if TYPE_CHECKING:
     from .labels import Labels
@@ -141,8 +142,7 @@ class Acoustics:
 
 def _cell(value) -> float | None:
     """A table's cell: None (blank) for NaN (a frame the sound gives no formant for)."""
-    value = float(value)
-    return None if np.isnan(value) else value
+    return blank_if_nan(float(value))
 
 
 def _median(values) -> float | None:

@@ -31,6 +31,12 @@ ID_COLUMNS = ("subject", "task", "status", "error")
 Row = Mapping[str, object]
 
 
+def blank_if_nan(value: object) -> object:
+    """None (a blank cell: nothing was measured or predicted) for a NaN number, else the
+    value as it is; :func:`cell` itself spells NaN out."""
+    return None if isinstance(value, numbers.Real) and math.isnan(value) else value
+
+
 def cell(value: object, digits: int = FLOAT_DIGITS) -> str:
     """One cell as text: None -> ``""``, bools -> ``true``/``false``, floats (numpy's
     too) with ``digits`` decimals (``nan``, ``inf``, ``-inf`` spelled out), integers and

@@ -106,13 +106,10 @@ def format_diagnostics(rows) -> str:
     """CSV text of :class:`cassi_fit.jaw_fit.JawDiagnostics` rows (``tables.csv_text``,
     4 decimals); a measure that does not exist for the fit (the jaw sensors' distance
     with one of them, the hidden sensor's error with both) is blank."""
-    from cassi_fit.tables import csv_text
+    from cassi_fit.tables import blank_if_nan, csv_text
 
-    def blank_nan(row: dict) -> dict:
-        return {k: None if isinstance(v, float) and math.isnan(v) else v
-                for k, v in row.items()}
-
-    return csv_text([blank_nan(row.to_dict()) for row in rows], DIAGNOSTIC_COLUMNS, digits=4)
+    rows = [{k: blank_if_nan(v) for k, v in row.to_dict().items()} for row in rows]
+    return csv_text(rows, DIAGNOSTIC_COLUMNS, digits=4)
 
 
 def print_diagnostics(rows) -> None:
