@@ -18,13 +18,13 @@ RATE = 16000.0
 TRUE_F = (550.0, 1450.0, 2550.0)
 
 
-def synthetic_vowel():
-    """0.3 s of silence, 0.6 s of a 110 Hz pulse train (tilted -12 dB/octave) through five
+def synthetic_vowel(f0_hz: float = 110.0):
+    """0.3 s of silence, 0.6 s of a ``f0_hz`` pulse train (tilted -12 dB/octave) through five
     resonators (TRUE_F, then 3500 and 4500 Hz; bandwidths 80-200 Hz), 0.3 s of white noise at a tenth of the vowel's level."""
     rng = np.random.default_rng(0)
     n = int(0.6 * RATE)
     x = np.zeros(n)
-    x[:: int(RATE / 110)] = 1.0
+    x[np.round(np.arange(0, n, RATE / f0_hz)).astype(int)] = 1.0
     x = lfilter([1.0], [1.0, -0.97], lfilter([1.0], [1.0, -0.97], x))  # a glottal pulse's tilt
     for f, b in zip(TRUE_F + (3500.0, 4500.0), (80.0, 100.0, 120.0, 150.0, 200.0), strict=True):
         r = np.exp(-np.pi * b / RATE)
@@ -40,6 +40,27 @@ def test_synthetic_vowel_formants_and_reliability():
     assert list(track.reason) == ["silence", "", "", "", "unvoiced"]
     assert track.share_reliable == pytest.approx(0.6)
     np.testing.assert_allclose(track.frequency[1:4], np.tile(TRUE_F, (3, 1)), rtol=0.04)
+
+
+@pytest.mark.parametrize(("f0", "speaker"), [(110.0, "male"), (220.0, "female")])
+def test_the_voice_says_the_speaker(f0, speaker):
+    """The median F0 of the voiced frames (the silence and the noise left out) is the
+    pulse train's, and the 160 Hz boundary gives the speaker."""
+    heard = ft.median_f0(synthetic_vowel(f0), RATE)
+    assert heard == pytest.approx(f0, rel=0.02)
+    assert ft.voice_speaker(heard) == speaker
+    assert ft.voice_speaker(ft.F0_BOUNDARY_HZ - 1) == "male"
+    assert ft.voice_speaker(ft.F0_BOUNDARY_HZ) == "female"
+
+
+def test_no_voice_is_none_not_nan():
+    """No sound, a sound too short for the pitch window, silence and noise: no F0 (None),
+    no speaker, never NaN or an error."""
+    noise = np.random.default_rng(1).normal(0, 0.1, int(RATE))
+    for x in (np.zeros(0), np.zeros(100), np.zeros(int(RATE)), noise):
+        assert ft.median_f0(x, RATE) is None
+    assert ft.median_f0(synthetic_vowel(), 0.0) is None
+    assert ft.voice_speaker(None) is None and ft.voice_speaker(float("nan")) is None
 
 
 def test_bad_input_is_one_clear_error(tmp_path):
