@@ -12,8 +12,10 @@ coefficients are never refitted: only these four scales move.
 The fit (optimistix Levenberg-Marquardt) minimises, over the scored frames of the training
 vowels, ``log(F_model / F_measured)`` of F1-F3 through the differentiable chain (area
 function, tube, formants by implicit differentiation), with a weak prior keeping the
-parameters near the adult norms (``PRIOR_SD``): the drop within about 10 mm of 30 mm, the
-scales within about a factor e^0.5. Scored by leaving one vowel quality out
+parameters near the speaker's adult norms (``PRIOR_SD``): the drop within about 10 mm of
+the norm's (``area_function.LARYNX_DROP_MM``: 30 mm for a man, 15 mm for a woman; the
+speaker is the one its acoustics were heard with, ``acoustics.speaker_norms``), the scales
+within about a factor e^0.5. Scored by leaving one vowel quality out
 (:func:`leave_one_quality_out`); a recording with one vowel quality has no held-out
 figure (say so).
 """
@@ -85,7 +87,7 @@ def fit_tract(geometry: af.TractGeometry, vertices: Float[ArrayLike, "m V 3"],
               base: af.TractParams | None = None, max_frames: int = MAX_FRAMES) -> AcousticFit:
     """Fit :class:`TractParams` to ``measured (m, 3)`` Hz formants of the frames
     ``vertices (m, V, 3)`` (module docstring). ``base``: the prior's centre (default the
-    adult norms)."""
+    adult male norms; ``area_function.default_tract(dtype, speaker)`` for a speaker's)."""
     vertices = jnp.asarray(vertices)
     dtype = vertices.dtype
     base = af.default_tract(dtype) if base is None else base
@@ -147,7 +149,8 @@ def leave_one_quality_out(result, *, max_frames: int = MAX_FRAMES):
     with scored frames: the tract fitted to the other qualities' scored frames and the
     model's F1-F3 on this quality's frames with it. Returns ``(held_out (m, 3) Hz, NaN for
     frames not scored or of a quality that could not be held out; fits {quality:
-    AcousticFit})``, or ``(None, {})`` with fewer than two qualities (no held-out figure)."""
+    AcousticFit})``, or ``(None, {})`` with fewer than two qualities (no held-out figure).
+    The prior is centred on the norms ``result`` was heard with (``result.norms``)."""
     scored = result.scored
     quality = np.array([vowel_quality(str(s)) for s in result.labels])
     qualities = sorted(set(quality[scored]))
@@ -156,11 +159,12 @@ def leave_one_quality_out(result, *, max_frames: int = MAX_FRAMES):
         return None, {}
     fits = {}
     geometry, vertices, scale = result.geometry, result.vertices, result.scale
+    base = af.default_tract(jnp.asarray(vertices).dtype, result.norms.speaker)
     for q in qualities:
         train = np.nonzero(scored & (quality != q))[0]
         test = np.nonzero(scored & (quality == q))[0]
         fit = fit_tract(geometry, vertices[train], result.measured.frequency[train], scale,
-                        max_frames=max_frames)
+                        base=base, max_frames=max_frames)
         fits[q] = fit
         held[test] = np.asarray(tract_formants(geometry, jnp.asarray(vertices)[test], fit.tract,
                                                scale))[:, :3]

@@ -9,6 +9,15 @@ of the vowels' frames scored is reported beside every figure (``share_scored``).
 :meth:`Acoustics.frame_rows` and :meth:`Acoustics.segment_rows` are the per-frame and
 per-vowel-segment tables (``cassi acoustics --csv``), :func:`plot_acoustics` the figure of
 the model's formant tracks over the spectrogram (``--plot``).
+
+**The speaker's norms** (:func:`speaker_norms`, the one place they are chosen for
+``cassi acoustics``, ``cassi calibrate --acoustic`` and the tract view): ``auto`` (the
+default) hears them in the recording's own voice, the median F0 of its voiced frames
+against ``formant_track.F0_BOUNDARY_HZ``; ``male`` or ``female`` is taken as given. They set
+the larynx's drop below the hyoid of the tract the sensors drive
+(``area_function.LARYNX_DROP_MM``), Praat's formant ceiling (``formant_track.CEILING_HZ``,
+unless a ceiling is given) and the acoustic calibration's prior centre. Without a sound or
+a voiced frame: the male norms, and :meth:`SpeakerNorms.line` says so.
 """
 
 from __future__ import annotations
@@ -25,7 +34,14 @@ from jaxtyping import Bool, Float
 
 from . import area_function as af
 from . import tube
-from .formant_track import CEILING_HZ, FormantTrack, measure_formants, read_wav
+from .formant_track import (
+    CEILING_HZ,
+    FormantTrack,
+    measure_formants,
+    median_f0,
+    read_wav,
+    voice_speaker,
+)
 from .tables import blank_if_nan
 
 if TYPE_CHECKING:
@@ -44,6 +60,66 @@ def is_vowel(label: str) -> bool:
     ignored, case kept for SAMPA but ARPAbet matched in lower case)."""
     core = label.strip().replace(":", "").rstrip("012")
     return bool(core) and (core in VOWELS or core.lower() in VOWELS)
+
+
+#: ``speaker=`` of :func:`speaker_norms` (``cassi acoustics --speaker``)
+SPEAKERS = ("auto", "male", "female")
+
+
+@dataclass(frozen=True)
+class SpeakerNorms:
+    """The adult norms a recording is heard with: ``speaker`` (``male`` or ``female``),
+    ``source`` (how: ``voice`` heard in the sound, ``given``, or for the male norms by
+    default ``no sound`` / ``no voiced frame``) and the voice's median ``f0_hz`` (None where
+    there is no voiced sound)."""
+
+    speaker: str
+    source: str
+    f0_hz: float | None
+
+    @property
+    def larynx_drop_mm(self) -> float:
+        return af.LARYNX_DROP_MM[self.speaker]
+
+    @property
+    def ceiling_hz(self) -> float:
+        return CEILING_HZ[self.speaker]
+
+    @property
+    def why(self) -> str:
+        """How the norms were chosen, in words."""
+        heard = f"median F0 {self.f0_hz:.0f} Hz" if self.f0_hz is not None else ""
+        return {"voice": f"a {self.speaker} voice, {heard}",
+                "given": f"{self.speaker}, as given" + (f" (the voice's {heard})" if heard else ""),
+                "no sound": "no sound to hear the voice by",
+                "no voiced frame": "no voiced frame in the sound"}[self.source]
+
+    def line(self, *, ceiling_hz: float | None = None, larynx: str | None = None) -> str:
+        """One line: the norms and why (what ``cassi acoustics`` prints); ``ceiling_hz``
+        and ``larynx`` (in words) where a given ceiling or a fitted tract took their place."""
+        other = "female" if self.speaker == "male" else "male"
+        larynx = larynx or f"larynx {self.larynx_drop_mm:.0f} mm below the hyoid"
+        ceiling = (f"formant ceiling {self.ceiling_hz:.0f} Hz" if ceiling_hz is None
+                   else f"formant ceiling {ceiling_hz:.0f} Hz as given")
+        return (f"speaker: {self.why}: adult {self.speaker} norms ({larynx}, {ceiling}); "
+                f"--speaker {other} to change")
+
+
+def speaker_norms(speaker: str = "auto", samples: Float[np.ndarray, " n"] | None = None,
+                  rate_hz: float | None = None) -> SpeakerNorms:
+    """The :class:`SpeakerNorms` for ``speaker`` (:data:`SPEAKERS`; module docstring):
+    ``auto`` from the voice of ``samples`` at ``rate_hz``, the male norms without one.
+    ``ValueError`` for another ``speaker``."""
+    if speaker not in SPEAKERS:
+        raise ValueError(f"speaker {speaker!r}: one of {', '.join(SPEAKERS)}")
+    sound = samples is not None and rate_hz is not None and np.size(samples) > 0
+    f0 = median_f0(samples, rate_hz) if sound else None
+    if speaker != "auto":
+        return SpeakerNorms(speaker, "given", f0)
+    heard = voice_speaker(f0)
+    if heard is None:
+        return SpeakerNorms("male", "no voiced frame" if sound else "no sound", None)
+    return SpeakerNorms(heard, "voice", f0)
 
 
 def model_formants(geometry: af.TractGeometry, vertices: Float[jax.Array, "m V 3"],
@@ -72,7 +148,8 @@ class Acoustics:
     ``model`` and ``model_bandwidth`` ``(m, 4)`` Hz, ``measured`` the
     :class:`FormantTrack`, ``labels (m,)``, ``areas`` and ``lengths`` ``(m, n)`` mm^2, mm;
     ``scored (m,)``; ``tract`` the :class:`~cassi_fit.area_function.TractParams` used; the
-    subject's ``geometry``, the frames' ``vertices`` and ``scale`` (for a calibration)."""
+    subject's ``geometry``, the frames' ``vertices`` and ``scale`` (for a calibration);
+    ``norms`` the :class:`SpeakerNorms` it was heard with (and their F0)."""
 
     times: Float[np.ndarray, " m"]
     model: Float[np.ndarray, "m 4"]
@@ -85,6 +162,7 @@ class Acoustics:
     geometry: af.TractGeometry
     vertices: jax.Array
     scale: float
+    norms: SpeakerNorms
 
     @property
     def vowel(self) -> Bool[np.ndarray, " m"]:
@@ -164,12 +242,15 @@ def recording_sound(recording) -> tuple[Float[np.ndarray, " n"], float]:
 
 def recording_acoustics(
     run: RecordingRun, *, samples: Float[np.ndarray, " n"] | None = None,
-    rate_hz: float | None = None, labels: Labels | None = None, ceiling_hz: float = CEILING_HZ["male"], tract: af.TractParams | None = None,
+    rate_hz: float | None = None, labels: Labels | None = None, ceiling_hz: float | None = None,
+    tract: af.TractParams | None = None, speaker: str = "auto",
 ) -> Acoustics:
     """The :class:`Acoustics` of a :class:`~cassi_fit.pipeline.RecordingRun`. The sound is
     the recording's ``.wav`` unless ``samples`` and ``rate_hz`` are given; the labels are
     those beside the pellet file unless ``labels`` (a :class:`~cassi_fit.labels.Labels`) is
-    given. ``MissingDataError`` if there is no sound."""
+    given. ``speaker`` (:func:`speaker_norms`: ``auto`` from the voice, ``male``,
+    ``female``) sets the norms: the tract's larynx unless ``tract`` is given, Praat's
+    ceiling unless ``ceiling_hz`` is. ``MissingDataError`` if there is no sound."""
     from .labels import recording_labels
 
     rec, anim = run.recording, run.animation
@@ -179,12 +260,15 @@ def recording_acoustics(
         labels = recording_labels(rec)
     times = np.asarray(anim.times, np.float64)
     names = labels.at(times) if labels is not None else np.full(times.shape, "")
-    tract = af.default_tract(jnp.asarray(anim.vertices).dtype) if tract is None else tract
+    norms = speaker_norms(speaker, samples, rate_hz)
+    dtype = jnp.asarray(anim.vertices).dtype
+    tract = af.default_tract(dtype, norms.speaker) if tract is None else tract
     geometry = af.tract_geometry(run.state.model)
     freq, bw, areas, lengths = model_formants(geometry, anim.vertices, tract, run.state.scale)
+    ceiling_hz = norms.ceiling_hz if ceiling_hz is None else ceiling_hz
     measured = measure_formants(samples, rate_hz, times, ceiling_hz=ceiling_hz)
     return Acoustics(times, freq, bw, measured, names, areas, lengths, tract, geometry,
-                     anim.vertices, float(run.state.scale))
+                     anim.vertices, float(run.state.scale), norms)
 
 
 #: ``tube.spectrum`` of many tracts at the same frequencies (compiled once per shape).
@@ -212,7 +296,7 @@ def _spectra(areas, lengths, frequency_hz, chunk: int = 256) -> np.ndarray:
 
 def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
                  calibration: str | os.PathLike | None = None,
-                 ceiling_hz: float = CEILING_HZ["male"]) -> list[dict]:
+                 ceiling_hz: float | None = None, speaker: str = "auto") -> list[dict]:
     """What ``cassi animate --views ...,tract`` draws beside the face, per animation frame
     of ``run``: ``lengths_mm``, ``areas_mm2`` (the area function, glottis first, as
     :func:`recording_acoustics` makes it), ``frequency_hz`` (:data:`PANEL_HZ`) and
@@ -221,25 +305,30 @@ def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
     measurement is reliable at that frame, else NaN), ``tract`` (which vocal tract, in
     words). ``tract``: default the subject's acoustic calibration when ``calibration``
     (what ``--calibration`` names) holds one (``acoustic_fit.calibrated_tract``), else the
-    adult norms (``area_function.default_tract``)."""
+    adult norms of ``speaker`` (:func:`speaker_norms`, as :func:`recording_acoustics`)."""
     from .acoustic_fit import calibrated_tract
 
     anim = run.animation
-    if tract is None:
-        tract, words = calibrated_tract(calibration, run.recording.subject)
-    else:
-        words = "vocal tract: as given"
-    tract = af.default_tract(jnp.asarray(anim.vertices).dtype) if tract is None else tract
-    geometry = af.tract_geometry(run.state.model)
-    freq, _, areas, lengths = model_formants(geometry, anim.vertices, tract, run.state.scale)
-    gain = _spectra(areas, lengths, PANEL_HZ)
-    measured = np.full((len(freq), 3), np.nan)
+    samples, rate_hz = None, None
     sound = getattr(run.recording, "sound", None)
     if sound is not None:
         with sound.wav_file() as wav:
             samples, rate_hz = read_wav(wav)
+    norms = speaker_norms(speaker, samples, rate_hz)
+    if tract is None:
+        tract, words = calibrated_tract(calibration, run.recording.subject)
+    else:
+        words = "vocal tract: as given"
+    if tract is None:
+        tract = af.default_tract(jnp.asarray(anim.vertices).dtype, norms.speaker)
+        words = f"{words}, {norms.speaker} ({norms.why})"
+    geometry = af.tract_geometry(run.state.model)
+    freq, _, areas, lengths = model_formants(geometry, anim.vertices, tract, run.state.scale)
+    gain = _spectra(areas, lengths, PANEL_HZ)
+    measured = np.full((len(freq), 3), np.nan)
+    if samples is not None:
         track = measure_formants(samples, rate_hz, np.asarray(anim.times, np.float64),
-                                 ceiling_hz=ceiling_hz)
+                                 ceiling_hz=norms.ceiling_hz if ceiling_hz is None else ceiling_hz)
         measured = np.where(track.reliable[:, None], track.frequency[:, :3], np.nan)
     return [{"lengths_mm": lengths[k], "areas_mm2": areas[k], "frequency_hz": PANEL_HZ,
              "gain_db": gain[k], "model_hz": freq[k, :3], "measured_hz": measured[k],

@@ -17,7 +17,16 @@ hyoid end (the hyoid body at about C3, the vocal folds at about C5-C6 in adult m
 two vertebrae, ``GLOTTIS_BELOW_HYOID_MM`` = 30 mm by default; a per-subject parameter, and
 the handle acoustic calibration moves for the vocal tract's length), and
 ``GLOTTIS_DEPTH_MM`` in front of the wall (the male glottis is about 16 mm long front to
-back, Hirano et al. 1988's adult men: 14-17 mm).
+back, Hirano et al. 1988's adult men: 14-17 mm). An adult woman's larynx sits higher
+(``LARYNX_DROP_MM["female"]`` = 15 mm: ten women's vocal folds 8.25 cm and hyoid 6.73 cm
+below the palate, means, in a midsagittal real-time MRI of a sustained vowel at habitual
+pitch and loudness, "Morphophysiological adjustments of the larynx and vocal tract of
+young women during the dynamic vocal analysis by dynamic magnetic resonance", Voice
+Foundation symposium abstract, voicefoundation.org 2026-abstracts entry 6958: the folds
+15.2 mm below the hyoid; the male 30 mm is not measured the same way, and no ratio of
+female to male pharynx length could be read here, ``docs/ACOUSTICS.md``);
+:func:`default_tract` takes the speaker (``cassi_fit.acoustics.speaker_norms`` chooses
+one from the voice).
 
 **The tongue base** (below T4, the last pellet: no pellet sees it): the model's template
 placed it for the synthetic corpus's walls (``pharynx.DEFAULT_WALL``, x = -66..-78 mm): the
@@ -102,6 +111,8 @@ from .face_model import FaceModel
 
 N_SECTIONS = 40
 GLOTTIS_BELOW_HYOID_MM = 30.0
+#: The adult norms' glottis below the tongue's hyoid end, mm, by speaker (module docstring)
+LARYNX_DROP_MM = {"male": GLOTTIS_BELOW_HYOID_MM, "female": 15.0}
 GLOTTIS_DEPTH_MM = 16.0
 WALL_EXTENSION_MM = 60.0  # how far below the model's wall the straight extension reaches
 MIN_AREA_MM2 = 5.0
@@ -132,10 +143,13 @@ class TractParams(eqx.Module):
     lip_scale: Float[Array, ""]
 
 
-def default_tract(dtype=float) -> TractParams:
-    """The published rules unscaled and the adult-norm larynx."""
+def default_tract(dtype=float, speaker: str = "male") -> TractParams:
+    """The published rules unscaled and the adult norm's larynx of ``speaker`` (``male``
+    or ``female``: :data:`LARYNX_DROP_MM`); ``ValueError`` for another."""
+    if speaker not in LARYNX_DROP_MM:
+        raise ValueError(f"speaker {speaker!r}: one of {', '.join(LARYNX_DROP_MM)}")
     one = jnp.asarray(1.0, dtype)
-    return TractParams(jnp.asarray(GLOTTIS_BELOW_HYOID_MM, dtype), one, one, one)
+    return TractParams(jnp.asarray(LARYNX_DROP_MM[speaker], dtype), one, one, one)
 
 
 class TractGeometry(eqx.Module):

@@ -138,6 +138,17 @@ def dataset_args(root, args: argparse.Namespace):
     return Dataset(os.path.abspath(root), sensor_map=smap)
 
 
+def add_speaker_argument(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--speaker {auto,male,female}``: the adult norms the sound is heard with
+    (``acoustics.speaker_norms``); ``what`` says where they apply."""
+    parser.add_argument(
+        "--speaker", choices=("auto", "male", "female"), default="auto",
+        help=f"the adult norms for {what}: the larynx's drop below the hyoid (30 mm male, 15 "
+        "mm female), Praat's formant ceiling (5000 / 5500 Hz) and the acoustic calibration's "
+        "prior; auto (default): from the recording's voice, a median F0 of its voiced frames "
+        "of 160 Hz or more a female voice; male without a voiced sound")
+
+
 # ------------------------------------------------------------------ how the model runs
 
 

@@ -9,6 +9,7 @@ from ._options import (
     acoustic_only_folder,
     add_model_arguments,
     add_recording_argument,
+    add_speaker_argument,
     load_recording_args,
     run_args,
 )
@@ -26,13 +27,15 @@ def register(subparsers) -> None:
         "and the share of the vowels' frames scored (silent, unvoiced and wide-bandwidth frames "
         "are never scored). --csv writes the per-frame table (and OUT.segments.csv), --plot "
         "the formant tracks over the spectrogram. --calibration FILE with an acoustic "
-        "calibration (cassi calibrate --acoustic) uses its vocal tract.",
+        "calibration (cassi calibrate --acoustic) uses its vocal tract. One line says which "
+        "speaker's norms (--speaker) the sound is heard with.",
     )
     add_recording_argument(parser)
     add_model_arguments(parser)
-    parser.add_argument("--ceiling", type=float, default=5000.0, metavar="HZ",
-                        help="Praat's formant ceiling: 5000 for an adult male (default), 5500 "
-                        "for an adult female")
+    add_speaker_argument(parser, "the vocal tract and the sound's formants")
+    parser.add_argument("--ceiling", type=float, default=None, metavar="HZ",
+                        help="Praat's formant ceiling (default the speaker's: 5000 for an adult "
+                        "male, 5500 for an adult female); given, it wins over --speaker's")
     parser.add_argument("--csv", metavar="OUT.csv", help="per-frame table to write")
     parser.add_argument("--plot", metavar="OUT.png", help="figure to write")
     parser.add_argument("--force", action="store_true", help="replace existing outputs")
@@ -53,9 +56,10 @@ def run(args) -> int:
     run_ = run_args(recording, face_args)
     for line in run_.state.calibration_caveats:  # what the model took without knowing it
         print(f"calibration: {line}")  # (a palate estimated, the lips' rest), as animate says
-    tract = _calibrated_tract(recording, getattr(args, "calibration", None))
+    tract, words = _calibrated_tract(recording, getattr(args, "calibration", None))
     result = recording_acoustics(run_, samples=samples, rate_hz=rate, ceiling_hz=args.ceiling,
-                                 tract=tract)
+                                 tract=tract, speaker=args.speaker)
+    print(result.norms.line(ceiling_hz=args.ceiling, larynx=words))
     segments = result.segment_rows()
     print(markdown_text(segments, digits=3) if segments else "no vowel segments labelled")
     print(f"{100 * result.share_scored:.0f} % of the vowels' frames scored")
@@ -72,14 +76,18 @@ def run(args) -> int:
 
 
 def _calibrated_tract(recording, calibration):
-    """The vocal tract of the subject's acoustic calibration (``SUBJECT.acoustic.json`` in
-    the ``--calibration`` folder, or beside the given file), or None (the adult norms)."""
+    """``(tract, words)``: the vocal tract of the subject's acoustic calibration
+    (``SUBJECT.acoustic.json`` in the ``--calibration`` folder, or beside the given file)
+    and its larynx in words, or ``(None, None)`` (the speaker's adult norms)."""
     from cassi_fit.acoustic_fit import calibrated_tract
 
     tract, words = calibrated_tract(calibration, recording.subject)
     if calibration and tract is None:
         print(words)
-    return tract
+    if tract is None:
+        return None, None
+    fitted = words.removeprefix("vocal tract: ")
+    return tract, f"larynx {float(tract.larynx_drop_mm):.0f} mm below the hyoid, {fitted}"
 
 
 def calibrate_acoustic(args) -> int:
@@ -98,6 +106,7 @@ def calibrate_acoustic(args) -> int:
         write_acoustic_calibration,
     )
     from cassi_fit.acoustics import recording_acoustics
+    from cassi_fit.area_function import default_tract
     from cassi_fit.dataset import Dataset
     from cassi_fit.errors import CassiError, OutputExistsError
     from cassi_fit.pipeline import run_recording
@@ -120,7 +129,8 @@ def calibrate_acoustic(args) -> int:
             recording = dataset.load(subject, task)
             if recording.sound is None:
                 continue
-            result = recording_acoustics(run_recording(recording))
+            result = recording_acoustics(run_recording(recording),
+                                         speaker=getattr(args, "speaker", "auto"))
             if result.scored.any():
                 results.append(result)
                 names.append(task)
@@ -133,7 +143,9 @@ def calibrate_acoustic(args) -> int:
 
         vertices = jnp.concatenate([r.vertices[r.scored] for r in results])
         measured = np.concatenate([r.measured.frequency[r.scored] for r in results])
-        fit = fit_tract(results[0].geometry, vertices, measured, results[0].scale)
+        norms = _subject_norms(subject, results)
+        fit = fit_tract(results[0].geometry, vertices, measured, results[0].scale,
+                        base=default_tract(vertices.dtype, norms.speaker))
         qualities = sorted({vowel_quality(str(s)) for r in results for s in r.labels[r.scored]})
         write_acoustic_calibration(target, subject, fit, recordings=names, frames=len(measured),
                                    qualities=qualities, overwrite=args.force)
@@ -149,3 +161,14 @@ def calibrate_acoustic(args) -> int:
                   "its file); pass --accept-unconverged to accept it", file=sys.stderr)
             status = 3
     return status
+
+
+def _subject_norms(subject, results):
+    """The norms of most of a subject's recordings (the first's on a tie), said in a line:
+    one speaker, one prior for the fit."""
+    speakers = [r.norms.speaker for r in results]
+    norms = next(r.norms for r in results if r.norms.speaker == max(speakers, key=speakers.count))
+    mixed = "" if len(set(speakers)) == 1 else (
+        f" ({speakers.count(norms.speaker)} of its {len(speakers)} recordings)")
+    print(f"{subject}: {norms.line()}{mixed}")
+    return norms

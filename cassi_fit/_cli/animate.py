@@ -13,6 +13,7 @@ from ._options import (
     add_model_arguments,
     add_recording_argument,
     add_run_arguments,
+    add_speaker_argument,
     dataset_args,
     finish,
     load_recording_args,
@@ -47,6 +48,7 @@ def register(subparsers) -> None:
         "frame's area function and the tube's spectrum with the model's F1-F3 (and the "
         "sound's, where measured), as in cassi acoustics",
     )
+    add_speaker_argument(parser, "the tract view")
     parser.add_argument(
         "--size",
         default="640x480",
@@ -169,7 +171,10 @@ def write_output(out: Path, run, size, views, args, pool=None) -> Path:
     if TRACT_VIEW in views:  # the area function and the tube's spectrum beside the face
         from cassi_fit.acoustics import tract_panels
 
-        panels = tract_panels(run, calibration=getattr(args, "calibration", None))
+        panels = tract_panels(run, calibration=getattr(args, "calibration", None),
+                              speaker=getattr(args, "speaker", "auto"))
+        if panels:  # which vocal tract: the fitted one or which speaker's norms, and why
+            print(panels[0]["tract"])
     if out.suffix.lower() == ".png":
         from cassi_fit.render import Renderer, save_png
 
@@ -222,7 +227,8 @@ def run_dataset(args) -> int:
         from cassi_fit.acoustics import tract_panels
 
         # a worker is sent the function and the folder: each subject's own vocal tract
-        video_options["tract_panels"] = partial(tract_panels, calibration=args.calibration)
+        video_options["tract_panels"] = partial(tract_panels, calibration=args.calibration,
+                                                speaker=args.speaker)
     run, written, _ = animate_corpus(dataset_args(args.recording[0], args), args.out, spec=spec_from_args(args),
                                      video_options=video_options,
                                      run_options=run_options(args))

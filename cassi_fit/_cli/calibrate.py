@@ -8,7 +8,14 @@ from pathlib import Path
 
 from cassi_fit.options import CALIBRATION_METHODS
 
-from ._options import add_run_arguments, add_source_arguments, dataset_args, finish, run_options
+from ._options import (
+    add_run_arguments,
+    add_source_arguments,
+    add_speaker_argument,
+    dataset_args,
+    finish,
+    run_options,
+)
 
 
 def register(subparsers) -> None:
@@ -51,6 +58,7 @@ def register(subparsers) -> None:
                         help="fit each subject's vocal tract (larynx drop, area-rule scales) to "
                         "the formants of the labelled vowels of its recordings with sound, to "
                         "OUT/SUBJECT.acoustic.json (cassi_fit.acoustic_fit)")
+    add_speaker_argument(parser, "--acoustic, each recording's")
     parser.set_defaults(func=run)
 
 
