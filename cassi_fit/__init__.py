@@ -31,8 +31,10 @@ if TYPE_CHECKING:
     from . import synth as synth
     from .acoustic_fit import fit_tract as fit_tract
     from .acoustics import Acoustics as Acoustics
+    from .acoustics import SpeakerNorms as SpeakerNorms
     from .acoustics import plot_acoustics as plot_acoustics
     from .acoustics import recording_acoustics as recording_acoustics
+    from .acoustics import speaker_norms as speaker_norms
     from .animate import Animation as Animation
     from .area_function import TractParams as TractParams
     from .area_function import tract_geometry as tract_geometry
@@ -297,6 +299,8 @@ _PUBLIC = {
     "Acoustics": "acoustics",
     "recording_acoustics": "acoustics",
     "plot_acoustics": "acoustics",
+    "SpeakerNorms": "acoustics",
+    "speaker_norms": "acoustics",
     # calibration (fitting): the record and its file
     "Calibration": "calibration",
     "CalibrationWarning": "calibration",
@@ -382,7 +386,7 @@ __all__ = [
     "write_recording_video",
     "view", "write_view", "ViewerPage",
     "Acoustics", "FormantTrack", "TractParams", "fit_tract", "formants", "measure_formants",
-    "plot_acoustics", "recording_acoustics", "tract_geometry",
+    "plot_acoustics", "recording_acoustics", "tract_geometry", "SpeakerNorms", "speaker_norms",
     "write_animation", "write_calibration", "write_headmeasures", "write_lab", "write_outline",
     "write_penetration_csv", "write_report", "write_table", "write_textgrid", "write_txy",
 ]
