@@ -138,7 +138,10 @@ def test_calibrate_acoustic_writes_the_tract_and_acoustics_reads_it(recording, t
     assert "NOT CONVERGED" not in text  # as on the whole recording: the cut keeps the fit's
     code = cli.main(["acoustics", str(recording), "--stride", "1", "--calibration", str(out)])
     assert code == 0
-    assert "no acoustic calibration" not in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "no acoustic calibration" not in text
+    # the speaker's line gives the fitted larynx in place of the norms'
+    assert f"mm below the hyoid, fitted to the sound ({written[0].name}), formant ceiling" in text
     written[0].write_text("{}")
     assert cli.main(["acoustics", str(recording), "--stride", "1", "--calibration", str(out)]) != 0
     assert "not an acoustic calibration" in capsys.readouterr().err
