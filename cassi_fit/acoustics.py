@@ -11,13 +11,16 @@ per-vowel-segment tables (``cassi acoustics --csv``), :func:`plot_acoustics` the
 the model's formant tracks over the spectrogram (``--plot``).
 
 **The speaker's norms** (:func:`speaker_norms`, the one place they are chosen for
-``cassi acoustics``, ``cassi calibrate --acoustic`` and the tract view): ``auto`` (the
-default) hears them in the recording's own voice, the median F0 of its voiced frames
-against ``formant_track.F0_BOUNDARY_HZ``; ``male`` or ``female`` is taken as given. They set
-the larynx's drop below the hyoid of the tract the sensors drive
-(``area_function.LARYNX_DROP_MM``), Praat's formant ceiling (``formant_track.CEILING_HZ``,
-unless a ceiling is given) and the acoustic calibration's prior centre. Without a sound or
-a voiced frame: the male norms, and :meth:`SpeakerNorms.line` says so.
+``cassi acoustics``, ``cassi calibrate --acoustic`` and the tract view): ``male`` (the
+default: the adult male norms the toolkit has always used), ``female``, or ``auto``, heard
+in the recording's own voice (the median F0 of its voiced frames against
+``formant_track.F0_BOUNDARY_HZ``). They set the larynx's drop below the hyoid of the tract
+the sensors drive (``area_function.LARYNX_DROP_MM``), Praat's formant ceiling
+(``formant_track.CEILING_HZ``, unless a ceiling is given) and the acoustic calibration's
+prior centre. The female norms are not the default: on the one female voice measured (EMU
+mo1) they made the model's formants worse overall (``docs/ACOUSTICS.md``).
+:meth:`SpeakerNorms.line` says which norms, and with the default ones whether the voice's
+F0 suggests the female norms. ``auto`` without a sound or a voiced frame: the male norms.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from . import area_function as af
 from . import tube
 from .formant_track import (
     CEILING_HZ,
+    F0_BOUNDARY_HZ,
     FormantTrack,
     measure_formants,
     median_f0,
@@ -62,16 +66,17 @@ def is_vowel(label: str) -> bool:
     return bool(core) and (core in VOWELS or core.lower() in VOWELS)
 
 
-#: ``speaker=`` of :func:`speaker_norms` (``cassi acoustics --speaker``)
-SPEAKERS = ("auto", "male", "female")
+#: ``speaker=`` of :func:`speaker_norms` (``cassi acoustics --speaker``; ``male`` the default)
+SPEAKERS = ("male", "female", "auto")
 
 
 @dataclass(frozen=True)
 class SpeakerNorms:
     """The adult norms a recording is heard with: ``speaker`` (``male`` or ``female``),
-    ``source`` (how: ``voice`` heard in the sound, ``given``, or for the male norms by
-    default ``no sound`` / ``no voiced frame``) and the voice's median ``f0_hz`` (None where
-    there is no voiced sound)."""
+    ``source`` (how: ``default`` for the male norms asked for or by default, ``given`` for
+    the female norms asked for, ``voice`` heard in the sound by ``auto``, or, ``auto``
+    falling back to the male norms, ``no sound`` / ``no voiced frame``) and the voice's
+    median ``f0_hz`` (None where there is no voiced sound or it was not measured)."""
 
     speaker: str
     source: str
@@ -88,34 +93,53 @@ class SpeakerNorms:
     @property
     def why(self) -> str:
         """How the norms were chosen, in words."""
-        heard = f"median F0 {self.f0_hz:.0f} Hz" if self.f0_hz is not None else ""
-        return {"voice": f"a {self.speaker} voice, {heard}",
-                "given": f"{self.speaker}, as given" + (f" (the voice's {heard})" if heard else ""),
+        return {"default": "the default",
+                "given": "as asked",
+                "voice": f"a {self.speaker} voice, median F0 {self.f0_hz or 0:.0f} Hz",
                 "no sound": "no sound to hear the voice by",
                 "no voiced frame": "no voiced frame in the sound"}[self.source]
 
+    @property
+    def voice_suggests_female(self) -> bool:
+        """The default male norms, and a voice whose median F0 is at or above
+        :data:`~cassi_fit.formant_track.F0_BOUNDARY_HZ` (an adult female's, typically)."""
+        return self.source == "default" and voice_speaker(self.f0_hz) == "female"
+
     def line(self, *, ceiling_hz: float | None = None, larynx: str | None = None) -> str:
-        """One line: the norms and why (what ``cassi acoustics`` prints); ``ceiling_hz``
-        and ``larynx`` (in words) where a given ceiling or a fitted tract took their place."""
-        other = "female" if self.speaker == "male" else "male"
+        """One line: the norms used (what ``cassi acoustics`` prints), with the default
+        norms and a voice above the F0 boundary a hint to ``--speaker female`` (or ``auto``);
+        ``ceiling_hz`` and ``larynx`` (in words) where a given ceiling or a fitted tract
+        took the norms' place."""
         larynx = larynx or f"larynx {self.larynx_drop_mm:.0f} mm below the hyoid"
         ceiling = (f"formant ceiling {self.ceiling_hz:.0f} Hz" if ceiling_hz is None
                    else f"formant ceiling {ceiling_hz:.0f} Hz as given")
-        return (f"speaker: {self.why}: adult {self.speaker} norms ({larynx}, {ceiling}); "
-                f"--speaker {other} to change")
+        asked = ", as asked" if self.source == "given" else ""
+        said = f"speaker: adult {self.speaker} norms{asked} ({larynx}, {ceiling})"
+        if self.voice_suggests_female:
+            return (f"{said}; the voice's median F0 is {self.f0_hz:.0f} Hz, above "
+                    f"{F0_BOUNDARY_HZ:.0f} Hz: --speaker female (or auto) for the adult "
+                    "female norms")
+        if self.source == "voice":
+            side = "at or above" if self.speaker == "female" else "below"
+            return (f"{said}, from the voice: median F0 {self.f0_hz:.0f} Hz, {side} "
+                    f"{F0_BOUNDARY_HZ:.0f} Hz")
+        if self.source in ("default", "given"):
+            return said
+        return f"{said}: {self.why}"
 
 
-def speaker_norms(speaker: str = "auto", samples: Float[np.ndarray, " n"] | None = None,
+def speaker_norms(speaker: str = "male", samples: Float[np.ndarray, " n"] | None = None,
                   rate_hz: float | None = None) -> SpeakerNorms:
     """The :class:`SpeakerNorms` for ``speaker`` (:data:`SPEAKERS`; module docstring):
-    ``auto`` from the voice of ``samples`` at ``rate_hz``, the male norms without one.
-    ``ValueError`` for another ``speaker``."""
+    ``male`` (default) or ``female`` as given, ``auto`` from the voice of ``samples`` at
+    ``rate_hz`` (the male norms without one). The voice's median F0 is measured whenever
+    there is a sound (for the line's hint). ``ValueError`` for another ``speaker``."""
     if speaker not in SPEAKERS:
         raise ValueError(f"speaker {speaker!r}: one of {', '.join(SPEAKERS)}")
     sound = samples is not None and rate_hz is not None and np.size(samples) > 0
     f0 = median_f0(samples, rate_hz) if sound else None
     if speaker != "auto":
-        return SpeakerNorms(speaker, "given", f0)
+        return SpeakerNorms(speaker, "default" if speaker == "male" else "given", f0)
     heard = voice_speaker(f0)
     if heard is None:
         return SpeakerNorms("male", "no voiced frame" if sound else "no sound", None)
@@ -243,13 +267,13 @@ def recording_sound(recording) -> tuple[Float[np.ndarray, " n"], float]:
 def recording_acoustics(
     run: RecordingRun, *, samples: Float[np.ndarray, " n"] | None = None,
     rate_hz: float | None = None, labels: Labels | None = None, ceiling_hz: float | None = None,
-    tract: af.TractParams | None = None, speaker: str = "auto",
+    tract: af.TractParams | None = None, speaker: str = "male",
 ) -> Acoustics:
     """The :class:`Acoustics` of a :class:`~cassi_fit.pipeline.RecordingRun`. The sound is
     the recording's ``.wav`` unless ``samples`` and ``rate_hz`` are given; the labels are
     those beside the pellet file unless ``labels`` (a :class:`~cassi_fit.labels.Labels`) is
-    given. ``speaker`` (:func:`speaker_norms`: ``auto`` from the voice, ``male``,
-    ``female``) sets the norms: the tract's larynx unless ``tract`` is given, Praat's
+    given. ``speaker`` (:func:`speaker_norms`: ``male``, the default, ``female``, or
+    ``auto`` from the voice) sets the norms: the tract's larynx unless ``tract`` is given, Praat's
     ceiling unless ``ceiling_hz`` is. ``MissingDataError`` if there is no sound."""
     from .labels import recording_labels
 
@@ -296,7 +320,7 @@ def _spectra(areas, lengths, frequency_hz, chunk: int = 256) -> np.ndarray:
 
 def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
                  calibration: str | os.PathLike | None = None,
-                 ceiling_hz: float | None = None, speaker: str = "auto") -> list[dict]:
+                 ceiling_hz: float | None = None, speaker: str = "male") -> list[dict]:
     """What ``cassi animate --views ...,tract`` draws beside the face, per animation frame
     of ``run``: ``lengths_mm``, ``areas_mm2`` (the area function, glottis first, as
     :func:`recording_acoustics` makes it), ``frequency_hz`` (:data:`PANEL_HZ`) and
@@ -305,7 +329,8 @@ def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
     measurement is reliable at that frame, else NaN), ``tract`` (which vocal tract, in
     words). ``tract``: default the subject's acoustic calibration when ``calibration``
     (what ``--calibration`` names) holds one (``acoustic_fit.calibrated_tract``), else the
-    adult norms of ``speaker`` (:func:`speaker_norms`, as :func:`recording_acoustics`)."""
+    adult norms of ``speaker`` (:func:`speaker_norms`, as :func:`recording_acoustics`;
+    ``tract`` names them where they are not the default male norms)."""
     from .acoustic_fit import calibrated_tract
 
     anim = run.animation
@@ -314,14 +339,16 @@ def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
     if sound is not None:
         with sound.wav_file() as wav:
             samples, rate_hz = read_wav(wav)
-    norms = speaker_norms(speaker, samples, rate_hz)
+    # the voice's F0 measured only where it chooses the norms (auto)
+    norms = speaker_norms(speaker, samples if speaker == "auto" else None, rate_hz)
     if tract is None:
         tract, words = calibrated_tract(calibration, run.recording.subject)
     else:
         words = "vocal tract: as given"
     if tract is None:
         tract = af.default_tract(jnp.asarray(anim.vertices).dtype, norms.speaker)
-        words = f"{words}, {norms.speaker} ({norms.why})"
+        if norms.source != "default":  # the default male norms: main's words, unchanged
+            words = f"{words}, {norms.speaker} ({norms.why})"
     geometry = af.tract_geometry(run.state.model)
     freq, _, areas, lengths = model_formants(geometry, anim.vertices, tract, run.state.scale)
     gain = _spectra(areas, lengths, PANEL_HZ)

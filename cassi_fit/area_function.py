@@ -25,8 +25,8 @@ young women during the dynamic vocal analysis by dynamic magnetic resonance", Vo
 Foundation symposium abstract, voicefoundation.org 2026-abstracts entry 6958: the folds
 15.2 mm below the hyoid; the male 30 mm is not measured the same way, and no ratio of
 female to male pharynx length could be read here, ``docs/ACOUSTICS.md``);
-:func:`default_tract` takes the speaker (``cassi_fit.acoustics.speaker_norms`` chooses
-one from the voice).
+:func:`default_tract` takes the speaker (``male`` by default; the female 15 mm rests on
+that one abstract and is an option, ``cassi_fit.acoustics.speaker_norms``).
 
 **The tongue base** (below T4, the last pellet: no pellet sees it): the model's template
 placed it for the synthetic corpus's walls (``pharynx.DEFAULT_WALL``, x = -66..-78 mm): the

@@ -25,7 +25,9 @@ is their geometric mean (159 Hz; F0 ranges compare on a log scale, in semitones,
 show), and it lies in the gap between the typical adult male (85-155 Hz) and female
 (165-255 Hz) speaking F0 of Baken (2000, *Clinical Measurement of Speech and Voice*, 2nd
 ed., p. 177, after Fitch & Holbrook 1970). A voice's F0 is not its sex: a child, a low
-female or a high male voice is misjudged, and the caller can say which.
+female or a high male voice is misjudged. The toolkit's norms stay the adult male ones
+unless asked (``cassi_fit.acoustics.speaker_norms``); the voice's F0 only says when another
+might fit.
 """
 
 from __future__ import annotations

@@ -102,18 +102,17 @@ def test_cli_tables_figure_and_refusals(recording, tmp_path, capsys):
     f1 = float(segments[1].split(",")[segments[0].split(",").index("F1_measured_hz")])
     assert abs(f1 - 600) < 60
     assert png.stat().st_size > 10_000
-    # the norms heard in the 120 Hz voice, said in one line
-    assert ("speaker: a male voice, median F0 120 Hz: adult male norms (larynx 30 mm below "
-            "the hyoid, formant ceiling 5000 Hz); --speaker female to change") in text
-    # given: the speaker's norms, and a given ceiling wins over theirs
+    # the default norms said in one line; a 120 Hz voice: no hint to other norms
+    assert [w for w in text.splitlines() if w.startswith("speaker:")] == [
+        "speaker: adult male norms (larynx 30 mm below the hyoid, formant ceiling 5000 Hz)"]
+    # asked for: the female norms, and a given ceiling wins over theirs
     code = cli.main(["acoustics", str(recording), "--stride", "1", "--speaker", "female",
                      "--ceiling", "5200"])
     text = capsys.readouterr().out
     assert code == 0, text
     line = [w for w in text.splitlines() if w.startswith("speaker:")]
-    assert line == ["speaker: female, as given (the voice's median F0 120 Hz): adult female "
-                    "norms (larynx 15 mm below the hyoid, formant ceiling 5200 Hz as given); "
-                    "--speaker male to change"]
+    assert line == ["speaker: adult female norms, as asked (larynx 15 mm below the hyoid, "
+                    "formant ceiling 5200 Hz as given)"]
     # an existing output is refused in one line; without a sound the formants cannot be measured
     assert cli.main(["acoustics", str(recording), "--stride", "1", "--csv", str(out)]) != 0
     assert "exists" in capsys.readouterr().err
@@ -134,7 +133,7 @@ def test_calibrate_acoustic_writes_the_tract_and_acoustics_reads_it(recording, t
     assert code == 0, text
     written = sorted(out.glob("*.acoustic.json"))
     assert len(written) == 1 and "one vowel quality" in text
-    assert "speaker: a male voice, median F0 120 Hz: adult male norms" in text  # the prior's
+    assert "speaker: adult male norms (larynx 30 mm" in text  # the prior's: the default
     assert "NOT CONVERGED" not in text  # as on the whole recording: the cut keeps the fit's
     code = cli.main(["acoustics", str(recording), "--stride", "1", "--calibration", str(out)])
     assert code == 0
@@ -172,10 +171,11 @@ def test_fit_recovers_a_longer_larynx_and_narrower_pharynx():
     assert float(again.pharynx_scale) == record["pharynx_scale"]
 
 
-def test_the_norms_follow_the_voice_and_a_given_ceiling_wins(recording):
-    """The recording's run heard with a 220 Hz voice: the female norms (the tract's larynx
-    15 mm below the hyoid, Praat's ceiling 5500 Hz), carried by the result with their F0;
-    given, the male norms and a ceiling (which wins over theirs); no voice: the male norms."""
+def test_the_default_norms_keep_the_voice_and_auto_follows_it(recording):
+    """The recording's run heard with a 220 Hz voice: by default the adult male norms (the
+    tract's larynx 30 mm below the hyoid, Praat's ceiling 5000 Hz: main's figures), the
+    voice's F0 kept and the line's hint to the female norms; ``auto``: the female norms
+    (15 mm, 5500 Hz); a given ceiling wins over the norms'; no voice: the male norms."""
     from cassi_fit.acoustics import recording_acoustics, speaker_norms
     from cassi_fit.dataset import load_recording
     from cassi_fit.pipeline import run_recording
@@ -183,16 +183,22 @@ def test_the_norms_follow_the_voice_and_a_given_ceiling_wins(recording):
     run = run_recording(load_recording(recording), stride=1)
     seconds = float(run.animation.times[-1]) + 0.01
     high = _vowel(seconds, 220.0) / 32768.0
-    heard = recording_acoustics(run, samples=high, rate_hz=RATE)
+    default = recording_acoustics(run, samples=high, rate_hz=RATE)
+    assert (default.norms.speaker, default.norms.source) == ("male", "default")
+    assert default.norms.f0_hz == pytest.approx(222.0, rel=0.02)
+    assert float(default.tract.larynx_drop_mm) == af.GLOTTIS_BELOW_HYOID_MM == 30.0
+    assert default.measured.ceiling_hz == 5000.0
+    assert "above 160 Hz: --speaker female (or auto)" in default.norms.line()
+    heard = recording_acoustics(run, samples=high, rate_hz=RATE, speaker="auto")
     assert (heard.norms.speaker, heard.norms.source) == ("female", "voice")
-    assert heard.norms.f0_hz == pytest.approx(222.0, rel=0.02)
     assert float(heard.tract.larynx_drop_mm) == af.LARYNX_DROP_MM["female"] == 15.0
     assert heard.measured.ceiling_hz == 5500.0
-    given = recording_acoustics(run, samples=high, rate_hz=RATE, speaker="male", ceiling_hz=5200.0)
-    assert float(given.tract.larynx_drop_mm) == 30.0 and given.measured.ceiling_hz == 5200.0
-    assert not np.allclose(heard.model[:, :3], given.model[:, :3])  # a longer tract
+    assert not np.allclose(heard.model[:, :3], default.model[:, :3])  # a shorter tract
+    given = recording_acoustics(run, samples=high, rate_hz=RATE, speaker="auto", ceiling_hz=5200.0)
+    assert float(given.tract.larynx_drop_mm) == 15.0 and given.measured.ceiling_hz == 5200.0
     silent = speaker_norms("auto", np.zeros(len(high)), RATE)
     assert (silent.speaker, silent.source, silent.f0_hz) == ("male", "no voiced frame", None)
-    assert speaker_norms().source == "no sound" and "no sound" in speaker_norms().line()
+    assert speaker_norms().source == "default" and speaker_norms().f0_hz is None
+    assert "no sound" in speaker_norms("auto").line()
     with pytest.raises(ValueError, match="robot"):
         speaker_norms("robot")

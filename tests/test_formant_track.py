@@ -53,6 +53,22 @@ def test_the_voice_says_the_speaker(f0, speaker):
     assert ft.voice_speaker(ft.F0_BOUNDARY_HZ) == "female"
 
 
+@pytest.mark.parametrize(("f0", "hint"), [(110.0, False), (220.0, True)])
+def test_the_default_line_names_a_high_voice(f0, hint):
+    """``cassi acoustics``'s line: the default adult male norms always, and for a voice at
+    220 Hz (above the 160 Hz boundary), not at 110 Hz, its F0 and the female norms' option."""
+    from cassi_fit.acoustics import speaker_norms
+
+    norms = speaker_norms(samples=synthetic_vowel(f0), rate_hz=RATE)
+    line = norms.line()
+    assert norms.speaker == "male" and norms.f0_hz == pytest.approx(f0, rel=0.02)
+    assert line.startswith("speaker: adult male norms (larynx 30 mm below the hyoid, "
+                           "formant ceiling 5000 Hz)")
+    assert (f"the voice's median F0 is {f0:.0f} Hz, above 160 Hz: --speaker female (or auto) "
+            "for the adult female norms" in line) is hint
+    assert ("--speaker" in line) is hint and ("F0" in line) is hint
+
+
 def test_no_voice_is_none_not_nan():
     """No sound, a sound too short for the pitch window, silence and noise: no F0 (None),
     no speaker, never NaN or an error."""

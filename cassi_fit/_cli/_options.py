@@ -139,14 +139,16 @@ def dataset_args(root, args: argparse.Namespace):
 
 
 def add_speaker_argument(parser: argparse.ArgumentParser, what: str) -> None:
-    """``--speaker {auto,male,female}``: the adult norms the sound is heard with
+    """``--speaker {male,female,auto}``: the adult norms the sound is heard with
     (``acoustics.speaker_norms``); ``what`` says where they apply."""
     parser.add_argument(
-        "--speaker", choices=("auto", "male", "female"), default="auto",
+        "--speaker", choices=("male", "female", "auto"), default="male",
         help=f"the adult norms for {what}: the larynx's drop below the hyoid (30 mm male, 15 "
         "mm female), Praat's formant ceiling (5000 / 5500 Hz) and the acoustic calibration's "
-        "prior; auto (default): from the recording's voice, a median F0 of its voiced frames "
-        "of 160 Hz or more a female voice; male without a voiced sound")
+        "prior; male (default, the norms the toolkit has always used), female, or auto: from "
+        "the recording's voice, a median F0 of its voiced frames of 160 Hz or more a female "
+        "voice (male without a voiced sound). The female norms rest on one MRI abstract and "
+        "made one female voice's formants worse overall (docs/ACOUSTICS.md)")
 
 
 # ------------------------------------------------------------------ how the model runs
