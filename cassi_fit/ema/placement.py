@@ -27,7 +27,7 @@ anterior axis); else the speaker's jaw, two cues combined by their variances:
   alone would tilt the path about 26 degrees backward (Bonwill's triangle at Balkwill's
   angle), the condyles' forward glide brings it toward the vertical; we take the middle.
   Real speakers differ: the XRMB speaker JW11's path is 2 degrees backward, the IPS
-  speaker mo1's about 23 (in his file's frame).
+  speaker mo1's about 23 (in its file's frame).
 
 Without a jaw sensor the line from the back of the tongue to the lips stands for it (+-15
 degrees, said in the report).
