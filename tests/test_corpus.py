@@ -292,6 +292,25 @@ def test_a_recording_that_kills_its_worker_is_one_failed_row(tmp_path):
                                          for r in run.results if r.status == Status.OK)
 
 
+def jax_settings_task(item: CorpusItem, out_dir, *, overwrite: bool = False) -> TaskResult:
+    """What JAX computes with in the worker that runs it."""
+    import jax
+
+    return TaskResult({"x64": bool(jax.config.jax_enable_x64),
+                       "rank_promotion": str(jax.config.jax_numpy_rank_promotion)})
+
+
+def test_workers_trace_as_the_starting_process_does():
+    # conftest sets float64 and rank promotion 'raise' here; a worker that allowed rank
+    # promotion would hide what this process refuses, and its kernels' keys would differ
+    # from this process's (so it traced again what this process exported)
+    import jax
+
+    assert jax.config.jax_numpy_rank_promotion == "raise" and jax.config.jax_enable_x64
+    run = run_corpus(jax_settings_task, ITEMS[:2], None, jobs=2, progress=False)
+    assert [r.row for r in run.results] == [{"x64": True, "rank_promotion": "raise"}] * 2
+
+
 def test_one_progress_bar_with_the_worker_count(tmp_path, capsys):
     run_corpus(counting_task, ITEMS, tmp_path, jobs=1, progress=True, desc="jaw")
     err = capsys.readouterr().err

@@ -43,12 +43,17 @@ class JaxSettings:
     earlier run compiled) or, with ``default_cache``, the worker's own default folder
     (``_process.default_compile_cache``: a Dask worker on another machine uses its own);
     neither: no cache. ``threads``: the worker's share of the cores (set before JAX
-    starts, in a process pool's workers only; None: no limit)."""
+    starts, in a process pool's workers only; None: no limit). ``rank_promotion``: JAX's
+    rank promotion rule (``allow``, ``warn``, ``raise``; None leaves JAX's), the
+    starting process's: its workers trace as it does (a worker that allowed what the
+    caller refuses would hide it), and a kernel it exported (``cassi_fit._exported``,
+    keyed by that rule) is theirs to load instead of tracing it again."""
 
     x64: bool | None = None
     compilation_cache: str | None = None
     default_cache: bool = False
     threads: int | None = None
+    rank_promotion: str | None = None
 
     def cache_folder(self) -> str | None:
         """The cache folder to use in this process, or None."""
@@ -65,7 +70,7 @@ def _configure_jax(settings: JaxSettings, *, inherit: bool = False) -> None:
     pool's worker before JAX starts), else through ``jax.config`` only (this process's
     environment, which the caller owns, is left alone)."""
     cache = settings.cache_folder()
-    if settings.x64 is None and cache is None:
+    if settings.x64 is None and cache is None and settings.rank_promotion is None:
         return
     if cache is not None and _CONFIGURED.get("cache") != cache:
         use_compile_cache(cache, inherit=inherit)
@@ -75,6 +80,11 @@ def _configure_jax(settings: JaxSettings, *, inherit: bool = False) -> None:
 
         if bool(jax.config.jax_enable_x64) != settings.x64:
             jax.config.update("jax_enable_x64", settings.x64)
+    if settings.rank_promotion is not None:
+        import jax
+
+        if jax.config.jax_numpy_rank_promotion != settings.rank_promotion:
+            jax.config.update("jax_numpy_rank_promotion", settings.rank_promotion)
 
 
 _CONFIGURED: dict[str, str] = {}  # what _configure_jax last set in this process
@@ -199,7 +209,8 @@ def process_pool(jobs: int, *, x64: bool | None = None,
     own_cache = compilation_cache not in (None, True, False)
     settings = JaxSettings(x64, os.path.abspath(compilation_cache) if own_cache else None,
                            default_cache=compilation_cache is True,
-                           threads=threads_per_worker(jobs))
+                           threads=threads_per_worker(jobs),
+                           rank_promotion=_current_rank_promotion())
     return _Pool(None, jobs, settings=settings).new_executor(jobs)
 
 
@@ -209,6 +220,15 @@ def _current_x64() -> bool | None:
     if "jax" not in sys.modules:
         return None
     return bool(sys.modules["jax"].config.jax_enable_x64)
+
+
+def _current_rank_promotion() -> str | None:
+    """This process's rank promotion rule, None before JAX starts."""
+    import sys
+
+    if "jax" not in sys.modules:
+        return None
+    return str(sys.modules["jax"].config.jax_numpy_rank_promotion)
 
 
 # ------------------------------------------------------------------- the runner
@@ -318,7 +338,7 @@ def run_corpus(
     jax_settings = JaxSettings(
         _current_x64() if x64 is None else bool(x64),
         os.path.abspath(compilation_cache) if own_cache else None,
-        default_cache=compilation_cache is True)
+        default_cache=compilation_cache is True, rank_promotion=_current_rank_promotion())
     pool = (_open_pool(executor, jobs, scheduler, len(todo), jax_settings, scheduler_timeout)
             if todo else _Pool(None, 1))
     try:
