@@ -32,29 +32,32 @@ def _outline(n, dip, seed):
 
 
 # Outline point counts: the least (2), a few, PAL.DAT-like, and many. Each new count
-# compiles the resampling's operations anew (about half a second), so the examples vary
-# the shape (dip, noise) over these counts rather than over every count from 2 to 52.
+# compiles the build anew, so the examples vary the shape (dip, noise) over these counts
+# rather than over every count from 2 to 52.
 POINT_COUNTS = (2, 3, 5, 11, 23, 52)
+# compiled once per point count, as the model builds it (``palate._palate_vertices`` is a
+# compiled kernel): op by op, 25 examples took 18 s, compiled 11 s
+_compiled_build_palate = jax.jit(build_palate)
 
 
 @settings(max_examples=25, deadline=None)
 @given(n=st.sampled_from(POINT_COUNTS), dip=st.floats(-15.0, 5.0),
        seed=st.integers(0, 10_000))
 def test_palate_never_below_the_upper_incisor_tip(n, dip, seed):
-    verts, faces = build_palate(_outline(n, dip, seed))
+    verts, faces = _compiled_build_palate(_outline(n, dip, seed))
     assert verts.shape == (2 * N_ALONG * N_ACROSS, 3) and faces.max() < verts.shape[0]
     assert float(jnp.min(verts[:, 1])) >= 1.0 - 1e-12
     assert np.all(np.isfinite(np.asarray(verts)))
 
 
 def test_narrow_front_wide_back_and_sloping_edges():
-    v = np.asarray(build_palate(DEFAULT_OUTLINE)[0])[: N_ALONG * N_ACROSS].reshape(N_ALONG, N_ACROSS, 3)
+    v = np.asarray(_compiled_build_palate(DEFAULT_OUTLINE)[0])[: N_ALONG * N_ACROSS].reshape(N_ALONG, N_ACROSS, 3)
     v = v[:N_HARD]  # the hard palate (the velum narrows to the uvula)
     width = v[:, -1, 2] - v[:, 0, 2]
     assert width[0] < width[-1] and np.all(np.diff(width) >= 0)
     mid = N_ACROSS // 2
     assert np.all(v[1:, 0, 1] < v[1:, mid, 1])  # edges lower than the centreline
-    np.testing.assert_allclose(v[:, mid, :2], np.asarray(build_palate(DEFAULT_OUTLINE)[0])[mid:N_HARD * N_ACROSS:N_ACROSS, :2])
+    np.testing.assert_allclose(v[:, mid, :2], np.asarray(_compiled_build_palate(DEFAULT_OUTLINE)[0])[mid:N_HARD * N_ACROSS:N_ACROSS, :2])
 
 
 def test_palate_gradients_match_finite_differences():
@@ -129,7 +132,7 @@ def test_the_hard_palate_meets_the_upper_teeth_necks(outline):
 
 
 def test_the_velum_hangs_behind_the_hard_palate_attached():
-    verts = np.asarray(build_palate(DEFAULT_OUTLINE)[0])
+    verts = np.asarray(_compiled_build_palate(DEFAULT_OUTLINE)[0])
     oral = verts[: N_ALONG * N_ACROSS].reshape(N_ALONG, N_ACROSS, 3)
     centre = oral[:, N_ACROSS // 2]
     pns, velum = centre[N_HARD - 1], centre[N_HARD:]
@@ -139,7 +142,7 @@ def test_the_velum_hangs_behind_the_hard_palate_attached():
     drop = np.degrees(np.arctan2(pns[1] - velum[-1, 1], pns[0] - velum[-1, 0]))
     assert drop == pytest.approx(50.0)  # 130 degrees to the palatal plane
     # one closed slab: the faces join the last hard row to the first velum row
-    faces = build_palate(DEFAULT_OUTLINE)[1]
+    faces = _compiled_build_palate(DEFAULT_OUTLINE)[1]
     row = lambda i: (faces // N_ACROSS) % N_ALONG == i  # noqa: E731
     assert np.any(row(N_HARD - 1).any(axis=1) & row(N_HARD).any(axis=1))
     # the model's velum: present, thicker than the hard palate
@@ -150,8 +153,8 @@ def test_the_velum_hangs_behind_the_hard_palate_attached():
 
 def test_the_velum_stays_in_front_of_the_pharyngeal_wall():
     wall = np.asarray(midline(DEFAULT_WALL + np.array([12.0, 0.0])))  # a wall close behind
-    verts = np.asarray(build_palate(DEFAULT_OUTLINE, wall=wall)[0])
-    free = np.asarray(build_palate(DEFAULT_OUTLINE)[0])
+    verts = np.asarray(_compiled_build_palate(DEFAULT_OUTLINE, wall=wall)[0])
+    free = np.asarray(_compiled_build_palate(DEFAULT_OUTLINE)[0])
     half = N_ALONG * N_ACROSS
     # the velum's midline, oral and nasal (back) surface, in front of the wall's midline
     velum = np.stack([verts[:half], verts[half:]]).reshape(2, N_ALONG, N_ACROSS, 3)
