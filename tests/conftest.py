@@ -38,6 +38,15 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
 
     limit_threads(threads_per_worker(int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))))
 
+# Every process the tests start (the command line in subprocesses, notebook kernels, corpus
+# workers) computes as this one does, float64 with rank promotion raising: it is held to
+# the same rule, and it loads the kernels this process and the others compiled (the
+# exported kernels and JAX's cache are keyed by these settings) instead of compiling a
+# float32 set of its own. The library's default, float32, has its own test
+# (tests/test_float32.py), which sets its process's precision itself.
+os.environ["JAX_ENABLE_X64"] = "1"
+os.environ["JAX_NUMPY_RANK_PROMOTION"] = "raise"
+
 import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
