@@ -347,7 +347,7 @@ def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
         words = "vocal tract: as given"
     if tract is None:
         tract = af.default_tract(jnp.asarray(anim.vertices).dtype, norms.speaker)
-        if norms.source != "default":  # the default male norms: main's words, unchanged
+        if norms.source != "default":  # the default male norms keep the words they always had
             words = f"{words}, {norms.speaker} ({norms.why})"
     geometry = af.tract_geometry(run.state.model)
     freq, _, areas, lengths = model_formants(geometry, anim.vertices, tract, run.state.scale)
