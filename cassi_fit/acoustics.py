@@ -356,7 +356,11 @@ def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
     pitch = None if samples is None else voice_pitch(samples, rate_hz)
     norms = speaker_norms(speaker, samples if speaker == "auto" else None, rate_hz, pitch=pitch)
     if tract is None:
-        tract, words = calibrated_tract(calibration, run.recording.subject)
+        tract, path = calibrated_tract(calibration, run.recording.subject)
+        words = ("vocal tract: the adult norms" if path is None
+                 else f"vocal tract: fitted to the sound ({path.name})" if tract is not None
+                 else f"no acoustic calibration for {run.recording.subject} in {path.parent}: "
+                      "the adult norms")
     else:
         words = "vocal tract: as given"
     if tract is None:
