@@ -194,21 +194,30 @@ def acoustic_calibration_path(folder: str | os.PathLike, subject: str) -> Path:
     return Path(folder) / f"{subject}{ACOUSTIC_SUFFIX}"
 
 
-def calibrated_tract(calibration: str | os.PathLike | None,
-                     subject: str) -> tuple[af.TractParams | None, str]:
+class CalibratedTract(NamedTuple):
+    """:func:`calibrated_tract`'s answer: the subject's fitted ``tract`` (None: the adult
+    norms, ``area_function.default_tract``) and ``path``, the acoustic calibration's file
+    read, or looked for and not there (``FOLDER/SUBJECT.acoustic.json``; its ``parent`` is
+    the folder), None where no calibration was named. The callers word it."""
+
+    tract: af.TractParams | None
+    path: Path | None
+
+
+def calibrated_tract(calibration: str | os.PathLike | None, subject: str) -> CalibratedTract:
     """The subject's fitted vocal tract and where it came from: ``calibration`` is what
     ``--calibration`` names (a folder written by ``cassi calibrate``, or a file in it),
-    and ``FOLDER/SUBJECT.acoustic.json`` is read when it is there. ``(tract, words)``;
-    ``tract`` is None (the adult norms, ``area_function.default_tract``) without a
-    calibration or without that file, and ``words`` says so in a line."""
+    and ``FOLDER/SUBJECT.acoustic.json`` is read when it is there. The
+    :class:`CalibratedTract`'s ``tract`` is None without a calibration (``path`` None too)
+    or without that file (``path`` the file looked for)."""
     if not calibration:
-        return None, "vocal tract: the adult norms"
+        return CalibratedTract(None, None)
     folder = Path(calibration)
     folder = folder if folder.is_dir() else folder.parent
     path = acoustic_calibration_path(folder, subject)
     if not path.is_file():
-        return None, f"no acoustic calibration for {subject} in {folder}: the adult norms"
-    return read_acoustic_calibration(path)[0], f"vocal tract: fitted to the sound ({path.name})"
+        return CalibratedTract(None, path)
+    return CalibratedTract(read_acoustic_calibration(path)[0], path)
 
 
 def write_acoustic_calibration(path: str | os.PathLike, subject: str, fit: AcousticFit, *,

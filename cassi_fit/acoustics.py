@@ -42,13 +42,16 @@ from .formant_track import (
     F0_BOUNDARY_HZ,
     FormantTrack,
     measure_formants,
-    median_f0,
+    pitch_median_f0,
     read_wav,
+    voice_pitch,
     voice_speaker,
 )
 from .tables import blank_if_nan
 
 if TYPE_CHECKING:
+    import parselmouth
+
     from .labels import Labels
     from .pipeline import RecordingRun
 
@@ -129,15 +132,21 @@ class SpeakerNorms:
 
 
 def speaker_norms(speaker: str = "male", samples: Float[np.ndarray, " n"] | None = None,
-                  rate_hz: float | None = None) -> SpeakerNorms:
+                  rate_hz: float | None = None, *,
+                  pitch: parselmouth.Pitch | None = None) -> SpeakerNorms:
     """The :class:`SpeakerNorms` for ``speaker`` (:data:`SPEAKERS`; module docstring):
     ``male`` (default) or ``female`` as given, ``auto`` from the voice of ``samples`` at
     ``rate_hz`` (the male norms without one). The voice's median F0 is measured whenever
-    there is a sound (for the line's hint). ``ValueError`` for another ``speaker``."""
+    there is a sound (for the line's hint), from ``pitch``
+    (``formant_track.voice_pitch(samples, rate_hz)``, where the caller has it for the
+    formants' voicing too) or, None, by Praat's pitch tracker here. ``ValueError`` for
+    another ``speaker``."""
     if speaker not in SPEAKERS:
         raise ValueError(f"speaker {speaker!r}: one of {', '.join(SPEAKERS)}")
     sound = samples is not None and rate_hz is not None and np.size(samples) > 0
-    f0 = median_f0(samples, rate_hz) if sound else None
+    if sound and pitch is None:
+        pitch = voice_pitch(samples, rate_hz)
+    f0 = pitch_median_f0(pitch) if sound else None
     if speaker != "auto":
         return SpeakerNorms(speaker, "default" if speaker == "male" else "given", f0)
     heard = voice_speaker(f0)
@@ -284,13 +293,16 @@ def recording_acoustics(
         labels = recording_labels(rec)
     times = np.asarray(anim.times, np.float64)
     names = labels.at(times) if labels is not None else np.full(times.shape, "")
-    norms = speaker_norms(speaker, samples, rate_hz)
+    # Praat's pitch tracker once: the voice's F0 (the norms, chosen before the formants:
+    # they can set the ceiling) and the formants' voicing read the same track
+    pitch = voice_pitch(samples, rate_hz)
+    norms = speaker_norms(speaker, samples, rate_hz, pitch=pitch)
     dtype = jnp.asarray(anim.vertices).dtype
     tract = af.default_tract(dtype, norms.speaker) if tract is None else tract
     geometry = af.tract_geometry(run.state.model)
     freq, bw, areas, lengths = model_formants(geometry, anim.vertices, tract, run.state.scale)
     ceiling_hz = norms.ceiling_hz if ceiling_hz is None else ceiling_hz
-    measured = measure_formants(samples, rate_hz, times, ceiling_hz=ceiling_hz)
+    measured = measure_formants(samples, rate_hz, times, ceiling_hz=ceiling_hz, pitch=pitch)
     return Acoustics(times, freq, bw, measured, names, areas, lengths, tract, geometry,
                      anim.vertices, float(run.state.scale), norms)
 
@@ -339,10 +351,16 @@ def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
     if sound is not None:
         with sound.wav_file() as wav:
             samples, rate_hz = read_wav(wav)
-    # the voice's F0 measured only where it chooses the norms (auto)
-    norms = speaker_norms(speaker, samples if speaker == "auto" else None, rate_hz)
+    # Praat's pitch tracker once: the voice's F0 (read only where it chooses the norms,
+    # auto) and the measured formants' voicing
+    pitch = None if samples is None else voice_pitch(samples, rate_hz)
+    norms = speaker_norms(speaker, samples if speaker == "auto" else None, rate_hz, pitch=pitch)
     if tract is None:
-        tract, words = calibrated_tract(calibration, run.recording.subject)
+        tract, path = calibrated_tract(calibration, run.recording.subject)
+        words = ("vocal tract: the adult norms" if path is None
+                 else f"vocal tract: fitted to the sound ({path.name})" if tract is not None
+                 else f"no acoustic calibration for {run.recording.subject} in {path.parent}: "
+                      "the adult norms")
     else:
         words = "vocal tract: as given"
     if tract is None:
@@ -355,7 +373,8 @@ def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
     measured = np.full((len(freq), 3), np.nan)
     if samples is not None:
         track = measure_formants(samples, rate_hz, np.asarray(anim.times, np.float64),
-                                 ceiling_hz=norms.ceiling_hz if ceiling_hz is None else ceiling_hz)
+                                 ceiling_hz=norms.ceiling_hz if ceiling_hz is None else ceiling_hz,
+                                 pitch=pitch)
         measured = np.where(track.reliable[:, None], track.frequency[:, :3], np.nan)
     return [{"lengths_mm": lengths[k], "areas_mm2": areas[k], "frequency_hz": PANEL_HZ,
              "gain_db": gain[k], "model_hz": freq[k, :3], "measured_hz": measured[k],

@@ -17,7 +17,8 @@ never scored (``FormantTrack.reason`` says why, ``share_reliable`` how many are 
   missing): no clear resonance to measure.
 
 **The speaker from the voice** (:func:`voice_speaker`): the median F0 of the sound's voiced
-frames (Praat's pitch tracker, as above) against ``F0_BOUNDARY_HZ`` = 160 Hz: an adult
+frames (Praat's pitch tracker, as above: :func:`voice_pitch`, run once per sound, its track
+read by :func:`median_f0` and handed to :func:`measure_formants` as ``pitch``) against ``F0_BOUNDARY_HZ`` = 160 Hz: an adult
 male voice below it, an adult female voice at or above it. Typical speaking F0 is 120 Hz
 for men and 210 Hz for women (Traunmueller & Eriksson 1995, "The frequency range of the
 voice fundamental in the speech of male and female adults", Stockholm University); 160 Hz
@@ -35,11 +36,15 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from jaxtyping import Bool, Float, Shaped
 
 from .errors import DataFormatError
+
+if TYPE_CHECKING:
+    import parselmouth
 
 CEILING_HZ = {"male": 5000.0, "female": 5500.0}
 WINDOW_S = 0.025
@@ -89,13 +94,37 @@ def read_wav(path: str | os.PathLike) -> tuple[Float[np.ndarray, " n"], float]:
     return x / float(2 ** (8 * width - 1)), float(params.framerate)
 
 
+def _to_pitch(sound: parselmouth.Sound) -> parselmouth.Pitch:
+    """Praat's ``To Pitch`` (75-500 Hz) of a parselmouth Sound: the one pitch analysis."""
+    return sound.to_pitch(pitch_floor=PITCH_FLOOR_HZ, pitch_ceiling=PITCH_CEILING_HZ)
+
+
+def voice_pitch(samples: Float[np.ndarray, " n"], rate_hz: float) -> parselmouth.Pitch | None:
+    """Praat's pitch track of the sound (``To Pitch``, 75-500 Hz), the one analysis both
+    :func:`median_f0` (the voice's F0, which can choose the speaker's norms and with them
+    the formant ceiling) and :func:`measure_formants` (voicing) read: a caller that needs
+    both computes it once and passes it on (``pitch=``). None for no sound, a non-positive
+    rate, a non-finite sample or a sound too short for the pitch window."""
+    import parselmouth
+
+    samples = np.asarray(samples, dtype=np.float64).reshape(-1)
+    if samples.size == 0 or not rate_hz > 0 or not np.all(np.isfinite(samples)):
+        return None
+    try:
+        return _to_pitch(parselmouth.Sound(samples, sampling_frequency=float(rate_hz)))
+    except parselmouth.PraatError:  # shorter than Praat's pitch window: nothing voiced
+        return None
+
+
 def measure_formants(
     samples: Float[np.ndarray, " n"], rate_hz: float, times: Float[np.ndarray, " m"], *,
     ceiling_hz: float = CEILING_HZ["male"], max_bandwidth_hz: float = MAX_BANDWIDTH_HZ,
-    silence_db: float = SILENCE_DB,
+    silence_db: float = SILENCE_DB, pitch: parselmouth.Pitch | None = None,
 ) -> FormantTrack:
     """Praat's Burg formants F1-F3 of ``samples`` at ``times`` (s), reliability marked
-    (module docstring). ``ValueError`` for an empty sound or a non-positive rate."""
+    (module docstring). ``pitch``: :func:`voice_pitch` of these same samples where the
+    caller has it already (Praat's pitch tracker is not run again); None: run here.
+    ``ValueError`` for an empty sound or a non-positive rate."""
     import parselmouth
 
     samples = np.asarray(samples, dtype=np.float64).reshape(-1)
@@ -105,7 +134,7 @@ def measure_formants(
     sound = parselmouth.Sound(samples, sampling_frequency=float(rate_hz))
     formant = sound.to_formant_burg(time_step=0.005, max_number_of_formants=N_FORMANTS_BURG,
                                     maximum_formant=float(ceiling_hz), window_length=WINDOW_S)
-    pitch = sound.to_pitch(pitch_floor=PITCH_FLOOR_HZ, pitch_ceiling=PITCH_CEILING_HZ)
+    pitch = _to_pitch(sound) if pitch is None else pitch
     intensity = sound.to_intensity(minimum_pitch=PITCH_FLOOR_HZ)
     freq = np.array([[formant.get_value_at_time(k, t) for k in (1, 2, 3)] for t in times]).reshape(-1, 3)
     bw = np.array([[formant.get_bandwidth_at_time(k, t) for k in (1, 2, 3)] for t in times]).reshape(-1, 3)
@@ -130,18 +159,16 @@ def measure_wav(path: str | os.PathLike, times: Float[np.ndarray, " m"], **optio
 def median_f0(samples: Float[np.ndarray, " n"], rate_hz: float) -> float | None:
     """The median F0 (Hz) of the sound's voiced frames (Praat's ``To Pitch``, 75-500 Hz);
     None for no sound, a non-positive rate, a sound too short for the pitch window or no
-    voiced frame (never NaN)."""
-    import parselmouth
+    voiced frame (never NaN). :func:`pitch_median_f0` where the pitch is at hand."""
+    return pitch_median_f0(voice_pitch(samples, rate_hz))
 
-    samples = np.asarray(samples, dtype=np.float64).reshape(-1)
-    if samples.size == 0 or not rate_hz > 0 or not np.all(np.isfinite(samples)):
+
+def pitch_median_f0(pitch: parselmouth.Pitch | None) -> float | None:
+    """The median F0 (Hz) of a :func:`voice_pitch` track's voiced frames; None without a
+    track or a voiced frame (never NaN)."""
+    if pitch is None:
         return None
-    sound = parselmouth.Sound(samples, sampling_frequency=float(rate_hz))
-    try:
-        f0 = sound.to_pitch(pitch_floor=PITCH_FLOOR_HZ, pitch_ceiling=PITCH_CEILING_HZ)
-    except parselmouth.PraatError:  # shorter than Praat's pitch window: nothing voiced
-        return None
-    voiced = f0.selected_array["frequency"]
+    voiced = pitch.selected_array["frequency"]
     voiced = voiced[voiced > 0]
     return float(np.median(voiced)) if voiced.size else None
 

@@ -41,7 +41,12 @@ class QualityReport:
     the mistrack detector; ``mistrack_reasons`` says why, per pellet and reason
     (``{pellet: {reason label: values}}``, :class:`~cassi_fit.mistracks.Reason`; a value
     with two reasons counts under both). ``all_valid_fraction`` is the fraction of frames
-    with all eight pellets tracked. Jaw distances (MNI-MNM, mm) are over frames with both
+    with every pellet the file ever tracks tracked (the set ``first_valid_frame``'s rule
+    reads, :func:`cassi_fit.pellets.ever_tracked`): all eight where each is tracked
+    somewhere, as in XRMB; in an articulograph file the pellets its sensors stand for (one
+    jaw sensor, three tongue sensors: six). ``never_tracked`` names the pellets left out
+    (``PELLET_NAMES`` order; empty when all eight are tracked somewhere); a file that
+    tracks none has 0. Jaw distances (MNI-MNM, mm) are over frames with both
     jaw pellets tracked and not flagged; None when there are none. ``first_valid_frame``
     is CASSI's first valid line by the one rule of
     :func:`cassi_fit.pellets.first_valid_line` (every pellet the file ever tracks is
@@ -63,6 +68,7 @@ class QualityReport:
     n_mistracked: dict[str, int]
     first_complete_frame: int | None = None
     mistrack_reasons: dict[str, dict[str, int]] | None = None
+    never_tracked: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, object]:
         return asdict(self)
@@ -89,6 +95,7 @@ def quality_report(track: PelletTrack) -> QualityReport:
     report = mistrack_report(track)
     flags = report.flags
     tracked = track.valid.all(axis=-1)  # (n, 8)
+    ever = ever_tracked(track.valid)  # (8,): the pellets the file tracks on some frame
     distance = jaw_distance(track)
     jaw_flag = flags[:, [pellet_index(p) for p in JAW_PELLETS]].any(axis=-1)
     good = distance[np.isfinite(distance) & ~jaw_flag]
@@ -101,10 +108,11 @@ def quality_report(track: PelletTrack) -> QualityReport:
         first_valid_frame=first,
         first_jaw_frame=_first(track, flags, JAW_PELLETS)[0],
         valid_fraction={p: float(tracked[:, i].sum() / n) for i, p in enumerate(PELLET_NAMES)},
-        all_valid_fraction=float(tracked.all(axis=-1).sum() / n),
+        all_valid_fraction=float(tracked[:, ever].all(axis=-1).sum() / n) if ever.any() else 0.0,
         jaw_distance_median_mm=float(np.median(good)) if good.size else None,
         jaw_distance_sd_mm=float(np.std(good)) if good.size else None,
         n_mistracked={p: int(flags[:, i].sum()) for i, p in enumerate(PELLET_NAMES)},
         first_complete_frame=complete,
         mistrack_reasons=report.counts(),
+        never_tracked=tuple(p for p, e in zip(PELLET_NAMES, ever, strict=True) if not e),
     )

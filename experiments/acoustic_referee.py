@@ -192,18 +192,23 @@ def _norms_note(norms) -> str:
             f"{norms.ceiling_hz:.0f} Hz); {f0}")
 
 
-def speaker_rows(runs: dict) -> tuple[list[dict], dict]:
+def speaker_rows(runs: dict, computed: dict | None = None) -> tuple[list[dict], dict]:
     """The second table (module docstring): ``runs`` {lips in words: run}; for each, mo1
     heard with the male and the female norms, sensors alone and calibrated held out. Also
-    the segments' rows {(lips, speaker): rows} (the third table's)."""
+    the segments' rows {(lips, speaker): rows} (the third table's). ``computed``
+    {(lips, speaker): (acoustics, held-out F1-F3)}: the combinations already computed
+    (the first table's mo1: lips at rest, male norms), not computed again."""
     from cassi_fit import acoustic_fit
     from cassi_fit.acoustics import recording_acoustics
 
-    out, segments = [], {}
+    out, segments, computed = [], {}, computed or {}
     for lips, run in runs.items():
         for speaker in ("male", "female"):
-            result = recording_acoustics(run, speaker=speaker)
-            held = acoustic_fit.leave_one_quality_out(result)[0]
+            if (lips, speaker) in computed:
+                result, held = computed[lips, speaker]
+            else:
+                result = recording_acoustics(run, speaker=speaker)
+                held = acoustic_fit.leave_one_quality_out(result)[0]
             name = f"mo1, {speaker} norms, {lips}"
             conds = {"pellets": result.model[:, :3], "calibrated, held out": held}
             segments[lips, speaker] = segment_rows(name, result, conds)
@@ -238,13 +243,16 @@ def quality_rows(male: list[dict], female: list[dict]) -> list[dict]:
 
 
 def speaker_section(args, emu) -> list[str]:
-    """The second table's section of the page (empty without the EMU recording)."""
+    """The second table's section of the page (empty without the EMU recording); ``emu``
+    the first table's ``(run, acoustics, held-out F1-F3)`` of mo1 (lips at rest, the
+    default male norms: its row of the second table, not computed again)."""
     from cassi_fit.tables import markdown_text
 
     if emu is None:
         return []
     closed_run, _ = run_emu(args.emu, lip_closure=True)
-    rows, segments = speaker_rows({"lips at rest": emu[0], "lip_closure": closed_run})
+    rows, segments = speaker_rows({"lips at rest": emu[0], "lip_closure": closed_run},
+                                  {("lips at rest", "male"): emu[1:]})
     rest = quality_rows(segments["lips at rest", "male"], segments["lips at rest", "female"])
     return ["## EMU mo1 with the adult male and female norms, lips at rest and touching", "",
             f"mo1's voice: median F0 {emu[1].norms.f0_hz:.0f} Hz (`--speaker auto` would choose "
@@ -280,8 +288,9 @@ def main(argv=None) -> int:
     seg_rows, summ, notes, emu = [], [], [], None
     for name, job in jobs:
         run, result = job()
-        emu = (run, result) if name.startswith("EMU") else emu
         conds, fits, vtl = conditions(result, run)
+        if name.startswith("EMU"):  # the default norms (male), the lips at rest
+            emu = (run, result, conds["calibrated, held out"])
         rows = segment_rows(name, result, conds)
         seg_rows += rows
         summ += summary_rows(name, rows, round(result.share_scored, 3))

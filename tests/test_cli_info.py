@@ -31,6 +31,7 @@ def test_info_folder_table(dataset, capsys):
     assert "JW11: 1 task(s)" in out and "DEFAULTS" in out
     row = next(line for line in out.splitlines() if "tp020_2" in line).split()
     assert row == ["S01", "tp020_2", "7", "0.04", "3", "42.9", "42.61", "0.003", "0"]
+    assert "all%:" not in out and "never tracked" not in out  # XRMB: all eight, as ever
 
 
 def test_info_json(dataset, capsys):
@@ -74,3 +75,42 @@ def test_info_errors_are_one_line(dataset, capsys):
     empty.mkdir()
     assert main(["info", str(empty)]) == 2
     assert "found no recordings: looked for pellet files" in capsys.readouterr().err
+
+
+def _one_jaw_sensor_ema(path: Path) -> Path:
+    """A MOCHA-TIMIT EST file (tests/ema_files.py), 20 frames: no sensor for T4 or MNM, tb
+    dead (T2 never tracked), the lower lip lost on 2 frames."""
+    import struct
+
+    from ema_files import mocha_header, mocha_values
+
+    body = b""
+    for i in range(20):
+        values = mocha_values(i)
+        if i in (4, 5):
+            values[3] = values[8] = float("nan")  # ll_x, ll_y
+        body += struct.pack("<22f", 0.002 * i, 1.0, *values)
+    path.write_bytes(mocha_header(20) + body)
+    return path
+
+
+def test_all_is_over_the_pellets_the_file_tracks(dataset, capsys):
+    """An articulograph file lacking some of the eight pellets: ``all`` is the share of
+    frames with the pellets it tracks (90 %, not 0), and says which it never tracks; the
+    dataset table's ``all%`` is the same figure, with a line saying what it is."""
+    ema = _one_jaw_sensor_ema(dataset / "fsew0_001.ema")
+    assert main(["info", str(ema)]) == 0
+    out = capsys.readouterr().out
+    assert "  all       90.0 (of the 5 pellets tracked; never tracked: T2, T4, MNM)\n" in out
+    assert main(["info", str(ema), "--json"]) == 0
+    q = json.loads(capsys.readouterr().out)["quality"]
+    assert q["all_valid_fraction"] == pytest.approx(0.9)
+    assert q["never_tracked"] == ["T2", "T4", "MNM"]
+    assert main(["info", str(dataset)]) == 0
+    out = capsys.readouterr().out
+    assert next(line for line in out.splitlines() if "001" in line).split()[:6] == [
+        "FSEW0", "001", "20", "0.04", "0", "90.0"]
+    row = next(line for line in out.splitlines() if "tp020_2" in line).split()
+    assert row == ["S01", "tp020_2", "7", "0.04", "3", "42.9", "42.61", "0.003", "0"]
+    assert ("  all%: of the pellets each file tracks; 1 of 4 recording(s) never track some "
+            "(T2, T4, MNM)") in out

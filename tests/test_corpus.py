@@ -311,6 +311,23 @@ def test_workers_trace_as_the_starting_process_does():
     assert [r.row for r in run.results] == [{"x64": True, "rank_promotion": "raise"}] * 2
 
 
+def test_the_settings_the_workers_take_are_read_one_way(monkeypatch):
+    """``_current(name)``: this process's JAX setting (float64, the rank promotion rule)
+    as JAX has it, and None for each before JAX starts (JAX not imported to read it)."""
+    import sys
+
+    import jax
+
+    from cassi_fit.corpus import _executor
+
+    assert _executor._current("jax_enable_x64") is jax.config.jax_enable_x64 is True  # conftest's
+    assert _executor._current("jax_numpy_rank_promotion") == "raise"
+    monkeypatch.delitem(sys.modules, "jax")
+    assert _executor._current("jax_enable_x64") is None
+    assert _executor._current("jax_numpy_rank_promotion") is None
+    assert "jax" not in sys.modules  # not started by asking (monkeypatch puts it back)
+
+
 def test_one_progress_bar_with_the_worker_count(tmp_path, capsys):
     run_corpus(counting_task, ITEMS, tmp_path, jobs=1, progress=True, desc="jaw")
     err = capsys.readouterr().err

@@ -79,6 +79,98 @@ def test_no_voice_is_none_not_nan():
     assert ft.voice_speaker(None) is None and ft.voice_speaker(float("nan")) is None
 
 
+@pytest.fixture
+def pitch_calls(monkeypatch):
+    """The number of times Praat's pitch tracker (``Sound.to_pitch``) has run."""
+    import parselmouth
+
+    calls = []
+    to_pitch = parselmouth.Sound.to_pitch
+
+    def counted(self, *args, **kwargs):
+        calls.append(1)
+        return to_pitch(self, *args, **kwargs)
+
+    monkeypatch.setattr(parselmouth.Sound, "to_pitch", counted)
+    return calls
+
+
+def test_a_given_pitch_track_gives_the_same_formants(pitch_calls):
+    """``measure_formants(pitch=voice_pitch(...))`` reads the given track (the tracker
+    not run again) and measures exactly what it measures on its own."""
+    x, times = synthetic_vowel(220.0), np.linspace(0.05, 1.15, 23)
+    own = ft.measure_formants(x, RATE, times)
+    assert len(pitch_calls) == 1
+    pitch = ft.voice_pitch(x, RATE)
+    given = ft.measure_formants(x, RATE, times, pitch=pitch)
+    assert len(pitch_calls) == 2  # voice_pitch's, none in measure_formants
+    for field in ("frequency", "bandwidth", "reliable", "reason"):
+        np.testing.assert_array_equal(getattr(given, field), getattr(own, field))
+    assert ft.pitch_median_f0(pitch) == ft.median_f0(x, RATE)
+    assert ft.voice_pitch(np.zeros(100), RATE) is None and ft.pitch_median_f0(None) is None
+
+
+class _Labels:
+    def at(self, times):
+        return np.full(np.shape(times), "a")
+
+
+def _stub_run(monkeypatch, tmp_path, samples):
+    """A run whose model part is stubbed (the tract's formants are not what is tested):
+    the recording's sound ``samples`` (a .wav) and 23 animation frames."""
+    import contextlib
+    import types
+    import wave
+
+    from cassi_fit import acoustics
+    from cassi_fit import area_function as af
+
+    m = 23
+    monkeypatch.setattr(af, "tract_geometry", lambda model: None)
+    monkeypatch.setattr(acoustics, "model_formants", lambda geometry, vertices, tract, scale: (
+        np.full((m, 4), 500.0), np.full((m, 4), 80.0), np.ones((m, 5)), np.ones((m, 5))))
+    monkeypatch.setattr(acoustics, "_spectra", lambda areas, lengths, hz: np.zeros((m, len(hz))))
+    wav = tmp_path / "x.wav"
+    with wave.open(str(wav), "wb") as w:
+        w.setnchannels(1)
+        w.setsampwidth(2)
+        w.setframerate(int(RATE))
+        w.writeframes((samples * 32767).astype("<i2").tobytes())
+    sound = types.SimpleNamespace(wav_file=lambda: contextlib.nullcontext(wav))
+    return types.SimpleNamespace(
+        recording=types.SimpleNamespace(subject="S01", task="t", sound=sound),
+        animation=types.SimpleNamespace(times=np.linspace(0.05, 1.15, m),
+                                        vertices=np.zeros((m, 1, 3))),
+        state=types.SimpleNamespace(model=None, scale=1.0))
+
+
+@pytest.mark.parametrize("speaker", ["male", "auto"])
+def test_praats_pitch_tracker_runs_once_per_recording(monkeypatch, tmp_path, pitch_calls, speaker):
+    """``recording_acoustics`` and the tract view hear the voice (the norms, chosen before
+    the formants: ``auto`` sets the ceiling from the F0) and measure the formants' voicing
+    from one pitch analysis, and measure what the separate analyses measure."""
+    from cassi_fit.acoustics import recording_acoustics, tract_panels
+    from cassi_fit.formant_track import read_wav
+
+    run = _stub_run(monkeypatch, tmp_path, synthetic_vowel(220.0))
+    with run.recording.sound.wav_file() as wav:
+        x, rate = read_wav(wav)
+    result = recording_acoustics(run, samples=x, rate_hz=rate, labels=_Labels(), speaker=speaker)
+    assert len(pitch_calls) == 1
+    panels = tract_panels(run, speaker=speaker)
+    assert len(pitch_calls) == 2
+    f0 = ft.median_f0(x, rate)
+    assert result.norms.f0_hz == f0 and f0 == pytest.approx(220.0, rel=0.02)
+    ceiling = ft.CEILING_HZ["female" if speaker == "auto" else "male"]
+    apart = ft.measure_formants(x, rate, run.animation.times, ceiling_hz=ceiling)
+    assert result.measured.ceiling_hz == ceiling and result.measured.reliable.any()
+    for field in ("frequency", "bandwidth", "reliable", "reason"):
+        np.testing.assert_array_equal(getattr(result.measured, field), getattr(apart, field))
+    np.testing.assert_array_equal(
+        np.stack([p["measured_hz"] for p in panels]),
+        np.where(apart.reliable[:, None], apart.frequency, np.nan))
+
+
 def test_bad_input_is_one_clear_error(tmp_path):
     with pytest.raises(ValueError, match="samples"):
         ft.measure_formants(np.zeros(0), RATE, np.array([0.1]))

@@ -101,11 +101,32 @@ def test_report():
     assert report.valid_fraction["T1"] == pytest.approx(580 / 600)
     assert report.valid_fraction["UL"] == pytest.approx(590 / 600)
     assert report.all_valid_fraction == pytest.approx(580 / 600)
+    assert report.never_tracked == ()  # all eight tracked somewhere: of all eight, as ever
     assert report.n_mistracked == {p: int(p == "T2") for p in PELLET_NAMES}
     assert 40 < report.jaw_distance_median_mm < 46
     assert 0.15 < report.jaw_distance_sd_mm < 0.5
     assert report.duration_s == pytest.approx(599 * FRAME_STEP_US * 1e-6)
     json.dumps(report.to_dict())  # machine-readable as is
+
+
+def test_all_valid_is_over_the_pellets_the_file_tracks():
+    """An articulograph file with one jaw sensor and three tongue sensors never tracks MNM
+    and T4: ``all_valid_fraction`` is the share of frames with the six it tracks (the
+    first valid line's set), not 0 for want of sensors it never had, and the report names
+    the two."""
+    t, pos = _speech_like(n=600, seed=4)
+    valid = np.ones(pos.shape, bool)
+    valid[:, [PELLET_NAMES.index("T4"), PELLET_NAMES.index("MNM")]] = False
+    valid[:12] = False  # leading untracked lines
+    valid[100:130, PELLET_NAMES.index("UL"), 1] = False  # y of UL only
+    report = quality_report(PelletTrack(t, pos, valid))
+    assert report.all_valid_fraction == pytest.approx(558 / 600)
+    assert report.never_tracked == ("T4", "MNM")
+    assert report.first_valid_frame == 12
+    assert report.valid_fraction["MNM"] == 0.0 and report.valid_fraction["UL"] == pytest.approx(558 / 600)
+    assert json.loads(json.dumps(report.to_dict()))["never_tracked"] == ["T4", "MNM"]
+    nothing = quality_report(PelletTrack(t, pos, np.zeros(pos.shape, bool)))
+    assert nothing.all_valid_fraction == 0.0 and nothing.never_tracked == PELLET_NAMES
 
 
 def test_report_without_a_second_jaw_pellet():

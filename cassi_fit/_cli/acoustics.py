@@ -81,13 +81,14 @@ def _calibrated_tract(recording, calibration):
     and its larynx in words, or ``(None, None)`` (the speaker's adult norms)."""
     from cassi_fit.acoustic_fit import calibrated_tract
 
-    tract, words = calibrated_tract(calibration, recording.subject)
-    if calibration and tract is None:
-        print(words)
+    tract, path = calibrated_tract(calibration, recording.subject)
     if tract is None:
+        if path is not None:  # a calibration named, without the subject's file
+            print(f"no acoustic calibration for {recording.subject} in {path.parent}: "
+                  "the adult norms")
         return None, None
-    fitted = words.removeprefix("vocal tract: ")
-    return tract, f"larynx {float(tract.larynx_drop_mm):.0f} mm below the hyoid, {fitted}"
+    return tract, (f"larynx {float(tract.larynx_drop_mm):.0f} mm below the hyoid, fitted to "
+                   f"the sound ({path.name})")
 
 
 def calibrate_acoustic(args) -> int:

@@ -203,7 +203,7 @@ def _print_file(report: dict, out) -> None:
         why = ", ".join(f"{r} {c}" for r, c in reasons.get(name, {}).items())
         print(f"  {name:<6}  {_pct(frac):>6}  {q['n_mistracked'][name]:>10}  {why}".rstrip(),
               file=out)
-    print(f"  all     {_pct(q['all_valid_fraction']):>6}", file=out)
+    print(f"  all     {_pct(q['all_valid_fraction']):>6}{_of_tracked(q)}", file=out)
     print(f"  jaw distance MNI-MNM: median {_mm(q['jaw_distance_median_mm'])} mm, "
           f"SD {_mm(q['jaw_distance_sd_mm'], 3)} mm", file=out)  # fmt: skip
     sound = report.get("sound")
@@ -215,6 +215,16 @@ def _print_file(report: dict, out) -> None:
     _print_labels(report.get("labels"), out)
     if report.get("sensors"):
         _print_sensors(report, out)
+
+
+def _of_tracked(q: dict) -> str:
+    """What ``all`` is a share of, where the file never tracks some pellets (an
+    articulograph without a sensor for them): empty when it tracks all of them."""
+    never = q.get("never_tracked") or ()
+    if not never:
+        return ""
+    return (f" (of the {len(q['valid_fraction']) - len(never)} pellets tracked; never "
+            f"tracked: {', '.join(never)})")
 
 
 def _print_labels(labels: dict | None, out) -> None:
@@ -305,6 +315,21 @@ def _print_dataset(report: dict, out) -> None:
         else:  # --list (path) or an error: the rest of the line
             r = [r[0].ljust(widths[0]), r[1].ljust(widths[1]), r[2]]
         print("  " + "  ".join(r).rstrip(), file=out)
+    _print_never_tracked(report, out)
+
+
+def _print_never_tracked(report: dict, out) -> None:
+    """Below the table, where some file never tracks some pellets: ``all%`` is the share of
+    frames with every pellet the file tracks (``QualityReport.all_valid_fraction``)."""
+    from cassi_fit.pellets import PELLET_NAMES
+
+    files = [e["quality"].get("never_tracked") or () for tasks in report["subjects"].values()
+             for e in tasks.values() if "quality" in e]
+    never = {p for names in files for p in names}
+    if never:
+        names = ", ".join(p for p in PELLET_NAMES if p in never)
+        print(f"  all%: of the pellets each file tracks; {sum(map(bool, files))} of "
+              f"{len(files)} recording(s) never track some ({names})", file=out)
 
 
 def _write_map(path: Path, out_path: str, out) -> int:

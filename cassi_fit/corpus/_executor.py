@@ -210,25 +210,18 @@ def process_pool(jobs: int, *, x64: bool | None = None,
     settings = JaxSettings(x64, os.path.abspath(compilation_cache) if own_cache else None,
                            default_cache=compilation_cache is True,
                            threads=threads_per_worker(jobs),
-                           rank_promotion=_current_rank_promotion())
+                           rank_promotion=_current("jax_numpy_rank_promotion"))
     return _Pool(None, jobs, settings=settings).new_executor(jobs)
 
 
-def _current_x64() -> bool | None:
+def _current(name: str) -> bool | str | None:
+    """This process's JAX setting ``name`` (``jax_enable_x64``: float64, a bool;
+    ``jax_numpy_rank_promotion``: the rank promotion rule, a str), None before JAX starts
+    (read without importing JAX: a process that has not started it has no setting)."""
     import sys
 
-    if "jax" not in sys.modules:
-        return None
-    return bool(sys.modules["jax"].config.jax_enable_x64)
-
-
-def _current_rank_promotion() -> str | None:
-    """This process's rank promotion rule, None before JAX starts."""
-    import sys
-
-    if "jax" not in sys.modules:
-        return None
-    return str(sys.modules["jax"].config.jax_numpy_rank_promotion)
+    jax = sys.modules.get("jax")
+    return None if jax is None else getattr(jax.config, name)
 
 
 # ------------------------------------------------------------------- the runner
@@ -336,9 +329,10 @@ def run_corpus(
             done.append(ItemResult(item, Status.OK, "", row, resumed=True))
     own_cache = compilation_cache not in (None, True, False)
     jax_settings = JaxSettings(
-        _current_x64() if x64 is None else bool(x64),
+        _current("jax_enable_x64") if x64 is None else bool(x64),
         os.path.abspath(compilation_cache) if own_cache else None,
-        default_cache=compilation_cache is True, rank_promotion=_current_rank_promotion())
+        default_cache=compilation_cache is True,
+        rank_promotion=_current("jax_numpy_rank_promotion"))
     pool = (_open_pool(executor, jobs, scheduler, len(todo), jax_settings, scheduler_timeout)
             if todo else _Pool(None, 1))
     try:
@@ -380,12 +374,12 @@ def _collect(pool, task, todo, out, options, fingerprint, jax_settings, progress
 
     try:
         if pool.executor is None:  # in this process: its own float64 setting comes back
-            before = _current_x64()
+            before = _current("jax_enable_x64")
             try:
                 for item in todo:
                     record(run_item(task, item, out, options, fingerprint, jax_settings))
             finally:
-                if before is not None and _current_x64() != before:
+                if before is not None and _current("jax_enable_x64") != before:
                     import jax
 
                     jax.config.update("jax_enable_x64", before)
