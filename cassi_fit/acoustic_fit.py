@@ -198,10 +198,25 @@ class CalibratedTract(NamedTuple):
     """:func:`calibrated_tract`'s answer: the subject's fitted ``tract`` (None: the adult
     norms, ``area_function.default_tract``) and ``path``, the acoustic calibration's file
     read, or looked for and not there (``FOLDER/SUBJECT.acoustic.json``; its ``parent`` is
-    the folder), None where no calibration was named. The callers word it."""
+    the folder), None where no calibration was named. :meth:`label` and :meth:`missing`
+    word it, once for every caller."""
 
     tract: af.TractParams | None
     path: Path | None
+
+    def label(self) -> str:
+        """Which vocal tract, short (the tract view draws it): ``fitted to the sound
+        (FILE)`` or ``the adult norms``."""
+        if self.tract is None:
+            return "the adult norms"
+        return f"fitted to the sound ({self.path.name})"
+
+    def missing(self, subject: str) -> str | None:
+        """The one line for a calibration named without ``subject``'s file in it (the
+        adult norms are used); None otherwise."""
+        if self.tract is not None or self.path is None:
+            return None
+        return f"no acoustic calibration for {subject} in {self.path.parent}: the adult norms"
 
 
 def calibrated_tract(calibration: str | os.PathLike | None, subject: str) -> CalibratedTract:

@@ -338,8 +338,9 @@ def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
     :func:`recording_acoustics` makes it), ``frequency_hz`` (:data:`PANEL_HZ`) and
     ``gain_db`` (the lossy tube's transfer function), ``model_hz`` (F1-F3) and
     ``measured_hz`` (the sound's F1-F3 where the recording has a sound and the
-    measurement is reliable at that frame, else NaN), ``tract`` (which vocal tract, in
-    words). ``tract``: default the subject's acoustic calibration when ``calibration``
+    measurement is reliable at that frame, else NaN), ``tract`` (which vocal tract, the
+    line ``cassi animate`` prints) and ``tract_label`` (the same, short: what the view
+    draws). ``tract``: default the subject's acoustic calibration when ``calibration``
     (what ``--calibration`` names) holds one (``acoustic_fit.calibrated_tract``), else the
     adult norms of ``speaker`` (:func:`speaker_norms`, as :func:`recording_acoustics`;
     ``tract`` names them where they are not the default male norms)."""
@@ -356,16 +357,16 @@ def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
     pitch = None if samples is None else voice_pitch(samples, rate_hz)
     norms = speaker_norms(speaker, samples if speaker == "auto" else None, rate_hz, pitch=pitch)
     if tract is None:
-        tract, path = calibrated_tract(calibration, run.recording.subject)
-        words = ("vocal tract: the adult norms" if path is None
-                 else f"vocal tract: fitted to the sound ({path.name})" if tract is not None
-                 else f"no acoustic calibration for {run.recording.subject} in {path.parent}: "
-                      "the adult norms")
+        found = calibrated_tract(calibration, run.recording.subject)
+        tract, label = found.tract, found.label()
+        words = found.missing(run.recording.subject) or f"vocal tract: {label}"
     else:
-        words = "vocal tract: as given"
+        label = "as given"
+        words = f"vocal tract: {label}"
     if tract is None:
         tract = af.default_tract(jnp.asarray(anim.vertices).dtype, norms.speaker)
         if norms.source != "default":  # the default male norms keep the words they always had
+            label = f"{label}, {norms.speaker} ({norms.why})"
             words = f"{words}, {norms.speaker} ({norms.why})"
     geometry = af.tract_geometry(run.state.model)
     freq, _, areas, lengths = model_formants(geometry, anim.vertices, tract, run.state.scale)
@@ -378,7 +379,7 @@ def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
         measured = np.where(track.reliable[:, None], track.frequency[:, :3], np.nan)
     return [{"lengths_mm": lengths[k], "areas_mm2": areas[k], "frequency_hz": PANEL_HZ,
              "gain_db": gain[k], "model_hz": freq[k, :3], "measured_hz": measured[k],
-             "tract": words}
+             "tract": words, "tract_label": label}
             for k in range(len(freq))]
 
 

@@ -65,3 +65,19 @@ def test_cassi_acoustics_words_the_calibration(folder, capsys):
     tract, words = _calibrated_tract(recording, folder)
     assert float(tract.larynx_drop_mm) == 27.0 and capsys.readouterr().out == ""
     assert words == f"larynx 27 mm below the hyoid, fitted to the sound ({SUBJECT}.acoustic.json)"
+
+
+def test_the_answer_words_itself_once_for_every_caller(folder):
+    """``label`` (what the tract view draws) and ``missing`` (the line for a calibration
+    named without the subject's file): one wording, read by ``cassi acoustics`` and the
+    tract view alike."""
+    nothing = calibrated_tract(None, SUBJECT)
+    assert nothing.label() == "the adult norms" and nothing.missing(SUBJECT) is None
+    missing = calibrated_tract(folder, SUBJECT)
+    assert missing.label() == "the adult norms"
+    assert missing.missing(SUBJECT) == (f"no acoustic calibration for {SUBJECT} in {folder}: "
+                                        "the adult norms")
+    _write(folder)
+    found = calibrated_tract(folder, SUBJECT)
+    assert found.label() == f"fitted to the sound ({SUBJECT}.acoustic.json)"
+    assert found.missing(SUBJECT) is None

@@ -132,6 +132,9 @@ def test_the_subjects_fitted_vocal_tract_is_drawn_when_the_calibration_holds_one
     own = tract_panels(run, calibration=folder)
     assert own[0]["tract"] == f"vocal tract: fitted to the sound ({subject}.acoustic.json)"
     assert panels[0]["tract"] == "vocal tract: the adult norms"
+    # what the view draws: the same, short (not the line's words cut up)
+    assert own[0]["tract_label"] == f"fitted to the sound ({subject}.acoustic.json)"
+    assert nothing[0]["tract_label"] == panels[0]["tract_label"] == "the adult norms"
     # the same frames through the fitted tract: what cassi acoustics computes with it
     expected = recording_acoustics(run, tract=fitted)
     np.testing.assert_allclose(np.stack([p["model_hz"] for p in own]), expected.model[:, :3],

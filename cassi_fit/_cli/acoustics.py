@@ -81,14 +81,13 @@ def _calibrated_tract(recording, calibration):
     and its larynx in words, or ``(None, None)`` (the speaker's adult norms)."""
     from cassi_fit.acoustic_fit import calibrated_tract
 
-    tract, path = calibrated_tract(calibration, recording.subject)
-    if tract is None:
-        if path is not None:  # a calibration named, without the subject's file
-            print(f"no acoustic calibration for {recording.subject} in {path.parent}: "
-                  "the adult norms")
+    found = calibrated_tract(calibration, recording.subject)
+    if found.tract is None:
+        if (line := found.missing(recording.subject)) is not None:
+            print(line)
         return None, None
-    return tract, (f"larynx {float(tract.larynx_drop_mm):.0f} mm below the hyoid, fitted to "
-                   f"the sound ({path.name})")
+    return found.tract, (f"larynx {float(found.tract.larynx_drop_mm):.0f} mm below the "
+                         f"hyoid, {found.label()}")
 
 
 def calibrate_acoustic(args) -> int:

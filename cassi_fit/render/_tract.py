@@ -59,9 +59,8 @@ def draw_tract(image: np.ndarray, box: tuple[int, int, int, int],
     caption = max(16, image.shape[0] // 32 + 12) if bottom >= image.shape[0] - 2 else 0
     half = (h - caption) // 2
     _area_plot(draw, font, (pad_l, 6, w - pad_r, half - below), panel)
-    if panel.get("tract"):  # which vocal tract: the adult norms or the subject's fitted one
-        draw.text((pad_l + 3, 8), str(panel["tract"]).removeprefix("vocal tract: "),
-                  font=font, fill=_INK)
+    if panel.get("tract_label"):  # which tract: the adult norms or the subject's fitted one
+        draw.text((pad_l + 3, 8), str(panel["tract_label"]), font=font, fill=_INK)
     _spectrum_plot(draw, font, (pad_l, half + 6, w - pad_r, h - caption - below), panel)
     image[top:bottom, left:right] = np.asarray(cell)
 
