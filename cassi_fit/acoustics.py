@@ -212,6 +212,15 @@ class Acoustics:
         return float(self.scored[v].mean()) if v.any() else 0.0
 
     @property
+    def lips_in_closures(self) -> tuple[int, float] | None:
+        """``(frames, median mm)``: the frames labelled as a bilabial and the model's lip
+        opening there (``lips.apart_in_closures``), None without such a frame: where the
+        speaker's lips touch, the model's lips should too."""
+        from .lips import apart_in_closures
+
+        return apart_in_closures(self.labels, af.lip_opening(self.geometry, self.vertices))
+
+    @property
     def relative_error(self) -> Float[np.ndarray, "m 3"]:
         """``model / measured - 1`` for F1-F3 (NaN where not scored)."""
         err = self.model[:, :3] / self.measured.frequency - 1.0

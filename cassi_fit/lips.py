@@ -5,8 +5,8 @@ articulograph lab glues its lip sensors elsewhere on the vermilion, so without a
 calibration the sensors' heights above the sites are taken from the recording
 (``SubjectState.lip_rest``, :mod:`cassi_fit.initialize`). The first valid line alone says
 how far the sensors are from the sites only if the speaker's lips are then as far apart
-as the model's lips at rest (about 6 mm): a speaker who starts with his lips closed (the
-IPS speaker mo1, before his first /m/) leaves the model's lips that far apart in every
+as the model's lips at rest (about 6 mm): a speaker who starts with the lips closed (the
+IPS speaker mo1, before the first /m/) leaves the model's lips that far apart in every
 closure.
 
 Like the palate from the tongue's upper envelope (``palate.envelope_palate``), the
@@ -22,17 +22,24 @@ the lips in proportion to each sensor's vertical range of motion over the record
 more of the way to a closure (in bilabials the lower lip, carried by the jaw, does most).
 Nothing is fitted to the sound. It is the run's choice ``lip_closure``
 (``RunSpec``), **off by default**: on the one real recording it was tried on (mo1) the
-model's lips now touch in his bilabial closures and the back rounded vowels come nearer,
+model's lips now touch in the speaker's bilabial closures and the back rounded vowels come nearer,
 but the formants' errors are not smaller overall (docs/ACOUSTICS.md;
 ``experiments/acoustic_tract_diagnosis.py``, table 4).
 
 It assumes the lips touch on at least :data:`CLOSED_PERCENTILE` % of the tracked lines (mo1:
-9 % of his lines are labelled /p b m/). A recording whose lips never close (no bilabial,
+9 % of the lines are labelled /p b m/). A recording whose lips never close (no bilabial,
 no pause with the lips shut) gets lips closed where they were only nearest: the note says
 how many lines its labels mark as bilabial, or that none does. The labels are not used for
 the distance itself: their boundaries are acoustic, the lips' closure is not bounded by
 them (mo1's /b/: the sensors are 20.7 mm apart at their nearest inside the labelled
 segment and 17 mm 40 ms after it), and most recordings have none.
+
+**Saying where the lips' rest is wrong** (:func:`apart_in_closures`,
+:func:`closures_line`): where a recording's labels mark bilabial closures, the model's lip
+opening in those frames says whether the lips' rest it took is right. ``cassi acoustics``
+prints one line when the median there is more than :data:`APART_MM` (mo1 with the
+default: 7.3 mm over 72 frames; with ``lip_closure``: 1.9 mm, no line): the formants
+depend on the lips' opening, and no sensor says where the lips are at rest.
 """
 
 from __future__ import annotations
@@ -43,6 +50,11 @@ import numpy as np
 #: (1 %: robust to a few bad lines left by the mistrack detector, and within one closure
 #: of 50 ms in 5 s of speech).
 CLOSED_PERCENTILE = 1.0
+#: The model's lip opening (mm, median over the frames labelled bilabial) above which its
+#: lips are said to stay apart where the speaker's touch (:func:`closures_line`): the
+#: model's lips at rest are about 6 mm apart; 2 mm leaves room for the labels' acoustic
+#: boundaries (a closure's labelled frames include some of its release).
+APART_MM = 2.0
 #: Phone labels of bilabial stops and nasals (SAMPA, IPA, ARPAbet lowercased), for the note.
 BILABIALS = ("p", "b", "m", "p_h", "em")
 
@@ -82,6 +94,38 @@ def bilabial_lines(labels, times) -> int | None:
                 found = True
                 inside |= (t >= start) & (t < end)
     return int(inside.sum()) if found else None
+
+
+def apart_in_closures(names, opening_mm) -> tuple[int, float] | None:
+    """``(frames, median mm)``: how many frames are labelled as a bilabial
+    (:data:`BILABIALS`; ``names (m,)``, each frame's label) and the model's median lip
+    opening there (``opening_mm (m,)``, ``area_function.lip_opening``: where the speaker's
+    lips touch, a model that places them right has them touching too, or pressed
+    together); None without such a frame."""
+    names = np.asarray(names, dtype=object).reshape(-1)
+    opening = np.asarray(opening_mm, np.float64).reshape(-1)
+    inside = np.array([str(n).strip().lower() in BILABIALS for n in names], bool)
+    inside &= np.isfinite(opening)
+    if not inside.any():
+        return None
+    return int(inside.sum()), float(np.median(opening[inside]))
+
+
+def closures_line(found: tuple[int, float] | None, lip_closure: bool) -> str | None:
+    """The one line saying the model's lips stay apart in the recording's labelled
+    bilabial closures (``found``, :func:`apart_in_closures`), when their median opening
+    there is more than :data:`APART_MM`: the lips' rest it was given is wrong by about
+    that much (off ``lip_closure``, the first valid line taken as the lips at rest);
+    None where they touch or nothing is labelled."""
+    if found is None or not found[1] > APART_MM:
+        return None
+    n, apart = found
+    why = ("the lip sensors' heights above the model's lip sites are not what the model "
+           "took (with --lip-closure, from where the sensors are nearest)" if lip_closure else
+           "the first valid line was not the lips at rest: --lip-closure takes them to "
+           "touch where their sensors are nearest")
+    return (f"lips: in the {n} frames labelled /p b m/ the model's lips are {apart:.1f} mm "
+            f"apart (median), where the speaker's touch: {why}")
 
 
 def lips_touching(model, vertices, rest, lip_rest, track, scale: float,

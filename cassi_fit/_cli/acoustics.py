@@ -60,6 +60,10 @@ def run(args) -> int:
     result = recording_acoustics(run_, samples=samples, rate_hz=rate, ceiling_hz=args.ceiling,
                                  tract=tract, speaker=args.speaker)
     print(result.norms.line(ceiling_hz=args.ceiling, larynx=words))
+    from cassi_fit.lips import closures_line
+
+    if (line := closures_line(result.lips_in_closures, run_.spec.lip_closure)) is not None:
+        print(line)  # the lips' rest is wrong where they stay apart in labelled closures
     segments = result.segment_rows()
     print(markdown_text(segments, digits=3) if segments else "no vowel segments labelled")
     print(f"{100 * result.share_scored:.0f} % of the vowels' frames scored")
