@@ -69,7 +69,8 @@ def is_vowel(label: str) -> bool:
     return bool(core) and (core in VOWELS or core.lower() in VOWELS)
 
 
-#: ``speaker=`` of :func:`speaker_norms` (``cassi acoustics --speaker``; ``male`` the default)
+#: ``speaker=`` of :func:`speaker_norms` (``cassi acoustics --speaker``; None, the male
+#: norms, the default)
 SPEAKERS = ("male", "female", "auto")
 
 
@@ -131,24 +132,27 @@ class SpeakerNorms:
         return f"{said}: {self.why}"
 
 
-def speaker_norms(speaker: str = "male", samples: Float[np.ndarray, " n"] | None = None,
+def speaker_norms(speaker: str | None = None, samples: Float[np.ndarray, " n"] | None = None,
                   rate_hz: float | None = None, *,
                   pitch: parselmouth.Pitch | None = None) -> SpeakerNorms:
     """The :class:`SpeakerNorms` for ``speaker`` (:data:`SPEAKERS`; module docstring):
-    ``male`` (default) or ``female`` as given, ``auto`` from the voice of ``samples`` at
-    ``rate_hz`` (the male norms without one). The voice's median F0 is measured whenever
+    None: the male norms by default; ``male`` or ``female`` as given (asked for, so the
+    line gives no hint); ``auto`` from the voice of ``samples`` at ``rate_hz`` (the male
+    norms without one). The voice's median F0 is measured whenever
     there is a sound (for the line's hint), from ``pitch``
     (``formant_track.voice_pitch(samples, rate_hz)``, where the caller has it for the
     formants' voicing too) or, None, by Praat's pitch tracker here. ``ValueError`` for
     another ``speaker``."""
-    if speaker not in SPEAKERS:
+    if speaker is not None and speaker not in SPEAKERS:
         raise ValueError(f"speaker {speaker!r}: one of {', '.join(SPEAKERS)}")
     sound = samples is not None and rate_hz is not None and np.size(samples) > 0
     if sound and pitch is None:
         pitch = voice_pitch(samples, rate_hz)
     f0 = pitch_median_f0(pitch) if sound else None
+    if speaker is None:
+        return SpeakerNorms("male", "default", f0)
     if speaker != "auto":
-        return SpeakerNorms(speaker, "default" if speaker == "male" else "given", f0)
+        return SpeakerNorms(speaker, "given", f0)
     heard = voice_speaker(f0)
     if heard is None:
         return SpeakerNorms("male", "no voiced frame" if sound else "no sound", None)
@@ -285,13 +289,13 @@ def recording_sound(recording) -> tuple[Float[np.ndarray, " n"], float]:
 def recording_acoustics(
     run: RecordingRun, *, samples: Float[np.ndarray, " n"] | None = None,
     rate_hz: float | None = None, labels: Labels | None = None, ceiling_hz: float | None = None,
-    tract: af.TractParams | None = None, speaker: str = "male",
+    tract: af.TractParams | None = None, speaker: str | None = None,
 ) -> Acoustics:
     """The :class:`Acoustics` of a :class:`~cassi_fit.pipeline.RecordingRun`. The sound is
     the recording's ``.wav`` unless ``samples`` and ``rate_hz`` are given; the labels are
     those beside the pellet file unless ``labels`` (a :class:`~cassi_fit.labels.Labels`) is
-    given. ``speaker`` (:func:`speaker_norms`: ``male``, the default, ``female``, or
-    ``auto`` from the voice) sets the norms: the tract's larynx unless ``tract`` is given, Praat's
+    given. ``speaker`` (:func:`speaker_norms`: None, the male norms by
+    default, ``male`` or ``female`` as asked, or ``auto`` from the voice) sets the norms: the tract's larynx unless ``tract`` is given, Praat's
     ceiling unless ``ceiling_hz`` is. ``MissingDataError`` if there is no sound."""
     from .labels import recording_labels
 
@@ -341,7 +345,7 @@ def _spectra(areas, lengths, frequency_hz, chunk: int = 256) -> np.ndarray:
 
 def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
                  calibration: str | os.PathLike | None = None,
-                 ceiling_hz: float | None = None, speaker: str = "male") -> list[dict]:
+                 ceiling_hz: float | None = None, speaker: str | None = None) -> list[dict]:
     """What ``cassi animate --views ...,tract`` draws beside the face, per animation frame
     of ``run``: ``lengths_mm``, ``areas_mm2`` (the area function, glottis first, as
     :func:`recording_acoustics` makes it), ``frequency_hz`` (:data:`PANEL_HZ`) and

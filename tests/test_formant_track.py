@@ -69,6 +69,24 @@ def test_the_default_line_names_a_high_voice(f0, hint):
     assert ("--speaker" in line) is hint and ("F0" in line) is hint
 
 
+def test_male_norms_asked_for_give_no_hint():
+    """``--speaker male`` given (asked, not the default): the same norms, said as asked, and
+    no hint to the female norms for a high voice; the command line's default is None."""
+    import argparse
+
+    from cassi_fit._cli._options import add_speaker_argument
+    from cassi_fit.acoustics import speaker_norms
+
+    asked = speaker_norms("male", synthetic_vowel(220.0), RATE)
+    assert (asked.speaker, asked.source) == ("male", "given")
+    assert asked.line().startswith("speaker: adult male norms, as asked (larynx 30 mm")
+    assert "--speaker" not in asked.line() and not asked.voice_suggests_female
+    parser = argparse.ArgumentParser()
+    add_speaker_argument(parser, "the test")
+    assert parser.parse_args([]).speaker is None
+    assert parser.parse_args(["--speaker", "male"]).speaker == "male"
+
+
 def test_no_voice_is_none_not_nan():
     """No sound, a sound too short for the pitch window, silence and noise: no F0 (None),
     no speaker, never NaN or an error."""

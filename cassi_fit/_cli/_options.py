@@ -142,7 +142,7 @@ def add_speaker_argument(parser: argparse.ArgumentParser, what: str) -> None:
     """``--speaker {male,female,auto}``: the adult norms the sound is heard with
     (``acoustics.speaker_norms``); ``what`` says where they apply."""
     parser.add_argument(
-        "--speaker", choices=("male", "female", "auto"), default="male",
+        "--speaker", choices=("male", "female", "auto"), default=None,
         help=f"the adult norms for {what}: the larynx's drop below the hyoid (30 mm male, 15 "
         "mm female), Praat's formant ceiling (5000 / 5500 Hz) and the acoustic calibration's "
         "prior; male (default, the norms the toolkit has always used), female, or auto: from "

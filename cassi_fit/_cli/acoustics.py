@@ -134,7 +134,7 @@ def calibrate_acoustic(args) -> int:
             if recording.sound is None:
                 continue
             result = recording_acoustics(run_recording(recording),
-                                         speaker=getattr(args, "speaker", "male"))
+                                         speaker=getattr(args, "speaker", None))
             if result.scored.any():
                 results.append(result)
                 names.append(task)

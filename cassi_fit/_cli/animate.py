@@ -172,7 +172,7 @@ def write_output(out: Path, run, size, views, args, pool=None) -> Path:
         from cassi_fit.acoustics import tract_panels
 
         panels = tract_panels(run, calibration=getattr(args, "calibration", None),
-                              speaker=getattr(args, "speaker", "male"))
+                              speaker=getattr(args, "speaker", None))
         if panels:  # which vocal tract: the fitted one or which speaker's norms, and why
             print(panels[0]["tract"])
     if out.suffix.lower() == ".png":
