@@ -4,7 +4,8 @@ A reader turns one file into named sensors with positions in millimetres (the fi
 converted), in the file's axes and origin, NaN where a value is untracked; nothing is
 mapped, corrected or rotated yet (:mod:`cassi_fit.ema.track` does that). Shared helpers:
 reading a file's bytes (regular files only, registered as input so no writer replaces
-it), splitting channel names into sensor and axis, and the checks on times.
+it), splitting channel names into sensor and axis, telling a number from a name in a
+header, and the checks on times.
 """
 
 from __future__ import annotations
@@ -283,3 +284,12 @@ def untrack_impossible(positions: np.ndarray, names: tuple[str, ...],
             notes.append(f"{name}: {int(far.sum())} frame(s) more than {ABSURD_MM:g} mm from "
                          "the sensor's median position (absurd values): untracked")
     return positions, notes
+
+
+def is_number(token: str) -> bool:
+    """Whether a text file's token reads as a number (a header of names or a line of data)."""
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True

@@ -40,7 +40,7 @@ import numpy as np
 from jaxtyping import Float
 
 from ..errors import DataFormatError
-from ._raw import RawEma, check_times, rate_of, read_bytes
+from ._raw import RawEma, check_times, is_number, rate_of, read_bytes
 
 SPARC_COLUMNS = ("TDX", "TDY", "TBX", "TBY", "TTX", "TTY", "LIX", "LIY", "ULX", "ULY",
                  "LLX", "LLY")
@@ -159,7 +159,7 @@ def _csv(path: Path) -> tuple[list[str] | None, np.ndarray, list[int]]:
         raise DataFormatError(path, None, "empty file")
     split = (lambda s: [t.strip() for t in s.split(",")]) if "," in lines[0][1] else str.split
     header = split(lines[0][1])
-    numeric = all(_is_number(t) for t in header)
+    numeric = all(is_number(t) for t in header)
     rows = lines if numeric else lines[1:]
     data = []
     for lineno, text in rows:
@@ -169,18 +169,11 @@ def _csv(path: Path) -> tuple[list[str] | None, np.ndarray, list[int]]:
         try:
             data.append([float(t) if t else np.nan for t in tokens])
         except ValueError:
-            bad = next(t for t in tokens if t and not _is_number(t))
+            bad = next(t for t in tokens if t and not is_number(t))
             raise DataFormatError(path, lineno, f"not a number: {bad[:40]!r}") from None
     return (None if numeric else header), np.array(data, np.float64).reshape(
         len(data), len(header)), [ln for ln, _ in rows]
 
-
-def _is_number(token: str) -> bool:
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
 
 
 def read_array(path: str | os.PathLike, *, layout: str | Sequence[str] | None = None,

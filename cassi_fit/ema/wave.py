@@ -28,7 +28,7 @@ import numpy as np
 
 from .._io import atomic_write, read_lines
 from ..errors import DataFormatError
-from ._raw import RawEma, check_times, rate_of
+from ._raw import RawEma, check_times, is_number, rate_of
 
 GROUP = ("sensor id", "frame", "state", "q0", "qx", "qy", "qz", "tx", "ty", "tz")
 _SUFFIX = re.compile(r"[\s.\[\(_]*\d*[\]\)]?$")
@@ -93,7 +93,7 @@ def read_wave_tsv(path: str | os.PathLike) -> RawEma:
     if not lines:
         raise DataFormatError(path, None, "empty file")
     first = lines[0][1].split("\t")
-    if _column(first[0]) == "wav time" or not _is_number(first[0]):
+    if _column(first[0]) == "wav time" or not is_number(first[0]):
         header, rows = first, lines[1:]
     else:
         width = len(first)
@@ -131,20 +131,13 @@ def read_wave_tsv(path: str | os.PathLike) -> RawEma:
     check_times(path, times, [ln for ln, _ in rows])
     names = []
     for g, sensor_id in enumerate(ids, start=1):
-        label = f"S{int(float(sensor_id))}" if sensor_id and _is_number(sensor_id) else f"S{g}"
+        label = f"S{int(float(sensor_id))}" if sensor_id and is_number(sensor_id) else f"S{g}"
         names.append(label if label not in names else f"S{g}")
     return RawEma(format="wave", times=times, names=tuple(names), positions=positions,
                   rate_hz=rate_of(times), units="mm", path=path, orientation=quats,
                   axes="the Wave field generator's frame (NDI)", frame=None,
                   notes=(f"{k} sensor group(s); a value is tracked where State is OK",))
 
-
-def _is_number(token: str) -> bool:
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
 
 
 def wave_text(times: np.ndarray, positions: np.ndarray, sensor_ids: list[int]) -> str:
