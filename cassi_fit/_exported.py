@@ -340,6 +340,26 @@ def _load(executable, lapack: bool):
         payload, in_tree, out_tree, backend=device.client, execution_devices=[device])
 
 
+def _value_pickle(obj) -> bytes:
+    """``obj`` pickled by its values alone, the same bytes in every process: pickle's memo
+    writes an object met twice as a reference to the first, so two equal structures whose
+    equal strings are one object in one process (the model's dict keys) and two in another
+    (a corpus worker's unpickled run spec) would give two digests, and the worker would
+    trace again what the folder holds. Without the memo (``Pickler.fast``) every object is
+    written in full; a structure that refers to itself cannot be, and keeps the plain
+    pickle (its digest is then this process's only)."""
+    import io
+
+    buffer = io.BytesIO()
+    pickler = pickle.Pickler(buffer, protocol=4)
+    pickler.fast = True
+    try:
+        pickler.dump(obj)
+    except (RecursionError, ValueError):
+        return pickle.dumps(obj, protocol=4)
+    return buffer.getvalue()
+
+
 class Exported:
     """A kernel wrapped by :func:`exported`. ``traces`` and ``loads`` count, in this
     process, the computations traced and those loaded from the folder; ``jitted`` is the
@@ -409,7 +429,7 @@ class Exported:
         spec = (self.name, jax.default_backend(), _settings(),
                 [(tuple(s), str(d), bool(w)) for s, d, w in avals], skeleton, static)
         h = hashlib.sha256(_fingerprint())
-        h.update(pickle.dumps(spec, protocol=4))
+        h.update(_value_pickle(spec))
         return h.hexdigest()[:40]
 
     def _trace(self, in_tree, avals, static):

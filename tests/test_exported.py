@@ -244,3 +244,24 @@ def test_lapack_is_readied_without_the_scipy_linalg_package():
     done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                           text=True, timeout=300)
     assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr[-2000:]
+
+
+def test_equal_static_arguments_give_one_digest_whichever_objects_hold_them():
+    """The folder's key reads the static arguments' values, not which objects hold them: a
+    corpus worker's unpickled run spec holds its strings in objects of its own where the
+    starting process shares one (pickle's memo wrote the two apart), and the worker traced
+    again what the folder held. A structure that refers to itself still gets a key."""
+    kernel = Exported(ek.kernel.fn)
+    args = ek.inputs()
+    dynamic, _ = eqx.partition((args, {}), eqx.is_array)
+    arrays, in_tree = jax.tree.flatten(dynamic)
+    avals = tuple((np.shape(a), np.asarray(a).dtype, False) for a in arrays)
+    name = "cassi"
+    shared = {"mode": name, "jaw": name}  # one object, twice
+    apart = {"mode": "".join(["cas", "si"]), "jaw": "".join(["ca", "ssi"])}  # equal, two objects
+    assert shared == apart and apart["mode"] is not apart["jaw"]
+    assert kernel._digest(in_tree, avals, shared) == kernel._digest(in_tree, avals, apart)
+    assert kernel._digest(in_tree, avals, shared) != kernel._digest(in_tree, avals, {"mode": "x"})
+    loop = []
+    loop.append(loop)
+    assert len(kernel._digest(in_tree, avals, loop)) == 40
