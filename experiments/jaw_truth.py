@@ -54,7 +54,11 @@ TASKS = ("tp106", "tp040")  # jaw wagging (wide angles), a sentence (speech angl
 DURATION_S = 4.0
 
 
-SMALL = {"subjects": 1, "tasks": ("tp106",), "duration_s": 3.0}
+#: ``--small`` (the tests' run): one subject, one task, as long as the full run's recordings
+#: (``DURATION_S``): the fits are compiled per frame count, so the small run, the full
+#: run's cells that tests/test_experiment_jaw.py re-runs and the fits of its other tests
+#: share their compilations
+SMALL = {"subjects": 1, "tasks": ("tp106",), "duration_s": DURATION_S}
 
 
 BOOTSTRAP, BOOTSTRAP_SEED = 400, 12345

@@ -5,6 +5,7 @@ the notebook runs the same small run first, so the second run in that process fi
 jaw fits and the statistics traced and compiled, instead of tracing them all again here."""
 
 import csv
+import os
 import sys
 from pathlib import Path
 
@@ -34,8 +35,15 @@ def runs(tmp_path_factory):
     """One kernel runs the notebook top to bottom, then ``main`` of the small run with
     ``--docs``. Returns ``part -> (result or None, error or None)``: for ``"notebook"`` the
     notebook's executed cells, for ``"small"`` the small run's output folder; each test
-    raises its own part's error."""
+    raises its own part's error. The notebook's one recording (subject S01's sentence of
+    the default synthetic corpus) comes from a corpus of that recording alone, the same
+    file (a recording depends only on its seed, subject and task): the kernel is not left
+    to write the whole default corpus (15 subjects, every task) into the user's cache."""
+    from cassi_fit import synth
+
     out = tmp_path_factory.mktemp("jaw_small")
+    sentence = synth.generate_corpus(tmp_path_factory.mktemp("synth") / "corpus", n_subjects=1,
+                                     tasks=[synth.SENTENCE_TASK], audio=False)
     argv = ["--small", "--out", str(out), "--docs", str(out / "docs")]
     nb = nbformat.read(ROOT / "notebooks" / "jaw_comparison.ipynb", as_version=4)
     notebook = list(nb.cells)
@@ -45,7 +53,7 @@ def runs(tmp_path_factory):
     client = NotebookClient(nb, timeout=None, kernel_name="python3",
                             resources={"metadata": {"path": str(ROOT / "notebooks")}})
     result = {}
-    with client.setup_kernel():
+    with client.setup_kernel(env={**os.environ, "CASSI_SYNTH_DIR": str(sentence)}):
         try:
             for i, cell in enumerate(notebook):
                 client.execute_cell(cell, i)

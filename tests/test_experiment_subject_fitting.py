@@ -28,6 +28,10 @@ RECOVERY = ROOT / "docs" / "generated" / "calibration_recovery.md"
 NOTEBOOK = ROOT / "notebooks" / "subject_fitting.ipynb"
 #: the subjects of the small plan (the notebook's and the small run's)
 SMALL_SUBJECTS = tuple(f"S{i:02d}" for i in range(1, subject_rows.SMALL.n_subjects + 1))
+#: the dataset run's ``--tasks``: one of its corpus's two (the small plan's), so the run
+#: calibrates from one recording and evaluates one (the small run covers two), and shows
+#: that ``--tasks`` leaves the other out
+DATASET_TASK = subject_rows.SMALL.tasks[1]
 
 
 def _doc_tables(path):
@@ -211,16 +215,17 @@ def test_main_refuses_existing_outputs_before_any_work(tmp_path, capsys):
 def runs(tmp_path_factory):
     """One kernel runs the notebook top to bottom, then ``main`` of the small run (``--small
     --docs``) and of the dataset run (``--dataset`` on a one-subject corpus of the small
-    plan's tasks, at its stride). Returns ``part -> (outputs or None, error or None, tmp)``
-    for ``"notebook"`` (the notebook's executed cells), ``"small"`` and ``"dataset"``
-    (the stdout of ``main``); each test raises its own part's error."""
+    plan's tasks, at its stride, ``--tasks`` choosing one of them: ``DATASET_TASK``).
+    Returns ``part -> (outputs or None, error or None, tmp)`` for ``"notebook"`` (the
+    notebook's executed cells), ``"small"`` and ``"dataset"`` (the stdout of ``main``);
+    each test raises its own part's error."""
     tmp = tmp_path_factory.mktemp("subject_fitting_runs")
     corpus = subject_rows.make_corpus(tmp / "corpus", subject_rows.Plan(
         1, subject_rows.SMALL.tasks, 1))
     argv = {"small": ["--small", "--out", str(tmp / "small" / "out"),
                       "--docs", str(tmp / "small" / "docs")],
             "dataset": ["--dataset", str(corpus), "--out", str(tmp / "dataset" / "out"),
-                        "--stride", str(subject_rows.SMALL.stride)]}
+                        "--tasks", DATASET_TASK, "--stride", str(subject_rows.SMALL.stride)]}
     nb = nbformat.read(NOTEBOOK, as_version=4)
     notebook = list(nb.cells)
     setup = setup_cell("subject_fitting")  # this process's settings, then the experiment
@@ -329,12 +334,15 @@ def test_dataset_run_has_residuals_but_no_truth(runs):
     assert [r["method"] for r in rows] == list(subject_rows.METHODS)
     assert not any(k.startswith("true_") or k.endswith("_percent") for k in rows[0])
     # S01 is one of the documented subjects: its jaw-shape residuals lie in the documented
-    # ranges (0.05 mm: the scale here comes from 2 first lines instead of 3)
+    # ranges (0.05 mm: the scale here comes from 1 first line instead of 3)
     for r in rows:
         for point in ("gonion", "gnathion"):
             lo, hi = (float(v) for v in summary[r["method"]][f"{point} residual mm"].split("-"))
             assert lo - 0.05 <= float(r[f"residual_{point}_mm"]) <= hi + 0.05, (r["method"], point)
     assert "converged 1/1" in printed
+    # --tasks: the evaluation and the penetration of that task alone
+    assert [(r["subject"], r["task"]) for r in _csv(out / "penetration.csv")] == [
+        ("S01", DATASET_TASK)]
 
 
 @pytest.mark.slow
