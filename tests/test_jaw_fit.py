@@ -252,11 +252,12 @@ def test_block_tridiagonal_solve_and_selected_inverse_match_dense_numpy():
     diag = blocks[np.arange(m), :, np.arange(m), :]
     upper = blocks[np.arange(m - 1), :, np.arange(1, m), :]
     rhs = rng.normal(size=(m, 2))
-    x = jaw_fit.block_tridiagonal_solve(diag, upper, rhs)
+    # compiled, as the smooth pivot's kernel runs them (op by op, each step compiles its own)
+    x = jax.jit(jaw_fit.block_tridiagonal_solve)(diag, upper, rhs)
     np.testing.assert_allclose(np.asarray(x).ravel(), np.linalg.solve(dense, rhs.ravel()),
                                rtol=1e-10)
     inv = np.linalg.inv(dense).reshape(m, 2, m, 2)
-    c_diag, c_up = jaw_fit.block_tridiagonal_inverse_blocks(diag, upper)
+    c_diag, c_up = jax.jit(jaw_fit.block_tridiagonal_inverse_blocks)(diag, upper)
     np.testing.assert_allclose(c_diag, inv[np.arange(m), :, np.arange(m), :], rtol=1e-10)
     np.testing.assert_allclose(c_up, inv[np.arange(m - 1), :, np.arange(1, m), :], rtol=1e-9,
                                atol=1e-14)
