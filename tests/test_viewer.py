@@ -1,11 +1,10 @@
 """The one-file viewer (issue 31): the frame encoding, the page's content, and the page in a
 real headless Chromium (Playwright, Debian's chromium; ``make browser`` installs it).
 
-One small synthetic recording (the sentence task cut to its first 1.7 s, with its sound,
-every data line), one page built once for the module, opened once from its ``file://`` URL
-with every other request aborted. The browser tests skip with one line only where no
-browser can be had here. Nothing waits for time to pass: the tests wait for states (a
-frame shown), never for playback.
+One small synthetic recording (the sentence task with its sound, every data line), one page built once
+for the module, opened once from its ``file://`` URL with every other request aborted. The
+browser tests skip with one line only where no browser can be had here. Nothing waits for
+time to pass: the tests wait for states (a frame shown), never for playback.
 """
 
 import json
@@ -84,34 +83,13 @@ def test_a_still_face_and_bad_frames():
 
 
 # ------------------------------------------------------------------ the page
-# the synthetic sentence cut to its first SECONDS (251 lines of 665; 247 frames: the frame
-# bucket of 256, not 768): the run, its compilation and the page's encoding take a third
-# of the time, and the jaw still opens and closes in it
-SECONDS = 1.72
-
-
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
-    """The synthetic sentence cut to ``SECONDS`` with its sound, and phone labels written
-    beside it."""
-    import wave
-
+    """The synthetic sentence with its sound, and phone labels written beside it."""
     root = synth.generate_corpus(tmp_path_factory.mktemp("corpus"), n_subjects=1,
                                  tasks=[synth.SENTENCE_TASK], audio=True)  # fmt: skip
     dataset = Dataset(root)
-    subject = dataset.subjects()[0]
-    recording = dataset.load(subject, synth.SENTENCE_TASK)
-    keep = int(np.sum(np.asarray(recording.track.times) < SECONDS))
-    lines = recording.path.read_bytes().splitlines(keepends=True)
-    recording.path.write_bytes(b"".join(lines[:keep]))  # a pellet file: a line a time
-    sound = recording.audio
-    with wave.open(str(sound), "rb") as w:
-        params, pcm = w.getparams(), w.readframes(w.getnframes())
-    with wave.open(str(sound), "wb") as w:
-        w.setparams(params)
-        w.writeframes(pcm[: int(SECONDS * params.framerate) * params.sampwidth * params.nchannels])
-    recording = dataset.load(subject, synth.SENTENCE_TASK)
-    assert len(recording.track.times) == keep
+    recording = dataset.load(dataset.subjects()[0], synth.SENTENCE_TASK)
     write_lab(recording.path.with_suffix(".lab"), _labels(recording))
     return recording
 
@@ -161,7 +139,7 @@ def test_page_holds_every_data_line_the_sound_and_says_what_it_is(page, run, rec
     assert not re.search(r'(src|href)="(https?:)?//', html)
     assert 'type="module"' not in html
     assert str(path.parent) not in html  # no machine's path in the page
-    # small enough to e-mail: at most 15 MB for 5 s (this recording is 1.7 s)
+    # small enough to e-mail: at most 15 MB for 5 s (this recording is about 4 s)
     seconds = float(run.animation.times[-1] - run.animation.times[0])
     assert path.stat().st_size <= 15e6 * seconds / 5
     assert [t["name"] for t in data["labels"]] == ["labels"]  # the .lab beside it
