@@ -153,10 +153,12 @@ def test_fit_recovers_a_longer_larynx_and_narrower_pharynx():
     opened = eqx.tree_at(lambda p: (p.jaw_translation, p.tongue), p0,
                          (jnp.array([0.0, -10.0]),
                           p0.tongue + jnp.array([[0, -10], [0, -10], [-4, -12], [-6, -10]], float)))
-    # from the rest to the opened mouth in MAX_FRAMES frames (the shape of every fit here)
-    w = jnp.linspace(0.0, 1.0, acoustic_fit.MAX_FRAMES)
-    frames = jax.jit(jax.vmap(lambda p: deform(model, p)))(jax.tree.map(
-        lambda a, b: a[None] + w.reshape((-1,) + (1,) * a.ndim) * (b - a)[None], p0, opened))
+    # from the rest to the opened mouth in MAX_FRAMES frames (the shape of every fit here),
+    # in one compiled function (op by op, every parameter's interpolation compiles its own)
+    w = np.linspace(0.0, 1.0, acoustic_fit.MAX_FRAMES)
+    frames = eqx.filter_jit(lambda p0, opened: jax.vmap(lambda p: deform(model, p))(jax.tree.map(
+        lambda a, b: a[None] + w.reshape((-1,) + (1,) * a.ndim) * (b - a)[None], p0, opened)))(
+        p0, opened)
     truth = af.TractParams(jnp.asarray(40.0), jnp.asarray(1.0), jnp.asarray(0.6), jnp.asarray(1.0))
     measured = np.asarray(acoustic_fit.tract_formants(geometry, frames, truth, 1.0))[:, :3]
     fit = acoustic_fit.fit_tract(geometry, frames, measured, 1.0)
