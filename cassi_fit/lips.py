@@ -37,7 +37,7 @@ segment and 17 mm 40 ms after it), and most recordings have none.
 **Saying where the lips' rest is wrong** (:func:`apart_in_closures`,
 :func:`closures_line`): where a recording's labels mark bilabial closures, the model's lip
 opening in those frames says whether the lips' rest it took is right. ``cassi acoustics``
-prints one line when the median there is more than :data:`APART_MM` (mo1 with the
+and ``cassi animate`` (:func:`run_closures_line`) print one line when the median there is more than :data:`APART_MM` (mo1 with the
 default: 7.3 mm over 72 frames; with ``lip_closure``: 1.9 mm, no line): the formants
 depend on the lips' opening, and no sensor says where the lips are at rest.
 """
@@ -126,6 +126,33 @@ def closures_line(found: tuple[int, float] | None, lip_closure: bool) -> str | N
            "touch where their sensors are nearest")
     return (f"lips: in the {n} frames labelled /p b m/ the model's lips are {apart:.1f} mm "
             f"apart (median), where the speaker's touch: {why}")
+
+
+def run_closures_line(run) -> str | None:
+    """:func:`closures_line` for a ``pipeline.RecordingRun`` (``cassi animate``): its labels
+    as every output reads them (``labels.recording_labels``: beside the file or inside it;
+    labels that do not fit the recording are read as they are, quietly: the video says so
+    itself) at its frames' times, and the model's lip opening there. None without labels
+    or without a labelled bilabial (the tract's geometry is then not built)."""
+    import warnings
+
+    from .area_function import lip_opening, tract_geometry
+    from .errors import CassiError
+    from .labels import recording_labels
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            labels = recording_labels(run.recording, accept_mismatch=True)
+    except CassiError:  # unreadable labels: the outputs that use them say so
+        return None
+    if labels is None:
+        return None
+    names = labels.at(np.asarray(run.animation.times, np.float64))
+    if not any(str(n).strip().lower() in BILABIALS for n in names):
+        return None
+    opening = lip_opening(tract_geometry(run.state.model), run.animation.vertices)
+    return closures_line(apart_in_closures(names, opening), run.spec.lip_closure)
 
 
 def lips_touching(model, vertices, rest, lip_rest, track, scale: float,

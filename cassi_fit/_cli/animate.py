@@ -153,6 +153,10 @@ def run(args) -> int:
         print(f"calibration problem: {line}")
     for line in state.calibration_caveats:
         print(f"calibration: {line}")
+    from cassi_fit.lips import run_closures_line
+
+    if (line := run_closures_line(run)) is not None:  # lips apart in labelled /p b m/
+        print(line)
     print(penetration_summary(animation))
     print(tongue_volume_summary(state.model, animation))
     if csv_out is not None:
