@@ -366,3 +366,36 @@ def test_item_rng_depends_only_on_seed_subject_task():
     assert item_rng(a).normal() != item_rng(a, seed=1).normal()
     assert item_rng(a).normal() != item_rng(CorpusItem("S01", "tp106", "x")).normal()
     assert np.isfinite(item_rng(a).normal())
+
+
+def test_a_wait_for_the_pool_answers_a_signal_another_thread_received():
+    """Ctrl-C handed by the system to another thread of the process (the pool's manager,
+    tqdm's monitor) reaches Python's handler only when the main thread runs: the corpus
+    runner's wait wakes to let it (``_executor._wait``), where a wait without a timeout
+    slept until the work was done (a run left waiting for ever). The interrupt comes while
+    the task still runs."""
+    import concurrent.futures as cf
+    import signal
+    import threading
+
+    from cassi_fit.corpus import _executor
+
+    release = threading.Event()
+
+    def task():  # the signal to this worker thread, not to the main one, once it waits
+        release.wait(0.5)
+        signal.pthread_kill(threading.get_ident(), signal.SIGINT)
+        release.wait(60)
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with cf.ThreadPoolExecutor(1) as pool:
+            try:
+                with pytest.raises(KeyboardInterrupt):
+                    future = pool.submit(task)
+                    _executor._wait([future])
+                assert not future.done()  # answered while the work went on
+            finally:
+                release.set()
+    finally:
+        signal.signal(signal.SIGINT, previous)

@@ -32,6 +32,11 @@ class ExtensionFileLoader:
         self.finished = True
 
 
+#: How long a run may take to answer before the test calls it hung (a guard against
+#: waiting for ever, far beyond what the slowest machine needs; not a speed limit)
+HANG_S = 300
+
+
 def _python_call():
     return sum(k for k in range(100))
 
@@ -133,7 +138,11 @@ def _interrupt(tmp_path, target, argv, sig, *, after=1, group=False):
         else:
             raise AssertionError(f"never reached {target}: {proc.wait()} {proc.stderr.read()}")
         (os.killpg if group else os.kill)(proc.pid, sig)
-        _, err = proc.communicate()
+        try:  # a guard, not a speed limit: a run that ignores the signal never ends
+            _, err = proc.communicate(timeout=HANG_S)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            raise AssertionError(f"the run was still going {HANG_S} s after the signal") from None
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -224,7 +233,11 @@ def test_corpus_run_interrupted_stops_its_workers(tmp_path, group):
             os.killpg(proc.pid, signal.SIGINT)
         else:
             os.kill(proc.pid, signal.SIGTERM)
-        _, err = proc.communicate()
+        try:  # a guard, not a speed limit: a run that ignores the signal never ends
+            _, err = proc.communicate(timeout=HANG_S)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            raise AssertionError(f"the run was still going {HANG_S} s after the signal") from None
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -246,7 +259,9 @@ def _reports(fifo: Path, proc: subprocess.Popen, n: int) -> list[int]:
     try:
         buffer = b""
         while len(lines) < n:
-            ready, _, _ = select.select([fd, proc.stderr], [], [])
+            ready, _, _ = select.select([fd, proc.stderr], [], [], HANG_S)
+            if not ready:  # a guard, not a speed limit: the workers never reported
+                raise AssertionError(f"no worker reported within {HANG_S} s")
             if fd not in ready:  # the run ended (or wrote an error) before reporting
                 proc.wait()
                 raise AssertionError(f"the run ended first: {proc.stderr.read()}")

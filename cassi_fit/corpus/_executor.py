@@ -390,6 +390,22 @@ def _collect(pool, task, todo, out, options, fingerprint, jax_settings, progress
         bar.close()
 
 
+#: How often (s) the main thread wakes while it waits for a pool's work: a signal the
+#: system hands to another of this process's threads (the pool's manager, tqdm's monitor)
+#: reaches Python's handler only when the main thread runs again, and a wait without a
+#: timeout never does: Ctrl-C was left unanswered, the run waiting for ever
+WAKE_S = 0.25
+
+
+def _wait(futures, return_when=cf.ALL_COMPLETED):
+    """``concurrent.futures.wait``, woken every :data:`WAKE_S` so that an interrupt is
+    answered (the signal's handler runs between two waits)."""
+    while True:
+        done, pending = cf.wait(futures, timeout=WAKE_S, return_when=return_when)
+        if not pending or (done and return_when == cf.FIRST_COMPLETED):
+            return done, pending
+
+
 WORKER_DIED = "its worker process died while running it (killed, out of memory or crashed)"
 
 
@@ -413,10 +429,10 @@ def _run_on_pool(pool, submit, todo, record) -> None:
                     record(ItemResult(item, Status.FAILED, _one_line(exc)))
             if not in_flight:
                 continue
-            done, _ = cf.wait(in_flight, return_when=cf.FIRST_COMPLETED)
+            done, _ = _wait(in_flight, return_when=cf.FIRST_COMPLETED)
             crashed = _settle(done, in_flight, record, BrokenProcessPool)
             if crashed and pool.settings is not None:
-                done, _ = cf.wait(in_flight)  # a broken pool fails all it holds at once
+                done, _ = _wait(in_flight)  # a broken pool fails all it holds at once
                 crashed += _settle(done, in_flight, record, BrokenProcessPool)
                 pool.executor.shutdown(wait=True)
                 for item in crashed:
@@ -450,7 +466,9 @@ def _alone(pool, submit, item, broken) -> ItemResult:
     """Run one item in a fresh one-worker pool: its result, or FAILED if it kills it."""
     single = pool.new_executor(1)
     try:
-        return submit(single, item).result()
+        future = submit(single, item)
+        _wait([future])
+        return future.result()
     except broken:
         return ItemResult(item, Status.FAILED, WORKER_DIED)
     except Exception as exc:  # noqa: BLE001
