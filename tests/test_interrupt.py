@@ -15,6 +15,33 @@ import pytest
 from cassi_fit import _signals, synth
 
 HERE = Path(__file__).resolve().parent
+#: How long a run may take to answer before the test calls it hung (a guard against
+#: waiting for ever, far beyond what the slowest machine needs; not a speed limit)
+HANG_S = 300
+
+
+@pytest.fixture(autouse=True)
+def as_from_a_terminal():
+    """Ctrl-C as a terminal's foreground command has it, whoever started the tests: a
+    shell without job control starts a background job with SIGINT ignored (POSIX), every
+    process it starts inherits that, and a command keeps a signal it was started to ignore
+    (``_signals.interruptible``), so these tests would see no interrupt. This process's
+    handlers for the tests here; :func:`_terminal_signals` for the commands they start."""
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def _terminal_signals() -> None:
+    """A started command's SIGINT and SIGTERM as a terminal gives them (``preexec_fn``):
+    not inherited as ignored (:func:`as_from_a_terminal`)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 class ExtensionFileLoader:
@@ -30,11 +57,6 @@ class ExtensionFileLoader:
         _python_call()  # the handler runs here, inside the "initialisation"
         self.pending_when_done = _signals._STATE.pending
         self.finished = True
-
-
-#: How long a run may take to answer before the test calls it hung (a guard against
-#: waiting for ever, far beyond what the slowest machine needs; not a speed limit)
-HANG_S = 300
 
 
 def _python_call():
@@ -130,7 +152,7 @@ def _interrupt(tmp_path, target, argv, sig, *, after=1, group=False):
     proc = subprocess.Popen([sys.executable, "-c", code, *map(str, argv)], cwd=tmp_path,
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=_terminal_signals)
     try:
         for line in proc.stdout:
             if line.strip() == "reached":
@@ -226,7 +248,7 @@ def test_corpus_run_interrupted_stops_its_workers(tmp_path, group):
     env = {**os.environ, "CASSI_TEST_REACHED": str(fifo)}
     proc = subprocess.Popen([sys.executable, "-c", code, "block", str(out)], cwd=tmp_path,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env, start_new_session=True)
+                            env=env, start_new_session=True, preexec_fn=_terminal_signals)
     try:
         pids = _reports(fifo, proc, 2)
         if group:
