@@ -26,7 +26,9 @@ def as_from_a_terminal():
     shell without job control starts a background job with SIGINT ignored (POSIX), every
     process it starts inherits that, and a command keeps a signal it was started to ignore
     (``_signals.interruptible``), so these tests would see no interrupt. This process's
-    handlers for the tests here; :func:`_terminal_signals` for the commands they start."""
+    handlers for the tests here; the commands they start inherit no ignored signal (a
+    handler is reset to the default when a program starts; no ``preexec_fn``, which forks
+    a process JAX's threads run in)."""
     previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
@@ -35,13 +37,6 @@ def as_from_a_terminal():
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
-
-
-def _terminal_signals() -> None:
-    """A started command's SIGINT and SIGTERM as a terminal gives them (``preexec_fn``):
-    not inherited as ignored (:func:`as_from_a_terminal`)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 class ExtensionFileLoader:
@@ -152,7 +147,7 @@ def _interrupt(tmp_path, target, argv, sig, *, after=1, group=False):
     proc = subprocess.Popen([sys.executable, "-c", code, *map(str, argv)], cwd=tmp_path,
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env,
-                            start_new_session=True, preexec_fn=_terminal_signals)
+                            start_new_session=True)
     try:
         for line in proc.stdout:
             if line.strip() == "reached":
@@ -248,7 +243,7 @@ def test_corpus_run_interrupted_stops_its_workers(tmp_path, group):
     env = {**os.environ, "CASSI_TEST_REACHED": str(fifo)}
     proc = subprocess.Popen([sys.executable, "-c", code, "block", str(out)], cwd=tmp_path,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env, start_new_session=True, preexec_fn=_terminal_signals)
+                            env=env, start_new_session=True)
     try:
         pids = _reports(fifo, proc, 2)
         if group:
