@@ -59,6 +59,11 @@ APART_MM = 2.0
 BILABIALS = ("p", "b", "m", "p_h", "em")
 
 
+def is_bilabial(label) -> bool:
+    """Whether a phone label names a bilabial stop or nasal (:data:`BILABIALS`, any case)."""
+    return str(label).strip().lower() in BILABIALS
+
+
 def closing_distance(track) -> tuple[float, float, tuple[float, float]] | None:
     """``(distance mm, time s, (upper range, lower range) mm)``: the lip sensors' closing
     distance (the upper one's height above the lower one at :data:`CLOSED_PERCENTILE`
@@ -90,7 +95,7 @@ def bilabial_lines(labels, times) -> int | None:
     inside, found = np.zeros(t.shape, bool), False
     for tier in labels or ():
         for start, end, name in zip(tier.starts, tier.ends, tier.labels, strict=True):
-            if str(name).strip().lower() in BILABIALS:
+            if is_bilabial(name):
                 found = True
                 inside |= (t >= start) & (t < end)
     return int(inside.sum()) if found else None
@@ -104,7 +109,7 @@ def apart_in_closures(names, opening_mm) -> tuple[int, float] | None:
     together); None without such a frame."""
     names = np.asarray(names, dtype=object).reshape(-1)
     opening = np.asarray(opening_mm, np.float64).reshape(-1)
-    inside = np.array([str(n).strip().lower() in BILABIALS for n in names], bool)
+    inside = np.array([is_bilabial(n) for n in names], bool)
     inside &= np.isfinite(opening)
     if not inside.any():
         return None
@@ -149,7 +154,7 @@ def run_closures_line(run) -> str | None:
     if labels is None:
         return None
     names = labels.at(np.asarray(run.animation.times, np.float64))
-    if not any(str(n).strip().lower() in BILABIALS for n in names):
+    if not any(is_bilabial(n) for n in names):
         return None
     opening = lip_opening(tract_geometry(run.state.model), run.animation.vertices)
     return closures_line(apart_in_closures(names, opening), run.spec.lip_closure)

@@ -37,7 +37,7 @@ import numpy as np
 
 from .._io import atomic_write
 from ..errors import DataFormatError
-from ._raw import RawEma, assemble_channels, check_times, rate_of, read_bytes
+from ._raw import RawEma, assemble_channels, check_times, is_number, rate_of, read_bytes
 
 MAGIC = b"EST_File"
 HEADER_END = b"EST_Header_End"
@@ -143,21 +143,13 @@ def _ascii_body(path: Path, raw: bytes, offset: int, width: int, n_frames: int |
         try:
             rows.append([float(t) for t in tokens])
         except ValueError:
-            bad = next(t for t in tokens if not _is_float(t))
+            bad = next(t for t in tokens if not is_number(t))
             raise DataFormatError(path, lineno, f"not a number: {bad[:40]!r}") from None
         lines.append(lineno)
     if n_frames is not None and len(rows) != n_frames:
         raise DataFormatError(path, None, f"header NumFrames {n_frames}, but the body holds "
                               f"{len(rows)} frames")
     return np.array(rows, dtype=np.float64).reshape(len(rows), width), lines
-
-
-def _is_float(token: str) -> bool:
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
 
 
 def read_est(path: str | os.PathLike) -> RawEma:
