@@ -56,13 +56,13 @@ def fit_recording_jaw(recording: Recording, spec: RunSpec) -> JawFit:
     (the reference: its first line with the jaw sensors tracked and not mistracked), by
     the spec's jaw method on the spec's jaw sensors (default: those the recording
     tracks, and the method ``RunSpec.jaw_method_for`` them), padded to a frame bucket
-    (``jaw_fit.jaw_bucket``: recordings of different lengths share one compilation)."""
-    from .jaw_fit import jaw_bucket, jaw_from_track, tracked_jaw_sensors
+    as every jaw fit is (``jaw_fit.jaw_bucket``: recordings of different lengths share one
+    compilation)."""
+    from .jaw_fit import jaw_from_track, tracked_jaw_sensors
 
     track = recording.track
     sensors = spec.jaw_sensors or tracked_jaw_sensors(track.valid, track.path)
-    return jaw_from_track(track, method=spec.jaw_method_for(sensors), jaw_sensors=sensors,
-                          pad_to=jaw_bucket(track.n_frames))
+    return jaw_from_track(track, method=spec.jaw_method_for(sensors), jaw_sensors=sensors)
 
 
 def run_recording(

@@ -107,12 +107,21 @@ def test_padding_to_a_frame_bucket_leaves_the_fit_unchanged(corpus):
     track = read_txy(dataset_items(corpus)[0].path)
     assert jaw_bucket(track.n_frames) > track.n_frames  # so there is padding
     for method in ("closed-form", "frame-fit"):
-        plain = jaw_from_track(track, method=method)
+        plain = jaw_from_track(track, method=method, pad_to=track.n_frames)  # no padding
         padded = jaw_from_track(track, method=method, pad_to=jaw_bucket(track.n_frames))
+        default = jaw_from_track(track, method=method)  # padded to the bucket by default
         for name in ("theta", "translation", "pivot", "pivot_defined", "residual", "status",
                      "covariance", "pivot_covariance"):
             np.testing.assert_array_equal(getattr(padded, name), getattr(plain, name))
+            np.testing.assert_array_equal(getattr(default, name), getattr(plain, name))
         assert (padded.noise_mm, padded.converged) == (plain.noise_mm, plain.converged)
+    # the pivot fit sums its residuals over the padded frames too (zeros): the same fit to
+    # rounding
+    plain = jaw_from_track(track, method="fixed-pivot", pad_to=track.n_frames)
+    default = jaw_from_track(track, method="fixed-pivot")
+    np.testing.assert_allclose(default.theta, plain.theta, atol=1e-9)
+    np.testing.assert_allclose(default.pivot, plain.pivot, atol=1e-6)
+    np.testing.assert_array_equal(default.status, plain.status)
 
 
 def test_jaw_corpus_refuses_to_replace_a_table_before_running(serial, corpus):

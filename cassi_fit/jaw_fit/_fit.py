@@ -176,7 +176,7 @@ def _fit_padded(reference, current, method, valid, jaw_sensors, pad_to: int) -> 
     padded = np.concatenate([np.asarray(current, float), np.full((pad_to - n, 2, 2), np.nan)])
     use = np.ones(n, bool) if valid is None else np.asarray(valid, bool)
     fit = fit_jaw(reference, padded, method=method, jaw_sensors=jaw_sensors,
-                  valid=np.concatenate([use, np.zeros(pad_to - n, bool)]))
+                  valid=np.concatenate([use, np.zeros(pad_to - n, bool)]), pad_to=pad_to)
     return replace(fit, **{f.name: getattr(fit, f.name)[:n] for f in fields(fit)
                            if np.ndim(getattr(fit, f.name)) and
                            np.shape(getattr(fit, f.name))[0] == pad_to})
@@ -215,12 +215,16 @@ def fit_jaw(
 
     ``pad_to``: fit ``pad_to`` frames, the given ones followed by untracked ones, and
     return the given ones (unchanged: the padding is not usable, so it weighs nothing), so
-    that one compilation serves every length up to ``pad_to`` (:func:`jaw_bucket`). A
-    method whose model depends on the length (``JawMethod.paddable`` False: the smooth
-    pivot's knots) is not padded.
+    that one compilation serves every length up to ``pad_to``. By default the frames'
+    bucket, :func:`jaw_bucket` (``n`` up to 1024 frames share one compilation per method:
+    a jaw fit over recordings of many lengths compiles once, not once a length); ``pad_to=n``
+    fits the given frames alone. A method whose model depends on the length
+    (``JawMethod.paddable`` False: the smooth pivot's knots) is not padded.
     """
     method = as_method(method, solver, smoothness, knot_spacing)
-    if pad_to is not None and pad_to > np.shape(current)[0] and method.paddable:
+    if pad_to is None:
+        pad_to = jaw_bucket(np.shape(current)[0])
+    if pad_to > np.shape(current)[0] and method.paddable:
         return _fit_padded(reference, current, method, valid, jaw_sensors, pad_to)
     sensors = jaw_sensor_set(jaw_sensors)
     check_sensors(method, sensors)

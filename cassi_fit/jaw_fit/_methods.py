@@ -244,6 +244,11 @@ class FrameFit(JawMethod):
     name: ClassVar[str] = "frame-fit"
 
     @property
+    def paddable(self) -> bool:  # type: ignore[override]
+        """A start given per frame, (n, 3), holds the length: not padded."""
+        return self.start is None or np.ndim(self.start) < 2
+
+    @property
     def iterative(self) -> bool:
         """Whether the fit iterates (a solver or a start given) or is the closed form."""
         return self.solver is not None or self.start is not None
