@@ -242,6 +242,32 @@ def test_smooth_pivot_covariance_is_the_marginal_of_the_full_problem(references)
     np.testing.assert_allclose(fit.pivot_covariance, dense, rtol=0.05)
 
 
+@pytest.mark.parametrize("sensors", [("MNI", "MNM"), ("MNI",)])
+def test_untracked_frames_at_the_ends_change_no_fit(sensors):
+    """A recording whose first and last frames are untracked is fitted as the recording of
+    its tracked stretch alone by the pivot methods (the per-frame ones fit each frame on
+    its own): the smooth pivot's knots that no usable frame reaches follow its smoothness
+    and carry neither its prior (informative with one sensor) nor a parameter's count. So
+    the smooth pivot, too, is padded to the frame bucket (the default: one compilation
+    for every length up to 1024 frames; both fits below are padded to it)."""
+    current = noisy(0.1, seed=4)
+    head, tail = SPACING, 13  # the cut's knots fall on the whole's
+    valid = np.ones(N, bool)
+    valid[:head] = valid[N - tail:] = False
+    valid[50:53] = False  # a gap inside stays a gap
+    inner = slice(head, N - tail)
+    for name in ("fixed-pivot", "smooth-pivot"):
+        cut = fit_jaw(current[head], current[inner], method=name, valid=valid[inner],
+                      jaw_sensors=sensors)
+        whole = fit_jaw(current[head], current, method=name, valid=valid, jaw_sensors=sensors)
+        np.testing.assert_allclose(whole.theta[inner], cut.theta, atol=1e-8, err_msg=name)
+        np.testing.assert_allclose(whole.pivot[inner], cut.pivot, atol=1e-5, err_msg=name)
+        np.testing.assert_allclose(whole.pivot_covariance[inner], cut.pivot_covariance,
+                                   rtol=1e-5, atol=1e-9, err_msg=name)
+        np.testing.assert_array_equal(whole.status[inner], cut.status, err_msg=name)
+        np.testing.assert_allclose(whole.noise_mm, cut.noise_mm, rtol=1e-6, err_msg=name)
+
+
 def test_block_tridiagonal_solve_and_selected_inverse_match_dense_numpy():
     rng = np.random.default_rng(3)
     m = 7

@@ -90,7 +90,7 @@ def fixed_pivot_kernel(solver, reference, current, weight, pivot0, prior):
 @exported
 def smooth_pivot_kernel(config, reference, current, weight, smoothness, knots0, prior):
     """Compiled smooth-pivot fit. ``config = (damped, max_steps, tol, spacing)`` (static);
-    ``prior = (mean (2,), weight (2,))``. Returns the pivot path (n, 2), its unit covariance
+    ``prior = (mean (2,), weight (m, 2))``, per knot. Returns the pivot path (n, 2), its unit covariance
     (n, 2, 2) (``(J^T J)^-1`` blocks mapped through the spline, selected inversion), the
     solver result and the knots (m, 2)."""
     from ._linalg import block_tridiagonal_inverse_blocks

@@ -125,6 +125,21 @@ def _pivot_estimate(reference, current, usable, path, unit_pivot_cov, result, n_
                     _prior_text(prior, path, usable))
 
 
+def _knots_reached(usable: np.ndarray, spacing: int, m: int) -> np.ndarray:
+    """(m,) bool: the knots of a path through ``m`` knots every ``spacing`` frames that a
+    usable frame's pivot depends on (frame ``k`` on knots ``k // spacing`` and the next).
+    The others, before the first usable frame and after the last, carry no data: the path's
+    smoothness alone sets them, so they are not its parameters, and untracked frames
+    appended to a recording (``fit_jaw(pad_to=...)``) leave its fit unchanged."""
+    frames = np.flatnonzero(usable)
+    reached = np.zeros(m, bool)
+    if frames.size == 0:
+        reached[:] = True
+    else:
+        reached[frames[0] // spacing: frames[-1] // spacing + 2] = True
+    return reached
+
+
 def _pivot_prior(method, k: int) -> PivotPrior:
     """The method's prior, else the sensor count's default: none with both sensors, the
     population condyle with one."""
@@ -334,8 +349,11 @@ class SmoothPivot(JawMethod):
     step budget of the structured block-tridiagonal solver (damped: Newton steps on the
     exact per-frame Hessians; Gauss-Newton solvers: Gauss-Newton steps); None as
     :class:`FixedPivot`. start: None (as :class:`FixedPivot`) or an initial pivot (2,) mm
-    for every knot. pivot_prior: as :class:`FixedPivot`, on every knot with ``1/m`` of its
-    information (``m`` knots), so that the path as a whole carries one prior.
+    for every knot. pivot_prior: as :class:`FixedPivot`, on every knot the data reach with
+    ``1/m`` of its information (``m`` such knots), so that the path as a whole carries one
+    prior. Knots no usable frame reaches (before the first, after the last) follow the
+    smoothness alone and are not counted as parameters, so the fit pads to a frame bucket
+    like the others (one compilation for every length up to ``jaw_bucket``).
     """
 
     smoothness: float = 1.0
@@ -347,7 +365,6 @@ class SmoothPivot(JawMethod):
 
     name: ClassVar[str] = "smooth-pivot"
     jaw_sensors_needed: ClassVar[tuple[int, ...]] = (1, 2)
-    paddable: ClassVar[bool] = False  # the knots depend on the length
 
     def __check_init__(self):
         try:
@@ -369,6 +386,7 @@ class SmoothPivot(JawMethod):
     def _estimate(self, reference, current, usable, sensors):
         n, spacing = current.shape[0], int(self.knot_spacing)
         m = (n - 1) // spacing + 2
+        reached = _knots_reached(usable, spacing, m)
         prior = _pivot_prior(self, reference.shape[0])
         pivot0 = _start_pivot(self, prior, reference, current, usable)
         dtype = _dtype_of(reference)
@@ -377,12 +395,14 @@ class SmoothPivot(JawMethod):
         config = (bool(solver.damped), int(solver.max_steps), float(tol), spacing)
 
         def solve_with(noise_mm, knots):
-            # the prior's information shared among the m knots: the path as a whole carries
-            # one prior, as the fixed pivot does (each knot's own would add up m-fold)
+            # the prior's information shared among the knots the data reach: the path as a
+            # whole carries one prior, as the fixed pivot does (each knot's own would add up
+            # m-fold); the knots beyond them follow the path's smoothness alone
+            mean, weight = _prior_arrays(prior, dtype, noise_mm / np.sqrt(reached.sum()))
             return smooth_pivot_kernel(
                 config, reference, current, usable.astype(float),
                 np.asarray(float(self.smoothness), dtype), np.asarray(knots, dtype),
-                _prior_arrays(prior, dtype, noise_mm / np.sqrt(m)))
+                (mean, np.where(reached[:, None], weight[None], 0.0).astype(dtype)))
 
         if prior.informative:
             # a moving pivot can follow one sensor anywhere, so its own residuals say nothing
@@ -393,7 +413,7 @@ class SmoothPivot(JawMethod):
             noise = PRIOR_NOISE_MM
         path, unit, result, _ = solve_with(noise, np.tile(pivot0, (m, 1)))
         return _pivot_estimate(reference, current, usable, np.asarray(path), np.asarray(unit),
-                               result, 2 * m, prior)
+                               result, 2 * int(reached.sum()), prior)
 
 
 class CoupledRotation(JawMethod):

@@ -127,7 +127,8 @@ def smooth_pivot_system(knots, reference, current, weight, smoothness, spacing, 
     """Cost, gradient (m, 2), the step matrix and the Gauss-Newton normal matrix of
     :func:`smooth_pivot_residuals` at ``knots`` (m, 2); each matrix block-tridiagonal as
     ``(diag (m, 2, 2), upper (m-1, 2, 2))``. ``prior = (mean (2,), weight (2,))`` adds the
-    residuals ``weight * (Q_j - mean)`` for every knot (a pivot prior; weight 0: none).
+    residuals ``weight_j * (Q_j - mean)`` for every knot (a pivot prior; ``weight`` (m, 2),
+    per knot: 0 for none, and on the knots no usable frame reaches).
 
     Assembled from per-frame blocks: frame ``k`` depends on its pivot ``q_k = (1-f) Q_j + f
     Q_j+1`` only, through a (4, 2) Jacobian ``J_k`` (angle projected out), so it adds
@@ -174,10 +175,10 @@ def smooth_pivot_system(knots, reference, current, weight, smoothness, spacing, 
     gn, mat = blocks(a_gn), (blocks(a_step) if newton else None)
     if prior is not None:
         mean, w = prior
-        off = w[None] * (knots - mean[None])
+        off = w * (knots - mean[None])
         cost = cost + 0.5 * jnp.sum(off**2)
-        grad = grad + w[None] * off
-        ridge = jnp.diag(w**2)
-        gn = (gn[0] + ridge[None], gn[1])
-        mat = None if mat is None else (mat[0] + ridge[None], mat[1])
+        grad = grad + w * off
+        ridge = eye[None] * (w**2)[:, :, None]  # diag(w_j^2) per knot
+        gn = (gn[0] + ridge, gn[1])
+        mat = None if mat is None else (mat[0] + ridge, mat[1])
     return cost, grad, (gn if mat is None else mat), gn
