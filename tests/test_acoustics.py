@@ -173,6 +173,39 @@ def test_fit_recovers_a_longer_larynx_and_narrower_pharynx():
     assert float(again.pharynx_scale) == record["pharynx_scale"]
 
 
+def test_a_fit_stopped_away_from_its_minimum_is_not_converged(monkeypatch):
+    """The solver's own test (its steps are small) is not enough: with tolerances so wide
+    that it stops at its first steps, the solver reports success, and the fit, whose
+    Gauss-Newton step still predicts a gain, says it did not converge (the same compiled
+    fit: the tolerances are arrays). The same frames as the recovery test above."""
+    model = load_model()
+    geometry = af.tract_geometry(model)
+    p0 = default_params(model)
+    opened = eqx.tree_at(lambda p: (p.jaw_translation, p.tongue), p0,
+                         (jnp.array([0.0, -10.0]),
+                          p0.tongue + jnp.array([[0, -10], [0, -10], [-4, -12], [-6, -10]], float)))
+    w = np.linspace(0.0, 1.0, acoustic_fit.MAX_FRAMES)
+    frames = eqx.filter_jit(lambda p0, opened: jax.vmap(lambda p: deform(model, p))(jax.tree.map(
+        lambda a, b: a[None] + w.reshape((-1,) + (1,) * a.ndim) * (b - a)[None], p0, opened)))(
+        p0, opened)
+    truth = af.TractParams(jnp.asarray(40.0), jnp.asarray(1.0), jnp.asarray(0.6), jnp.asarray(1.0))
+    measured = np.asarray(acoustic_fit.tract_formants(geometry, frames, truth, 1.0))[:, :3]
+    seen = {}
+    solve = acoustic_fit._solve
+
+    def spy(*a):
+        out = solve(*a)
+        seen["successful"], seen["steps"] = bool(out[1]), int(out[2])
+        return out
+
+    monkeypatch.setattr(acoustic_fit, "_solve", spy)
+    monkeypatch.setattr(acoustic_fit, "SOLVER_TOL", 30.0)
+    fit = acoustic_fit.fit_tract(geometry, frames, measured, 1.0)
+    assert seen["successful"] and seen["steps"] < 5  # the solver says it is done
+    assert not fit.converged
+    assert np.max(fit.after) > 0.01  # and it is not: the recovery's fit gets under 3 %
+
+
 def test_the_default_norms_keep_the_voice_and_auto_follows_it(recording):
     """The recording's run heard with a 220 Hz voice: by default the adult male norms (the
     tract's larynx 30 mm below the hyoid, Praat's ceiling 5000 Hz: main's figures), the
