@@ -146,21 +146,29 @@ def test_calibrate_acoustic_writes_the_tract_and_acoustics_reads_it(recording, t
     assert "not an acoustic calibration" in capsys.readouterr().err
 
 
-def test_fit_recovers_a_longer_larynx_and_narrower_pharynx():
+@pytest.fixture(scope="module")
+def opening():
+    """``(geometry, frames, measured)``: the model from rest to an opened mouth in
+    MAX_FRAMES frames (the shape of every fit here) and their F1-F3 with a longer larynx
+    (40 mm) and a narrower pharynx (x0.6) than the norms."""
     model = load_model()
     geometry = af.tract_geometry(model)
     p0 = default_params(model)
     opened = eqx.tree_at(lambda p: (p.jaw_translation, p.tongue), p0,
                          (jnp.array([0.0, -10.0]),
                           p0.tongue + jnp.array([[0, -10], [0, -10], [-4, -12], [-6, -10]], float)))
-    # from the rest to the opened mouth in MAX_FRAMES frames (the shape of every fit here),
     # in one compiled function (op by op, every parameter's interpolation compiles its own)
     w = np.linspace(0.0, 1.0, acoustic_fit.MAX_FRAMES)
     frames = eqx.filter_jit(lambda p0, opened: jax.vmap(lambda p: deform(model, p))(jax.tree.map(
         lambda a, b: a[None] + w.reshape((-1,) + (1,) * a.ndim) * (b - a)[None], p0, opened)))(
         p0, opened)
     truth = af.TractParams(jnp.asarray(40.0), jnp.asarray(1.0), jnp.asarray(0.6), jnp.asarray(1.0))
-    measured = np.asarray(acoustic_fit.tract_formants(geometry, frames, truth, 1.0))[:, :3]
+    return geometry, frames, np.asarray(acoustic_fit.tract_formants(geometry, frames, truth,
+                                                                    1.0))[:, :3]
+
+
+def test_fit_recovers_a_longer_larynx_and_narrower_pharynx(opening):
+    geometry, frames, measured = opening
     fit = acoustic_fit.fit_tract(geometry, frames, measured, 1.0)
     # the norms start 10 mm and a factor 0.6 away: their formants are off by several %
     assert np.max(fit.before) > 0.04
@@ -173,23 +181,12 @@ def test_fit_recovers_a_longer_larynx_and_narrower_pharynx():
     assert float(again.pharynx_scale) == record["pharynx_scale"]
 
 
-def test_a_fit_stopped_away_from_its_minimum_is_not_converged(monkeypatch):
+def test_a_fit_stopped_away_from_its_minimum_is_not_converged(opening, monkeypatch):
     """The solver's own test (its steps are small) is not enough: with tolerances so wide
     that it stops at its first steps, the solver reports success, and the fit, whose
     Gauss-Newton step still predicts a gain, says it did not converge (the same compiled
-    fit: the tolerances are arrays). The same frames as the recovery test above."""
-    model = load_model()
-    geometry = af.tract_geometry(model)
-    p0 = default_params(model)
-    opened = eqx.tree_at(lambda p: (p.jaw_translation, p.tongue), p0,
-                         (jnp.array([0.0, -10.0]),
-                          p0.tongue + jnp.array([[0, -10], [0, -10], [-4, -12], [-6, -10]], float)))
-    w = np.linspace(0.0, 1.0, acoustic_fit.MAX_FRAMES)
-    frames = eqx.filter_jit(lambda p0, opened: jax.vmap(lambda p: deform(model, p))(jax.tree.map(
-        lambda a, b: a[None] + w.reshape((-1,) + (1,) * a.ndim) * (b - a)[None], p0, opened)))(
-        p0, opened)
-    truth = af.TractParams(jnp.asarray(40.0), jnp.asarray(1.0), jnp.asarray(0.6), jnp.asarray(1.0))
-    measured = np.asarray(acoustic_fit.tract_formants(geometry, frames, truth, 1.0))[:, :3]
+    fit: the tolerances are arrays)."""
+    geometry, frames, measured = opening
     seen = {}
     solve = acoustic_fit._solve
 
