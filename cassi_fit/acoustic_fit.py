@@ -98,10 +98,7 @@ def fit_tract(geometry: af.TractGeometry, vertices: Float[ArrayLike, "m V 3"],
     sd = jnp.asarray([PRIOR_SD["larynx_drop_mm"]] + [PRIOR_SD["log_scale"]] * 3, dtype)
 
     args = (geometry, v, target, base, sd, jnp.asarray(scale, dtype))
-    # parameters in mm and log-scales: a thousandth is far below what the formants resolve
-    # (and above float32's noise in them, so a float32 fit can meet it); the tolerances are
-    # arrays, so that other tolerances compile nothing new
-    tol = jnp.asarray(SOLVER_TOL, dtype)
+    tol = jnp.asarray(SOLVER_TOL, dtype)  # an array: other tolerances compile nothing new
     x, successful, steps, decrement, cost = _solve(
         optx.LevenbergMarquardt(rtol=tol, atol=tol), jnp.zeros(4, dtype), args)
     tract = _unpack(x, base)
@@ -111,6 +108,9 @@ def fit_tract(geometry: af.TractGeometry, vertices: Float[ArrayLike, "m V 3"],
     return AcousticFit(tract, bool(successful) and stationary, int(steps), before, after)
 
 
+#: The solver's relative and absolute step tolerance: parameters in mm and log-scales, a
+#: thousandth is far below what the formants resolve (and above float32's noise in them,
+#: so a float32 fit can meet it).
 SOLVER_TOL = 1e-3
 #: Converged means the solver stopped (its steps became small) *and* the answer is
 #: stationary: a Gauss-Newton step from it predicts lowering the cost (half the mean

@@ -218,8 +218,8 @@ def fit_jaw(
     that one compilation serves every length up to ``pad_to``. By default the frames'
     bucket, :func:`jaw_bucket` (``n`` up to 1024 frames share one compilation per method:
     a jaw fit over recordings of many lengths compiles once, not once a length); ``pad_to=n``
-    fits the given frames alone. A method whose model depends on the length
-    (``JawMethod.paddable`` False: the smooth pivot's knots) is not padded.
+    fits the given frames alone. A method whose model holds the length
+    (``JawMethod.paddable`` False: a frame-fit start given per frame) is not padded.
     """
     method = as_method(method, solver, smoothness, knot_spacing)
     if pad_to is None:

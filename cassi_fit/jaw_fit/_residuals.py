@@ -126,9 +126,9 @@ def smooth_pivot_system(knots, reference, current, weight, smoothness, spacing, 
                         prior=None):
     """Cost, gradient (m, 2), the step matrix and the Gauss-Newton normal matrix of
     :func:`smooth_pivot_residuals` at ``knots`` (m, 2); each matrix block-tridiagonal as
-    ``(diag (m, 2, 2), upper (m-1, 2, 2))``. ``prior = (mean (2,), weight (2,))`` adds the
-    residuals ``weight_j * (Q_j - mean)`` for every knot (a pivot prior; ``weight`` (m, 2),
-    per knot: 0 for none, and on the knots no usable frame reaches).
+    ``(diag (m, 2, 2), upper (m-1, 2, 2))``. ``prior = (mean (2,), weight (m, 2))`` adds the
+    residuals ``weight_j * (Q_j - mean)`` for every knot (a pivot prior; weight 0: none, as
+    on the knots no usable frame reaches).
 
     Assembled from per-frame blocks: frame ``k`` depends on its pivot ``q_k = (1-f) Q_j + f
     Q_j+1`` only, through a (4, 2) Jacobian ``J_k`` (angle projected out), so it adds
