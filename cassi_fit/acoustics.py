@@ -43,7 +43,6 @@ from .formant_track import (
     FormantTrack,
     measure_formants,
     pitch_median_f0,
-    read_wav,
     voice_pitch,
     voice_speaker,
 )
@@ -282,8 +281,7 @@ def recording_sound(recording) -> tuple[Float[np.ndarray, " n"], float]:
     if sound is None:
         raise MissingDataError(f"{recording.subject}/{recording.task}: no sound (a .wav "
                                "beside the file or inside it): the formants cannot be measured")
-    with sound.wav_file() as wav:
-        return read_wav(wav)
+    return sound.samples()
 
 
 def recording_acoustics(
@@ -363,8 +361,7 @@ def tract_panels(run: RecordingRun, *, tract: af.TractParams | None = None,
     samples, rate_hz = None, None
     sound = getattr(run.recording, "sound", None)
     if sound is not None:
-        with sound.wav_file() as wav:
-            samples, rate_hz = read_wav(wav)
+        samples, rate_hz = sound.samples()
     # Praat's pitch tracker once: the voice's F0 (read only where it chooses the norms,
     # auto) and the measured formants' voicing
     pitch = None if samples is None else voice_pitch(samples, rate_hz)

@@ -35,13 +35,10 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 from jaxtyping import Bool, Float, Shaped
-
-from .errors import DataFormatError
 
 if TYPE_CHECKING:
     import parselmouth
@@ -74,24 +71,6 @@ class FormantTrack:
     def share_reliable(self) -> float:
         """The share of frames measured reliably (0 for no frames)."""
         return float(np.mean(self.reliable)) if len(self.times) else 0.0
-
-
-def read_wav(path: str | os.PathLike) -> tuple[Float[np.ndarray, " n"], float]:
-    """``(samples in [-1, 1], rate Hz)`` of a PCM ``.wav`` (first channel);
-    ``DataFormatError`` naming the file for what :mod:`cassi_fit.sound` cannot read."""
-    from .sound import open_pcm
-
-    params, data = open_pcm(path)
-    width = params.sampwidth
-    if width not in (1, 2, 4) or params.framerate <= 0:
-        raise DataFormatError(Path(path), None, f"unsupported .wav: {8 * width}-bit samples at "
-                              f"{params.framerate} Hz")
-    dtype = {1: np.uint8, 2: "<i2", 4: "<i4"}[width]
-    x = np.frombuffer(data, dtype=dtype).astype(np.float64)
-    x = x.reshape(-1, params.nchannels)[:, 0]
-    if width == 1:
-        x = x - 128.0
-    return x / float(2 ** (8 * width - 1)), float(params.framerate)
 
 
 def _to_pitch(sound: parselmouth.Sound) -> parselmouth.Pitch:
@@ -152,7 +131,9 @@ def measure_formants(
 
 def measure_wav(path: str | os.PathLike, times: Float[np.ndarray, " m"], **options) -> FormantTrack:
     """:func:`measure_formants` of the ``.wav`` at ``path``."""
-    samples, rate = read_wav(path)
+    from .sound import Sound
+
+    samples, rate = Sound.from_file(path).samples()
     return measure_formants(samples, rate, times, **options)
 
 

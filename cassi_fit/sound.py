@@ -2,7 +2,7 @@
 
 An XRMB recording's sound and pellets start together (sample 0 = time 0) and last about
 as long (JW11 task 5: 5.03 s of sound, 5.01 s of pellets). :func:`check_sound` reads the
-``.wav`` header only and compares: a sound within ``max(SOUND_TOLERANCE_S, 5 %)`` of the
+``.wav`` header (and maps its samples) and compares: a sound within ``max(SOUND_TOLERANCE_S, 5 %)`` of the
 recording is ``"ok"``; otherwise one line says the numbers and the likely cause:
 
 * ``"rate"`` (an error): the samples would fill the recording at a standard rate other
@@ -20,7 +20,14 @@ recording is ``"ok"``; otherwise one line says the numbers and the likely cause:
 
 ``accept_mismatch=True`` turns every error into a :class:`SoundMismatchWarning` (the
 sound is then used as it is: padded or cut, never resampled). The video writer and
-``cassi info`` call it; this module is the standard library's ``wave`` only.
+``cassi info`` call it.
+
+**Reading** (:func:`read_wav`, the one reader of sound files): what labs' files hold, not
+only 16-bit PCM: integer PCM of 8, 16, 24 or 32 bits, 32- or 64-bit float, plain or in
+``WAVE_FORMAT_EXTENSIBLE`` headers (through :mod:`scipy.io.wavfile`; the standard
+library's ``wave`` reads 8-32-bit integer PCM in plain headers only); compressed ``.wav``
+(ADPCM, mu-law...) is refused in one line naming the file. The formants are measured on
+the first channel (:meth:`Sound.samples`).
 
 **A recording's sound** is a :class:`Sound`: a ``.wav`` beside the recording file, or the
 sound stored inside it (Haskins mview's ``AUDIO`` channel, an EMU bundle's media file),
@@ -34,6 +41,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import struct
 import tempfile
 import warnings
 import wave
@@ -42,6 +50,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+from jaxtyping import Float
 
 from .errors import DataFormatError
 from .status import LengthFit
@@ -81,37 +90,106 @@ class SoundCheck:
         return asdict(self)
 
 
-def open_pcm(path: str | os.PathLike, *, samples: bool = True
-             ) -> tuple[wave._wave_params, bytes]:
-    """``(parameters, sample bytes)`` of the integer-PCM ``.wav`` at ``path`` (``b""``
-    without ``samples``: the header only), nothing checked beyond what :mod:`wave` reads;
-    :class:`DataFormatError` naming the file if it is missing, not a WAVE file, truncated,
-    compressed or float."""
-    path = Path(path)
-    if not path.is_file():
-        raise DataFormatError(path, None, "sound file not found (or not a regular file)")
+@dataclass(frozen=True)
+class WavInfo:
+    """What a ``.wav`` holds: ``framerate`` (Hz), ``nchannels``, ``nframes`` (samples per
+    channel the header claims), ``held`` (those the file holds: fewer in a cut file) and
+    ``encoding`` (``"16-bit PCM"``, ``"32-bit float"``...; 24-bit PCM is read as 32-bit)."""
+
+    framerate: int
+    nchannels: int
+    nframes: int
+    held: int
+    encoding: str
+
+
+def _data_chunk(handle: io.BytesIO | Path) -> tuple[int, int, int] | None:
+    """``(block bytes, data offset, data bytes claimed)`` of a RIFF/WAVE header: its
+    ``fmt `` chunk's block alignment and where its ``data`` chunk starts and how long it
+    says it is; None where the header is not one (:mod:`scipy.io.wavfile` says why)."""
+    with (open(handle, "rb") if isinstance(handle, Path) else contextlib.nullcontext(handle)) as f:
+        f.seek(0)
+        if f.read(12)[8:12] != b"WAVE":
+            return None
+        block = None
+        while len(head := f.read(8)) == 8:
+            chunk, size = head[:4], struct.unpack("<I", head[4:])[0]
+            if chunk == b"fmt ":
+                block = struct.unpack("<H", f.read(16)[12:14])[0]
+                f.seek(size - 16 + size % 2, io.SEEK_CUR)
+            elif chunk == b"data":
+                return (block, f.tell(), size) if block else None
+            else:
+                f.seek(size + size % 2, io.SEEK_CUR)
+    return None
+
+
+def read_wav(source: str | os.PathLike | bytes, *, where: str | os.PathLike | None = None,
+             header_only: bool = False) -> tuple[WavInfo, np.ndarray]:
+    """``(WavInfo, samples (held, channels))`` of a ``.wav`` file or its bytes, the samples
+    in their stored type (:func:`as_float` scales them to [-1, 1]): integer PCM of 8 to 32
+    bits (24-bit in 32-bit integers), 32- and 64-bit float, plain or
+    ``WAVE_FORMAT_EXTENSIBLE`` (through :mod:`scipy.io.wavfile`). ``header_only`` maps the
+    samples instead of reading them where it can. :class:`DataFormatError` naming the file
+    (``where``, default the path) if it is missing, not a WAVE file, compressed, or has a
+    rate or channel count of 0; a cut file is read (``held < nframes``, a partial last
+    sample dropped): its callers say so."""
+    from scipy.io import wavfile
+
+    if isinstance(source, bytes):
+        where, handle = where or "sound", io.BytesIO(source)
+    else:
+        where, handle = where or source, Path(source)
+        if not handle.is_file():
+            raise DataFormatError(where, None, "sound file not found (or not a regular file)")
+    layout = _data_chunk(handle)
+
+    def read(mmap: bool):
+        with warnings.catch_warnings():  # a cut file, chunks it skips: said below or moot
+            warnings.simplefilter("ignore", wavfile.WavFileWarning)
+            if isinstance(handle, io.BytesIO):
+                handle.seek(0)
+            return wavfile.read(handle, mmap=mmap)
+
+    mmap = header_only and isinstance(handle, Path)
     try:
-        with wave.open(str(path), "rb") as src:
-            params = src.getparams()
-            data = src.readframes(params.nframes) if samples else b""
-    except (wave.Error, EOFError, OSError) as exc:
-        reason = str(exc) or "empty or truncated header"
-        if "unknown format: 3" in reason:
-            reason = "float samples; only integer PCM is read"
-        raise DataFormatError(path, None, f"not a readable PCM .wav file ({reason})") from None
-    return params, data
+        for attempt in range(3):
+            try:
+                rate, data = read(mmap)
+                break
+            except ValueError as exc:
+                if attempt == 2 or not (mmap or ("reshape" in str(exc) and layout)):
+                    raise
+                if mmap:  # 24-bit samples cannot be mapped: read them
+                    mmap = False
+                    continue
+                block, start, _ = layout  # cut inside a sample: drop its part
+                raw = handle.read_bytes() if isinstance(handle, Path) else handle.getvalue()
+                handle = io.BytesIO(raw[: start + (len(raw) - start) // block * block])
+    except (ValueError, EOFError, OSError, IndexError, struct.error) as exc:
+        reason = str(exc).strip().rstrip(".") or "empty or truncated header"
+        raise DataFormatError(where, None, f"not a readable .wav file ({reason})") from None
+    data = data[:, None] if data.ndim == 1 else data
+    if rate <= 0 or data.shape[1] <= 0:
+        raise DataFormatError(where, None, f"bad .wav header: rate {rate} Hz, "
+                              f"{data.shape[1]} channels")
+    held = data.shape[0]
+    nframes = held if layout is None else max(layout[2] // layout[0], held)
+    kind = "float" if data.dtype.kind == "f" else "PCM"
+    info = WavInfo(int(rate), int(data.shape[1]), nframes, held,
+                   f"{8 * data.dtype.itemsize}-bit {kind}")
+    return info, data
 
 
-def read_header(path: str | os.PathLike) -> wave._wave_params:
-    """The parameters of a PCM ``.wav`` (header only); :class:`DataFormatError` naming the
-    file if it is missing, not a WAVE file, compressed or float, or has a rate or channel
-    count of 0."""
-    path = Path(path)
-    params, _ = open_pcm(path, samples=False)
-    if params.framerate <= 0 or params.nchannels <= 0:
-        raise DataFormatError(path, None, f"bad .wav header: rate {params.framerate} Hz, "
-                              f"{params.nchannels} channels")
-    return params
+def as_float(samples: np.ndarray) -> Float[np.ndarray, "n c"]:
+    """Samples as :func:`read_wav` gives them, scaled to [-1, 1] (float64): integers by
+    their type's range (8-bit PCM is unsigned), floats as they are."""
+    x = np.asarray(samples)
+    if x.dtype.kind == "f":
+        return x.astype(np.float64)
+    if x.dtype == np.uint8:
+        return (x.astype(np.float64) - 128.0) / 128.0
+    return x.astype(np.float64) / float(2 ** (8 * x.dtype.itemsize - 1))
 
 
 def _likely_rate(n_samples: int, recording_s: float, header_hz: int) -> int | None:
@@ -122,10 +200,6 @@ def _likely_rate(n_samples: int, recording_s: float, header_hz: int) -> int | No
         if rate != header_hz and abs(implied - rate) <= RATE_MATCH * rate:
             return rate
     return None
-
-
-def _held_frames(params: wave._wave_params, data: bytes) -> int:
-    return len(data) // max(params.sampwidth * params.nchannels, 1)
 
 
 def check_sound(path: str | os.PathLike | Sound, recording_s: float, *,
@@ -140,16 +214,12 @@ def check_sound(path: str | os.PathLike | Sound, recording_s: float, *,
     """
     if isinstance(path, Sound):
         return path.check(recording_s, accept_mismatch=accept_mismatch)
-    path = Path(path)
-    params, data = open_pcm(path)
-    read_header(path)  # a rate or channel count of 0
-    return _check(str(path), params, _held_frames(params, data), recording_s,
-                  accept_mismatch)
+    info, _ = read_wav(path, header_only=True)
+    return _check(str(path), info, recording_s, accept_mismatch)
 
 
-def _check(where: str, params: wave._wave_params, held: int, recording_s: float,
-           accept_mismatch: bool) -> SoundCheck:
-    rate, n = int(params.framerate), int(params.nframes)
+def _check(where: str, info: WavInfo, recording_s: float, accept_mismatch: bool) -> SoundCheck:
+    rate, n, held = info.framerate, info.nframes, info.held
     if held < n:
         message = (f"the header claims {n} samples ({n / rate:.3g} s) but the file holds "
                    f"{held} ({held / rate:.3g} s): the file is cut")
@@ -221,32 +291,24 @@ class Sound:
             out.writeframes(pcm.tobytes())
         return cls(source, kind, data=buffer.getvalue())
 
-    def _open(self) -> tuple[wave._wave_params, bytes]:
-        if self.path is not None:
-            return open_pcm(self.path)
-        try:
-            with wave.open(io.BytesIO(self.data), "rb") as src:
-                params = src.getparams()
-                return params, src.readframes(params.nframes)
-        except (wave.Error, EOFError) as exc:
-            reason = str(exc) or "empty or truncated header"
-            raise DataFormatError(self.source, None, f"not a readable PCM .wav sound "
-                                  f"({reason})") from None
+    def read(self, *, header_only: bool = False) -> tuple[WavInfo, np.ndarray]:
+        """:func:`read_wav` of this sound (the file, or the bytes held)."""
+        return read_wav(self.path if self.path is not None else self.data, where=self.source,
+                        header_only=header_only)
 
-    def params(self) -> wave._wave_params:
-        """The sound's ``.wav`` parameters (rate, channels, samples...)."""
-        params, _ = self._open()
-        if params.framerate <= 0 or params.nchannels <= 0:
-            raise DataFormatError(self.source, None, f"bad .wav header: rate "
-                                  f"{params.framerate} Hz, {params.nchannels} channels")
-        return params
+    def info(self) -> WavInfo:
+        """The sound's rate, channels, length and encoding (:class:`WavInfo`)."""
+        return self.read(header_only=True)[0]
+
+    def samples(self) -> tuple[Float[np.ndarray, " n"], float]:
+        """``(samples in [-1, 1], rate Hz)``: the first channel (a recording's microphone:
+        a second channel is often a trigger or a second microphone), all it holds."""
+        info, data = self.read()
+        return as_float(data[:, 0]), float(info.framerate)
 
     def check(self, recording_s: float, *, accept_mismatch: bool = False) -> SoundCheck:
         """:func:`check_sound` for this sound."""
-        params, data = self._open()
-        self.params()
-        return _check(self.source, params, _held_frames(params, data), recording_s,
-                      accept_mismatch)
+        return _check(self.source, self.info(), recording_s, accept_mismatch)
 
     @contextlib.contextmanager
     def wav_file(self) -> Iterator[Path]:
@@ -262,6 +324,6 @@ class Sound:
 
     def describe(self) -> str:
         """One line: where the sound is, its rate, channels and length."""
-        params = self.params()
-        return (f"{self.source} ({self.kind}): {params.nframes / params.framerate:.3g} s at "
-                f"{params.framerate} Hz, {params.nchannels} channel(s)")
+        info = self.info()
+        return (f"{self.source} ({self.kind}): {info.held / info.framerate:.3g} s at "
+                f"{info.framerate} Hz, {info.nchannels} channel(s), {info.encoding}")

@@ -32,7 +32,6 @@ import re
 import subprocess
 import tempfile
 import threading
-import wave
 from collections.abc import Iterable
 from fractions import Fraction
 from pathlib import Path
@@ -43,7 +42,7 @@ from jaxtyping import UInt8
 
 from ._io import atomic_output_path, atomic_write, commit_output, register_input, remove_quietly
 from .errors import CassiError, DataFormatError
-from .sound import open_pcm
+from .sound import WavInfo, read_wav
 
 if TYPE_CHECKING:
     pass
@@ -74,28 +73,25 @@ def _ffmpeg() -> str:
 # --------------------------------------------------------------------------- audio
 
 
-def check_wav(path: str | os.PathLike) -> wave._wave_params:
-    """The parameters of a readable integer-PCM ``.wav`` with sound in it; registers it as
-    an input (no output may replace it). Otherwise one :class:`DataFormatError` naming the
-    file: not a WAVE file, empty, float or compressed samples, a rate or channel count of
-    0, no samples."""
-    params, _ = _read_pcm(path)
-    return params
+def check_wav(path: str | os.PathLike) -> WavInfo:
+    """What a readable ``.wav`` with sound in it holds (:func:`cassi_fit.sound.read_wav`:
+    integer PCM or float, plain or extensible headers); registers it as an input (no output
+    may replace it). Otherwise one :class:`DataFormatError` naming the file: not a WAVE
+    file, empty, compressed samples, a rate or channel count of 0, no samples."""
+    info, _ = _read_sound(path, header_only=True)
+    return info
 
 
-def _read_pcm(path: str | os.PathLike) -> tuple[wave._wave_params, bytes]:
-    """(parameters, sample bytes) of a PCM ``.wav``, checked as :func:`check_wav` says."""
+def _read_sound(path: str | os.PathLike, *,
+                header_only: bool = False) -> tuple[WavInfo, np.ndarray]:
+    """:func:`cassi_fit.sound.read_wav` of a ``.wav`` that holds samples (else one error),
+    registered as an input."""
     path = Path(path)
-    params, data = open_pcm(path)
+    info, data = read_wav(path, header_only=header_only)
     register_input(path)
-    if params.framerate <= 0 or params.nchannels <= 0 or params.sampwidth not in (1, 2, 3, 4):
-        raise DataFormatError(
-            path, None, f"bad .wav header: rate {params.framerate} Hz, "
-            f"{params.nchannels} channels, {params.sampwidth}-byte samples",
-        )  # fmt: skip
-    if len(data) < params.sampwidth * params.nchannels:
+    if info.held == 0:
         raise DataFormatError(path, None, "the .wav file holds no sound samples")
-    return params, data
+    return info, data
 
 
 def slice_wav(
@@ -106,27 +102,22 @@ def slice_wav(
     Times in seconds on the recording's clock (sample 0 = time 0). Where the interval
     reaches outside the sound it is filled with silence, so the result is always exactly
     ``round(duration_s * rate)`` samples long and sample 0 of the result is recording time
-    ``start_s`` (to within half a sample). Any PCM sample width and channel count.
-    ``destination`` is written atomically.
+    ``start_s`` (to within half a sample). The samples keep their type (24-bit PCM is
+    written as 32-bit) and channels. ``destination`` is written atomically.
     """
-    params, data = _read_pcm(source)
-    frame_bytes = params.sampwidth * params.nchannels
-    n_have = len(data) // frame_bytes
-    first = int(round(start_s * params.framerate))
-    count = max(int(round(duration_s * params.framerate)), 1)
-    silence = b"\x80" if params.sampwidth == 1 else b"\x00"  # 8-bit PCM is unsigned
-    out = bytearray(silence * (count * frame_bytes))
-    lo, hi = max(first, 0), min(first + count, n_have)
+    from scipy.io import wavfile
+
+    info, data = _read_sound(source)
+    first = int(round(start_s * info.framerate))
+    count = max(int(round(duration_s * info.framerate)), 1)
+    silence = 128 if data.dtype == np.uint8 else 0  # 8-bit PCM is unsigned
+    out = np.full((count, data.shape[1]), silence, data.dtype)
+    lo, hi = max(first, 0), min(first + count, info.held)
     if hi > lo:
-        at = (lo - first) * frame_bytes
-        out[at : at + (hi - lo) * frame_bytes] = data[lo * frame_bytes : hi * frame_bytes]
+        out[lo - first : hi - first] = data[lo:hi]
 
     def write(fh: IO[bytes]) -> None:
-        with wave.open(fh, "wb") as dst:
-            dst.setnchannels(params.nchannels)
-            dst.setsampwidth(params.sampwidth)
-            dst.setframerate(params.framerate)
-            dst.writeframes(bytes(out))
+        wavfile.write(fh, info.framerate, out)
 
     return atomic_write(destination, write, overwrite=True, binary=True, data_file=True)
 

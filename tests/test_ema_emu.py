@@ -95,7 +95,7 @@ def test_real_ips_bundle_read(ips):
     tracked = np.isfinite(raw.positions).all(-1)
     assert not tracked[762:].any() and tracked[:762].all()
     assert np.isfinite(raw.positions[:762, :, 0]).all()  # posx is used, not only y and z
-    params = raw.sound.params()
+    params = raw.sound.info()
     assert (params.framerate, params.nchannels, params.nframes) == (24000, 1, 96002)
     tiers = {t.tier: t for t in raw.labels}
     assert set(tiers) == {"Word", "Segment", "TT", "TB"} and len(tiers["Segment"]) == 38
@@ -182,7 +182,7 @@ def test_synthetic_emudb_read_against_its_truth(emudb):
     got = np.linalg.norm(_pellet(track, "UL") - _pellet(track, "LL"), axis=-1)[ok]
     want = np.linalg.norm(truth.positions["UL"] - truth.positions["LL"], axis=-1)[ok]
     np.testing.assert_allclose(got, want, atol=0.05)
-    assert rec.sound.kind == "EMU media" and rec.sound.params().framerate == 16000
+    assert rec.sound.kind == "EMU media" and rec.sound.info().framerate == 16000
     labels = recording_labels(rec)
     assert labels.tier == "Segment" and labels.labels[:2] == ("She", "had")
     assert {t.tier for t in rec.labels} == {"Word", "Segment"}

@@ -136,12 +136,12 @@ class _Labels:
 def _stub_run(monkeypatch, tmp_path, samples):
     """A run whose model part is stubbed (the tract's formants are not what is tested):
     the recording's sound ``samples`` (a .wav) and 23 animation frames."""
-    import contextlib
     import types
     import wave
 
     from cassi_fit import acoustics
     from cassi_fit import area_function as af
+    from cassi_fit.sound import Sound
 
     m = 23
     monkeypatch.setattr(af, "tract_geometry", lambda model: None)
@@ -154,7 +154,7 @@ def _stub_run(monkeypatch, tmp_path, samples):
         w.setsampwidth(2)
         w.setframerate(int(RATE))
         w.writeframes((samples * 32767).astype("<i2").tobytes())
-    sound = types.SimpleNamespace(wav_file=lambda: contextlib.nullcontext(wav))
+    sound = Sound.from_file(wav)
     return types.SimpleNamespace(
         recording=types.SimpleNamespace(subject="S01", task="t", sound=sound),
         animation=types.SimpleNamespace(times=np.linspace(0.05, 1.15, m),
@@ -168,11 +168,8 @@ def test_praats_pitch_tracker_runs_once_per_recording(monkeypatch, tmp_path, pit
     the formants: ``auto`` sets the ceiling from the F0) and measure the formants' voicing
     from one pitch analysis, and measure what the separate analyses measure."""
     from cassi_fit.acoustics import recording_acoustics, tract_panels
-    from cassi_fit.formant_track import read_wav
-
     run = _stub_run(monkeypatch, tmp_path, synthetic_vowel(220.0))
-    with run.recording.sound.wav_file() as wav:
-        x, rate = read_wav(wav)
+    x, rate = run.recording.sound.samples()
     result = recording_acoustics(run, samples=x, rate_hz=rate, labels=_Labels(), speaker=speaker)
     assert len(pitch_calls) == 1
     panels = tract_panels(run, speaker=speaker)

@@ -273,7 +273,7 @@ def _wav_bytes(fmt=1, channels=1, rate=RATE, width=2, samples=b"\x00\x01" * 100)
 BAD_WAVS = {
     "garbage": b"this is not a sound file, just text\n" * 4,
     "empty": b"",
-    "float": _wav_bytes(fmt=3, width=4, samples=b"\x00" * 400),
+    "compressed": _wav_bytes(fmt=2, width=1, samples=b"\x00" * 400),  # ADPCM: not decoded
     "rate0": _wav_bytes(rate=0),
     "silent": _wav_bytes(samples=b""),
 }
@@ -289,6 +289,26 @@ def test_a_bad_wav_is_one_error_and_leaves_no_file(tmp_path, kind):
     assert message.startswith(str(wav)) and "\n" not in message
     assert sorted(p.name for p in tmp_path.iterdir()) == [wav.name]
     assert wav.read_bytes() == BAD_WAVS[kind]
+
+
+def test_a_float_sound_is_sliced_and_muxed_as_it_is(tmp_path):
+    """A lab's 32-bit float ``.wav`` (as Audacity or a recording program writes it; the
+    toolkit refused it before): sliced sample-aligned with its values unchanged, and heard
+    in the video."""
+    from scipy.io import wavfile
+
+    t = np.arange(RATE) / RATE
+    tone = (0.5 * np.sin(2 * np.pi * 440 * t)).astype("<f4")
+    wav = tmp_path / "float.wav"
+    wav.write_bytes(_wav_bytes(fmt=3, width=4, samples=tone.tobytes()))
+    rate, out = wavfile.read(slice_wav(wav, tmp_path / "cut.wav", 0.25, 0.5))
+    assert rate == RATE and out.dtype == np.float32
+    np.testing.assert_array_equal(out, tone[RATE // 4 : 3 * RATE // 4])
+    video = write_video(tmp_path / "talk.mp4", _frames(10), 10, audio=wav)
+    heard = _decoded_audio(video, tmp_path).astype(float) / 32768
+    assert heard.size / RATE == pytest.approx(1.0, abs=0.05)
+    assert np.sqrt(np.mean(heard[RATE // 10 : -RATE // 10] ** 2)) == pytest.approx(0.5 / np.sqrt(2),
+                                                                                  rel=0.1)
 
 
 def test_the_audio_is_registered_as_an_input(tmp_path):
