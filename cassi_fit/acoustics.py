@@ -4,7 +4,7 @@
 area function of every animated frame (:mod:`cassi_fit.area_function`), its formants
 through the lossy tube (:mod:`cassi_fit.tube`) and measures the sound's formants at the
 same times (:mod:`cassi_fit.formant_track`). Frames are *scored* where the label is a
-vowel (:data:`VOWELS`), the measurement is reliable and the model found F1-F3; the share
+vowel (:func:`is_vowel`), the measurement is reliable and the model found F1-F3; the share
 of the vowels' frames scored is reported beside every figure (``share_scored``).
 :meth:`Acoustics.frame_rows` and :meth:`Acoustics.segment_rows` are the per-frame and
 per-vowel-segment tables (``cassi acoustics --csv``), :func:`plot_acoustics` the figure of
@@ -54,18 +54,67 @@ if TYPE_CHECKING:
     from .labels import Labels
     from .pipeline import RecordingRun
 
-#: Vowel labels (SAMPA, ARPAbet without stress digits, plain letters): a label whose
-#: stress digits and length marks removed is here is a vowel.
+#: Vowel labels matched whole (SAMPA with its length marks removed, ARPAbet in lower case
+#: without stress digits, TIMIT's and Buckeye's extra vowels, plain letters): a label whose
+#: stress digits and ``:`` length marks removed is here is a vowel (:func:`is_vowel`).
 VOWELS = frozenset(
     "a e i o u y @ 6 E I O U Y V Q A { } 2 9 3 & aI aU OY eI oU @U OI ai au oi ei ou "
-    "aa ae ah ao aw ax ay eh er ey ih iy ow oy uh uw".split())
+    "aa ae ah ao aw ax ay eh er ey ih iy ow oy uh uw "
+    # TIMIT: ix, ux, axr, ax-h; Buckeye's nasalised vowels
+    "ix ux axr ax-h aan aen ahn aon awn ayn ehn eyn ihn iyn own oyn uhn uwn".split())
+
+#: The IPA chart's vowel letters and the rhotic schwas (Montreal Forced Aligner's
+#: ``english_mfa``/``german_mfa``, hand transcriptions): see :func:`is_vowel`.
+IPA_VOWEL_LETTERS = frozenset(
+    "i y ɨ ʉ ɯ u ɪ ʏ ʊ e ø ɘ ɵ ɤ o ə ɛ œ ɜ ɞ ʌ ɔ æ ɐ a ɶ ɑ ɒ ɚ ɝ".split())
+_OFFGLIDES = frozenset("jw")  # MFA's diphthongs: aj aw ej ow ɔj = a vowel letter + j or w
+
+
+def _ipa_letters(core: str) -> str:
+    """``core`` decomposed (NFD) without its combining marks (nasalisation, ◌̯, syllabic
+    ◌̩, tie bars, ...), modifier letters (ː ˑ ˈ ˌ ʰ ʲ ...) and modifier symbols (˞)."""
+    import unicodedata  # here, not at the top: this block is the vowels' alone
+
+    return "".join(c for c in unicodedata.normalize("NFD", core)
+                   if not unicodedata.category(c).startswith("M")
+                   and unicodedata.category(c) not in ("Lm", "Sk"))
 
 
 def is_vowel(label: str) -> bool:
-    """True for a vowel label (:data:`VOWELS`; ``:`` length marks and stress digits
-    ignored, case kept for SAMPA but ARPAbet matched in lower case)."""
-    core = label.strip().replace(":", "").rstrip("012")
-    return bool(core) and (core in VOWELS or core.lower() in VOWELS)
+    """True for a vowel label, in any of these phone sets:
+
+    * SAMPA (case kept; ``a: 2 9 3 6 @ { } & Q V`` are vowels), and the lower-case
+      ARPAbet of :data:`VOWELS`, matched whole once ``:`` length marks and trailing stress
+      digits (``0 1 2``) are removed; upper-case ARPAbet is matched in lower case
+      (``AA1``, ``IY0``, ``ER``). TIMIT's ``ix ux axr ax-h`` and Buckeye's nasalised
+      vowels (``aan``, ``iyn``, ...) are vowels. ``er`` is a vowel, ``r`` is not. The
+      syllabic consonants ``el em en eng`` are **not** vowels: their formants are a
+      consonant's, not a vowel's, so they are not scored. The stress digit is kept where
+      it is the whole label: SAMPA's ``2`` (and ``2:``) is a vowel.
+    * IPA: after removing combining diacritics (nasalisation, non-syllabic ◌̯,
+      centralisation, syllabicity, ...; by Unicode category), modifier letters (length
+      ``ː ˑ``, stress ``ˈ ˌ``, aspiration, ...) and modifier symbols (rhoticity ``˞``), a
+      label of one or two of :data:`IPA_VOWEL_LETTERS` (a monophthong, or a diphthong such
+      as ``aɪ``, ``aɪ̯`` or ``a͡ɪ``) or one vowel letter followed by ``j`` or ``w`` (MFA's
+      ``aj aw ej ow ɔj``). A lone ``j`` or ``w`` and syllabic consonants (``n̩``, ``l̩``)
+      are not vowels.
+
+    Ambiguous labels keep their SAMPA reading: ``y``/``Y`` (TIMIT's and CMU's glide /j/)
+    are vowels, as they have always been here. Silence and noise labels (``sil sp spn``,
+    ``<p:>``, ``#``, empty) are not vowels."""
+    core = label.strip().replace(":", "")
+    core = core.rstrip("012") or core
+    if not core:
+        return False
+    if core in VOWELS or core.lower() in VOWELS:
+        return True
+    letters = _ipa_letters(core)
+    if letters in VOWELS:  # SAMPA with an X-SAMPA diacritic, e.g. r-coloured "@`"
+        return True
+    if 1 <= len(letters) <= 2 and all(c in IPA_VOWEL_LETTERS for c in letters):
+        return True
+    return (len(letters) == 2 and letters[0] in IPA_VOWEL_LETTERS
+            and letters[1] in _OFFGLIDES)
 
 
 #: ``speaker=`` of :func:`speaker_norms` (``cassi acoustics --speaker``; None, the male

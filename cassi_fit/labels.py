@@ -398,7 +398,8 @@ def _choose_tier(path: Path, grid, tier: str | None):
         raise DataFormatError(path, None, "no interval tier")
     by_lower = {n.lower(): n for n in names}
     if tier is None:
-        chosen = next((by_lower[t] for t in DEFAULT_TIERS if t in by_lower), names[0])
+        chosen = next((by_lower[t] for t in DEFAULT_TIERS if t in by_lower), None)
+        chosen = chosen or _speaker_tier(path, names) or names[0]
     elif tier.lower() in by_lower:
         chosen = by_lower[tier.lower()]
     else:
@@ -406,9 +407,25 @@ def _choose_tier(path: Path, grid, tier: str | None):
     return grid.getTier(chosen)
 
 
+def _speaker_tier(path: Path, names: list[str]) -> str | None:
+    """The one tier named "SPEAKER - phones", else "SPEAKER - words" (the Montreal Forced
+    Aligner's tiers of a multi-speaker corpus; any case); None without one. More than one
+    speaker's: a MissingDataError naming them (``tier=`` chooses)."""
+    for default in DEFAULT_TIERS:
+        found = [n for n in names if n.lower().endswith(f" - {default}")]
+        if len(found) > 1:
+            raise MissingDataError(f"{path}: {len(found)} speakers' {default} tiers "
+                                   f"({', '.join(found)}): tier= chooses one")
+        if found:
+            return found[0]
+    return None
+
+
 def read_textgrid(path: str | os.PathLike, *, tier: str | None = None) -> Labels:
     """One interval tier of a Praat TextGrid: ``tier`` by name (case-insensitive), or by
-    default the tier called "phones", else "words", else the first interval tier."""
+    default the tier called "phones", else "words", else one speaker's "SPEAKER - phones",
+    else "SPEAKER - words" (the Montreal Forced Aligner's names; more than one speaker's: a
+    :class:`MissingDataError`, ``tier=`` chooses), else the first interval tier."""
     path = Path(path)
     if not path.is_file():
         raise MissingDataError(f"{path}: no such label file")
