@@ -41,7 +41,7 @@ import os
 import re
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -108,7 +108,9 @@ class Recording:
     track is in the toolkit's frame, mm, at the file's own rate (``track.frame_step_s``).
     ``file_sound``: the sound stored inside the recording file (mview ``AUDIO``, an EMU
     bundle's media), or None; ``labels``: the label tiers stored inside it (mview
-    ``WORDS``/``PHONES``/``LABELS``, EMU levels), ``()`` if none.
+    ``WORDS``/``PHONES``/``LABELS``, EMU levels), ``()`` if none; ``label_tier``: the tier
+    its labels come from (a TextGrid's beside it, or one inside it), None for the default
+    (``labels.tier_name``: phones, then words, then the first).
     """
 
     subject: str
@@ -123,6 +125,7 @@ class Recording:
     sensors: SensorReport | None = None
     file_sound: Sound | None = None
     labels: tuple = ()
+    label_tier: str | None = None
 
     @property
     def sound(self) -> Sound | None:
@@ -413,7 +416,8 @@ def _split_ema_stem(stem: str, folder_name: str, subject_folder: bool):
 
 def load_recording(path: str | os.PathLike, *, sensor_map: SensorMapLike = None,
                    layout: str | Sequence[str] | None = None, rate: float | None = None,
-                   bite_plane: str | os.PathLike | None = None) -> Recording:
+                   bite_plane: str | os.PathLike | None = None,
+                   tier: str | None = None) -> Recording:
     """Load a single recording with the subject data found beside it or one folder up.
 
     The format is detected by content (:func:`cassi_fit.ema.detect.detect_format`): an
@@ -424,13 +428,19 @@ def load_recording(path: str | os.PathLike, *, sensor_map: SensorMapLike = None,
     :class:`~cassi_fit.ema.sensor_map.SensorMap`, a built-in name or a ``.toml`` file;
     default the one beside the file, else the built-in names), ``layout`` and ``rate``
     (arrays; ``rate`` also for a headerless ``.pos``), ``bite_plane`` (a bite-plane
-    recording; default a ``*bite*`` file beside).
+    recording; default a ``*bite*`` file beside). ``tier``: the label tier to use
+    (``Recording.label_tier``; default phones, then words).
 
     ``path`` must be a regular file (or a link to one): a pipe, device or socket is a
     :class:`DataFormatError` and is never opened; special files beside it are skipped
     with a :class:`SpecialFileWarning`.
     """
-    path = Path(path)
+    recording = _load_recording(Path(path), sensor_map, layout, rate, bite_plane)
+    return recording if tier is None else replace(recording, label_tier=tier)
+
+
+def _load_recording(path: Path, sensor_map, layout, rate, bite_plane) -> Recording:
+    """:func:`load_recording`'s work, the tier aside."""
     pellet_file = path.suffix.lower() == PELLET_SUFFIX  # (never an EMU ``*_bndl`` folder)
     if pellet_file or not _emu().is_bundle_folder(path):
         _regular(path)
@@ -441,7 +451,7 @@ def load_recording(path: str | os.PathLike, *, sensor_map: SensorMapLike = None,
 
         fmt = detect_format(path)
     folder = path.parent.resolve()
-    _warn_special(folder, stacklevel=2)  # the subject's files are looked for here
+    _warn_special(folder, stacklevel=3)  # the subject's files are looked for here
     names = _listing(folder)
     if fmt == "xrmb":
         ema = None
@@ -504,7 +514,8 @@ def recording_from_array(
 class Dataset:
     """The recordings under ``root`` (either layout, case-insensitive; XRMB and
     articulograph files, see the module docstring; ``sensor_map`` for every
-    articulograph file, else each file's own).
+    articulograph file, else each file's own; ``tier`` the label tier of every recording,
+    ``Recording.label_tier``).
 
     ``subjects()`` and ``tasks(subject)`` list canonical names (natural order);
     ``load(subject, task)`` returns a :class:`Recording`; ``pellet_path`` the file.
@@ -515,7 +526,8 @@ class Dataset:
     an empty dataset, which :meth:`check_selection` refuses.
     """
 
-    def __init__(self, root: str | os.PathLike, *, sensor_map: SensorMapLike = None):
+    def __init__(self, root: str | os.PathLike, *, sensor_map: SensorMapLike = None,
+                 tier: str | None = None):
         self.root = Path(root)
         if not self.root.is_dir():
             raise MissingDataError(f"{self.root}: {_not_a_folder(self.root)}")
@@ -525,6 +537,7 @@ class Dataset:
             raise MissingDataError(f"{self.root}: cannot list the dataset folder "
                                    f"({exc.strerror or exc})") from None
         self.sensor_map = sensor_map
+        self.tier = tier
         # (SUBJECT, task) -> (pellet path, the subject's own folder or None)
         self._index: dict[tuple[str, str], tuple[Path, Path | None]] = {}
         self.skipped: list[tuple[Path, str]] = []
@@ -661,7 +674,8 @@ class Dataset:
         xrmb = path.suffix.lower() == PELLET_SUFFIX or detect_format(path) == "xrmb"
         ema = None if xrmb else {"sensor_map": self.sensor_map,
                                  "session": partial(self._session_frame, subject)}
-        return _assemble(path, subject, task, own=own, shared=shared, ema=ema)
+        recording = _assemble(path, subject, task, own=own, shared=shared, ema=ema)
+        return recording if self.tier is None else replace(recording, label_tier=self.tier)
 
     def _session_frame(self, subject: str, smap: SensorMap):
         """``(map, frame)`` shared by ``subject``'s articulograph files, found once from

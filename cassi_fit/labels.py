@@ -58,7 +58,6 @@ LAB_SUFFIX = ".lab"
 TEXTGRID_SUFFIX = ".textgrid"
 HTK_UNITS_PER_S = 10_000_000  # HTK time unit: 100 ns
 HTK_UNITS_THRESHOLD = 1000  # all-integer times reaching this are HTK units (see above)
-DEFAULT_TIERS = ("phones", "words")  # tried in this order when no tier is named
 UNITS = ("auto", "seconds", "htk")
 #: Labels may end this long (s), or 5 % of the recording, after the pellets' last frame.
 LABEL_TOLERANCE_S = 0.25
@@ -396,36 +395,13 @@ def _choose_tier(path: Path, grid, tier: str | None):
     names = [n for n in grid.tierNames if isinstance(grid.getTier(n), textgrid.IntervalTier)]
     if not names:
         raise DataFormatError(path, None, "no interval tier")
-    by_lower = {n.lower(): n for n in names}
-    if tier is None:
-        chosen = next((by_lower[t] for t in DEFAULT_TIERS if t in by_lower), None)
-        chosen = chosen or _speaker_tier(path, names) or names[0]
-    elif tier.lower() in by_lower:
-        chosen = by_lower[tier.lower()]
-    else:
-        raise MissingDataError(f"{path}: no interval tier {tier!r} (tiers: {', '.join(names)})")
-    return grid.getTier(chosen)
-
-
-def _speaker_tier(path: Path, names: list[str]) -> str | None:
-    """The one tier named "SPEAKER - phones", else "SPEAKER - words" (the Montreal Forced
-    Aligner's tiers of a multi-speaker corpus; any case); None without one. More than one
-    speaker's: a MissingDataError naming them (``tier=`` chooses)."""
-    for default in DEFAULT_TIERS:
-        found = [n for n in names if n.lower().endswith(f" - {default}")]
-        if len(found) > 1:
-            raise MissingDataError(f"{path}: {len(found)} speakers' {default} tiers "
-                                   f"({', '.join(found)}): tier= chooses one")
-        if found:
-            return found[0]
-    return None
+    return grid.getTier(tier_name(names, tier, path, "interval tier"))
 
 
 def read_textgrid(path: str | os.PathLike, *, tier: str | None = None) -> Labels:
-    """One interval tier of a Praat TextGrid: ``tier`` by name (case-insensitive), or by
-    default the tier called "phones", else "words", else one speaker's "SPEAKER - phones",
-    else "SPEAKER - words" (the Montreal Forced Aligner's names; more than one speaker's: a
-    :class:`MissingDataError`, ``tier=`` chooses), else the first interval tier."""
+    """One interval tier of a Praat TextGrid: ``tier`` by name (case-insensitive), or the
+    one :func:`tier_name` chooses among its interval tiers (phones, then words, then one
+    speaker's, then the first)."""
     path = Path(path)
     if not path.is_file():
         raise MissingDataError(f"{path}: no such label file")
@@ -529,24 +505,50 @@ def _pellet_seconds(pellet_path: Path) -> float | None:
         return None
 
 
-# ------------------------------------------------------- a recording's own labels
-#: Tier names (lower case) taken first when none is named: phones, then words.
-PHONE_TIERS = ("phones", "phone", "segment", "segments", "phonetic", "phn")
-WORD_TIERS = ("words", "word", "wrd")
+# ------------------------------------------------------------ which tier is used
+#: Tier names (lower case) taken first when none is named: phones, then words (a TextGrid
+#: beside the file and the tiers inside it alike). ``mau``, ``ort-mau``: BAS WebMAUS's
+#: phone and word tiers; ``segment``: EMU's usual phone level.
+PHONE_TIERS = ("phones", "phone", "segment", "segments", "phonetic", "phn", "mau")
+WORD_TIERS = ("words", "word", "wrd", "ort-mau", "ort")
+
+
+def tier_name(names, tier: str | None = None, where=None, kind: str = "label tier"
+              ) -> str | None:
+    """Which of the tiers ``names`` a recording's labels come from: ``tier`` (any case;
+    else a :class:`MissingDataError` listing them), else the first of
+    :data:`PHONE_TIERS`, then :data:`WORD_TIERS`, then one speaker's (the Montreal
+    Forced Aligner's ``SPEAKER - phones``, then ``SPEAKER - words``; several speakers'
+    are refused in one line: ``--tier`` / ``tier=`` chooses), then the first tier; None
+    for no tier."""
+    names = list(names)
+    by_lower = {}
+    for n in names:
+        by_lower.setdefault(n.lower(), n)
+    if tier is not None:
+        if tier.lower() not in by_lower:
+            raise MissingDataError(f"{where or 'the recording'}: no {kind} {tier!r} "
+                                   f"(tiers: {', '.join(names) or 'none'})")
+        return by_lower[tier.lower()]
+    for default in PHONE_TIERS + WORD_TIERS:
+        if default in by_lower:
+            return by_lower[default]
+    for default in ("phones", "words"):
+        found = [n for n in names if n.lower().endswith(f" - {default}")]
+        if len(found) > 1:
+            raise MissingDataError(f"{where or 'the recording'}: {len(found)} speakers' "
+                                   f"{default} tiers ({', '.join(found)}): --tier (tier=) "
+                                   "chooses one")
+        if found:
+            return found[0]
+    return names[0] if names else None
 
 
 def choose_tier(tiers, tier: str | None = None, where=None) -> Labels | None:
-    """The tier named ``tier`` (any case; else a :class:`MissingDataError` listing them),
-    else the first of :data:`PHONE_TIERS`, then :data:`WORD_TIERS`, then the first tier."""
+    """The tier of ``tiers`` (:class:`Labels`) that :func:`tier_name` chooses."""
     tiers = list(tiers)
-    by_name = {t.tier.lower(): t for t in reversed(tiers)}
-    if tier is not None and tier.lower() not in by_name:
-        raise MissingDataError(f"{where or 'the recording'}: no label tier {tier!r} (tiers: "
-                               f"{', '.join(t.tier for t in tiers) or 'none'})")
-    if tier is not None:
-        return by_name[tier.lower()]
-    found = [by_name[n] for n in PHONE_TIERS + WORD_TIERS if n in by_name]
-    return found[0] if found else (tiers[0] if tiers else None)
+    name = tier_name([t.tier for t in tiers], tier, where)
+    return next((t for t in tiers if t.tier == name), None)
 
 
 def recording_labels(recording, *, tier: str | None = None, units: str = "auto",
@@ -555,8 +557,12 @@ def recording_labels(recording, *, tier: str | None = None, units: str = "auto",
     """The labels every output uses for a ``dataset.Recording``: a file beside it
     (:func:`labels_for`), else the tiers inside it (``recording.labels``: mview
     ``WORDS``/``PHONES``, EMU levels; :func:`choose_tier`), else None; checked against
-    its length (``recording_s``, default the track's) as :func:`labels_for` checks."""
+    its length (``recording_s``, default the track's) as :func:`labels_for` checks.
+    ``tier``: default the recording's own choice (``Recording.label_tier``: ``--tier``),
+    else :func:`tier_name`'s."""
 
+    if tier is None:
+        tier = getattr(recording, "label_tier", None)
     if recording_s is None:
         recording_s = recording.track.length_s
     path = getattr(recording, "path", None)

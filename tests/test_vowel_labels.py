@@ -203,3 +203,45 @@ def test_mfa_several_speakers_need_a_tier(tmp_path):
     ):
         read_textgrid(two)
     assert read_textgrid(two, tier="BOB - phones").labels == ("t", "a")
+
+
+def test_webmaus_phone_tier_by_default(tmp_path):
+    """BAS WebMAUS's TextGrids (ORT-MAU words, KAN-MAU canonical words, MAU phones)."""
+    grid = _grid(tmp_path / "maus.TextGrid",
+                 [("ORT-MAU", ("Klausur",)), ("KAN-MAU", ("klaUzu:6",)), ("MAU", ("k", "aU", "u:"))])
+    assert read_textgrid(grid).tier == "MAU"
+
+
+def test_the_tier_is_chosen_on_the_command_line_and_for_a_dataset(tmp_path, capsys):
+    """Two speakers' MFA phone tiers beside a recording: every command says in one line how
+    to choose (``--tier``), and ``--tier`` (``load_recording``, ``Dataset``, a corpus item:
+    ``Recording.label_tier``) makes every output use that tier."""
+    import json
+
+    from cassi_fit import cli
+    from cassi_fit.corpus._items import dataset_items, load_item
+    from cassi_fit.dataset import Dataset, load_recording
+    from cassi_fit.labels import recording_labels
+    from cassi_fit.synth import generate_corpus
+
+    root = generate_corpus(tmp_path / "corpus", n_subjects=1, tasks="tp040")
+    txy = next((root / "S01").glob("*.[Tt][Xx][Yy]"))
+    length = load_recording(txy).track.length_s
+    grid = textgrid.Textgrid(0.0, length)
+    for name, label in [("alice - phones", "a"), ("bob - phones", "i"), ("bob - words", "he")]:
+        grid.addTier(textgrid.IntervalTier(name, [Interval(0.0, length, label)], 0.0, length))
+    grid.save(str(txy.with_suffix(".TextGrid")), format="long_textgrid", includeBlankSpaces=True)
+
+    assert cli.main(["info", str(txy), "--json"]) == 0
+    used = json.loads(capsys.readouterr().out)["labels"]["used"]
+    assert "2 speakers' phones tiers" in used["error"] and "--tier" in used["error"]
+    assert cli.main(["info", str(txy), "--json", "--tier", "BOB - phones"]) == 0
+    assert json.loads(capsys.readouterr().out)["labels"]["used"]["tier"] == "bob - phones"
+
+    assert recording_labels(load_recording(txy, tier="bob - phones")).labels == ("i",)
+    ds = Dataset(root, tier="alice - phones")
+    assert recording_labels(ds.load("S01", "tp040")).labels == ("a",)
+    item, = dataset_items(ds)
+    assert recording_labels(load_item(item)).labels == ("a",)
+    with pytest.raises(MissingDataError, match="no interval tier 'carol - phones'.*bob - words"):
+        recording_labels(load_recording(txy, tier="carol - phones"))

@@ -59,6 +59,10 @@ def add_source_arguments(parser: argparse.ArgumentParser) -> None:
                         help="articulograph files with numbered channels and no sensor map: "
                         "use the map proposed from the data (`cassi info --write-sensor-map "
                         "FILE` shows it); the channels it is not sure of get no role")
+    parser.add_argument("--tier", metavar="NAME", default=None,
+                        help="the label tier to use: a TextGrid's beside the file or one "
+                        "inside it (default: phones, then words, WebMAUS's MAU, one "
+                        "speaker's 'NAME - phones', else the first; `cassi info` lists them)")
 
 
 def source_options(args: argparse.Namespace) -> dict:
@@ -67,7 +71,7 @@ def source_options(args: argparse.Namespace) -> dict:
     if smap is None and getattr(args, "accept_proposed_map", False):
         smap = "proposed"  # cassi_fit.ema.sensor_map.PROPOSED; a map beside the files wins
     return {"sensor_map": smap, "layout": args.layout, "rate": args.rate,
-            "bite_plane": args.bite_plane}
+            "bite_plane": args.bite_plane, "tier": getattr(args, "tier", None)}
 
 
 def load_recording_args(words, args: argparse.Namespace | None = None):
@@ -94,7 +98,8 @@ def load_recording_args(words, args: argparse.Namespace | None = None):
         root = Path(words[0])
         if not root.is_dir():
             raise CassiError(f"{root}: no such dataset folder")
-        return Dataset(root, sensor_map=options.get("sensor_map")).load(words[1], words[2])
+        return Dataset(root, sensor_map=options.get("sensor_map"),
+                       tier=options.get("tier")).load(words[1], words[2])
     raise CassiError(f"RECORDING is a pellet file or DATASET SUBJECT TASK, got {len(words)} words")
 
 
@@ -104,7 +109,7 @@ def _only_recording(root: Path, options: dict):
     from cassi_fit.dataset import Dataset
     from cassi_fit.errors import CassiError
 
-    dataset = Dataset(root, sensor_map=options.get("sensor_map"))
+    dataset = Dataset(root, sensor_map=options.get("sensor_map"), tier=options.get("tier"))
     pairs = [(s, t) for s in dataset.subjects() for t in dataset.tasks(s)]
     if len(pairs) != 1:
         example = f" (e.g. {root} {pairs[0][0]} {pairs[0][1]})" if pairs else ""
@@ -129,13 +134,13 @@ def dataset_args(root, args: argparse.Namespace):
         raise CassiError(f"{root}: {', '.join(per_file)} describe one file, not a dataset; "
                          f"give them with one recording (or put a sensor map beside the files)")
     smap = options.get("sensor_map")
-    if smap is None:
+    if smap is None and options.get("tier") is None:
         return root
     from cassi_fit.dataset import Dataset
 
     if isinstance(smap, str) and os.path.lexists(smap):
         smap = os.path.abspath(smap)  # a worker may run in another folder
-    return Dataset(os.path.abspath(root), sensor_map=smap)
+    return Dataset(os.path.abspath(root), sensor_map=smap, tier=options.get("tier"))
 
 
 def add_speaker_argument(parser: argparse.ArgumentParser, what: str) -> None:

@@ -136,7 +136,7 @@ def _load(load, *args) -> dict:
 
 
 def collect(path: Path, list_only: bool = False, *, sensor_map=None, layout=None, rate=None,
-            bite_plane=None) -> dict:
+            bite_plane=None, tier=None) -> dict:
     """The whole report as a JSON-ready dict (a folder or a single recording file); the
     keywords are :func:`cassi_fit.dataset.load_recording`'s, for articulograph files."""
     from functools import partial
@@ -151,13 +151,13 @@ def collect(path: Path, list_only: bool = False, *, sensor_map=None, layout=None
     if ((path.exists() or path.is_symlink()) and not path.is_dir()) or is_bundle_folder(path):
         # a file (load_recording refuses a FIFO, a device, a broken or looping link)
         load = partial(load_recording, sensor_map=sensor_map, layout=layout, rate=rate,
-                       bite_plane=bite_plane)
+                       bite_plane=bite_plane, tier=tier)
         rec = _quietly(load, path)
         info = _describe(rec)
         return {"path": str(path), "kind": "file", "subject": rec.subject, "task": rec.task, **info}
     if not path.is_dir():
         raise MissingDataError(f"{path}: no such file or folder")
-    ds = Dataset(path, sensor_map=sensor_map)
+    ds = Dataset(path, sensor_map=sensor_map, tier=tier)
     ds.check_selection()  # nothing found: one line naming the folder and what was looked for
     subjects = {}
     for subject in ds.subjects():

@@ -22,20 +22,22 @@ class CorpusItem:
     per-subject work), ``path``: the pellet file (or, per subject, the dataset folder),
     ``root``: the dataset folder it came from (``""`` for a lone file), and
     ``sensor_map``: the dataset's articulograph sensor map as it was given
-    (``dataset.Dataset``'s; None: a map beside the files, else the built-in names), so a
-    worker reads the recording as the dataset does."""
+    (``dataset.Dataset``'s; None: a map beside the files, else the built-in names) and
+    ``tier`` its label tier (None: the default), so a worker reads the recording as the
+    dataset does."""
 
     subject: str
     task: str
     path: str
     root: str = ""
     sensor_map: Any = field(default=None, compare=False)
+    tier: str | None = field(default=None, compare=False)
 
     def dataset(self) -> Dataset:
         """The item's ``dataset.Dataset`` (its folder, with its sensor map)."""
         from ..dataset import Dataset
 
-        return Dataset(self.root, sensor_map=self.sensor_map)
+        return Dataset(self.root, sensor_map=self.sensor_map, tier=self.tier)
 
 
 def load_item(item: CorpusItem, *, quiet: bool = False) -> Recording:
@@ -52,7 +54,7 @@ def load_item(item: CorpusItem, *, quiet: bool = False) -> Recording:
             warnings.simplefilter("ignore", DefaultHeadMeasuresWarning)
         if item.root:
             return item.dataset().load(item.subject, item.task)
-        return load_recording(item.path, sensor_map=item.sensor_map)
+        return load_recording(item.path, sensor_map=item.sensor_map, tier=item.tier)
 
 
 @dataclass(frozen=True)
@@ -108,10 +110,10 @@ def dataset_items(dataset: Dataset | str | os.PathLike, *, subjects: Iterable[st
     for subject in names:
         chosen = chosen_tasks(ds, subject, tasks)
         if per_subject and chosen:
-            items.append(CorpusItem(subject, "", root, root, ds.sensor_map))
+            items.append(CorpusItem(subject, "", root, root, ds.sensor_map, ds.tier))
         elif not per_subject:
             items += [CorpusItem(subject, t, os.path.abspath(ds.pellet_path(subject, t)), root,
-                                 ds.sensor_map) for t in chosen]
+                                 ds.sensor_map, ds.tier) for t in chosen]
     return items
 
 
