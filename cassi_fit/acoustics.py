@@ -117,6 +117,22 @@ def is_vowel(label: str) -> bool:
             and letters[1] in _OFFGLIDES)
 
 
+def unscored_line(labels: Labels | None) -> str | None:
+    """One line saying why no frame of a recording can be scored, for a researcher whose
+    labels the toolkit does not take for vowels: no labels at all, or no vowel
+    (:func:`is_vowel`) among those of the tier used; None when some label is a vowel."""
+    if labels is None or not len(labels):
+        return ("no labels (X.lab or X.TextGrid beside the file, or a tier inside it): nothing "
+                "is scored; --csv gives every frame's model and measured formants")
+    if any(is_vowel(s) for s in labels.labels):
+        return None
+    names = sorted(set(labels.labels))
+    shown = ", ".join(names[:8]) + (", ..." if len(names) > 8 else "")
+    return (f"no vowel among the {len(labels)} labels of the tier {labels.tier!r} ({shown}): "
+            "nothing is scored (vowels are read in SAMPA, ARPAbet, TIMIT or IPA; --tier "
+            "chooses another tier)")
+
+
 #: ``speaker=`` of :func:`speaker_norms` (``cassi acoustics --speaker``; None, the male
 #: norms, the default)
 SPEAKERS = ("male", "female", "auto")

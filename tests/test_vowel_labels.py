@@ -4,6 +4,7 @@ stress digits), TIMIT and Buckeye, IPA (Montreal Forced Aligner, hand transcript
 TextGrids; combining marks written as ``\\u`` escapes), and the MFA TextGrid's speaker tiers
 (``SPEAKER - phones``) chosen by default."""
 
+import numpy as np
 import pytest
 from praatio import textgrid
 from praatio.utilities.constants import Interval
@@ -245,3 +246,18 @@ def test_the_tier_is_chosen_on_the_command_line_and_for_a_dataset(tmp_path, caps
     assert recording_labels(load_item(item)).labels == ("a",)
     with pytest.raises(MissingDataError, match="no interval tier 'carol - phones'.*bob - words"):
         recording_labels(load_recording(txy, tier="carol - phones"))
+
+
+def test_a_recording_with_nothing_to_score_says_why():
+    """No labels, or labels none of which is a vowel (a words tier, an unknown phone set):
+    one line naming the tier and a few of its labels, instead of '0 % scored'."""
+    from cassi_fit.acoustics import unscored_line
+    from cassi_fit.labels import Labels
+
+    assert unscored_line(None).startswith("no labels")
+    words = Labels([0.0, 0.5], [0.5, 1.0], ("sah", "sah"), tier="words")
+    line = unscored_line(words)
+    assert "2 labels of the tier 'words' (sah)" in line and "--tier" in line
+    many = Labels(np.arange(10.0), np.arange(1.0, 11.0), tuple("bcdfghjklm"), tier="mau")
+    assert "(b, c, d, f, g, h, j, k, ...)" in unscored_line(many)
+    assert unscored_line(Labels([0.0], [1.0], ("\u0251\u02d0",), tier="phones")) is None

@@ -43,8 +43,14 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from cassi_fit.acoustics import plot_acoustics, recording_acoustics, recording_sound
+    from cassi_fit.acoustics import (
+        plot_acoustics,
+        recording_acoustics,
+        recording_sound,
+        unscored_line,
+    )
     from cassi_fit.errors import OutputExistsError
+    from cassi_fit.labels import recording_labels
     from cassi_fit.tables import markdown_text, write_table
 
     for out in (args.csv, args.plot):
@@ -52,21 +58,25 @@ def run(args) -> int:
             raise OutputExistsError(f"{out}: exists (use --force to replace it)")
     recording = load_recording_args(args.recording, args)
     samples, rate = recording_sound(recording)  # none: said before the model is run
+    labels = recording_labels(recording)  # a label file that does not fit: said here too
     face_args = acoustic_only_folder(recording, args)
     run_ = run_args(recording, face_args)
     for line in run_.state.calibration_caveats:  # what the model took without knowing it
         print(f"calibration: {line}")  # (a palate estimated, the lips' rest), as animate says
     tract, words = _calibrated_tract(recording, getattr(args, "calibration", None))
-    result = recording_acoustics(run_, samples=samples, rate_hz=rate, ceiling_hz=args.ceiling,
-                                 tract=tract, speaker=args.speaker)
+    result = recording_acoustics(run_, samples=samples, rate_hz=rate, labels=labels,
+                                 ceiling_hz=args.ceiling, tract=tract, speaker=args.speaker)
     print(result.norms.line(ceiling_hz=args.ceiling, larynx=words))
     from cassi_fit.lips import closures_line
 
     if (line := closures_line(result.lips_in_closures, run_.spec.lip_closure)) is not None:
         print(line)  # the lips' rest is wrong where they stay apart in labelled closures
     segments = result.segment_rows()
-    print(markdown_text(segments, digits=3) if segments else "no vowel segments labelled")
-    print(f"{100 * result.share_scored:.0f} % of the vowels' frames scored")
+    if (why := unscored_line(labels)) is not None:
+        print(why)
+    else:
+        print(markdown_text(segments, digits=3) if segments else "no vowel segments labelled")
+        print(f"{100 * result.share_scored:.0f} % of the vowels' frames scored")
     if args.csv:
         write_table(result.frame_rows(), args.csv, overwrite=args.force, digits=3)
         seg_path = Path(args.csv).with_suffix(".segments.csv")
