@@ -22,12 +22,13 @@ figure (say so).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -242,6 +243,14 @@ class CalibratedTract(NamedTuple):
             return "the adult norms"
         return f"fitted to the sound ({self.path.name})"
 
+    def larynx(self) -> str | None:
+        """The fitted larynx and where it came from, in words (``cassi acoustics``' norms
+        line); None for the adult norms."""
+        if self.tract is None:
+            return None
+        return (f"larynx {float(self.tract.larynx_drop_mm):.0f} mm below the hyoid, "
+                f"{self.label()}")
+
     def missing(self, subject: str) -> str | None:
         """The one line for a calibration named without ``subject``'s file in it (the
         adult norms are used); None otherwise."""
@@ -264,6 +273,25 @@ def calibrated_tract(calibration: str | os.PathLike | None, subject: str) -> Cal
     if not path.is_file():
         return CalibratedTract(None, path)
     return CalibratedTract(read_acoustic_calibration(path)[0], path)
+
+
+def face_calibration(spec: Any, subject: str) -> tuple[Any, str | None]:
+    """``(spec, note)`` for a run whose calibration (a ``run_spec.RunSpec``'s, what
+    ``--calibration`` names) is a folder holding ``subject``'s vocal tract
+    (``SUBJECT.acoustic.json``, what ``cassi calibrate --acoustic`` writes) but no
+    calibration of the face (``SUBJECT.calibration.json``): the spec without it (the face
+    keeps its defaults; the folder serves the vocal tract alone) and the one line saying
+    so; otherwise the spec as it is and None."""
+    from .calibration import calibration_path
+
+    folder = getattr(spec.calibration, "path", None)  # run_spec.CalibrationFiles
+    if (folder is None or not Path(folder).is_dir()
+            or not acoustic_calibration_path(folder, subject).is_file()
+            or calibration_path(folder, subject).is_file()):
+        return spec, None
+    note = (f"{folder}: no calibration of {subject}'s face, only its vocal tract: the face "
+            "with the default calibration")
+    return dataclasses.replace(spec, calibration=None), note  # (.replace keeps a None)
 
 
 def write_acoustic_calibration(path: str | os.PathLike, subject: str, fit: AcousticFit, *,

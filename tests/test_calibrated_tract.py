@@ -3,7 +3,6 @@ tract and the file read or looked for), which each caller words: ``cassi acousti
 (``_cli.acoustics._calibrated_tract``) and the tract view (``acoustics.tract_panels``,
 tested in test_tract_view.py)."""
 
-import types
 from pathlib import Path
 
 import numpy as np
@@ -50,21 +49,17 @@ def test_the_answer_is_the_tract_and_its_file_not_a_sentence(folder):
         assert float(found.tract.larynx_drop_mm) == float(fitted.larynx_drop_mm) == 27.0
 
 
-def test_cassi_acoustics_words_the_calibration(folder, capsys):
-    """The speaker's line's larynx words with a calibration; the one line naming the
-    folder without the subject's file; nothing without a calibration named."""
-    from cassi_fit._cli.acoustics import _calibrated_tract
-
-    recording = types.SimpleNamespace(subject=SUBJECT)
-    assert _calibrated_tract(recording, None) == (None, None)
-    assert capsys.readouterr().out == ""
-    assert _calibrated_tract(recording, folder) == (None, None)
-    assert capsys.readouterr().out == (f"no acoustic calibration for {SUBJECT} in {folder}: "
-                                       "the adult norms\n")
+def test_cassi_acoustics_words_the_calibration(folder):
+    """The speaker's line's larynx words with a calibration (``CalibratedTract.larynx``,
+    what ``cassi acoustics`` prints, one recording or a dataset); none without one, and
+    none where the folder lacks the subject's file (``missing`` says so)."""
+    assert calibrated_tract(None, SUBJECT).larynx() is None
+    assert calibrated_tract(folder, SUBJECT).larynx() is None
     _write(folder)
-    tract, words = _calibrated_tract(recording, folder)
-    assert float(tract.larynx_drop_mm) == 27.0 and capsys.readouterr().out == ""
-    assert words == f"larynx 27 mm below the hyoid, fitted to the sound ({SUBJECT}.acoustic.json)"
+    found = calibrated_tract(folder, SUBJECT)
+    assert float(found.tract.larynx_drop_mm) == 27.0
+    assert found.larynx() == (f"larynx 27 mm below the hyoid, fitted to the sound "
+                              f"({SUBJECT}.acoustic.json)")
 
 
 def test_the_answer_words_itself_once_for_every_caller(folder):

@@ -292,35 +292,29 @@ def spec_from_args(args: argparse.Namespace):
 
 def run_args(recording, args):
     """``pipeline.run_recording`` of one recording with the options of
-    :func:`add_model_arguments`."""
+    :func:`add_model_arguments` (:func:`face_spec`)."""
     from cassi_fit.pipeline import run_recording
 
-    return run_recording(recording, spec_from_args(args))
+    return run_recording(recording, face_spec(recording, args))
 
 
-def acoustic_only_folder(recording, args):
-    """A ``--calibration`` folder holding the subject's acoustic calibration but no
-    ``SUBJECT.calibration.json`` (``cassi calibrate --acoustic`` writes only the former):
-    the pellets' model keeps its defaults, said in one line, and the folder serves the
-    vocal tract alone (``cassi acoustics``, ``cassi animate --views ...,tract``). Returns
-    the options for the face's run (a copy; ``args`` kept)."""
-    folder = getattr(args, "calibration", None)
-    if not folder or not Path(folder).is_dir():
-        return args
+def face_spec(recording, args):
+    """The ``RunSpec`` of the face's run for ``recording``: :func:`spec_from_args`, without
+    the calibration where ``--calibration`` names a folder holding the subject's vocal
+    tract but not its face (``acoustic_fit.face_calibration``: ``cassi calibrate
+    --acoustic`` writes only the former; said in one line): the face keeps its defaults
+    and the folder serves the vocal tract alone (``cassi animate --views ...,tract``)."""
+    spec = spec_from_args(args)
+    if not (getattr(args, "calibration", None) and Path(args.calibration).is_dir()):
+        return spec
     # Imported only for a folder: the acoustic fit's module (optimistix with it) costs
     # a run without a calibration over a second.
-    from cassi_fit.acoustic_fit import acoustic_calibration_path
-    from cassi_fit.calibration import calibration_path
+    from cassi_fit.acoustic_fit import face_calibration
 
-    if (acoustic_calibration_path(folder, recording.subject).is_file()
-            and not calibration_path(folder, recording.subject).is_file()):
-        print(f"{folder}: no calibration of {recording.subject}'s face, only its vocal "
-              "tract: the face with the default calibration")
-        return argparse.Namespace(**{**vars(args), "calibration": None})
-    return args
-
-
-# ------------------------------------------------------------------ images
+    spec, note = face_calibration(spec, recording.subject)
+    if note is not None:
+        print(note)
+    return spec
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -371,6 +365,15 @@ def add_run_arguments(parser: argparse.ArgumentParser, *, force: bool = True) ->
     if force:
         parser.add_argument("--force", action="store_true",
                             help="replace existing outputs (and rerun every recording)")
+
+
+def names_option(values: str | list[str] | None) -> list[str] | None:
+    """``--subjects``/``--tasks`` as names: ``"a,b"`` or ``["a,b", "c"]`` -> ``["a", "b",
+    "c"]``; None (or an empty string) stays None (every one)."""
+    if not values:
+        return None
+    values = [values] if isinstance(values, str) else values
+    return [w.strip() for v in values for w in v.split(",") if w.strip()]
 
 
 def run_options(args: argparse.Namespace) -> dict:

@@ -1,17 +1,23 @@
 """``cassi acoustics RECORDING [--csv OUT.csv] [--plot OUT.png]``: the model's formants of
-every frame against the recording's sound (``cassi_fit.acoustics``)."""
+every frame against the recording's sound (``cassi_fit.acoustics``); ``cassi acoustics
+DATASET --out DIR``: every recording of a dataset and its tables
+(``cassi_fit.acoustics_corpus``)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from ._options import (
-    acoustic_only_folder,
     add_model_arguments,
     add_recording_argument,
+    add_run_arguments,
     add_speaker_argument,
+    dataset_args,
+    finish,
     load_recording_args,
-    run_args,
+    names_option,
+    run_options,
+    spec_from_args,
 )
 
 
@@ -38,17 +44,32 @@ def register(subparsers) -> None:
                         "male, 5500 for an adult female); given, it wins over --speaker's")
     parser.add_argument("--csv", metavar="OUT.csv", help="per-frame table to write")
     parser.add_argument("--plot", metavar="OUT.png", help="figure to write")
-    parser.add_argument("--force", action="store_true", help="replace existing outputs")
+    parser.add_argument("--out", metavar="DIR", default=None,
+                        help="a dataset folder as RECORDING: every recording heard (in "
+                        "parallel) into DIR/SUBJECT/TASK.acoustics.csv and "
+                        ".acoustics.segments.csv, and the dataset's tables "
+                        "acoustics_recordings.csv, acoustics_segments.csv and "
+                        "acoustics_summary.csv/.md (per subject and vowel quality)")
+    parser.add_argument("--subjects", nargs="+", metavar="SUBJECT",
+                        help="with --out: only these subjects (default: all)")
+    parser.add_argument("--tasks", nargs="+", metavar="TASK",
+                        help="with --out: only these tasks (default: all)")
+    add_run_arguments(parser)  # with --out: --jobs, --scheduler, --resume, --force
+    parser.add_argument("--quiet", action="store_true", help="with --out: no progress bar")
     parser.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from cassi_fit.acoustics import (
-        plot_acoustics,
-        recording_acoustics,
-        recording_sound,
-        unscored_line,
-    )
+    words = args.recording
+    if len(words) == 1 and Path(words[0]).is_dir() and args.out is not None:
+        return run_dataset(args)
+    if args.out is not None:
+        from cassi_fit.errors import CassiError
+
+        raise CassiError(f"--out DIR is for a dataset folder's recordings, not {' '.join(words)}"
+                         " (one recording: --csv and --plot)")
+    from cassi_fit.acoustics import plot_acoustics, recording_sound, unscored_line
+    from cassi_fit.acoustics_corpus import hear
     from cassi_fit.errors import OutputExistsError
     from cassi_fit.labels import recording_labels
     from cassi_fit.tables import markdown_text, write_table
@@ -56,17 +77,17 @@ def run(args) -> int:
     for out in (args.csv, args.plot):
         if out and Path(out).exists() and not args.force:
             raise OutputExistsError(f"{out}: exists (use --force to replace it)")
-    recording = load_recording_args(args.recording, args)
+    recording = load_recording_args(words, args)
     samples, rate = recording_sound(recording)  # none: said before the model is run
     labels = recording_labels(recording)  # a label file that does not fit: said here too
-    face_args = acoustic_only_folder(recording, args)
-    run_ = run_args(recording, face_args)
+    heard = hear(recording, spec_from_args(args), labels=labels, samples=samples,
+                 rate_hz=rate, speaker=args.speaker, ceiling_hz=args.ceiling)
+    run_, result = heard.run, heard.acoustics
+    for line in heard.notes:  # what the calibration folder lacked
+        print(line)
     for line in run_.state.calibration_caveats:  # what the model took without knowing it
         print(f"calibration: {line}")  # (a palate estimated, the lips' rest), as animate says
-    tract, words = _calibrated_tract(recording, getattr(args, "calibration", None))
-    result = recording_acoustics(run_, samples=samples, rate_hz=rate, labels=labels,
-                                 ceiling_hz=args.ceiling, tract=tract, speaker=args.speaker)
-    print(result.norms.line(ceiling_hz=args.ceiling, larynx=words))
+    print(result.norms.line(ceiling_hz=args.ceiling, larynx=heard.larynx))
     from cassi_fit.lips import closures_line
 
     if (line := closures_line(result.lips_in_closures, run_.spec.lip_closure)) is not None:
@@ -89,19 +110,26 @@ def run(args) -> int:
     return 0
 
 
-def _calibrated_tract(recording, calibration):
-    """``(tract, words)``: the vocal tract of the subject's acoustic calibration
-    (``SUBJECT.acoustic.json`` in the ``--calibration`` folder, or beside the given file)
-    and its larynx in words, or ``(None, None)`` (the speaker's adult norms)."""
-    from cassi_fit.acoustic_fit import calibrated_tract
+def run_dataset(args) -> int:
+    """``cassi acoustics DATASET --out DIR``: every recording heard, in parallel, and the
+    dataset's tables (``acoustics_corpus``); exit 1 if any recording failed."""
+    from cassi_fit.acoustics_corpus import acoustics_corpus
+    from cassi_fit.errors import CassiError
+    from cassi_fit.tables import markdown_text
 
-    found = calibrated_tract(calibration, recording.subject)
-    if found.tract is None:
-        if (line := found.missing(recording.subject)) is not None:
-            print(line)
-        return None, None
-    return found.tract, (f"larynx {float(found.tract.larynx_drop_mm):.0f} mm below the "
-                         f"hyoid, {found.label()}")
+    if args.csv or args.plot:
+        raise CassiError("--csv and --plot are for one recording; a dataset's tables go to "
+                         "--out DIR")
+    run, written, summary = acoustics_corpus(
+        dataset_args(args.recording[0], args), args.out, spec=spec_from_args(args),
+        subjects=names_option(args.subjects), tasks=names_option(args.tasks), speaker=args.speaker,
+        ceiling_hz=args.ceiling, run_options=run_options(args))
+    overall = [r for r in summary if r["quality"] == "all"]
+    if overall:
+        print(markdown_text(overall, digits=1))
+    print(f"{len(run.results) - len(run.failed)} of {len(run.results)} recordings heard on "
+          f"{run.workers} worker(s); tables {', '.join(str(p) for p in written)}")
+    return finish(run)
 
 
 def calibrate_acoustic(args) -> int:

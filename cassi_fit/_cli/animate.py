@@ -9,7 +9,6 @@ from pathlib import Path
 from cassi_fit.options import ANIMATION_SUFFIXES, DEFAULT_FPS, TRACT_VIEW, VIEWS
 
 from ._options import (
-    acoustic_only_folder,
     add_model_arguments,
     add_recording_argument,
     add_run_arguments,
@@ -143,7 +142,7 @@ def run(args) -> int:
     prepare_gl()  # drawn here (too): OpenGL readied while the face is fitted and moved
     # --jobs N: the drawing workers start now, importing what they need meanwhile
     with FramePool(jobs=jobs) if jobs > 1 else contextlib.nullcontext() as pool:
-        run = run_args(recording, acoustic_only_folder(recording, args))
+        run = run_args(recording, args)
         written = write_output(out, run, size, views, args, pool=pool)
     state, animation = run.state, run.animation
     from cassi_fit.reports import penetration_summary, tongue_volume_summary, write_penetration_csv

@@ -14,6 +14,7 @@ from ._options import (
     add_speaker_argument,
     dataset_args,
     finish,
+    names_option,
     run_options,
 )
 
@@ -62,10 +63,6 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-def _words(text):
-    return None if not text else [w.strip() for w in text.split(",") if w.strip()]
-
-
 def run(args) -> int:
     import warnings
 
@@ -83,7 +80,7 @@ def run(args) -> int:
         raise CassiError(f"{root}: no such dataset folder")
     source = dataset_args(root, args)  # the folder, or a Dataset with its sensor map
     out = Path(args.out)
-    subjects = _words(args.subjects) or (
+    subjects = names_option(args.subjects) or (
         source if isinstance(source, Dataset) else Dataset(root)).subjects()
     targets = [calibration_path(out, s) for s in subjects] + [out / "calibration_summary.csv"]
     if not (args.force or args.resume):
@@ -94,7 +91,7 @@ def run(args) -> int:
     with warnings.catch_warnings():  # the problems are printed below, one line each
         warnings.simplefilter("ignore", CalibrationWarning)
         run, _, cals = calibrate_corpus(source, out, subjects=subjects,
-                                        tasks=_words(args.tasks), run_options=run_options(args),
+                                        tasks=names_option(args.tasks), run_options=run_options(args),
                                         method=args.method, collisions=not args.no_collisions)
     print(f"{'subject':8} {'scale':>7} {'UL mm':>7} {'LL mm':>7} {'LL bias mm':>12} "
           f"{'face mm':>8}  residuals (mm)")

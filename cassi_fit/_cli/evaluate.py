@@ -12,6 +12,7 @@ from ._options import (
     add_source_arguments,
     dataset_args,
     finish,
+    names_option,
     run_options,
     spec_from_args,
 )
@@ -44,13 +45,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def _words(values: list[str] | None) -> list[str] | None:
-    """``["a,b", "c"]`` -> ``["a", "b", "c"]`` (None stays None)."""
-    if values is None:
-        return None
-    return [w.strip() for v in values for w in v.split(",") if w.strip()]
-
-
 def run(args: argparse.Namespace) -> int:
     from cassi_fit.errors import CassiError, OutputExistsError
 
@@ -67,8 +61,8 @@ def run(args: argparse.Namespace) -> int:
         raise OutputExistsError(f"{', '.join(existing)}: file exists (pass --force to replace)")
     from cassi_fit.evaluate import evaluate_corpus, markdown_table, write_report
 
-    run, _, result = evaluate_corpus(dataset_args(dataset, args), out, spec=spec, tasks=_words(args.tasks),
-                                     subjects=_words(args.subjects),
+    run, _, result = evaluate_corpus(dataset_args(dataset, args), out, spec=spec, tasks=names_option(args.tasks),
+                                     subjects=names_option(args.subjects),
                                      run_options=run_options(args))
     print(markdown_table(result), end="")
     flagged = {r.item.subject: r.row["calibration_problems"] for r in run.results
