@@ -25,7 +25,7 @@ vowel segment, when there is one); over the dataset:
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -58,14 +58,17 @@ class Heard(NamedTuple):
 
 def hear(recording: Any, spec: Any, *, labels: Any = None, samples=None, rate_hz=None,
          speaker: str | None = None, ceiling_hz: float | None = None,
-         model: Any = None) -> Heard:
+         model: Any = None, say: Callable[[str], Any] | None = None) -> Heard:
     """One recording heard as ``cassi acoustics`` hears it: run with ``spec`` (a
     ``run_spec.RunSpec``; where its calibration names a folder or a file in it, the
     subject's acoustic calibration there, ``SUBJECT.acoustic.json``, gives the vocal
     tract, and a folder without the subject's face calibration runs the face with the
     default one, said in a note), heard with ``speaker``'s norms and Praat's
     ``ceiling_hz`` (``acoustics.recording_acoustics``); ``labels`` and the sound default to
-    the recording's own."""
+    the recording's own. ``notes``: what the calibration folder lacked and what the model
+    took without knowing it (``calibration: ...``, the run's caveats: a palate estimated,
+    the lips' rest), each also given to ``say`` as soon as it is known (before the
+    acoustics, which may fail)."""
     from .acoustic_fit import calibrated_tract, face_calibration
     from .acoustics import recording_acoustics
     from .pipeline import run_recording
@@ -77,6 +80,9 @@ def hear(recording: Any, spec: Any, *, labels: Any = None, samples=None, rate_hz
         spec, note = face_calibration(spec, recording.subject)
         notes += [line for line in (found.missing(recording.subject), note) if line]
     run = run_recording(recording, spec, **({} if model is None else {"model": model}))
+    notes += [f"calibration: {line}" for line in run.state.calibration_caveats]
+    for line in notes if say is not None else ():
+        say(line)
     tract = None if found is None else found.tract
     result = recording_acoustics(run, samples=samples, rate_hz=rate_hz, labels=labels,
                                  ceiling_hz=ceiling_hz, tract=tract, speaker=speaker)

@@ -80,13 +80,11 @@ def run(args) -> int:
     recording = load_recording_args(words, args)
     samples, rate = recording_sound(recording)  # none: said before the model is run
     labels = recording_labels(recording)  # a label file that does not fit: said here too
+    # what the calibration folder lacked and what the model took without knowing it (a
+    # palate estimated, the lips' rest), as animate says: printed before the acoustics
     heard = hear(recording, spec_from_args(args), labels=labels, samples=samples,
-                 rate_hz=rate, speaker=args.speaker, ceiling_hz=args.ceiling)
+                 rate_hz=rate, speaker=args.speaker, ceiling_hz=args.ceiling, say=print)
     run_, result = heard.run, heard.acoustics
-    for line in heard.notes:  # what the calibration folder lacked
-        print(line)
-    for line in run_.state.calibration_caveats:  # what the model took without knowing it
-        print(f"calibration: {line}")  # (a palate estimated, the lips' rest), as animate says
     print(result.norms.line(ceiling_hz=args.ceiling, larynx=heard.larynx))
     from cassi_fit.lips import closures_line
 
