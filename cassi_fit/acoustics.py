@@ -55,13 +55,17 @@ if TYPE_CHECKING:
     from .pipeline import RecordingRun
 
 #: Vowel labels matched whole (SAMPA with its length marks removed, ARPAbet in lower case
-#: without stress digits, TIMIT's and Buckeye's extra vowels, plain letters): a label whose
+#: without stress digits, TIMIT's and Buckeye's extra vowels, the Edinburgh MRPA and
+#: Unisyn/Combilex sets of MOCHA-TIMIT's and mngu0's labels, plain letters): a label whose
 #: stress digits and ``:`` length marks removed is here is a vowel (:func:`is_vowel`).
 VOWELS = frozenset(
     "a e i o u y @ 6 E I O U Y V Q A { } 2 9 3 & aI aU OY eI oU @U OI ai au oi ei ou "
     "aa ae ah ao aw ax ay eh er ey ih iy ow oy uh uw "
     # TIMIT: ix, ux, axr, ax-h; Buckeye's nasalised vowels
-    "ix ux axr ax-h aan aen ahn aon awn ayn ehn eyn ihn iyn own oyn uhn uwn".split())
+    "ix ux axr ax-h aan aen ahn aon awn ayn ehn eyn ihn iyn own oyn uhn uwn "
+    # MRPA (MOCHA-TIMIT; Festival's British English) and Unisyn (mngu0): long vowels
+    # doubled, centring diphthongs with @, r-coloured schwas
+    "ii uu oo @@ i@ e@ u@ @@r @r".split())
 
 #: The IPA chart's vowel letters and the rhotic schwas (Montreal Forced Aligner's
 #: ``english_mfa``/``german_mfa``, hand transcriptions): see :func:`is_vowel`.
@@ -83,9 +87,10 @@ def _ipa_letters(core: str) -> str:
 def is_vowel(label: str) -> bool:
     """True for a vowel label, in any of these phone sets:
 
-    * SAMPA (case kept; ``a: 2 9 3 6 @ { } & Q V`` are vowels), and the lower-case
-      ARPAbet of :data:`VOWELS`, matched whole once ``:`` length marks and trailing stress
-      digits (``0 1 2``) are removed; upper-case ARPAbet is matched in lower case
+    * SAMPA (case kept; ``a: 2 9 3 6 @ { } & Q V`` are vowels), the lower-case ARPAbet
+      and the MRPA/Unisyn vowels (``ii uu oo @@ i@ e@ u@``: MOCHA-TIMIT, mngu0) of
+      :data:`VOWELS`, matched whole once ``:`` length marks and trailing stress digits
+      (``0 1 2``) are removed; upper-case ARPAbet is matched in lower case
       (``AA1``, ``IY0``, ``ER``). TIMIT's ``ix ux axr ax-h`` and Buckeye's nasalised
       vowels (``aan``, ``iyn``, ...) are vowels. ``er`` is a vowel, ``r`` is not. The
       syllabic consonants ``el em en eng`` are **not** vowels: their formants are a

@@ -100,6 +100,9 @@ NEW_VOWELS = [
     "2:",
     # X-SAMPA's rhotic diacritic
     "@`",
+    # Edinburgh MRPA (MOCHA-TIMIT's labels) and Unisyn (mngu0's): long vowels, centring
+    # diphthongs, r-coloured schwas
+    *"ii uu oo @@ i@ e@ u@ @@r @r".split(),
 ]
 
 # Vowels the old code recognised too: kept.
