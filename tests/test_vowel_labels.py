@@ -135,7 +135,7 @@ NOT_VOWELS = [
     # syllabic consonants in ARPAbet / TIMIT: not vowels for formant scoring
     *"el em en eng EL EM EN".split(),
     # silence, noise and markers
-    *"sil sp spn SIL SPN <p:> <sil> # h# pau epi : 0 1".split(),
+    *"sil sp spn SIL SPN <p:> <sil> # h# pau epi : 0 1 breath".split(),
     "",
     " ",
     LONG,
