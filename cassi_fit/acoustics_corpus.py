@@ -89,9 +89,10 @@ def hear(recording: Any, spec: Any, *, labels: Any = None, samples=None, rate_hz
     return Heard(run, result, None if found is None else found.larynx(), tuple(notes))
 
 
-def _median_abs(rows: list[dict], key: str) -> float | None:
+def _median_abs_pct(rows: list[dict], key: str) -> float | None:
+    """The median over ``rows`` of ``|row[key]|`` in %, to 0.1 (None for none)."""
     values = [abs(r[key]) for r in rows if r.get(key) is not None]
-    return float(np.median(values)) if values else None
+    return round(100 * float(np.median(values)), 1) if values else None
 
 
 def acoustics_task(item: Any, out_dir: str, *, spec: Any, speaker: str | None = None,
@@ -99,8 +100,8 @@ def acoustics_task(item: Any, out_dir: str, *, spec: Any, speaker: str | None = 
     """``cassi acoustics DATASET``'s task: :func:`hear` one recording (the worker's model)
     and write its frame and segment tables to ``out_dir/SUBJECT/TASK``
     (:data:`FRAMES_SUFFIX`, :data:`SEGMENTS_SUFFIX`). Row: frames, vowel frames, the share
-    scored, segments, the norms, a note saying why nothing is scored (or empty), and the
-    median over segments of each |F error|."""
+    scored, segments, the norms, the notes (the run's caveats, why nothing is scored), and
+    the median over segments of each |F error| in %."""
     from .acoustics import unscored_line
     from .corpus import TaskResult, load_item, worker_model
     from .labels import recording_labels
@@ -126,7 +127,7 @@ def acoustics_task(item: Any, out_dir: str, *, spec: Any, speaker: str | None = 
            "norms": result.norms.speaker, "larynx": heard.larynx or "the norms",
            "note": "; ".join([*heard.notes, unscored_line(labels) or ""]).strip("; ")}
     for f in FORMANTS:
-        row[f"{f}_median_abs_error"] = _median_abs(segments, f"{f}_error")
+        row[f"{f}_median_abs_error_pct"] = _median_abs_pct(segments, f"{f}_error")
     return TaskResult(row, tuple(str(p) for p in outputs))
 
 
@@ -218,7 +219,7 @@ def acoustics_corpus(dataset: Any, out_dir: str | os.PathLike, *, spec: Any = No
     overwrite = replaces(run_options)
     segments = dataset_segments(run, out)
     summary = summary_rows(segments)
-    written = write_table(run.rows(), tables[0], overwrite=overwrite)
+    written = write_table(run.rows(), tables[0], overwrite=overwrite, digits=3)
     written += write_table(segments, tables[1], overwrite=overwrite, digits=ERROR_DIGITS)
     written += write_table(summary, tables[2], overwrite=overwrite, digits=1,
                            markdown="Formants over the dataset: model / measured - 1 per vowel "

@@ -89,6 +89,9 @@ def test_a_dataset_is_heard_recording_by_recording_and_summed_up_per_subject(dat
                 100 * np.median(np.abs(errors)), abs=0.051)
             assert float(overall[f"{f}_median_error_pct"]) == pytest.approx(
                 100 * np.median(errors), abs=0.051)
+    for f in ("F1", "F2", "F3"):  # the recording's row: its segments' median, as the subject's
+        assert (float(recordings["S01"][f"{f}_median_abs_error_pct"])
+                == float(overall[f"{f}_median_abs_error_pct"]))
     assert "| S01 | all | 3 |" in printed.out and "2 of 3 recordings heard" in printed.out
     assert (out / "acoustics_summary.md").is_file()
 
