@@ -1,4 +1,4 @@
-"""Phone and word labels beside a pellet file: HTK ``.lab`` and Praat TextGrid.
+"""Phone and word labels beside a pellet file: HTK or ESPS ``.lab`` and Praat TextGrid.
 
 A :class:`Labels` record holds one tier of time intervals (seconds, half-open
 ``[start, end)``, sorted, not overlapping) with their labels; :meth:`Labels.at` gives the
@@ -15,6 +15,11 @@ Formats (both written atomically, and read back identically by the readers):
   (any decimal point or exponent, or only small integers such as ``0 1 a``). A recording
   of 1000 s or more labelled in whole seconds is the case this rule gets wrong: pass
   ``units="seconds"`` for it.
+* **ESPS/xwaves label file** (``xlabel``; Festival's and the CSTR corpora's ``.lab``, CMU
+  ARCTIC's): a header ended by a line holding ``#`` alone, then one line per interval,
+  ``end colour label``: the interval ends at the time (seconds) and starts where the one
+  before ended (the first at 0); a line without a label is silence left blank. Read when
+  one of the first ``XLABEL_HEADER_LINES`` lines is ``#``.
 * **Praat TextGrid** ``X.TextGrid`` (long or short text format), read through praatio;
   interval tiers only. Empty intervals (silence left blank) are not segments.
 
@@ -227,16 +232,54 @@ def _check_intervals(path, starts, ends, lines) -> None:
 _INTEGER = re.compile(r"[+-]?[0-9]+")
 
 
-def _lab_rows(path: Path) -> list[tuple[int, str, str, str]]:
+def _lab_rows(path: Path) -> tuple[list[tuple[int, str, str, str]], bool]:
+    """``(rows (line, start, end, label), ESPS)``: the intervals of an HTK label file, or
+    of an ESPS one (``True``: its times are seconds)."""
     from ._io import read_lines  # BOM, CRLF, encodings: as for pellet files
 
     _, lines = read_lines(path)
+    header_end = _xlabel_header_end(lines)
+    if header_end is not None:
+        return _xlabel_rows(path, lines[header_end + 1:]), True
     rows = []
     for lineno, text in lines:
         fields = text.split()
         if len(fields) < 3:
             raise DataFormatError(path, lineno, f"expected 'start end label', got {text!r}")
         rows.append((lineno, *fields[:3]))
+    return rows, False
+
+
+#: An ESPS/xwaves label file's header ends at a line holding ``#`` alone; searched for in
+#: this many first lines (its header: ``signal``, ``type``, ``color``, ``separator``,
+#: ``nfields``, a comment or two).
+XLABEL_HEADER_LINES = 20
+
+
+def _xlabel_header_end(lines: list[tuple[int, str]]) -> int | None:
+    """The index of the ``#`` line ending an ESPS label file's header, or None (an HTK
+    file: its first line is an interval)."""
+    for k, (_, text) in enumerate(lines[:XLABEL_HEADER_LINES]):
+        if text.strip() == "#":
+            return k
+    return None
+
+
+def _xlabel_rows(path: Path, lines: list[tuple[int, str]]) -> list[tuple[int, str, str, str]]:
+    """ESPS/xwaves (``xlabel``) rows ``end colour label``: each interval ends at its time
+    and starts at the one before (the first at 0), in seconds; an interval with no label
+    (``end colour`` alone) is silence left blank, not a segment. Returned as HTK rows
+    ``(line, start, end, label)``."""
+    rows, start = [], "0"
+    for lineno, text in lines:
+        fields = text.split(None, 2)
+        if len(fields) < 2:
+            raise DataFormatError(path, lineno, f"expected 'end colour label' (an ESPS label "
+                                  f"file, its header ended by '#'), got {text!r}")
+        label = fields[2].strip() if len(fields) > 2 else ""
+        if label:
+            rows.append((lineno, start, fields[0], label))
+        start = fields[0]
     return rows
 
 
@@ -249,12 +292,15 @@ def _lab_time(path: Path, lineno: int, token: str) -> float:
 
 def read_lab(path: str | os.PathLike, *, units: str = "auto") -> Labels:
     """Read an HTK label file (see the module doc for ``units``: "auto", "seconds",
-    "htk"). An empty file gives an empty :class:`Labels`."""
+    "htk") or an ESPS/xwaves one (its header ended by ``#``; seconds). An empty file
+    gives an empty :class:`Labels`."""
     if units not in UNITS:
         raise ValueError(f"units must be one of {', '.join(UNITS)}, got {units!r}")
     path = Path(path)
-    rows = _lab_rows(path)
+    rows, esps = _lab_rows(path)
     register_input(path)
+    if esps and units == "auto":
+        units = "seconds"  # ESPS label files time in seconds
     times = np.array([[_lab_time(path, n, a), _lab_time(path, n, b)] for n, a, b, _ in rows],
                      dtype=np.float64).reshape(-1, 2)
     if units == "auto":

@@ -295,3 +295,40 @@ def test_labels_past_the_end_warn_with_the_numbers(five_seconds):
 def test_a_partial_labelling_is_not_a_mismatch():
     check = check_labels(Labels([1.0, 1.2], [1.2, 1.5], ("p", "a")), 5.0)
     assert check.status == "ok"
+
+
+# ------------------------------------------------------------- ESPS/xwaves label files
+ESPS_HEADER = ("signal fsew0_001\ntype 0\ncolor 121\ncomment hand-made\n"
+               "font -misc-*-bold-*-*-*-15-*-*-*-*-*-*-*\nseparator ;\nnfields 1\n#\n")
+
+
+def test_an_esps_label_file_is_read_as_the_intervals_it_ends(tmp_path):
+    """Festival's and the CSTR corpora's ``.lab`` (CMU ARCTIC's too): a header ended by
+    ``#``, then ``end colour label``: each label ends its interval, which starts where the
+    one before ended; a line without a label is blank silence, not a segment."""
+    from cassi_fit.labels import read_lab
+
+    path = tmp_path / "fsew0_001.lab"
+    path.write_text(ESPS_HEADER + "    0.2500  125 sil\n    0.2800  125 breath\n"
+                    "    0.3500  125\n    0.4200  125 dh\n    0.5000  125 i\n"
+                    "    1000  125 ii\n")  # a whole number of seconds stays seconds
+    labels = read_lab(path)
+    np.testing.assert_allclose(labels.starts, [0.0, 0.25, 0.35, 0.42, 0.5])
+    np.testing.assert_allclose(labels.ends, [0.25, 0.28, 0.42, 0.5, 1000.0])
+    assert labels.labels == ("sil", "breath", "dh", "i", "ii")
+    assert labels.at(np.array([0.3, 0.4])).tolist() == ["", "dh"]
+
+
+@pytest.mark.parametrize("body, line, problem", [
+    ("0.25 125 sil\n0.1x 125 a\n", 10, "not a number"),
+    ("0.25 125 sil\n0.10 125 a\n", 10, "before"),  # times must not go back
+    ("0.25 125 sil\n0.30\n", 10, "expected 'end colour label'"),
+])
+def test_a_bad_esps_line_is_one_error_naming_it(tmp_path, body, line, problem):
+    from cassi_fit.labels import read_lab
+
+    path = tmp_path / "bad.lab"
+    path.write_text(ESPS_HEADER + body)
+    with pytest.raises(DataFormatError, match=rf"bad.lab:{line}: .*{problem}") as err:
+        read_lab(path)
+    assert "\n" not in str(err.value)
