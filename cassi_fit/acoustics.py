@@ -293,6 +293,22 @@ class Acoustics:
 
         return apart_in_closures(self.labels, af.lip_opening(self.geometry, self.vertices))
 
+    def scored_line(self) -> str:
+        """The share of the vowels' frames scored, and why the others are not (the
+        measurement's reason: silence, unvoiced, wide bandwidth; or no model formant),
+        in one line."""
+        vowel = self.vowel
+        line = f"{100 * self.share_scored:.0f} % of the vowels' frames scored"
+        left = vowel & ~self.scored
+        if not left.any():
+            return line
+        why = np.where(self.measured.reliable, "no model formant",
+                       np.asarray(self.measured.reason, dtype=object))[left]
+        names, counts = np.unique(why.astype(str), return_counts=True)
+        order = np.argsort(-counts, kind="stable")
+        parts = ", ".join(f"{counts[k]} {names[k]}" for k in order)
+        return f"{line} ({int(vowel.sum())} vowel frames; not scored: {parts})"
+
     @property
     def relative_error(self) -> Float[np.ndarray, "m 3"]:
         """``model / measured - 1`` for F1-F3 (NaN where not scored)."""
@@ -342,15 +358,21 @@ def _median(values) -> float | None:
     return _cell(np.median(values)) if len(values) else None
 
 
-def recording_sound(recording) -> tuple[Float[np.ndarray, " n"], float]:
+def recording_sound(recording, *, accept_mismatch: bool = False
+                    ) -> tuple[Float[np.ndarray, " n"], float]:
     """``(samples, rate_hz)`` of the recording's sound (a ``.wav`` beside the file or the
-    sound inside it); ``MissingDataError`` naming the recording if it has none."""
+    sound inside it), checked against the recording's length as every output checks it
+    (``sound.check_sound``: a cut file, a wrong rate or under half the recording is one
+    error naming the file unless ``accept_mismatch``; a lesser mismatch warns: frames the
+    sound does not cover are never scored); ``MissingDataError`` naming the recording if
+    it has none."""
     from .errors import MissingDataError
 
     sound = recording.sound
     if sound is None:
         raise MissingDataError(f"{recording.subject}/{recording.task}: no sound (a .wav "
                                "beside the file or inside it): the formants cannot be measured")
+    sound.check(recording.track.length_s, accept_mismatch=accept_mismatch)
     return sound.samples()
 
 

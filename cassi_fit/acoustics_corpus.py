@@ -96,21 +96,23 @@ def _median_abs_pct(rows: list[dict], key: str) -> float | None:
 
 
 def acoustics_task(item: Any, out_dir: str, *, spec: Any, speaker: str | None = None,
-                   ceiling_hz: float | None = None, overwrite: bool = False) -> Any:
+                   ceiling_hz: float | None = None, accept_mismatch: bool = False,
+                   overwrite: bool = False) -> Any:
     """``cassi acoustics DATASET``'s task: :func:`hear` one recording (the worker's model)
     and write its frame and segment tables to ``out_dir/SUBJECT/TASK``
     (:data:`FRAMES_SUFFIX`, :data:`SEGMENTS_SUFFIX`). Row: frames, vowel frames, the share
     scored, segments, the norms, the notes (the run's caveats, why nothing is scored), and
     the median over segments of each |F error| in %."""
-    from .acoustics import unscored_line
+    from .acoustics import recording_sound, unscored_line
     from .corpus import TaskResult, load_item, worker_model
     from .labels import recording_labels
     from .tables import write_table
 
     recording = load_item(item, quiet=True)
-    labels = recording_labels(recording)
-    heard = hear(recording, spec, labels=labels, speaker=speaker, ceiling_hz=ceiling_hz,
-                 model=worker_model())
+    samples, rate = recording_sound(recording, accept_mismatch=accept_mismatch)
+    labels = recording_labels(recording, accept_mismatch=accept_mismatch)
+    heard = hear(recording, spec, labels=labels, samples=samples, rate_hz=rate,
+                 speaker=speaker, ceiling_hz=ceiling_hz, model=worker_model())
     result = heard.acoustics
     stem = Path(out_dir) / item.subject / item.task
     stem.parent.mkdir(parents=True, exist_ok=True)
@@ -190,9 +192,12 @@ def summary_rows(segments: list[dict]) -> list[dict]:
 def acoustics_corpus(dataset: Any, out_dir: str | os.PathLike, *, spec: Any = None,
                      subjects: Iterable[str] | None = None, tasks: Iterable[str] | None = None,
                      speaker: str | None = None, ceiling_hz: float | None = None,
+                     accept_mismatch: bool = False,
                      run_options: Mapping[str, Any] | None = None, **changes: Any) -> Any:
     """:func:`acoustics_task` on every recording of ``dataset`` (the chosen ``subjects`` /
-    ``tasks``), then the dataset's three tables in ``out_dir`` (module docstring).
+    ``tasks``), then the dataset's three tables in ``out_dir`` (module docstring);
+    ``accept_mismatch``: sound or labels that do not fit a recording's length are used
+    (with a warning) instead of failing it.
     ``run_options`` go to ``corpus.run_corpus`` (``jobs``, ``resume``, ``overwrite``...).
     Returns a ``corpus.CorpusResult``: the run, the tables written and the summary rows."""
     from .corpus import (
@@ -214,7 +219,8 @@ def acoustics_corpus(dataset: Any, out_dir: str | os.PathLike, *, spec: Any = No
     run_options.setdefault("desc", "acoustics")
     items = require_items(dataset_items(dataset, subjects=subjects, tasks=tasks), dataset,
                           subjects, tasks)
-    options = {"spec": spec, "speaker": speaker, "ceiling_hz": ceiling_hz}
+    options = {"spec": spec, "speaker": speaker, "ceiling_hz": ceiling_hz,
+               "accept_mismatch": accept_mismatch}
     run = run_corpus(acoustics_task, items, out_dir, options=options, **run_options)
     overwrite = replaces(run_options)
     segments = dataset_segments(run, out)

@@ -180,3 +180,40 @@ def test_a_compressed_wav_is_one_error_naming_the_file(tmp_path, code, name):
         with pytest.raises(DataFormatError, match=rf"{name}.wav: not a readable .wav") as err:
             read()
         assert "\n" not in str(err.value)
+
+
+def test_the_acoustics_check_the_sound_against_the_recording(tmp_path):
+    """``cassi acoustics`` checks the sound as every output does: 1 s of sound for 5 s of
+    pellets is one error naming the file (the formants of four fifths of the frames would
+    be silently missing), ``accept_mismatch`` keeps it with a warning."""
+    import types
+
+    from cassi_fit.acoustics import recording_sound
+    from cassi_fit.sound import Sound
+
+    wav = _wav(tmp_path / "cut.wav", 16000, 16000)
+    recording = types.SimpleNamespace(subject="S01", task="t", sound=Sound.from_file(wav),
+                                      track=types.SimpleNamespace(length_s=5.0))
+    with pytest.raises(DataFormatError, match=r"cut.wav: 1 s of sound .* for 5 s of pellets"):
+        recording_sound(recording)
+    with pytest.warns(SoundMismatchWarning):
+        samples, rate = recording_sound(recording, accept_mismatch=True)
+    assert samples.shape == (16000,) and rate == 16000.0
+
+
+def test_the_share_scored_says_why_the_other_vowel_frames_are_not():
+    import types
+
+    from cassi_fit.acoustics import Acoustics
+
+    result = types.SimpleNamespace(
+        vowel=np.array([1, 1, 1, 1, 1, 0], bool), scored=np.array([1, 0, 0, 0, 0, 0], bool),
+        share_scored=0.2, measured=types.SimpleNamespace(
+            reliable=np.array([1, 0, 0, 1, 0, 0], bool),
+            reason=np.array(["", "unvoiced", "silence", "", "unvoiced", "silence"])))
+    assert Acoustics.scored_line(result) == (
+        "20 % of the vowels' frames scored (5 vowel frames; not scored: 2 unvoiced, "
+        "1 no model formant, 1 silence)")
+    result.scored = result.vowel.copy()
+    result.share_scored = 1.0
+    assert Acoustics.scored_line(result) == "100 % of the vowels' frames scored"

@@ -44,6 +44,10 @@ def register(subparsers) -> None:
                         "male, 5500 for an adult female); given, it wins over --speaker's")
     parser.add_argument("--csv", metavar="OUT.csv", help="per-frame table to write")
     parser.add_argument("--plot", metavar="OUT.png", help="figure to write")
+    parser.add_argument("--accept-mismatch", action="store_true",
+                        help="use sound or labels whose length does not fit the recording "
+                        "(a wrong sample rate, a cut file, labels in other units): a warning "
+                        "instead of the error; frames the sound does not cover are not scored")
     parser.add_argument("--out", metavar="DIR", default=None,
                         help="a dataset folder as RECORDING: every recording heard (in "
                         "parallel) into DIR/SUBJECT/TASK.acoustics.csv and "
@@ -78,8 +82,9 @@ def run(args) -> int:
         if out and Path(out).exists() and not args.force:
             raise OutputExistsError(f"{out}: exists (use --force to replace it)")
     recording = load_recording_args(words, args)
-    samples, rate = recording_sound(recording)  # none: said before the model is run
-    labels = recording_labels(recording)  # a label file that does not fit: said here too
+    # none, or one that does not fit the recording: said before the model is run
+    samples, rate = recording_sound(recording, accept_mismatch=args.accept_mismatch)
+    labels = recording_labels(recording, accept_mismatch=args.accept_mismatch)
     # what the calibration folder lacked and what the model took without knowing it (a
     # palate estimated, the lips' rest), as animate says: printed before the acoustics
     heard = hear(recording, spec_from_args(args), labels=labels, samples=samples,
@@ -95,7 +100,7 @@ def run(args) -> int:
         print(why)
     else:
         print(markdown_text(segments, digits=3) if segments else "no vowel segments labelled")
-        print(f"{100 * result.share_scored:.0f} % of the vowels' frames scored")
+        print(result.scored_line())
     if args.csv:
         write_table(result.frame_rows(), args.csv, overwrite=args.force, digits=3)
         seg_path = Path(args.csv).with_suffix(".segments.csv")
@@ -121,7 +126,8 @@ def run_dataset(args) -> int:
     run, written, summary = acoustics_corpus(
         dataset_args(args.recording[0], args), args.out, spec=spec_from_args(args),
         subjects=names_option(args.subjects), tasks=names_option(args.tasks), speaker=args.speaker,
-        ceiling_hz=args.ceiling, run_options=run_options(args))
+        ceiling_hz=args.ceiling, accept_mismatch=args.accept_mismatch,
+        run_options=run_options(args))
     overall = [r for r in summary if r["quality"] == "all"]
     if overall:
         print(markdown_text(overall, digits=1))
