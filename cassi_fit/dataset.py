@@ -435,12 +435,7 @@ def load_recording(path: str | os.PathLike, *, sensor_map: SensorMapLike = None,
     :class:`DataFormatError` and is never opened; special files beside it are skipped
     with a :class:`SpecialFileWarning`.
     """
-    recording = _load_recording(Path(path), sensor_map, layout, rate, bite_plane)
-    return recording if tier is None else replace(recording, label_tier=tier)
-
-
-def _load_recording(path: Path, sensor_map, layout, rate, bite_plane) -> Recording:
-    """:func:`load_recording`'s work, the tier aside."""
+    path = Path(path)
     pellet_file = path.suffix.lower() == PELLET_SUFFIX  # (never an EMU ``*_bndl`` folder)
     if pellet_file or not _emu().is_bundle_folder(path):
         _regular(path)
@@ -451,7 +446,7 @@ def _load_recording(path: Path, sensor_map, layout, rate, bite_plane) -> Recordi
 
         fmt = detect_format(path)
     folder = path.parent.resolve()
-    _warn_special(folder, stacklevel=3)  # the subject's files are looked for here
+    _warn_special(folder, stacklevel=2)  # the subject's files are looked for here
     names = _listing(folder)
     if fmt == "xrmb":
         ema = None
@@ -463,12 +458,20 @@ def _load_recording(path: Path, sensor_map, layout, rate, bite_plane) -> Recordi
         if fmt == "emu":
             subject, task = _emu().recording_names(path, folder)
             if _emu().session_of(path) is not None:  # a database: the session folder
-                return _assemble(path, subject, task, own=folder,
-                                 shared=[folder.parent], ema=ema)
+                return _with_tier(_assemble(path, subject, task, own=folder,
+                                            shared=[folder.parent], ema=ema), tier)
     if subject is None or subject == folder.name.upper():
         subject = folder.name.upper()
-        return _assemble(path, subject, task, own=folder, shared=[folder.parent], ema=ema)
-    return _assemble(path, subject, task, own=None, shared=[folder, folder.parent], ema=ema)
+        return _with_tier(_assemble(path, subject, task, own=folder, shared=[folder.parent],
+                                    ema=ema), tier)
+    return _with_tier(_assemble(path, subject, task, own=None, shared=[folder, folder.parent],
+                                ema=ema), tier)
+
+
+def _with_tier(recording: Recording, tier: str | None) -> Recording:
+    """The recording with its label tier chosen (``Recording.label_tier``), or as it is.
+    (Called on ``_assemble``'s result: its warnings keep their stack levels.)"""
+    return recording if tier is None else replace(recording, label_tier=tier)
 
 
 def recording_from_array(
@@ -674,8 +677,8 @@ class Dataset:
         xrmb = path.suffix.lower() == PELLET_SUFFIX or detect_format(path) == "xrmb"
         ema = None if xrmb else {"sensor_map": self.sensor_map,
                                  "session": partial(self._session_frame, subject)}
-        recording = _assemble(path, subject, task, own=own, shared=shared, ema=ema)
-        return recording if self.tier is None else replace(recording, label_tier=self.tier)
+        return _with_tier(_assemble(path, subject, task, own=own, shared=shared, ema=ema),
+                          self.tier)
 
     def _session_frame(self, subject: str, smap: SensorMap):
         """``(map, frame)`` shared by ``subject``'s articulograph files, found once from
