@@ -444,6 +444,16 @@ def _choose_tier(path: Path, grid, tier: str | None):
     return grid.getTier(tier_name(names, tier, path, "interval tier"))
 
 
+def textgrid_tiers(path: str | os.PathLike) -> list[tuple[str, int]]:
+    """The interval tiers of a Praat TextGrid, ``(name, labelled intervals)`` in the file's
+    order: what ``--tier`` / ``tier=`` can name (``cassi info`` lists them)."""
+    from praatio import textgrid
+
+    grid = _open_textgrid(Path(path))
+    return [(name, len(grid.getTier(name).entries)) for name in grid.tierNames
+            if isinstance(grid.getTier(name), textgrid.IntervalTier)]
+
+
 def read_textgrid(path: str | os.PathLike, *, tier: str | None = None) -> Labels:
     """One interval tier of a Praat TextGrid: ``tier`` by name (case-insensitive), or the
     one :func:`tier_name` chooses among its interval tiers (phones, then words, then one

@@ -237,8 +237,14 @@ def test_the_tier_is_chosen_on_the_command_line_and_for_a_dataset(tmp_path, caps
     grid.save(str(txy.with_suffix(".TextGrid")), format="long_textgrid", includeBlankSpaces=True)
 
     assert cli.main(["info", str(txy), "--json"]) == 0
-    used = json.loads(capsys.readouterr().out)["labels"]["used"]
-    assert "2 speakers' phones tiers" in used["error"] and "--tier" in used["error"]
+    labels = json.loads(capsys.readouterr().out)["labels"]
+    assert "2 speakers' phones tiers" in labels["used"]["error"]
+    assert "--tier" in labels["used"]["error"]
+    assert [t["tier"] for t in labels["beside_tiers"]] == ["alice - phones", "bob - phones",
+                                                           "bob - words"]
+    assert cli.main(["info", str(txy)]) == 0  # what --tier can name, in the report's line
+    assert "(tiers: alice - phones (1), bob - phones (1), bob - words (1))" in (
+        capsys.readouterr().out)
     assert cli.main(["info", str(txy), "--json", "--tier", "BOB - phones"]) == 0
     assert json.loads(capsys.readouterr().out)["labels"]["used"]["tier"] == "bob - phones"
 

@@ -99,11 +99,17 @@ def _labels(recording) -> dict:
     import warnings
 
     from cassi_fit.errors import CassiError
-    from cassi_fit.labels import label_path_for, recording_labels
+    from cassi_fit.labels import TEXTGRID_SUFFIX, label_path_for, recording_labels, textgrid_tiers
 
     path = getattr(recording, "path", None)
     beside = None if path is None else label_path_for(path)
     inside = [{"tier": t.tier, "labels": len(t)} for t in getattr(recording, "labels", ())]
+    tiers = []  # a TextGrid beside: its tiers, what --tier can name
+    if beside is not None and beside.suffix.lower() == TEXTGRID_SUFFIX:
+        try:
+            tiers = [{"tier": name, "labels": n} for name, n in textgrid_tiers(beside)]
+        except CassiError:
+            tiers = []  # unreadable: the used tier's error says why
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
@@ -111,7 +117,8 @@ def _labels(recording) -> dict:
             used = None if used is None else {"tier": used.tier, "labels": len(used)}
         except CassiError as exc:
             used = {"error": str(exc)}
-    return {"beside": None if beside is None else str(beside), "inside": inside, "used": used}
+    return {"beside": None if beside is None else str(beside), "beside_tiers": tiers,
+            "inside": inside, "used": used}
 
 
 def _quietly(load, *args):
@@ -232,6 +239,9 @@ def _print_labels(labels: dict | None, out) -> None:
     if not labels or not (labels["beside"] or labels["inside"]):
         return
     parts = [f"beside: {labels['beside']}"] if labels["beside"] else []
+    if labels.get("beside_tiers"):
+        parts[-1] += " (tiers: " + ", ".join(f"{t['tier']} ({t['labels']})"
+                                             for t in labels["beside_tiers"]) + ")"
     if labels["inside"]:
         parts.append("in the file: " + ", ".join(f"{t['tier']} ({t['labels']})"
                                                  for t in labels["inside"]))
