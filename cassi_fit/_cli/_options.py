@@ -65,6 +65,28 @@ def add_source_arguments(parser: argparse.ArgumentParser) -> None:
                         "speaker's 'NAME - phones', else the first; `cassi info` lists them)")
 
 
+def add_accept_mismatch_argument(parser: argparse.ArgumentParser, also: str = "") -> None:
+    """``--accept-mismatch``: sound or labels whose length does not fit the recording
+    used with a warning (``sound.check_sound``, ``labels.check_labels``); ``also``: what
+    it means for this command, appended to the help."""
+    parser.add_argument("--accept-mismatch", action="store_true",
+                        help="use sound or labels whose length does not fit the recording "
+                        "(a wrong sample rate, a cut file, labels in other units): a warning "
+                        "instead of the error" + (f"; {also}" if also else ""))
+
+
+def add_selection_arguments(parser: argparse.ArgumentParser, when: str = "") -> None:
+    """A dataset command's ``--subjects`` and ``--tasks`` (names or comma-separated
+    lists, :func:`names_option`); ``when``: the condition they apply under, e.g. "with
+    --out"."""
+    prefix = f"{when}: " if when else ""
+    parser.add_argument("--subjects", nargs="+", metavar="SUBJECT",
+                        help=f"{prefix}only these subjects (default: all)")
+    parser.add_argument("--tasks", nargs="+", metavar="TASK",
+                        help=f"{prefix}only these tasks (names or comma-separated lists, e.g. "
+                        "tp040 tp106); default: every task of every subject")
+
+
 def source_options(args: argparse.Namespace) -> dict:
     """``dataset.load_recording``'s keywords from :func:`add_source_arguments`' options."""
     smap = args.sensor_map

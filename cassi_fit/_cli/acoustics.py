@@ -8,9 +8,11 @@ from __future__ import annotations
 from pathlib import Path
 
 from ._options import (
+    add_accept_mismatch_argument,
     add_model_arguments,
     add_recording_argument,
     add_run_arguments,
+    add_selection_arguments,
     add_speaker_argument,
     dataset_args,
     finish,
@@ -44,20 +46,14 @@ def register(subparsers) -> None:
                         "male, 5500 for an adult female); given, it wins over --speaker's")
     parser.add_argument("--csv", metavar="OUT.csv", help="per-frame table to write")
     parser.add_argument("--plot", metavar="OUT.png", help="figure to write")
-    parser.add_argument("--accept-mismatch", action="store_true",
-                        help="use sound or labels whose length does not fit the recording "
-                        "(a wrong sample rate, a cut file, labels in other units): a warning "
-                        "instead of the error; frames the sound does not cover are not scored")
+    add_accept_mismatch_argument(parser, "frames the sound does not cover are not scored")
     parser.add_argument("--out", metavar="DIR", default=None,
                         help="a dataset folder as RECORDING: every recording heard (in "
                         "parallel) into DIR/SUBJECT/TASK.acoustics.csv and "
                         ".acoustics.segments.csv, and the dataset's tables "
                         "acoustics_recordings.csv, acoustics_segments.csv and "
                         "acoustics_summary.csv/.md (per subject and vowel quality)")
-    parser.add_argument("--subjects", nargs="+", metavar="SUBJECT",
-                        help="with --out: only these subjects (default: all)")
-    parser.add_argument("--tasks", nargs="+", metavar="TASK",
-                        help="with --out: only these tasks (default: all)")
+    add_selection_arguments(parser, "with --out")
     add_run_arguments(parser)  # with --out: --jobs, --scheduler, --resume, --force
     parser.add_argument("--quiet", action="store_true", help="with --out: no progress bar")
     parser.set_defaults(func=run)

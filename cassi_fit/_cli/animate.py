@@ -9,6 +9,7 @@ from pathlib import Path
 from cassi_fit.options import ANIMATION_SUFFIXES, DEFAULT_FPS, TRACT_VIEW, VIEWS
 
 from ._options import (
+    add_accept_mismatch_argument,
     add_model_arguments,
     add_recording_argument,
     add_run_arguments,
@@ -92,10 +93,7 @@ def register(subparsers) -> None:
         "front teeth; lips in teeth), before and after any projection, to CSV",
     )
     parser.add_argument("--no-audio", action="store_true", help="leave the sound out of an .mp4")
-    parser.add_argument("--accept-mismatch", action="store_true",
-                        help="use sound or labels whose length does not fit the recording "
-                        "(a wrong sample rate, a cut file, labels in other units): a warning "
-                        "instead of the error")
+    add_accept_mismatch_argument(parser)
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     # DATASET alone with --out DIR: every recording to DIR/SUBJECT/TASK.mp4 (run_dataset)

@@ -9,6 +9,7 @@ from pathlib import Path
 from ._options import (
     add_model_arguments,
     add_run_arguments,
+    add_selection_arguments,
     add_source_arguments,
     dataset_args,
     finish,
@@ -34,11 +35,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", default="evaluation", metavar="DIR",
                         help="output folder (default: evaluation/ in the current folder)")
     add_model_arguments(parser)  # the same run options as `cassi animate`
-    parser.add_argument("--tasks", nargs="+", metavar="TASK",
-                        help="only these tasks (names or comma-separated lists, e.g. tp040 "
-                        "tp106); default: every task of every subject")
-    parser.add_argument("--subjects", nargs="+", metavar="SUBJECT",
-                        help="only these subjects (default: all)")
+    add_selection_arguments(parser)
     add_source_arguments(parser)  # a dataset's articulograph files: --sensor-map, ...
     add_run_arguments(parser)  # recordings in parallel: --jobs, --scheduler, --resume, --force
     parser.add_argument("--quiet", action="store_true", help="no progress bar")

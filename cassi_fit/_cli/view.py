@@ -4,7 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._options import add_model_arguments, add_recording_argument, load_recording_args, run_args
+from ._options import (
+    add_accept_mismatch_argument,
+    add_model_arguments,
+    add_recording_argument,
+    load_recording_args,
+    run_args,
+)
 
 
 def register(subparsers) -> None:
@@ -26,9 +32,7 @@ def register(subparsers) -> None:
                         help="leave the recording's sound out of the page")
     parser.add_argument("--no-labels", action="store_true",
                         help="leave the labels beside the recording out of the page")
-    parser.add_argument("--accept-mismatch", action="store_true",
-                        help="use sound or labels whose length does not fit the recording "
-                        "(with a warning) instead of stopping with an error")
+    add_accept_mismatch_argument(parser)
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.set_defaults(func=run)
 
